@@ -1,0 +1,264 @@
+//! The main job: program → sweep through the deviated chain → scan → fit → identify →
+//! report, on a loaded scene. Pure: it returns everything it made and writes nothing.
+//!
+//! **Invariant:** `run` has no side effects beyond the progress calls; the same scene and
+//! program give the same outcome (except the timings) for any thread count.
+
+use crate::cloud::PointCloud;
+use crate::identify::{self, Face, IdentifyError};
+use crate::math::Real;
+use crate::nc::Program;
+use crate::progress::Progress;
+use crate::render::{HeatMapOptions, RenderError, encode_png, render_heat_map};
+use crate::report::{FaceReport, Report, ScanReport, SolverReport, StockReport};
+use crate::scan::{ScanError, scan};
+use crate::scene::Scene;
+use crate::stock::{StockError, TriDexel};
+use crate::sweep::{SweepError, sweep_program};
+use std::collections::BTreeMap;
+use std::time::Instant;
+
+/// Errors of a run (the scene and program are already valid).
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    /// The stock could not be made.
+    #[error("{path}: [stock]: {source}")]
+    Stock {
+        /// Scene file.
+        path: String,
+        /// Why.
+        source: StockError,
+    },
+    /// The sweep failed.
+    #[error("{path}:{source}")]
+    Sweep {
+        /// Program file.
+        path: String,
+        /// Why.
+        source: SweepError,
+    },
+    /// The scan failed.
+    #[error("{path}: [scanner]: {source}")]
+    Scan {
+        /// Scene file.
+        path: String,
+        /// Why.
+        source: ScanError,
+    },
+    /// Faces could not be found or identified.
+    #[error("{path}: [identify]: {source}")]
+    Identify {
+        /// Scene file.
+        path: String,
+        /// Why.
+        source: IdentifyError,
+    },
+    /// The heat map could not be drawn.
+    #[error("{path}: heat map: {source}")]
+    Render {
+        /// Scene file.
+        path: String,
+        /// Why.
+        source: RenderError,
+    },
+}
+
+/// Everything a run produces.
+#[derive(Clone, Debug)]
+pub struct Outcome {
+    /// The report.
+    pub report: Report,
+    /// The scanned cloud (workpiece frame).
+    pub cloud: PointCloud,
+    /// The heat map of the scanned faces, PNG-encoded.
+    pub heat_map_png: Vec<u8>,
+}
+
+fn face_report(f: &Face, line: usize) -> FaceReport {
+    let n = f.fit.plane.normal;
+    FaceReport {
+        name: f.name.clone(),
+        line,
+        rotary_deg: f.rotary_deg.clone(),
+        points: f.fit.n_used,
+        rejected: f.fit.n_rejected,
+        normal: [n.x, n.y, n.z],
+        offset_mm: f.fit.plane.offset,
+        centroid_mm: [f.fit.centroid.x, f.fit.centroid.y, f.fit.centroid.z],
+        rms_mm: f.fit.rms_mm,
+        max_abs_mm: f.fit.max_abs_mm,
+    }
+}
+
+/// Runs the whole pipeline on `scene` with its parsed `program`.
+pub fn run(
+    scene: &Scene,
+    program: &Program,
+    progress: &dyn Progress,
+) -> Result<Outcome, PipelineError> {
+    let spath = scene.path.display().to_string();
+    let mut timings = Vec::new();
+    let mut clock = Instant::now();
+    let mut lap = |name: &str, timings: &mut Vec<(String, Real)>| {
+        timings.push((name.to_string(), clock.elapsed().as_secs_f64()));
+        clock = Instant::now();
+    };
+
+    let mut stock = TriDexel::new_box(
+        scene.stock_box,
+        scene.pitch_mm,
+        crate::scene::memory_budget_bytes(),
+    )
+    .map_err(|source| PipelineError::Stock {
+        path: spath.clone(),
+        source,
+    })?;
+    let volume0 = stock.volume();
+    lap("stock", &mut timings);
+
+    let sweep = sweep_program(
+        &mut stock,
+        &scene.chain,
+        &scene.tool,
+        &program.moves,
+        &scene.sweep,
+        progress,
+    )
+    .map_err(|source| PipelineError::Sweep {
+        path: program.path.display().to_string(),
+        source,
+    })?;
+    lap("sweep", &mut timings);
+
+    let scanned = scan(&stock, &scene.scanner, progress).map_err(|source| PipelineError::Scan {
+        path: spath.clone(),
+        source,
+    })?;
+    lap("scan", &mut timings);
+
+    let id_err = |source| PipelineError::Identify {
+        path: spath.clone(),
+        source,
+    };
+    let points = &scanned.cloud.points;
+    let faces = [0, 1].map(|k| {
+        identify::extract_face(
+            points,
+            &scene.faces[k],
+            &program.moves,
+            &scene.model,
+            &scene.tool,
+            &scene.stock_box,
+            &scene.face_options,
+        )
+    });
+    let [f0, f1] = faces;
+    let faces = [f0.map_err(id_err)?, f1.map_err(id_err)?];
+    lap("fit", &mut timings);
+
+    let cuts = identify::cut_moves(&program.moves, &scene.faces, &scene.model).map_err(id_err)?;
+    let ident = identify::identify_step(&faces, cuts, &scene.model, &scene.tool, &scene.stock_box)
+        .map_err(id_err)?;
+    let (predicted_step, predicted_tilt) = identify::predicted_step(
+        &scene.chain,
+        &scene.tool,
+        cuts,
+        &scene.stock_box,
+        &ident.frame,
+    )
+    .unwrap_or((Real::NAN, Real::NAN));
+    lap("identify", &mut timings);
+
+    // Heat map of both faces against the first face's nominal plane.
+    let nominal = identify::flank(
+        &scene.chain.nominal(),
+        &scene.tool,
+        cuts[0],
+        &scene.stock_box,
+    )
+    .unwrap_or(faces[0].flank);
+    let face_points: Vec<_> = faces
+        .iter()
+        .flat_map(|f| f.indices.iter().map(|&i| points[i]))
+        .collect();
+    let title = format!(
+        "{}: scanned faces, distance from nominal plane (step {:+.4} mm)",
+        scene.name, ident.step_mm
+    );
+    let img = render_heat_map(
+        &face_points,
+        &nominal.plane,
+        &nominal.u,
+        &nominal.v,
+        &HeatMapOptions {
+            title,
+            width_px: 800,
+            point_pitch_mm: scene.scanner.pitch_mm,
+            range_um: None,
+        },
+    )
+    .and_then(|img| encode_png(&img))
+    .map_err(|source| PipelineError::Render {
+        path: spath.clone(),
+        source,
+    })?;
+    lap("render", &mut timings);
+
+    let mut identified = BTreeMap::new();
+    let mut uncertainty = BTreeMap::new();
+    for (name, value, sigma) in [&ident.offset, &ident.angle_sum].into_iter().flatten() {
+        identified.insert(name.clone(), *value);
+        uncertainty.insert(name.clone(), *sigma);
+    }
+    let mut not_observable = ident.not_observable.clone();
+    if ident.offset.is_none() {
+        not_observable.push("step pair (Jacobian singular)".into());
+    }
+    let report = Report {
+        scene: scene.name.clone(),
+        machine: scene.machine_name.clone(),
+        chain: scene.chain.to_string(),
+        program: program.path.display().to_string(),
+        moves: program.moves.len(),
+        step_mm: ident.step_mm,
+        step_sigma_mm: ident.step_sigma_mm,
+        predicted_step_mm: predicted_step,
+        tilt_rad: ident.tilt_rad,
+        predicted_tilt_rad: predicted_tilt,
+        injected: scene.injected.clone(),
+        known: scene.known.clone(),
+        identified,
+        uncertainty,
+        not_observable,
+        faces: faces.iter().zip(&scene.faces).map(|(f, s)| face_report(f, s.line)).collect(),
+        solver: SolverReport {
+            method: "Levenberg-Marquardt on the exact chain (step, tilt), seed 002 eq. (6)(7) to first order".into(),
+            singular_values: ident.singular_values,
+            evaluations: ident.solver.0,
+            residual: ident.solver.1,
+        },
+        stock: StockReport {
+            pitch_mm: scene.pitch_mm,
+            rays: stock.grids().iter().map(|g| g.dims().0 * g.dims().1).sum(),
+            segments: stock.grids().iter().map(|g| g.segment_count()).sum(),
+            volume_mm3: stock.volume(),
+            removed_mm3: volume0 - stock.volume(),
+            memory_mib: stock.memory_bytes() as Real / 1048576.0,
+        },
+        sweep,
+        scan: ScanReport {
+            rays: scanned.rays,
+            points: points.len(),
+            shadowed: scanned.shadowed,
+            pitch_mm: scene.scanner.pitch_mm,
+            noise_sigma_mm: scene.scanner.noise_sigma_mm,
+            seed: scene.scanner.seed,
+        },
+        timings_s: timings,
+    };
+    Ok(Outcome {
+        report,
+        cloud: scanned.cloud,
+        heat_map_png: img,
+    })
+}

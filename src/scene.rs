@@ -1,0 +1,598 @@
+//! Scene files (TOML): the machine chain and its deviations, tool, stock, program, scanner
+//! and the faces to identify. Also reads the NC program the scene names.
+//!
+//! Every value is checked when the scene loads; an error names the file, line and column
+//! of the offending value. TOML accepts `nan` and `inf`: they are rejected here.
+//!
+//! **Invariant:** this module and [`crate::output`] are the only ones that touch files.
+
+use crate::fit::RobustRule;
+use crate::identify::{FaceOptions, FaceSpec};
+use crate::kinematics::{Axis, AxisKind, Chain};
+use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
+use crate::nc::{AxisLetter, AxisValues, NcError, Program, parse_program};
+use crate::scan::ScannerConfig;
+use crate::sweep::SweepOptions;
+use crate::tool::{Tool, ToolKind};
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use std::ops::Range;
+use std::path::{Path, PathBuf};
+use toml::Spanned;
+
+/// A problem with a scene or the files it names.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// A file could not be read.
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A value is malformed or out of range.
+    #[error("{path}:{line}:{column}: {message}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: usize,
+        /// 1-based column.
+        column: usize,
+        /// What is wrong.
+        message: String,
+    },
+    /// The NC program has errors.
+    #[error("{0}")]
+    Program(NcError),
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SceneFile {
+    name: Spanned<String>,
+    program: Spanned<String>,
+    machine: MachineFile,
+    #[serde(default)]
+    deviations: BTreeMap<String, Spanned<Real>>,
+    tool: ToolFile,
+    stock: StockFile,
+    #[serde(default)]
+    sweep: SweepFile,
+    scanner: ScannerFile,
+    identify: IdentifyFile,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MachineFile {
+    #[serde(default)]
+    name: String,
+    axes: Spanned<Vec<AxisFile>>,
+    #[serde(default = "default_spindle")]
+    spindle: String,
+    #[serde(default)]
+    home: BTreeMap<String, Spanned<Real>>,
+}
+
+fn default_spindle() -> String {
+    "S".into()
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct AxisFile {
+    name: Spanned<String>,
+    kind: Spanned<String>,
+    direction: Spanned<[Real; 3]>,
+    #[serde(default)]
+    origin: Option<Spanned<[Real; 3]>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ToolFile {
+    kind: Spanned<String>,
+    diameter_mm: Spanned<Real>,
+    length_mm: Spanned<Real>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct StockFile {
+    min: Spanned<[Real; 3]>,
+    max: Spanned<[Real; 3]>,
+    pitch_mm: Spanned<Real>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct SweepFile {
+    rotary_step_bound_mm: Option<Spanned<Real>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ScannerFile {
+    position: Spanned<[Real; 3]>,
+    target: Spanned<[Real; 3]>,
+    up: Spanned<[Real; 3]>,
+    #[serde(default)]
+    baseline_mm: Option<Spanned<Real>>,
+    #[serde(default)]
+    fov_mm: Option<Spanned<[Real; 2]>>,
+    #[serde(default)]
+    pitch_mm: Option<Spanned<Real>>,
+    #[serde(default)]
+    noise_sigma_mm: Option<Spanned<Real>>,
+    #[serde(default)]
+    seed: Option<u64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct IdentifyFile {
+    faces: Spanned<Vec<FaceFile>>,
+    #[serde(default)]
+    margin_mm: Option<Spanned<Real>>,
+    #[serde(default)]
+    band_mm: Option<Spanned<Real>>,
+    #[serde(default)]
+    known: BTreeMap<String, Spanned<Real>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FaceFile {
+    name: String,
+    line: Spanned<usize>,
+}
+
+/// A loaded, validated scene.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// The scene file.
+    pub path: PathBuf,
+    /// Scene name (names the output folder).
+    pub name: String,
+    /// Machine description.
+    pub machine_name: String,
+    /// The NC program file.
+    pub program_path: PathBuf,
+    /// The simulated (real) machine: chain with the injected deviations.
+    pub chain: Chain,
+    /// Deviations injected, by name (mm or rad), as written in the scene.
+    pub injected: BTreeMap<String, Real>,
+    /// The identification model: nominal chain plus the deviations known a priori.
+    pub model: Chain,
+    /// Deviations known a priori, by name.
+    pub known: BTreeMap<String, Real>,
+    /// Axis values before the first move.
+    pub home: AxisValues,
+    /// The cutter.
+    pub tool: Tool,
+    /// Stock box (workpiece frame, mm).
+    pub stock_box: Aabb,
+    /// Tri-dexel pitch (mm).
+    pub pitch_mm: Real,
+    /// Sweep options.
+    pub sweep: SweepOptions,
+    /// Scanner.
+    pub scanner: ScannerConfig,
+    /// The two faces of the 0/180 experiment.
+    pub faces: [FaceSpec; 2],
+    /// Face extraction options.
+    pub face_options: FaceOptions,
+}
+
+struct Ctx<'a> {
+    path: &'a Path,
+    text: &'a str,
+}
+
+impl Ctx<'_> {
+    fn err(&self, span: Range<usize>, message: impl Into<String>) -> SceneError {
+        let (line, column) = line_col(self.text, span.start);
+        SceneError::Invalid {
+            path: self.path.to_path_buf(),
+            line,
+            column,
+            message: message.into(),
+        }
+    }
+
+    fn finite(&self, v: &Spanned<Real>, what: &str) -> Result<Real, SceneError> {
+        let x = *v.get_ref();
+        if x.is_finite() {
+            Ok(x)
+        } else {
+            Err(self.err(v.span(), format!("{what} must be a finite number, got {x}")))
+        }
+    }
+
+    fn positive(&self, v: &Spanned<Real>, what: &str) -> Result<Real, SceneError> {
+        let x = self.finite(v, what)?;
+        if x > 0.0 {
+            Ok(x)
+        } else {
+            Err(self.err(v.span(), format!("{what} must be positive, got {x}")))
+        }
+    }
+
+    fn vec3(&self, v: &Spanned<[Real; 3]>, what: &str) -> Result<Vector3, SceneError> {
+        let a = v.get_ref();
+        if a.iter().all(|c| c.is_finite()) {
+            Ok(Vector3::new(a[0], a[1], a[2]))
+        } else {
+            Err(self.err(
+                v.span(),
+                format!("{what} must have finite components, got {a:?}"),
+            ))
+        }
+    }
+}
+
+/// 1-based line and column (in characters) of byte offset `at`.
+fn line_col(text: &str, at: usize) -> (usize, usize) {
+    let at = at.min(text.len());
+    let before = text.get(..at).unwrap_or(text);
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, col)
+}
+
+fn read_text(path: &Path) -> Result<String, SceneError> {
+    let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    String::from_utf8(bytes).map_err(|e| {
+        let at = e.utf8_error().valid_up_to();
+        let text = String::from_utf8_lossy(e.as_bytes());
+        let (line, column) = line_col(&text, at);
+        SceneError::Invalid {
+            path: path.to_path_buf(),
+            line,
+            column,
+            message: "not valid UTF-8".into(),
+        }
+    })
+}
+
+fn deviation_map(
+    ctx: &Ctx,
+    chain: &mut Chain,
+    map: &BTreeMap<String, Spanned<Real>>,
+) -> Result<BTreeMap<String, Real>, SceneError> {
+    let mut out = BTreeMap::new();
+    for (name, value) in map {
+        let id = chain
+            .deviation_id(name)
+            .map_err(|e| ctx.err(value.span(), e.to_string()))?;
+        let v = ctx.finite(value, name)?;
+        chain.set_deviation(id, v);
+        out.insert(name.clone(), v);
+    }
+    Ok(out)
+}
+
+/// The memory the tri-dexel may use: the machine's available memory, less a quarter for the
+/// rest of the pipeline; 16 GiB if it cannot be read.
+pub fn memory_budget_bytes() -> Real {
+    let avail = std::fs::read_to_string("/proc/meminfo").ok().and_then(|s| {
+        s.lines()
+            .find(|l| l.starts_with("MemAvailable:"))
+            .and_then(|l| l.split_whitespace().nth(1))
+            .and_then(|kb| kb.parse::<Real>().ok())
+            .map(|kb| kb * 1024.0)
+    });
+    avail.unwrap_or(16.0 * 1073741824.0) * 0.75
+}
+
+impl Scene {
+    /// Loads and validates a scene file.
+    pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        let text = read_text(path)?;
+        Self::parse(&text, path)
+    }
+
+    /// Parses and validates scene text; `path` locates messages and relative file names.
+    pub fn parse(text: &str, path: &Path) -> Result<Scene, SceneError> {
+        let ctx = Ctx { path, text };
+        let file: SceneFile = toml::from_str(text).map_err(|e| {
+            let span = e.span().unwrap_or(0..0);
+            ctx.err(span, e.message().trim().to_string())
+        })?;
+        let name = file.name.get_ref().trim().to_string();
+        if name.is_empty()
+            || !name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || "-_.".contains(c))
+            || name.starts_with('.')
+        {
+            return Err(ctx.err(
+                file.name.span(),
+                "name must be non-empty and use only letters, digits, '-', '_', '.'",
+            ));
+        }
+        // Machine.
+        let mut axes = Vec::new();
+        for a in file.machine.axes.get_ref() {
+            let mut chars = a.name.get_ref().chars();
+            let letter = match (chars.next().and_then(AxisLetter::from_char), chars.next()) {
+                (Some(l), None) => l,
+                _ => {
+                    return Err(ctx.err(
+                        a.name.span(),
+                        format!(
+                            "axis name must be one of X Y Z A B C, got '{}'",
+                            a.name.get_ref()
+                        ),
+                    ));
+                }
+            };
+            let kind = match a.kind.get_ref().as_str() {
+                "linear" => AxisKind::Linear,
+                "rotary" => AxisKind::Rotary,
+                other => {
+                    return Err(ctx.err(
+                        a.kind.span(),
+                        format!("axis kind must be 'linear' or 'rotary', got '{other}'"),
+                    ));
+                }
+            };
+            if (kind == AxisKind::Rotary) != letter.is_rotary() {
+                return Err(ctx.err(
+                    a.kind.span(),
+                    format!(
+                        "axis {} must be {}",
+                        letter.as_char(),
+                        if letter.is_rotary() {
+                            "rotary"
+                        } else {
+                            "linear"
+                        }
+                    ),
+                ));
+            }
+            let d = ctx.vec3(&a.direction, "direction")?;
+            let direction = UnitVector3::try_new(d, tol::LENGTH_EPS)
+                .ok_or_else(|| ctx.err(a.direction.span(), "direction must not be zero"))?;
+            let origin = match &a.origin {
+                Some(o) => Point3::from(ctx.vec3(o, "origin")?),
+                None => Point3::origin(),
+            };
+            axes.push(Axis {
+                letter,
+                kind,
+                direction,
+                origin,
+            });
+        }
+        let mut chain = Chain::new(axes, &file.machine.spindle)
+            .map_err(|e| ctx.err(file.machine.axes.span(), e.to_string()))?;
+        let mut home = AxisValues::default();
+        for (k, v) in &file.machine.home {
+            let letter = match k.chars().collect::<Vec<_>>()[..] {
+                [c] => AxisLetter::from_char(c).filter(|l| chain.has_axis(*l)),
+                _ => None,
+            }
+            .ok_or_else(|| {
+                ctx.err(
+                    v.span(),
+                    format!("home: '{k}' is not an axis of this machine"),
+                )
+            })?;
+            home.set(letter, ctx.finite(v, &format!("home.{k}"))?);
+        }
+        let model_nominal = chain.nominal();
+        let injected = deviation_map(&ctx, &mut chain, &file.deviations)?;
+        let mut model = model_nominal;
+        let known = deviation_map(&ctx, &mut model, &file.identify.known)?;
+        // Tool.
+        let kind = match file.tool.kind.get_ref().as_str() {
+            "flat" => ToolKind::Flat,
+            "ball" => ToolKind::Ball,
+            other => {
+                return Err(ctx.err(
+                    file.tool.kind.span(),
+                    format!("tool kind must be 'flat' or 'ball', got '{other}'"),
+                ));
+            }
+        };
+        let diameter = ctx.positive(&file.tool.diameter_mm, "diameter_mm")?;
+        let length = ctx.positive(&file.tool.length_mm, "length_mm")?;
+        let tool = Tool::try_new(kind, diameter, length)
+            .map_err(|e| ctx.err(file.tool.length_mm.span(), e.to_string()))?;
+        // Stock.
+        let (mn, mx) = (
+            ctx.vec3(&file.stock.min, "stock.min")?,
+            ctx.vec3(&file.stock.max, "stock.max")?,
+        );
+        if (0..3).any(|k| mx[k] <= mn[k]) {
+            return Err(ctx.err(
+                file.stock.max.span(),
+                "stock.max must exceed stock.min on every axis",
+            ));
+        }
+        let stock_box = Aabb {
+            min: mn.into(),
+            max: mx.into(),
+        };
+        let pitch_mm = ctx.positive(&file.stock.pitch_mm, "pitch_mm")?;
+        let budget = memory_budget_bytes();
+        let need = crate::stock::estimate_bytes(&stock_box, pitch_mm);
+        if need > budget {
+            let suggested = pitch_mm * (need / budget).sqrt() * 1.01;
+            return Err(ctx.err(
+                file.stock.pitch_mm.span(),
+                format!(
+                    "pitch_mm = {pitch_mm} needs about {:.0} MiB for the tri-dexel, more than the {:.0} MiB this machine can give; use pitch_mm >= {suggested:.4}",
+                    need / 1048576.0,
+                    budget / 1048576.0
+                ),
+            ));
+        }
+        // Sweep.
+        let bound = match &file.sweep.rotary_step_bound_mm {
+            Some(v) => {
+                let b = ctx.positive(v, "rotary_step_bound_mm")?;
+                if b > 1.0 {
+                    return Err(ctx.err(v.span(), "rotary_step_bound_mm must be at most 1 mm"));
+                }
+                b
+            }
+            None => tol::ROTARY_STEP_BOUND,
+        };
+        // Scanner.
+        let s = &file.scanner;
+        let opt = |v: &Option<Spanned<Real>>, what: &str, default: Real| {
+            v.as_ref().map_or(Ok(default), |v| ctx.finite(v, what))
+        };
+        let fov = match &s.fov_mm {
+            Some(f) => {
+                let a = f.get_ref();
+                if !(a[0].is_finite() && a[1].is_finite() && a[0] > 0.0 && a[1] > 0.0) {
+                    return Err(ctx.err(f.span(), "fov_mm must be two positive finite numbers"));
+                }
+                (a[0], a[1])
+            }
+            None => (200.0, 150.0),
+        };
+        let scanner = ScannerConfig {
+            position: ctx.vec3(&s.position, "position")?.into(),
+            target: ctx.vec3(&s.target, "target")?.into(),
+            up: ctx.vec3(&s.up, "up")?,
+            baseline_mm: opt(&s.baseline_mm, "baseline_mm", 100.0)?,
+            fov_mm: fov,
+            pitch_mm: opt(&s.pitch_mm, "pitch_mm", 0.185)?,
+            noise_sigma_mm: opt(&s.noise_sigma_mm, "noise_sigma_mm", 0.025)?,
+            seed: s.seed.unwrap_or(1),
+        };
+        if let Some(p) = &s.pitch_mm {
+            ctx.positive(p, "pitch_mm")?;
+        }
+        if let Some(n) = &s.noise_sigma_mm
+            && *n.get_ref() < 0.0
+        {
+            return Err(ctx.err(n.span(), "noise_sigma_mm must not be negative"));
+        }
+        if (scanner.target - scanner.position).norm() < 1.0
+            || (scanner.target - scanner.position)
+                .normalize()
+                .cross(&scanner.up)
+                .norm()
+                < 1e-6
+        {
+            return Err(ctx.err(
+                s.up.span(),
+                "scanner: target must differ from position and up must not be parallel to the view",
+            ));
+        }
+        // Faces.
+        let faces = file.identify.faces.get_ref();
+        let [f0, f1] = &faces[..] else {
+            return Err(ctx.err(
+                file.identify.faces.span(),
+                format!(
+                    "identify.faces must list exactly two faces (cut at A = 0° and 180°), got {}",
+                    faces.len()
+                ),
+            ));
+        };
+        let spec = |f: &FaceFile| FaceSpec {
+            name: f.name.clone(),
+            line: *f.line.get_ref(),
+        };
+        let margin = opt(&file.identify.margin_mm, "margin_mm", 1.0)?;
+        let band = opt(&file.identify.band_mm, "band_mm", 2.0)?;
+        if margin < 0.0 {
+            return Err(ctx.err(
+                file.identify.margin_mm.as_ref().map_or(0..0, |m| m.span()),
+                "margin_mm must not be negative",
+            ));
+        }
+        if band <= 0.0 {
+            return Err(ctx.err(
+                file.identify.band_mm.as_ref().map_or(0..0, |m| m.span()),
+                "band_mm must be positive",
+            ));
+        }
+        let program_path = path
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join(file.program.get_ref());
+        Ok(Scene {
+            path: path.to_path_buf(),
+            name,
+            machine_name: file.machine.name,
+            program_path,
+            chain,
+            injected,
+            model,
+            known,
+            home,
+            tool,
+            stock_box,
+            pitch_mm,
+            sweep: SweepOptions {
+                rotary_step_bound_mm: bound,
+            },
+            scanner,
+            faces: [spec(f0), spec(f1)],
+            face_options: FaceOptions {
+                margin_mm: margin,
+                band_mm: band,
+                robust: RobustRule::default(),
+            },
+        })
+    }
+
+    /// Reads and parses the scene's NC program, checking that it drives only axes the
+    /// machine has.
+    pub fn load_program(&self) -> Result<Program, SceneError> {
+        let text = read_text(&self.program_path)?;
+        let program =
+            parse_program(&text, &self.program_path, self.home).map_err(SceneError::Program)?;
+        if let Some(letter) = program.axes_used.iter().find(|l| !self.chain.has_axis(**l)) {
+            let line = program
+                .moves
+                .iter()
+                .find(|m| m.start.get(*letter) != m.end.get(*letter))
+                .map_or(1, |m| m.line);
+            let (col, src) = text
+                .lines()
+                .nth(line - 1)
+                .and_then(|l| {
+                    l.to_ascii_uppercase()
+                        .find(letter.as_char())
+                        .map(|c| (c + 1, l.to_string()))
+                })
+                .unwrap_or((1, String::new()));
+            let _ = src;
+            return Err(SceneError::Invalid {
+                path: self.program_path.clone(),
+                line,
+                column: col,
+                message: format!(
+                    "the machine '{}' has no {} axis",
+                    self.machine_name,
+                    letter.as_char()
+                ),
+            });
+        }
+        Ok(program)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn line_col_counts_from_one() {
+        assert_eq!(line_col("ab\ncd", 0), (1, 1));
+        assert_eq!(line_col("ab\ncd", 4), (2, 2));
+    }
+}
