@@ -1,1 +1,68 @@
-fn main() {}
+//! Benchmarks of the main job on the built-in scene, whole and per stage.
+//!
+//! `cargo bench --bench pipeline`; figures and the machine they came from are in README.md.
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use std::hint::black_box;
+use std::path::Path;
+use twinmill::pipeline::run;
+use twinmill::progress::NoProgress;
+use twinmill::scan::scan;
+use twinmill::scene::Scene;
+use twinmill::stock::TriDexel;
+use twinmill::sweep::sweep_program;
+
+const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/mdx50-step.toml");
+
+fn benches(c: &mut Criterion) {
+    let scene = Scene::load(Path::new(SCENE)).expect("scene");
+    let program = scene.load_program().expect("program");
+
+    let mut g = c.benchmark_group("mdx50-step");
+    g.sample_size(20);
+    g.bench_function("run (whole pipeline, default resolution)", |b| {
+        b.iter(|| run(black_box(&scene), black_box(&program), &NoProgress).expect("runs"))
+    });
+
+    g.throughput(Throughput::Elements(program.moves.len() as u64));
+    g.bench_function("stock + sweep (moves)", |b| {
+        b.iter(|| {
+            let mut stock = TriDexel::new_box(scene.stock_box, scene.pitch_mm, 8e9).expect("fits");
+            sweep_program(
+                &mut stock,
+                &scene.chain,
+                &scene.tool,
+                &program.moves,
+                &scene.sweep,
+                &NoProgress,
+            )
+            .expect("sweeps");
+            stock
+        })
+    });
+
+    let mut stock = TriDexel::new_box(scene.stock_box, scene.pitch_mm, 8e9).expect("fits");
+    sweep_program(
+        &mut stock,
+        &scene.chain,
+        &scene.tool,
+        &program.moves,
+        &scene.sweep,
+        &NoProgress,
+    )
+    .expect("sweeps");
+    let rays = (scene.scanner.fov_mm.0 / scene.scanner.pitch_mm).round()
+        * (scene.scanner.fov_mm.1 / scene.scanner.pitch_mm).round();
+    g.throughput(Throughput::Elements(rays as u64));
+    g.bench_function("scan (camera rays)", |b| {
+        b.iter(|| scan(black_box(&stock), &scene.scanner, &NoProgress).expect("scans"))
+    });
+    g.finish();
+}
+
+// criterion_group! generates an undocumented public function: keep it in a private module.
+mod group {
+    use super::*;
+    criterion_group!(pipeline, benches);
+}
+criterion_main!(group::pipeline);

@@ -295,12 +295,17 @@ pub struct StepIdentification {
     pub offset: Option<(String, Real, Real)>,
     /// Name and value of the angle sum (e.g. `gamma_AY+gamma_YX`, rad), if identifiable.
     pub angle_sum: Option<(String, Real, Real)>,
+    /// Name of the offset parameter solved for (e.g. `dy_AY`).
+    pub offset_name: String,
+    /// Name of the angle combination solved for (e.g. `gamma_AY+gamma_YX`).
+    pub angle_name: String,
     /// Singular values of the 2×2 Jacobian (step, tilt) w.r.t. (offset, angle).
     pub singular_values: [Real; 2],
     /// Levenberg–Marquardt evaluations and final residual norm.
     pub solver: (usize, Real),
-    /// Deviation names this experiment cannot observe: held at their known values.
-    pub not_observable: Vec<String>,
+    /// Deviation names this experiment does not identify (alone or separably): held at
+    /// their known values (0 unless the scene gives them), never given a value.
+    pub not_identified: Vec<String>,
 }
 
 /// The two parameters solved for, on a model chain.
@@ -451,7 +456,7 @@ pub fn identify_step(
     if joint + 1 < model.axes().len() {
         observed.push(format!("gamma_{joint_next}"));
     }
-    let not_observable = model
+    let not_identified = model
         .deviation_names()
         .into_iter()
         .filter(|n| !observed.contains(n))
@@ -480,8 +485,12 @@ pub fn identify_step(
             0.0
         };
         (
-            Some((offset_name, solved.base[0] + x[0], sig(0))),
-            Some((angle_name, solved.base[1] + x[1] + gamma_next, sig(1))),
+            Some((offset_name.clone(), solved.base[0] + x[0], sig(0))),
+            Some((
+                angle_name.clone(),
+                solved.base[1] + x[1] + gamma_next,
+                sig(1),
+            )),
             (rep.number_of_evaluations, res),
         )
     } else {
@@ -495,9 +504,11 @@ pub fn identify_step(
         tilt_sigma_rad: tilt_sigma,
         offset,
         angle_sum,
+        offset_name,
+        angle_name,
         singular_values: [smax, smin],
         solver,
-        not_observable,
+        not_identified,
     })
 }
 

@@ -210,9 +210,11 @@ pub fn run(
         identified.insert(name.clone(), *value);
         uncertainty.insert(name.clone(), *sigma);
     }
-    let mut not_observable = ident.not_observable.clone();
+    let mut not_identified = ident.not_identified.clone();
     if ident.offset.is_none() {
-        not_observable.push("step pair (Jacobian singular)".into());
+        // The faces do not determine the pair: report the names, give no value.
+        let names = [ident.offset_name.clone(), ident.angle_name.clone()];
+        not_identified.extend(names);
     }
     let report = Report {
         scene: scene.name.clone(),
@@ -229,7 +231,7 @@ pub fn run(
         known: scene.known.clone(),
         identified,
         uncertainty,
-        not_observable,
+        not_identified,
         faces: faces.iter().zip(&scene.faces).map(|(f, s)| face_report(f, s.line)).collect(),
         solver: SolverReport {
             method: "Levenberg-Marquardt on the exact chain (step, tilt), seed 002 eq. (6)(7) to first order".into(),

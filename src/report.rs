@@ -113,8 +113,9 @@ pub struct Report {
     pub identified: BTreeMap<String, f64>,
     /// Standard uncertainties of the identified values, from the fit residuals.
     pub uncertainty: BTreeMap<String, f64>,
-    /// Deviations this experiment cannot observe; never given a value.
-    pub not_observable: Vec<String>,
+    /// Deviations this experiment does not identify; held at their known values, never
+    /// given an identified value.
+    pub not_identified: Vec<String>,
     /// The fitted faces.
     pub faces: Vec<FaceReport>,
     /// Identification solver.

@@ -394,7 +394,8 @@ mod tests {
             .iter()
             .filter(|p| p.z < 4.0 && p.x.abs() < 9.0)
             .count();
-        assert!(front > 1000, "front points {front}");
+        // 18 × 9 mm of the front face at 0.5 mm pitch: about 650 points.
+        assert!(front > 600, "front points {front}");
         for p in s
             .cloud
             .points

@@ -280,8 +280,7 @@ impl DexelGrid {
         let (axis, u, v, u0, v0, du, dv) = (
             self.axis, self.u, self.v, self.u0, self.v0, self.du, self.dv,
         );
-        let changed = self
-            .blocks
+        self.blocks
             .par_iter_mut()
             .enumerate()
             .map(|(b, block)| {
@@ -322,8 +321,7 @@ impl DexelGrid {
                 }
                 changed
             })
-            .reduce(|| false, |a, b| a || b);
-        changed
+            .reduce(|| false, |a, b| a || b)
     }
 }
 

@@ -12,12 +12,15 @@
 //! ∩ quadric, line ∩ line), each computed by a quadratic formula.
 //!
 //! **Moves that turn a rotary axis** are split into `N` sub-steps, each swept as a
-//! translation with the mid-step orientation between the exact end positions. The distance
-//! between any tool point on the true and on the approximate motion is at most
+//! translation with the mid-step orientation, its mid-height point `c` moving straight
+//! between its exact positions at the sub-step's ends. The distance between any tool point
+//! on the true and on the approximate motion is at most
 //! `ε(N) = ω·ρ_tool/(2N) + (ω²·ρ_axis + 2·ω·v)/(8N²)`, with `ω` the total rotation (rad),
-//! `ρ_tool` the tool's reach from its tip, `ρ_axis` the tip's largest distance from a rotary
-//! axis point and `v` the linear travel; `N` is the smallest that meets the bound asked for,
-//! and the achieved bound is reported.
+//! `ρ_tool` the largest distance of a tool point from `c`, `ρ_axis` the largest distance of
+//! `c` from a rotary axis point and `v` the linear travel: the first term is the orientation
+//! held fixed over a sub-step, the second the chord error of `c`'s curved path
+//! (`|c''| ≤ ω²ρ_axis + 2ωv`). `N` is the smallest that meets the bound asked for, and the
+//! achieved bound is reported.
 //!
 //! **Invariant:** the sweep reads moves and poses; it never parses text or touches files.
 
@@ -453,43 +456,72 @@ fn rotation_and_travel(chain: &Chain, a: &AxisValues, b: &AxisValues) -> (Real, 
     (omega, travel)
 }
 
-/// Plans a rotary move: number of sub-steps (a multiple of [`COARSE`]) and its error bound.
-pub fn plan_rotary(
-    chain: &Chain,
-    tool: &Tool,
-    mv: &Move,
-    bound: Real,
-) -> Result<(usize, Real), SweepError> {
-    let (omega, v) = rotation_and_travel(chain, &mv.start, &mv.end);
-    let rotaries = chain
-        .axes()
-        .iter()
-        .filter(|a| a.kind == AxisKind::Rotary)
-        .count();
-    let tips = [chain.w_from_t(&mv.start), chain.w_from_t(&mv.end)].map(|p| p * Point3::origin());
-    let mut rho = 0.0;
-    for (q, tip) in [&mv.start, &mv.end].iter().zip(&tips) {
-        for c in chain.rotary_points_in_w(q) {
-            rho = Real::max(rho, (tip - c).norm());
+/// The error bound of a rotary move's sub-steps: `ε(N) = a/N + b/N²` (see the module docs).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RotaryBound {
+    /// First-order coefficient (mm): orientation held fixed over a sub-step.
+    pub a: Real,
+    /// Second-order coefficient (mm): chord error of the mid point's path.
+    pub b: Real,
+}
+
+impl RotaryBound {
+    /// The bound for a move on `chain` with `tool`.
+    pub fn of(chain: &Chain, tool: &Tool, mv: &Move) -> Self {
+        let (omega, v) = rotation_and_travel(chain, &mv.start, &mv.end);
+        let rotaries = chain
+            .axes()
+            .iter()
+            .filter(|a| a.kind == AxisKind::Rotary)
+            .count();
+        let mids =
+            [chain.w_from_t(&mv.start), chain.w_from_t(&mv.end)].map(|p| p * mid_point(tool));
+        let mut rho = 0.0;
+        for (q, c) in [&mv.start, &mv.end].iter().zip(&mids) {
+            for axis_point in chain.rotary_points_in_w(q) {
+                rho = Real::max(rho, (c - axis_point).norm());
+            }
+        }
+        if rotaries > 1 {
+            // Several rotaries: distances may grow mid-move by at most the path length.
+            rho = (rho + v) * (1.0 + omega);
+        }
+        Self {
+            a: omega * tool.radius().hypot(tool.length() / 2.0) / 2.0,
+            b: (omega * omega * rho + 2.0 * omega * v) / 8.0,
         }
     }
-    if rotaries > 1 {
-        // Several rotaries: distances may grow mid-move by at most the path length.
-        rho = (rho + v) * (1.0 + omega);
+
+    /// The bound at `n` sub-steps (mm).
+    pub fn at(&self, n: usize) -> Real {
+        let n = n as Real;
+        self.a / n + self.b / (n * n)
     }
-    let a = omega * tool.reach() / 2.0;
-    let b = (omega * omega * rho + 2.0 * omega * v) / 8.0;
-    let n = (a + (a * a + 4.0 * b * bound).sqrt()) / (2.0 * bound);
-    let n = (n.ceil() / COARSE as Real).ceil() * COARSE as Real;
-    if !(n <= MAX_SUBSTEPS) {
-        return Err(SweepError::TooManySubsteps {
-            line: mv.line,
-            bound_mm: bound,
-            steps: n,
-        });
+
+    /// The smallest multiple of [`COARSE`] sub-steps meeting `bound`, if not absurd.
+    pub fn steps_for(&self, bound: Real, line: usize) -> Result<usize, SweepError> {
+        let n = (self.a + (self.a * self.a + 4.0 * self.b * bound).sqrt()) / (2.0 * bound);
+        let n = ((n.ceil() / COARSE as Real).ceil() * COARSE as Real).max(COARSE as Real);
+        if n.is_nan() || n > MAX_SUBSTEPS {
+            return Err(SweepError::TooManySubsteps {
+                line,
+                bound_mm: bound,
+                steps: n,
+            });
+        }
+        Ok(n as usize)
     }
-    let eps = a / n + b / (n * n);
-    Ok((n as usize, eps))
+}
+
+/// The tool's mid-height point on its axis, tool frame: the point whose path rotary
+/// sub-steps interpolate.
+fn mid_point(tool: &Tool) -> Point3 {
+    Point3::new(0.0, 0.0, tool.length() / 2.0)
+}
+
+/// A sub-step: the tool with axis `v` whose mid point moves from `a` to `b`.
+fn substep(tool: &Tool, a: Point3, b: Point3, v: UnitVector3) -> TranslatedTool {
+    TranslatedTool::new(*tool, a - v.into_inner() * (tool.length() / 2.0), b - a, v)
 }
 
 fn pose_at(chain: &Chain, mv: &Move, lambda: Real) -> Isometry3 {
@@ -531,21 +563,20 @@ pub fn sweep_program(
             cut |= stock.remove(&swept, line);
         } else {
             report.rotary_moves += 1;
-            let (n, eps) = plan_rotary(chain, tool, mv, bound)?;
-            report.rotary_error_bound_mm = report.rotary_error_bound_mm.max(eps);
+            let rb = RotaryBound::of(chain, tool, mv);
+            let n = rb.steps_for(bound, mv.line)?;
+            report.rotary_error_bound_mm = report.rotary_error_bound_mm.max(rb.at(n));
             let per = n / COARSE;
-            // Coarse bound for pruning: the same formula at COARSE sub-steps.
-            let (_, eps_c) = plan_rotary(chain, tool, mv, 1.0).unwrap_or((COARSE, Real::INFINITY));
-            let eps_c = eps_c.max(eps) * 2.0 + 1e-6;
+            // A coarse sub-step's box, grown by its own bound, holds every fine sub-step in it.
+            let eps_c = rb.at(COARSE) + 1e-6;
+            let mid = mid_point(tool);
             for j in 0..COARSE {
                 let (l0, l1) = (j as Real / COARSE as Real, (j + 1) as Real / COARSE as Real);
-                let pm = pose_at(chain, mv, (l0 + l1) / 2.0);
-                let axis = UnitVector3::new_normalize(pm.rotation * Vector3::z());
-                let (a0, a1) = (
-                    pose_at(chain, mv, l0) * Point3::origin(),
-                    pose_at(chain, mv, l1) * Point3::origin(),
-                );
-                let coarse = TranslatedTool::new(*tool, a0, a1 - a0, axis)
+                let axis_at = |l: Real| {
+                    UnitVector3::new_normalize(pose_at(chain, mv, l).rotation * Vector3::z())
+                };
+                let (a0, a1) = (pose_at(chain, mv, l0) * mid, pose_at(chain, mv, l1) * mid);
+                let coarse = substep(tool, a0, a1, axis_at((l0 + l1) / 2.0))
                     .bounds()
                     .inflated(eps_c);
                 if !coarse.intersects(stock.bounds()) {
@@ -555,10 +586,8 @@ pub fn sweep_program(
                 for k in 0..per {
                     let i = j * per + k;
                     let (la, lb) = (i as Real / n as Real, (i + 1) as Real / n as Real);
-                    let next = pose_at(chain, mv, lb) * Point3::origin();
-                    let mid = pose_at(chain, mv, (la + lb) / 2.0);
-                    let axis = UnitVector3::new_normalize(mid.rotation * Vector3::z());
-                    let swept = TranslatedTool::new(*tool, prev, next - prev, axis);
+                    let next = pose_at(chain, mv, lb) * mid;
+                    let swept = substep(tool, prev, next, axis_at((la + lb) / 2.0));
                     report.sweeps += 1;
                     cut |= stock.remove(&swept, line);
                     prev = next;

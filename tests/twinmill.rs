@@ -1,0 +1,627 @@
+//! Public behaviour of twinmill, through the library API and the `twinmill` binary.
+
+use nalgebra::{Matrix4, Vector4};
+use proptest::prelude::*;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use twinmill::kinematics::Chain;
+use twinmill::math::{Aabb, Point3, Real, Vector3};
+use twinmill::nc::{AxisLetter, AxisValues, Move, MoveKind};
+use twinmill::pipeline::{Outcome, run};
+use twinmill::progress::NoProgress;
+use twinmill::scene::Scene;
+use twinmill::stock::TriDexel;
+use twinmill::sweep::{SweepOptions, sweep_program};
+
+const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/mdx50-step.toml");
+
+fn scene() -> Scene {
+    Scene::load(Path::new(SCENE)).expect("the built-in scene loads")
+}
+
+fn run_scene(scene: &Scene) -> Outcome {
+    let program = scene.load_program().expect("the built-in program parses");
+    run(scene, &program, &NoProgress).expect("the pipeline runs")
+}
+
+fn set_deviation(scene: &mut Scene, name: &str, value: Real) {
+    let id = scene.chain.deviation_id(name).expect("known name");
+    scene.chain.set_deviation(id, value);
+    scene.injected.insert(name.to_string(), value);
+}
+
+// ---------------------------------------------------------------------------------------
+// An independent derivation of the exact faces (BRIEF §4): homogeneous 4×4 matrices built
+// here from the chain's definition, not from the library's kinematics or sweep code.
+
+fn trans(x: Real, y: Real, z: Real) -> Matrix4<Real> {
+    let mut m = Matrix4::identity();
+    m[(0, 3)] = x;
+    m[(1, 3)] = y;
+    m[(2, 3)] = z;
+    m
+}
+
+fn rot(axis: usize, a: Real) -> Matrix4<Real> {
+    let (s, c) = a.sin_cos();
+    let (i, j) = ((axis + 1) % 3, (axis + 2) % 3);
+    let mut m = Matrix4::identity();
+    m[(i, i)] = c;
+    m[(i, j)] = -s;
+    m[(j, i)] = s;
+    m[(j, j)] = c;
+    m
+}
+
+/// E = Trans(dx,dy,dz)·Rx(alpha)·Ry(beta)·Rz(gamma)
+fn deviation(d: [Real; 6]) -> Matrix4<Real> {
+    trans(d[0], d[1], d[2]) * rot(0, d[3]) * rot(1, d[4]) * rot(2, d[5])
+}
+
+/// r_W = RotX(a)·E_AY·Ty·E_YX·Tx·E_XZ·Tz·E_ZS·r_T
+fn mdx50_w_from_t(dev: &[[Real; 6]; 4], x: Real, y: Real, z: Real, a_deg: Real) -> Matrix4<Real> {
+    rot(0, a_deg.to_radians())
+        * deviation(dev[0])
+        * trans(0.0, y, 0.0)
+        * deviation(dev[1])
+        * trans(x, 0.0, 0.0)
+        * deviation(dev[2])
+        * trans(0.0, 0.0, z)
+        * deviation(dev[3])
+}
+
+/// The flank plane (unit normal towards +Y_W, offset) of a straight cut along X of a
+/// cylinder of radius `r`: tangent to the cylinder, parallel to its axis and the path.
+fn exact_face(dev: &[[Real; 6]; 4], y: Real, a_deg: Real, r: Real) -> (Vector3, Real) {
+    let m0 = mdx50_w_from_t(dev, -30.0, y, 0.0, a_deg);
+    let m1 = mdx50_w_from_t(dev, 30.0, y, 0.0, a_deg);
+    let p0 = (m0 * Vector4::new(0.0, 0.0, 0.0, 1.0)).xyz();
+    let p1 = (m1 * Vector4::new(0.0, 0.0, 0.0, 1.0)).xyz();
+    let axis = (m0 * Vector4::new(0.0, 0.0, 1.0, 0.0)).xyz();
+    let mut n = (p1 - p0).cross(&axis).normalize();
+    if n.y < 0.0 {
+        n = -n;
+    }
+    (n, n.dot(&p0) + r)
+}
+
+fn mdx50_deviations(scene: &Scene) -> [[Real; 6]; 4] {
+    std::array::from_fn(|j| scene.chain.deviations()[j].values)
+}
+
+// ---------------------------------------------------------------------------------------
+// Acceptance of the 0°/180° experiment.
+
+#[test]
+fn noise_off_step_and_identification_are_exact() {
+    let mut s = scene();
+    s.scanner.noise_sigma_mm = 0.0;
+    let out = run_scene(&s);
+    let r = &out.report;
+    assert!((r.step_mm - 1.0).abs() < 0.5e-3, "step {}", r.step_mm);
+    let dy = r.identified["dy_AY"];
+    assert!((dy + 0.5).abs() < 0.5e-3, "dy_AY {dy}");
+    let g = r.identified["gamma_AY+gamma_YX"];
+    assert!(g.abs() < 2e-6, "gamma sum {g}");
+    // Far tighter in fact: the faces are exact.
+    assert!((r.step_mm - 1.0).abs() < 1e-6, "step {}", r.step_mm);
+}
+
+#[test]
+fn noise_on_identifies_dy_ay_within_2_um() {
+    let s = scene();
+    assert_eq!(s.scanner.noise_sigma_mm, 0.025);
+    assert_eq!(s.scanner.pitch_mm, 0.185);
+    let r = run_scene(&s).report;
+    let dy = r.identified["dy_AY"];
+    assert!((dy + 0.5).abs() < 2e-3, "dy_AY {dy}");
+    // The stated uncertainty is honest: the error is within 4 of it.
+    assert!(
+        (dy + 0.5).abs() < 4.0 * r.uncertainty["dy_AY"],
+        "dy_AY {dy} ± {}",
+        r.uncertainty["dy_AY"]
+    );
+}
+
+#[test]
+fn zero_deviations_leave_no_step() {
+    let mut s = scene();
+    set_deviation(&mut s, "dy_AY", 0.0);
+    s.scanner.noise_sigma_mm = 0.0;
+    let r = run_scene(&s).report;
+    assert!(r.step_mm.abs() < 0.1e-3, "step {}", r.step_mm);
+}
+
+#[test]
+fn gamma_sum_is_identified_from_the_tilt() {
+    // gamma_AY + gamma_YX tilts the two faces oppositely (eq. 6, 7).
+    let mut s = scene();
+    s.scanner.noise_sigma_mm = 0.0;
+    set_deviation(&mut s, "gamma_AY", 3e-4);
+    set_deviation(&mut s, "gamma_YX", -1e-4);
+    let r = run_scene(&s).report;
+    let g = r.identified["gamma_AY+gamma_YX"];
+    assert!((g - 2e-4).abs() < 2e-6, "gamma sum {g}");
+    assert!((r.identified["dy_AY"] + 0.5).abs() < 0.5e-3);
+    // To first order the tilt is 2(γ_AY + γ_YX).
+    assert!((r.tilt_rad - 4e-4).abs() < 1e-6, "tilt {}", r.tilt_rad);
+}
+
+// ---------------------------------------------------------------------------------------
+// The simulated faces coincide with the exact planes of the chain.
+
+fn check_faces_exact(s: &Scene) -> Result<(), TestCaseError> {
+    let dev = mdx50_deviations(s);
+    let r = s.tool.radius();
+    let faces = [(-25.0, 0.0, 1.5, 8.5), (25.0, 180.0, -8.5, -1.5)];
+    let program = s.load_program().expect("parses");
+    let mut stock = TriDexel::new_box(s.stock_box, s.pitch_mm, 4e9).expect("fits");
+    sweep_program(
+        &mut stock,
+        &s.chain,
+        &s.tool,
+        &program.moves,
+        &s.sweep,
+        &NoProgress,
+    )
+    .expect("sweeps");
+    for (y, a, z0, z1) in faces {
+        let (n, d) = exact_face(&dev, y, a, r);
+        let mut count = 0;
+        let mut worst: Real = 0.0;
+        for g in stock.grids() {
+            g.for_each_crossing(|p, c| {
+                let in_region =
+                    p.x.abs() <= 18.0 && p.z >= z0 && p.z <= z1 && (p.y + 22.0).abs() <= 1.8;
+                if in_region && c.normal().y < -0.9 {
+                    count += 1;
+                    worst = worst.max((n.dot(&p.coords) - d).abs());
+                }
+            });
+        }
+        prop_assert!(count > 5000, "A{a}: only {count} crossings on the face");
+        prop_assert!(
+            worst <= 0.5e-3,
+            "A{a}: dexel crossing {worst} mm off the exact plane"
+        );
+        // And the noise-free scan of the face.
+        let mut sc = s.scanner;
+        sc.noise_sigma_mm = 0.0;
+        let scanned = twinmill::scan::scan(&stock, &sc, &NoProgress).expect("scans");
+        let mut count = 0;
+        let mut worst: Real = 0.0;
+        for p in &scanned.cloud.points {
+            if p.x.abs() <= 18.0 && p.z >= z0 && p.z <= z1 && (p.y + 22.0).abs() <= 1.8 {
+                count += 1;
+                worst = worst.max((n.dot(&p.coords) - d).abs());
+            }
+        }
+        prop_assert!(count > 5000, "A{a}: only {count} scan points on the face");
+        prop_assert!(
+            worst <= 0.5e-3,
+            "A{a}: scan point {worst} mm off the exact plane"
+        );
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 12, failure_persistence: None, ..ProptestConfig::default() })]
+    #[test]
+    fn simulated_faces_coincide_with_exact_planes(
+        dy in -1.0..1.0f64, dz in -0.5..0.5f64,
+        g_ay in -5e-4..5e-4f64, g_yx in -5e-4..5e-4f64, a_yx in -5e-4..5e-4f64,
+        b_xz in -5e-4..5e-4f64, a_zs in -5e-4..5e-4f64, b_zs in -5e-4..5e-4f64,
+    ) {
+        let mut s = scene();
+        for (name, v) in [("dy_AY", dy), ("dz_AY", dz), ("gamma_AY", g_ay), ("gamma_YX", g_yx),
+                          ("alpha_YX", a_yx), ("beta_XZ", b_xz), ("alpha_ZS", a_zs), ("beta_ZS", b_zs)] {
+            set_deviation(&mut s, name, v);
+        }
+        check_faces_exact(&s)?;
+    }
+}
+
+#[test]
+fn the_library_chain_matches_the_independent_derivation() {
+    let mut s = scene();
+    let vals = [
+        ("dy_AY", -0.3),
+        ("dz_AY", 0.2),
+        ("beta_AY", 1e-4),
+        ("gamma_AY", -2e-4),
+        ("alpha_YX", 3e-4),
+        ("gamma_YX", 1e-4),
+        ("beta_XZ", -1e-4),
+        ("alpha_ZS", 2e-4),
+        ("beta_ZS", -3e-4),
+        ("dx_ZS", 0.05),
+    ];
+    for (n, v) in vals {
+        set_deviation(&mut s, n, v);
+    }
+    let dev = mdx50_deviations(&s);
+    for (x, y, z, a) in [
+        (1.0, 2.0, 3.0, 0.0),
+        (-12.0, 25.0, 7.0, 180.0),
+        (3.0, -4.0, 50.0, 37.5),
+    ] {
+        let q = AxisValues::default()
+            .with(AxisLetter::X, x)
+            .with(AxisLetter::Y, y)
+            .with(AxisLetter::Z, z)
+            .with(AxisLetter::A, a);
+        let lib = s.chain.w_from_t(&q).to_homogeneous();
+        let ind = mdx50_w_from_t(&dev, x, y, z, a);
+        assert!(
+            (lib - ind).abs().max() < 1e-12,
+            "pose differs at {x} {y} {z} {a}"
+        );
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// A rotary move: the dexel surface agrees with a brute-force point-in-sweep test.
+
+fn nominal_mdx50() -> Chain {
+    scene().chain.nominal()
+}
+
+#[test]
+fn rotary_move_surface_agrees_with_brute_force() {
+    let chain = nominal_mdx50();
+    let tool =
+        twinmill::tool::Tool::try_new(twinmill::tool::ToolKind::Flat, 6.0, 10.0).expect("valid");
+    let start = AxisValues::default().with(AxisLetter::Z, 6.0);
+    let mv = Move {
+        kind: MoveKind::Linear,
+        start,
+        end: start.with(AxisLetter::A, 90.0),
+        feed_mm_per_min: Some(100.0),
+        line: 3,
+    };
+    let bounds = Aabb {
+        min: Point3::new(-8.03, -10.0, -10.0),
+        max: Point3::new(7.97, 10.0, 10.0),
+    };
+    // The 0.03 mm shift keeps every ray off the tool's tangent planes x = ±3, where the
+    // swept solid is a sheet of zero thickness that point sampling cannot find.
+    let mut stock = TriDexel::new_box(bounds, 0.4, 4e9).expect("fits");
+    let opts = SweepOptions {
+        rotary_step_bound_mm: 5e-4,
+    };
+    let rep = sweep_program(&mut stock, &chain, &tool, &[mv], &opts, &NoProgress).expect("sweeps");
+    assert_eq!(rep.rotary_moves, 1);
+    assert!(rep.rotary_error_bound_mm <= 5e-4 && rep.rotary_error_bound_mm > 0.0);
+    // Brute force: p is in the sweep iff RotX(−a)·p is inside the tool for some a ∈ [0°, 90°].
+    // With 40,000 samples the tool moves ≤ 16 mm · (π/2)/40,000 = 0.6 µm between samples.
+    let inside = |p: &Vector3| {
+        (0..=40_000).any(|k| {
+            let a = (k as Real / 40_000.0) * std::f64::consts::FRAC_PI_2;
+            let (s, c) = a.sin_cos();
+            let (y, z) = (c * p.y + s * p.z, -s * p.y + c * p.z);
+            let h = z - 6.0;
+            (p.x * p.x + y * y).sqrt() <= 3.0 && (0.0..=10.0).contains(&h)
+        })
+    };
+    let mut checked = 0;
+    for g in stock.grids() {
+        let mut pts = Vec::new();
+        g.for_each_crossing(|p, c| {
+            if c.line == 3 {
+                pts.push((p, c.normal()));
+            }
+        });
+        for (p, n) in pts.iter().step_by(23) {
+            // 5 µm into the cut is inside the sweep, 5 µm into the material is not.
+            let into_cut = p.coords + n * 5e-3;
+            let into_material = p.coords - n * 5e-3;
+            assert!(inside(&into_cut), "{p} + 5 µm n should be cut");
+            assert!(!inside(&into_material), "{p} − 5 µm n should be material");
+            checked += 1;
+        }
+    }
+    assert!(checked > 80, "only {checked} crossings checked");
+}
+
+// ---------------------------------------------------------------------------------------
+// Determinism.
+
+#[test]
+fn output_is_identical_for_one_and_two_threads() {
+    let s = scene();
+    let run_with = |threads| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool");
+        let mut out = pool.install(|| run_scene(&s));
+        out.report.timings_s.clear();
+        out
+    };
+    let (a, b) = (run_with(1), run_with(2));
+    assert_eq!(a.cloud, b.cloud);
+    assert_eq!(a.report, b.report);
+    assert_eq!(a.heat_map_png, b.heat_map_png);
+}
+
+// ---------------------------------------------------------------------------------------
+// The command line.
+
+struct Sandbox {
+    dir: PathBuf,
+}
+
+impl Sandbox {
+    fn new(name: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("twinmill-test-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        Self { dir }
+    }
+
+    fn write(&self, name: &str, bytes: &[u8]) -> PathBuf {
+        let p = self.dir.join(name);
+        std::fs::write(&p, bytes).expect("write");
+        p
+    }
+
+    fn run(&self, args: &[&str]) -> (i32, String, String) {
+        let out = Command::new(env!("CARGO_BIN_EXE_twinmill"))
+            .args(args)
+            .current_dir(&self.dir)
+            .output()
+            .expect("binary runs");
+        (
+            out.status.code().unwrap_or(-1),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    }
+}
+
+impl Drop for Sandbox {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+fn builtin(name: &str) -> String {
+    std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("scenes")
+            .join(name),
+    )
+    .expect("built-in file")
+}
+
+#[test]
+fn cli_run_writes_report_cloud_and_picture() {
+    let sb = Sandbox::new("run");
+    sb.write("s.toml", builtin("mdx50-step.toml").as_bytes());
+    sb.write("mdx50-step.ngc", builtin("mdx50-step.ngc").as_bytes());
+    let (code, stdout, stderr) = sb.run(&["run", "s.toml", "--json"]);
+    assert_eq!(code, 0, "{stderr}");
+    let report: serde_json::Value =
+        serde_json::from_str(&stdout).expect("--json prints the report");
+    assert!(
+        report["step_mm"]
+            .as_f64()
+            .is_some_and(|s| (s - 1.0).abs() < 2e-3)
+    );
+    assert_eq!(report["injected"]["dy_AY"].as_f64(), Some(-0.5));
+    assert!(report["identified"]["dy_AY"].is_number());
+    assert!(report["timings_s"].as_array().is_some_and(|t| t.len() >= 5));
+    let dir = sb.dir.join("out/mdx50-step");
+    let written: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("report.json")).expect("report.json"))
+            .expect("json");
+    assert_eq!(written["step_mm"], report["step_mm"]);
+    let ply = std::fs::read(dir.join("cloud.ply")).expect("cloud.ply");
+    let cloud = twinmill::cloud::read_ply(&ply, &dir.join("cloud.ply")).expect("readable PLY");
+    assert_eq!(
+        Some(cloud.points.len() as u64),
+        report["scan"]["points"].as_u64()
+    );
+    let png = std::fs::read(dir.join("faces.png")).expect("faces.png");
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    // The summary (no --json) names the step and the identified deviation.
+    let (code, stdout, _) = sb.run(&["run", "s.toml"]);
+    assert_eq!(code, 0);
+    assert!(
+        stdout.contains("step") && stdout.contains("dy_AY"),
+        "{stdout}"
+    );
+}
+
+/// Runs a broken variant of the built-in scene and checks the failure is clean.
+fn check_bad(name: &str, scene: &str, program: &[u8], expect_in_message: &[&str]) {
+    let sb = Sandbox::new(name);
+    sb.write("scene.toml", scene.as_bytes());
+    sb.write("mdx50-step.ngc", program);
+    let (code, stdout, stderr) = sb.run(&["run", "scene.toml"]);
+    assert_ne!(code, 0, "{name}: should fail");
+    assert!(!stderr.contains("panicked"), "{name}: panicked: {stderr}");
+    assert_eq!(
+        stderr.trim_end().lines().count(),
+        1,
+        "{name}: one line expected: {stderr}"
+    );
+    for e in expect_in_message {
+        assert!(stderr.contains(e), "{name}: '{e}' not in: {stderr}");
+    }
+    assert!(stdout.is_empty(), "{name}: printed {stdout}");
+    let out = sb.dir.join("out");
+    let leftovers: Vec<_> = std::fs::read_dir(&out)
+        .map(|d| d.flatten().map(|e| e.path()).collect())
+        .unwrap_or_default();
+    assert!(leftovers.is_empty(), "{name}: left {leftovers:?}");
+}
+
+#[test]
+fn bad_input_fails_cleanly_with_a_located_message() {
+    let scene = builtin("mdx50-step.toml");
+    let program = builtin("mdx50-step.ngc");
+    let line_of = |needle: &str| {
+        scene
+            .lines()
+            .position(|l| l.starts_with(needle))
+            .expect("line present")
+            + 1
+    };
+
+    check_bad(
+        "malformed",
+        &scene.replace("[tool]", "[tool"),
+        program.as_bytes(),
+        &["scene.toml:"],
+    );
+    let l = line_of("dy_AY");
+    check_bad(
+        "unknown-deviation",
+        &scene.replace("dy_AY = -0.50", "dy_AX = -0.50"),
+        program.as_bytes(),
+        &[&format!("scene.toml:{l}:9:"), "unknown deviation 'dy_AX'"],
+    );
+    check_bad(
+        "non-finite",
+        &scene.replace("dy_AY = -0.50", "dy_AY = nan"),
+        program.as_bytes(),
+        &[&format!("scene.toml:{l}:9:"), "finite"],
+    );
+    let l = line_of("pitch_mm = 0.1");
+    check_bad(
+        "non-finite-pitch",
+        &scene.replace("pitch_mm = 0.1 ", "pitch_mm = inf "),
+        program.as_bytes(),
+        &[&format!("scene.toml:{l}:"), "finite"],
+    );
+    check_bad(
+        "pitch-too-fine",
+        &scene.replace("pitch_mm = 0.1 ", "pitch_mm = 0.00001 "),
+        program.as_bytes(),
+        &[&format!("scene.toml:{l}:12:"), "MiB", "use pitch_mm >="],
+    );
+    check_bad(
+        "missing-program",
+        &scene.replace("\"mdx50-step.ngc\"", "\"nowhere.ngc\""),
+        program.as_bytes(),
+        &["nowhere.ngc: cannot read"],
+    );
+    check_bad(
+        "unreadable-program",
+        &scene.replace("\"mdx50-step.ngc\"", "\".\""),
+        program.as_bytes(),
+        &["cannot read"],
+    );
+    check_bad(
+        "non-utf8-program",
+        &scene,
+        b"G21 G90\nG0 X1 (\xff\xfe)\nM30\n",
+        &["mdx50-step.ngc:2:", "UTF-8"],
+    );
+    check_bad(
+        "unsupported-word",
+        &scene,
+        program
+            .replace(
+                "G0 Z0\nG1 X30 F600 (cut at A = 0",
+                "G0 Z0\nG2 X30 F600 (cut at A = 0",
+            )
+            .as_bytes(),
+        &["mdx50-step.ngc:9:1:", "G2"],
+    );
+    check_bad(
+        "no-such-axis",
+        &scene,
+        program.replace("G0 A180", "G0 B180").as_bytes(),
+        &["mdx50-step.ngc:12:", "no B axis"],
+    );
+    check_bad(
+        "one-face",
+        &scene.replace(
+            "  { name = \"A180\", line = 14 },   # NC line of the cut at A = 180°\n",
+            "",
+        ),
+        program.as_bytes(),
+        &["scene.toml:", "exactly two faces"],
+    );
+    check_bad(
+        "face-not-a-cut",
+        &scene.replace("line = 14", "line = 12"),
+        program.as_bytes(),
+        &["scene.toml", "line 12 is not a feed move"],
+    );
+    check_bad(
+        "zero-tool",
+        &scene.replace("diameter_mm = 6.0", "diameter_mm = 0.0"),
+        program.as_bytes(),
+        &["scene.toml:", "diameter_mm must be positive"],
+    );
+}
+
+// ---------------------------------------------------------------------------------------
+// Architecture: modules depend only on modules before them in the pipeline.
+
+#[test]
+fn module_dependencies_point_down_the_pipeline() {
+    let order = [
+        "math",
+        "progress",
+        "nc",
+        "kinematics",
+        "tool",
+        "stock",
+        "sweep",
+        "cloud",
+        "scan",
+        "fit",
+        "identify",
+        "render",
+        "report",
+        "scene",
+        "pipeline",
+        "output",
+    ];
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut seen = 0;
+    for entry in std::fs::read_dir(&src).expect("src") {
+        let path = entry.expect("entry").path();
+        let stem = path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .unwrap_or_default()
+            .to_string();
+        if stem == "lib" || stem == "main" {
+            continue;
+        }
+        let rank = order
+            .iter()
+            .position(|m| *m == stem)
+            .unwrap_or_else(|| panic!("module {stem} is not placed in the architecture order"));
+        let text = std::fs::read_to_string(&path).expect("source");
+        let code: String = text
+            .lines()
+            .filter(|l| !l.trim_start().starts_with("//"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        for (i, _) in code.match_indices("crate::") {
+            let used: String = code[i + 7..]
+                .chars()
+                .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                .collect();
+            if let Some(r) = order.iter().position(|m| *m == used) {
+                assert!(
+                    r < rank,
+                    "{stem} (rank {rank}) uses crate::{used} (rank {r}): dependencies must point down the pipeline"
+                );
+            }
+        }
+        // The library never prints.
+        for bad in ["println!", "eprintln!", "print!(", "dbg!("] {
+            assert!(!text.contains(bad), "{stem} contains {bad}");
+        }
+        seen += 1;
+    }
+    assert_eq!(seen, order.len());
+}
