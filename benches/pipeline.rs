@@ -24,33 +24,25 @@ fn benches(c: &mut Criterion) {
         b.iter(|| run(black_box(&scene), black_box(&program), &NoProgress).expect("runs"))
     });
 
+    // The sweep as it runs in the pipeline: a fresh stock cut by the whole program.
+    let swept = || {
+        let mut stock = TriDexel::new_box(scene.stock_box, scene.pitch_mm, 8e9).expect("fits");
+        let (chain, tool) = (&scene.chain, &scene.tool);
+        sweep_program(
+            &mut stock,
+            chain,
+            tool,
+            &program.moves,
+            &scene.sweep,
+            &NoProgress,
+        )
+        .expect("sweeps");
+        stock
+    };
     g.throughput(Throughput::Elements(program.moves.len() as u64));
-    g.bench_function("stock + sweep (moves)", |b| {
-        b.iter(|| {
-            let mut stock = TriDexel::new_box(scene.stock_box, scene.pitch_mm, 8e9).expect("fits");
-            sweep_program(
-                &mut stock,
-                &scene.chain,
-                &scene.tool,
-                &program.moves,
-                &scene.sweep,
-                &NoProgress,
-            )
-            .expect("sweeps");
-            stock
-        })
-    });
+    g.bench_function("stock + sweep (moves)", |b| b.iter(swept));
 
-    let mut stock = TriDexel::new_box(scene.stock_box, scene.pitch_mm, 8e9).expect("fits");
-    sweep_program(
-        &mut stock,
-        &scene.chain,
-        &scene.tool,
-        &program.moves,
-        &scene.sweep,
-        &NoProgress,
-    )
-    .expect("sweeps");
+    let stock = swept();
     let rays = (scene.scanner.fov_mm.0 / scene.scanner.pitch_mm).round()
         * (scene.scanner.fov_mm.1 / scene.scanner.pitch_mm).round();
     g.throughput(Throughput::Elements(rays as u64));

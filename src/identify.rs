@@ -27,7 +27,7 @@ use crate::fit::{FitError, Plane, PlaneFit, RobustRule, fit_plane_robust};
 use crate::kinematics::{AxisKind, Chain, Component, DeviationId};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3};
 use crate::nc::{Move, MoveKind};
-use crate::tool::Tool;
+use crate::tool::{Tool, ToolKind};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{Matrix2, Owned, U2, Vector2};
 
@@ -139,6 +139,16 @@ pub fn flank(chain: &Chain, tool: &Tool, mv: &Move, stock: &Aabb) -> Option<Flan
     })
 }
 
+/// The range of `w · (x − origin)` over the box: its extent along `w` (mm).
+pub fn extent(stock: &Aabb, origin: &Point3, w: &UnitVector3) -> (Real, Real) {
+    corners(stock)
+        .iter()
+        .fold((Real::INFINITY, Real::NEG_INFINITY), |(lo, hi), c| {
+            let x = w.dot(&(c - origin));
+            (lo.min(x), hi.max(x))
+        })
+}
+
 fn corners(b: &Aabb) -> [Point3; 8] {
     std::array::from_fn(|i| {
         Point3::new(
@@ -205,18 +215,15 @@ pub fn extract_face(
     };
     let fl = flank(model, tool, mv, stock).ok_or_else(empty)?;
     // Extent of the stock along u and v, relative to the cut's start tip.
-    let extent = |w: &UnitVector3| {
-        corners(stock)
-            .iter()
-            .fold((Real::INFINITY, Real::NEG_INFINITY), |(lo, hi), c| {
-                let x = w.dot(&(c - fl.tip));
-                (lo.min(x), hi.max(x))
-            })
-    };
-    let (su, sv) = (extent(&fl.u), extent(&fl.v));
+    let (su, sv) = (extent(stock, &fl.tip, &fl.u), extent(stock, &fl.tip, &fl.v));
     let m = opts.margin_mm;
     let (u0, u1) = (su.0.max(0.0) + m, su.1.min(fl.length) - m);
-    let (v0, v1) = (sv.0.max(0.0) + m, sv.1.min(tool.length()) - m);
+    // The flank is the cylindrical part: from the tip (flat) or one radius above it (ball).
+    let flank_start = match tool.kind() {
+        ToolKind::Flat => 0.0,
+        ToolKind::Ball => tool.radius(),
+    };
+    let (v0, v1) = (sv.0.max(flank_start) + m, sv.1.min(tool.length()) - m);
     if u0 >= u1 || v0 >= v1 {
         return Err(empty());
     }

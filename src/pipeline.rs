@@ -5,11 +5,12 @@
 //! program give the same outcome (except the timings) for any thread count.
 
 use crate::cloud::PointCloud;
+use crate::fit::Plane;
 use crate::identify::{self, Face, IdentifyError};
-use crate::math::Real;
+use crate::math::{Point3, Real};
 use crate::nc::Program;
 use crate::progress::Progress;
-use crate::render::{HeatMapOptions, RenderError, encode_png, render_heat_map};
+use crate::render::{HeatMapOptions, RenderError, encode_png, nice_ceil, render_heat_map};
 use crate::report::{FaceReport, Report, ScanReport, SolverReport, StockReport};
 use crate::scan::{ScanError, scan};
 use crate::scene::Scene;
@@ -88,6 +89,21 @@ fn face_report(f: &Face, line: usize) -> FaceReport {
         rms_mm: f.fit.rms_mm,
         max_abs_mm: f.fit.max_abs_mm,
     }
+}
+
+/// A colour range (µm) that spans 99 % of the points' distances from `plane`, rounded up to
+/// a 1-2-5 step: edge points beyond it saturate instead of washing out the face.
+fn colour_range_um(points: &[Point3], plane: &Plane) -> Real {
+    let mut d: Vec<Real> = points
+        .iter()
+        .map(|p| plane.signed_distance(p).abs() * 1e3)
+        .collect();
+    d.sort_by(Real::total_cmp);
+    let p99 = d
+        .get(d.len().saturating_sub(1) * 99 / 100)
+        .copied()
+        .unwrap_or(1.0);
+    nice_ceil(p99.max(1e-3))
 }
 
 /// Runs the whole pipeline on `scene` with its parsed `program`.
@@ -177,9 +193,19 @@ pub fn run(
         &scene.stock_box,
     )
     .unwrap_or(faces[0].flank);
-    let face_points: Vec<_> = faces
+    // The whole face as scanned, step edge and occluded band included: every point within
+    // the identification band of the nominal plane, strictly between the stock's faces
+    // across it (whose edge strips also fall in the band).
+    let band = scene.face_options.band_mm;
+    let (v0, v1) = identify::extent(&scene.stock_box, &nominal.tip, &nominal.v);
+    let edge = 2.0 * scene.scanner.pitch_mm;
+    let face_points: Vec<_> = points
         .iter()
-        .flat_map(|f| f.indices.iter().map(|&i| points[i]))
+        .filter(|p| {
+            let v = nominal.v.dot(&(*p - nominal.tip));
+            nominal.plane.signed_distance(p).abs() <= band && v > v0 + edge && v < v1 - edge
+        })
+        .copied()
         .collect();
     let title = format!(
         "{}: scanned faces, distance from nominal plane (step {:+.4} mm)",
@@ -193,8 +219,10 @@ pub fn run(
         &HeatMapOptions {
             title,
             width_px: 800,
-            point_pitch_mm: scene.scanner.pitch_mm,
-            range_um: None,
+            // Seen obliquely, points on a face lie further apart than the nominal pitch:
+            // dots 1.5 pitches wide close the gaps.
+            point_pitch_mm: 1.5 * scene.scanner.pitch_mm,
+            range_um: Some(colour_range_um(&face_points, &nominal.plane)),
         },
     )
     .and_then(|img| encode_png(&img))

@@ -490,16 +490,21 @@ mod tests {
         }
     }
 
-    #[test]
-    fn step_renders_red_left_white_right() {
-        let img = render_heat_map(
+    /// The step face rendered against z = 5, x right, y up.
+    fn render_step(range_um: Option<Real>) -> RgbImage {
+        render_heat_map(
             &step_face(),
             &z_plane(),
             &Vector3::x_axis(),
             &Vector3::y_axis(),
-            &opts(None),
+            &opts(range_um),
         )
-        .expect("render");
+        .expect("render")
+    }
+
+    #[test]
+    fn step_renders_red_left_white_right() {
+        let img = render_step(None);
         // Plot is 400 × 201 px (0.1 mm per px).
         let (w, h) = img.dimensions();
         assert!(w >= PLOT_X0 + 400 + BAR_GAP + BAR_W && h >= PLOT_Y0 + 201);
@@ -527,14 +532,7 @@ mod tests {
 
     #[test]
     fn explicit_range_clamps_and_scales() {
-        let img = render_heat_map(
-            &step_face(),
-            &z_plane(),
-            &Vector3::x_axis(),
-            &Vector3::y_axis(),
-            &opts(Some(2000.0)),
-        )
-        .expect("render");
+        let img = render_step(Some(2000.0));
         // +1000 µm of ±2000 is half-way to the end colour: lighter than the end colour.
         let p = img.get_pixel(PLOT_X0 + 40, PLOT_Y0 + 100).0;
         assert_eq!(Rgb(p), diverging_colour(0.5));
@@ -543,14 +541,7 @@ mod tests {
 
     #[test]
     fn png_round_trip() {
-        let img = render_heat_map(
-            &step_face(),
-            &z_plane(),
-            &Vector3::x_axis(),
-            &Vector3::y_axis(),
-            &opts(None),
-        )
-        .expect("render");
+        let img = render_step(None);
         let png = encode_png(&img).expect("encode");
         assert!(png.starts_with(&[0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A]));
         let back = image::load_from_memory(&png).expect("decode").to_rgb8();

@@ -46,8 +46,13 @@ pub struct ScannerConfig {
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum ScanError {
     /// A setting is out of range or not finite.
-    #[error("scanner: {0}")]
-    BadConfig(String),
+    #[error("scanner {field}: {message}")]
+    BadConfig {
+        /// The setting's name in scene files.
+        field: &'static str,
+        /// What is wrong.
+        message: String,
+    },
     /// The field of view over the pitch asks for too many rays.
     #[error("scanner: {rays} rays requested (fov / pitch); at most {max} allowed")]
     TooManyRays {
@@ -234,36 +239,42 @@ fn finite_point(p: &Point3) -> bool {
 }
 
 impl ScannerConfig {
-    fn validate(&self) -> Result<(), ScanError> {
-        let bad = |m: &str| Err(ScanError::BadConfig(m.to_string()));
-        if !finite_point(&self.position)
-            || !finite_point(&self.target)
-            || !self.up.iter().all(|c| c.is_finite())
-        {
-            return bad("position, target and up must be finite");
+    /// Checks every setting; the error names the offending field.
+    pub fn validate(&self) -> Result<(), ScanError> {
+        let bad = |field: &'static str, m: &str| {
+            Err(ScanError::BadConfig {
+                field,
+                message: m.to_string(),
+            })
+        };
+        for (field, ok) in [
+            ("position", finite_point(&self.position)),
+            ("target", finite_point(&self.target)),
+            ("up", self.up.iter().all(|c| c.is_finite())),
+        ] {
+            if !ok {
+                return bad(field, "must be finite");
+            }
         }
         let view = self.target - self.position;
         if view.norm() < 1.0 {
-            return bad("target must be at least 1 mm from the camera position");
+            return bad("target", "must be at least 1 mm from the camera position");
         }
         if view.normalize().cross(&self.up).norm() < 1e-6 {
-            return bad("up must not be parallel to the viewing direction");
+            return bad("up", "must not be parallel to the viewing direction");
         }
         if !(self.pitch_mm.is_finite() && self.pitch_mm > 0.0) {
-            return bad("pitch_mm must be positive and finite");
+            return bad("pitch_mm", "must be positive and finite");
         }
-        if !(self.fov_mm.0.is_finite()
-            && self.fov_mm.1.is_finite()
-            && self.fov_mm.0 > 0.0
-            && self.fov_mm.1 > 0.0)
-        {
-            return bad("fov_mm must be positive and finite");
+        let (w, h) = self.fov_mm;
+        if !(w.is_finite() && h.is_finite() && w > 0.0 && h > 0.0) {
+            return bad("fov_mm", "must be two positive finite numbers");
         }
         if !(self.noise_sigma_mm.is_finite() && self.noise_sigma_mm >= 0.0) {
-            return bad("noise_sigma_mm must be finite and not negative");
+            return bad("noise_sigma_mm", "must be finite and not negative");
         }
         if !self.baseline_mm.is_finite() {
-            return bad("baseline_mm must be finite");
+            return bad("baseline_mm", "must be finite");
         }
         let rays =
             (self.fov_mm.0 / self.pitch_mm).round() * (self.fov_mm.1 / self.pitch_mm).round();
@@ -375,17 +386,18 @@ mod tests {
         }
     }
 
+    /// A 20 × 10 × 10 mm box whose front face is y = 0.
+    fn box_stock() -> TriDexel {
+        let bounds = Aabb {
+            min: Point3::new(-10.0, 0.0, -5.0),
+            max: Point3::new(10.0, 10.0, 5.0),
+        };
+        TriDexel::new_box(bounds, 0.3, 1e9).expect("fits")
+    }
+
     #[test]
     fn points_of_a_box_face_lie_on_it() {
-        let stock = TriDexel::new_box(
-            Aabb {
-                min: Point3::new(-10.0, 0.0, -5.0),
-                max: Point3::new(10.0, 10.0, 5.0),
-            },
-            0.3,
-            1e9,
-        )
-        .expect("fits");
+        let stock = box_stock();
         let s = scan(&stock, &cfg(), &NoProgress).expect("scans");
         // The camera sees the front face y = 0 and the top face z = 5.
         let front = s
@@ -408,15 +420,7 @@ mod tests {
 
     #[test]
     fn noise_is_along_the_ray_with_the_given_sigma() {
-        let stock = TriDexel::new_box(
-            Aabb {
-                min: Point3::new(-10.0, 0.0, -5.0),
-                max: Point3::new(10.0, 10.0, 5.0),
-            },
-            0.3,
-            1e9,
-        )
-        .expect("fits");
+        let stock = box_stock();
         let mut c = cfg();
         c.noise_sigma_mm = 0.025;
         let s = scan(&stock, &c, &NoProgress).expect("scans");

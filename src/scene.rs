@@ -11,7 +11,7 @@ use crate::identify::{FaceOptions, FaceSpec};
 use crate::kinematics::{Axis, AxisKind, Chain};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
 use crate::nc::{AxisLetter, AxisValues, NcError, Program, parse_program};
-use crate::scan::ScannerConfig;
+use crate::scan::{ScanError, ScannerConfig};
 use crate::sweep::SweepOptions;
 use crate::tool::{Tool, ToolKind};
 use serde::Deserialize;
@@ -421,19 +421,12 @@ impl Scene {
             max: mx.into(),
         };
         let pitch_mm = ctx.positive(&file.stock.pitch_mm, "pitch_mm")?;
-        let budget = memory_budget_bytes();
-        let need = crate::stock::estimate_bytes(&stock_box, pitch_mm);
-        if need > budget {
-            let suggested = pitch_mm * (need / budget).sqrt() * 1.01;
-            return Err(ctx.err(
+        crate::stock::check_memory(&stock_box, pitch_mm, memory_budget_bytes()).map_err(|e| {
+            ctx.err(
                 file.stock.pitch_mm.span(),
-                format!(
-                    "pitch_mm = {pitch_mm} needs about {:.0} MiB for the tri-dexel, more than the {:.0} MiB this machine can give; use pitch_mm >= {suggested:.4}",
-                    need / 1048576.0,
-                    budget / 1048576.0
-                ),
-            ));
-        }
+                format!("pitch_mm = {pitch_mm}: {e}"),
+            )
+        })?;
         // Sweep.
         let bound = match &file.sweep.rotary_step_bound_mm {
             Some(v) => {
@@ -451,13 +444,7 @@ impl Scene {
             v.as_ref().map_or(Ok(default), |v| ctx.finite(v, what))
         };
         let fov = match &s.fov_mm {
-            Some(f) => {
-                let a = f.get_ref();
-                if !(a[0].is_finite() && a[1].is_finite() && a[0] > 0.0 && a[1] > 0.0) {
-                    return Err(ctx.err(f.span(), "fov_mm must be two positive finite numbers"));
-                }
-                (a[0], a[1])
-            }
+            Some(f) => (f.get_ref()[0], f.get_ref()[1]),
             None => (200.0, 150.0),
         };
         let scanner = ScannerConfig {
@@ -470,26 +457,26 @@ impl Scene {
             noise_sigma_mm: opt(&s.noise_sigma_mm, "noise_sigma_mm", 0.025)?,
             seed: s.seed.unwrap_or(1),
         };
-        if let Some(p) = &s.pitch_mm {
-            ctx.positive(p, "pitch_mm")?;
-        }
-        if let Some(n) = &s.noise_sigma_mm
-            && *n.get_ref() < 0.0
-        {
-            return Err(ctx.err(n.span(), "noise_sigma_mm must not be negative"));
-        }
-        if (scanner.target - scanner.position).norm() < 1.0
-            || (scanner.target - scanner.position)
-                .normalize()
-                .cross(&scanner.up)
-                .norm()
-                < 1e-6
-        {
-            return Err(ctx.err(
-                s.up.span(),
-                "scanner: target must differ from position and up must not be parallel to the view",
-            ));
-        }
+        scanner.validate().map_err(|e| {
+            let span = match &e {
+                ScanError::BadConfig { field, .. } => match *field {
+                    "position" => s.position.span(),
+                    "target" => s.target.span(),
+                    "up" => s.up.span(),
+                    "pitch_mm" => s.pitch_mm.as_ref().map_or(s.position.span(), |v| v.span()),
+                    "fov_mm" => s.fov_mm.as_ref().map_or(s.position.span(), |v| v.span()),
+                    "noise_sigma_mm" => s
+                        .noise_sigma_mm
+                        .as_ref()
+                        .map_or(s.position.span(), |v| v.span()),
+                    _ => s.position.span(),
+                },
+                ScanError::TooManyRays { .. } => {
+                    s.pitch_mm.as_ref().map_or(s.position.span(), |v| v.span())
+                }
+            };
+            ctx.err(span, e.to_string())
+        })?;
         // Faces.
         let faces = file.identify.faces.get_ref();
         let [f0, f1] = &faces[..] else {

@@ -358,6 +358,21 @@ pub fn estimate_bytes(bounds: &Aabb, pitch: Real) -> Real {
     rays * (2.0 * std::mem::size_of::<Segment>() as Real + 4.0)
 }
 
+/// Checks that a tri-dexel over `bounds` at `pitch` fits in `budget_bytes`; the error
+/// suggests the finest pitch that does (memory scales as 1/pitch²).
+pub fn check_memory(bounds: &Aabb, pitch: Real, budget_bytes: Real) -> Result<(), StockError> {
+    let needed = estimate_bytes(bounds, pitch);
+    if needed > budget_bytes {
+        return Err(StockError::TooMuchMemory {
+            pitch,
+            needed_mib: needed / 1048576.0,
+            budget_mib: budget_bytes / 1048576.0,
+            suggested_pitch: pitch * (needed / budget_bytes).sqrt() * 1.01,
+        });
+    }
+    Ok(())
+}
+
 /// The tri-dexel stock.
 #[derive(Clone, Debug)]
 pub struct TriDexel {
@@ -381,17 +396,7 @@ impl TriDexel {
         if !(pitch.is_finite() && pitch > 0.0) {
             return Err(StockError::BadPitch(pitch));
         }
-        let needed = estimate_bytes(&bounds, pitch);
-        if needed > budget_bytes {
-            // bytes scale as 1/pitch²
-            let suggested = pitch * (needed / budget_bytes).sqrt() * 1.01;
-            return Err(StockError::TooMuchMemory {
-                pitch,
-                needed_mib: needed / 1048576.0,
-                budget_mib: budget_bytes / 1048576.0,
-                suggested_pitch: suggested,
-            });
-        }
+        check_memory(&bounds, pitch, budget_bytes)?;
         Ok(Self {
             bounds,
             pitch,

@@ -655,7 +655,7 @@ mod tests {
             k += 1;
             rng.uniform(k, 0) * 2.0 - 1.0
         };
-        for case in 0..60 {
+        for case in 0..30 {
             let kind = if case % 2 == 0 {
                 ToolKind::Flat
             } else {
@@ -666,7 +666,7 @@ mod tests {
             let start = Point3::new(next() * 3.0, next() * 3.0, next() * 3.0);
             let d = Vector3::new(next() * 8.0, next() * 8.0, next() * 4.0);
             let t = TranslatedTool::new(tool, start, d, v);
-            for _ in 0..40 {
+            for _ in 0..30 {
                 let axis = (next().abs() * 3.0) as usize % 3;
                 let o = Point3::new(next() * 8.0, next() * 8.0, next() * 8.0);
                 let mut e = Vector3::zeros();

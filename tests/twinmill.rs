@@ -147,6 +147,22 @@ fn gamma_sum_is_identified_from_the_tilt() {
     assert!((r.tilt_rad - 4e-4).abs() < 1e-6, "tilt {}", r.tilt_rad);
 }
 
+#[test]
+fn ball_end_mill_cuts_the_same_step() {
+    // The ball's flank starts one radius above the tip: with the tip 3 mm lower, both
+    // flanks start at Z_W = 0 as the flat mill's do.
+    let mut s = scene();
+    s.tool =
+        twinmill::tool::Tool::try_new(twinmill::tool::ToolKind::Ball, 6.0, 25.0).expect("valid");
+    s.scanner.noise_sigma_mm = 0.0;
+    let text = builtin("mdx50-step.ngc").replace("G0 Z0", "G0 Z-3");
+    let program =
+        twinmill::nc::parse_program(&text, Path::new("ball.ngc"), s.home).expect("parses");
+    let r = run(&s, &program, &NoProgress).expect("runs").report;
+    assert!((r.step_mm - 1.0).abs() < 0.5e-3, "step {}", r.step_mm);
+    assert!((r.identified["dy_AY"] + 0.5).abs() < 0.5e-3);
+}
+
 // ---------------------------------------------------------------------------------------
 // The simulated faces coincide with the exact planes of the chain.
 
