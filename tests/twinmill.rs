@@ -148,6 +148,25 @@ fn gamma_sum_is_identified_from_the_tilt() {
 }
 
 #[test]
+fn another_chain_needs_only_a_scene_file() {
+    // A VMC with the rotary table on the X table: chain A, X, Y, Z; the A axis's offset is
+    // dy_AX. Same program, same experiment.
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/vmc-4th-axis-step.toml");
+    let mut s = Scene::load(&path).expect("loads");
+    assert_eq!(s.chain.joint_name(0), "AX");
+    s.scanner.noise_sigma_mm = 0.0;
+    let r = run_scene(&s).report;
+    assert!(
+        (r.identified["dy_AX"] - 0.12).abs() < 0.5e-3,
+        "dy_AX {}",
+        r.identified["dy_AX"]
+    );
+    let g = r.identified["gamma_AX+gamma_XY"];
+    assert!((g - 8e-5).abs() < 2e-6, "gamma sum {g}");
+    assert!((r.step_mm + 0.24).abs() < 0.5e-3, "step {}", r.step_mm);
+}
+
+#[test]
 fn ball_end_mill_cuts_the_same_step() {
     // The ball's flank starts one radius above the tip: with the tip 3 mm lower, both
     // flanks start at Z_W = 0 as the flat mill's do.
@@ -516,7 +535,11 @@ fn bad_input_fails_cleanly_with_a_located_message() {
         "pitch-too-fine",
         &scene.replace("pitch_mm = 0.1 ", "pitch_mm = 0.00001 "),
         program.as_bytes(),
-        &[&format!("scene.toml:{l}:12:"), "MiB", "use pitch_mm >="],
+        &[
+            &format!("scene.toml:{l}:12:"),
+            "MiB",
+            "use a pitch of at least",
+        ],
     );
     check_bad(
         "missing-program",
