@@ -31,10 +31,10 @@ pub enum PipelineError {
         source: StockError,
     },
     /// The sweep failed.
-    #[error("{path}:{source}")]
+    #[error("{location}: {source}")]
     Sweep {
-        /// Program file.
-        path: String,
+        /// Program file and line (`file:line`), or the scene file.
+        location: String,
         /// Why.
         source: SweepError,
     },
@@ -140,9 +140,12 @@ pub fn run(
         &scene.sweep,
         progress,
     )
-    .map_err(|source| PipelineError::Sweep {
-        path: program.path.display().to_string(),
-        source,
+    .map_err(|source| {
+        let location = match source.line() {
+            Some(line) => format!("{}:{line}", program.path.display()),
+            None => format!("{spath}: [sweep]"),
+        };
+        PipelineError::Sweep { location, source }
     })?;
     lap("sweep", &mut timings);
 

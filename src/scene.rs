@@ -548,16 +548,11 @@ impl Scene {
                 .iter()
                 .find(|m| m.start.get(*letter) != m.end.get(*letter))
                 .map_or(1, |m| m.line);
-            let (col, src) = text
+            let col = text
                 .lines()
                 .nth(line - 1)
-                .and_then(|l| {
-                    l.to_ascii_uppercase()
-                        .find(letter.as_char())
-                        .map(|c| (c + 1, l.to_string()))
-                })
-                .unwrap_or((1, String::new()));
-            let _ = src;
+                .and_then(|l| l.to_ascii_uppercase().find(letter.as_char()))
+                .map_or(1, |c| c + 1);
             return Err(SceneError::Invalid {
                 path: self.program_path.clone(),
                 line,

@@ -26,7 +26,7 @@
 
 use crate::kinematics::{AxisKind, Chain};
 use crate::math::{Aabb, Isometry3, Point3, Real, UnitVector3, Vector3, tol};
-use crate::nc::{AxisValues, Move};
+use crate::nc::{AxisLetter, AxisValues, Move};
 use crate::progress::Progress;
 use crate::stock::{Cutter, RayCut, TriDexel};
 use crate::tool::{Tool, ToolKind};
@@ -43,7 +43,7 @@ pub struct SweepOptions {
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum SweepError {
     /// A move names an axis the machine does not have.
-    #[error("line {line}: the machine has no {axis} axis")]
+    #[error("the machine has no {axis} axis")]
     MissingAxis {
         /// Source line.
         line: usize,
@@ -52,7 +52,7 @@ pub enum SweepError {
     },
     /// A rotary move would need an absurd number of sub-steps for the requested bound.
     #[error(
-        "line {line}: meeting the rotary bound of {bound_mm} mm needs {steps:.3e} sub-steps; raise rotary_step_bound_mm"
+        "meeting the rotary bound of {bound_mm} mm needs {steps:.3e} sub-steps; raise rotary_step_bound_mm"
     )]
     TooManySubsteps {
         /// Source line.
@@ -65,6 +65,18 @@ pub enum SweepError {
     /// The bound is not in (0, 1] mm.
     #[error("rotary_step_bound_mm must be in (0, 1], got {0}")]
     BadBound(Real),
+}
+
+impl SweepError {
+    /// The NC line the error is about, if any.
+    pub fn line(&self) -> Option<usize> {
+        match self {
+            SweepError::MissingAxis { line, .. } | SweepError::TooManySubsteps { line, .. } => {
+                Some(*line)
+            }
+            SweepError::BadBound(_) => None,
+        }
+    }
 }
 
 /// What the sweep did.
@@ -549,6 +561,15 @@ pub fn sweep_program(
     let mut report = SweepReport::default();
     progress.start("sweep", moves.len() as u64);
     for mv in moves {
+        if let Some(missing) = AxisLetter::ALL
+            .into_iter()
+            .find(|&l| !chain.has_axis(l) && mv.start.get(l) != mv.end.get(l))
+        {
+            return Err(SweepError::MissingAxis {
+                line: mv.line,
+                axis: missing.as_char(),
+            });
+        }
         let line = mv.line as u32;
         report.moves += 1;
         let (omega, _) = rotation_and_travel(chain, &mv.start, &mv.end);

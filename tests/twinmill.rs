@@ -592,6 +592,12 @@ fn bad_input_fails_cleanly_with_a_located_message() {
         &["scene.toml", "line 12 is not a feed move"],
     );
     check_bad(
+        "rotary-bound-unreachable",
+        &scene.replace("rotary_step_bound_mm = 1e-4", "rotary_step_bound_mm = 1e-9"),
+        program.as_bytes(),
+        &["mdx50-step.ngc:12: meeting", "sub-steps"],
+    );
+    check_bad(
         "zero-tool",
         &scene.replace("diameter_mm = 6.0", "diameter_mm = 0.0"),
         program.as_bytes(),
