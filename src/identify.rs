@@ -25,7 +25,7 @@
 
 use crate::fit::{FitError, Plane, PlaneFit, RobustRule, fit_plane_robust};
 use crate::kinematics::{AxisKind, Chain, Component, DeviationId};
-use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3};
+use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
 use crate::nc::{Move, MoveKind};
 use crate::tool::{Tool, ToolKind};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
@@ -116,8 +116,8 @@ pub fn flank(chain: &Chain, tool: &Tool, mv: &Move, stock: &Aabb) -> Option<Flan
     let d = p1 * Point3::origin() - tip;
     let length = d.norm();
     let v = UnitVector3::new_normalize(p0.rotation * Vector3::z());
-    let u = UnitVector3::try_new(d, 1e-9)?;
-    let side = UnitVector3::try_new(u.cross(&v), 1e-9)?;
+    let u = UnitVector3::try_new(d, tol::LENGTH_EPS)?;
+    let side = UnitVector3::try_new(u.cross(&v), tol::LENGTH_EPS)?;
     // Pick the side with the stock beyond it.
     let reach = |n: &Vector3| {
         corners(stock)
@@ -342,6 +342,7 @@ impl StepProblem<'_> {
 
     fn jacobian_at(&self, x: &Vector2<Real>) -> Option<Matrix2<Real>> {
         // Central differences; the model is smooth and nearly linear in these parameters.
+        // Steps: 0.1 µm and 1 µrad, small against the deviations, large against rounding.
         let h = [1e-4, 1e-6];
         let mut j = Matrix2::zeros();
         for k in 0..2 {
@@ -398,9 +399,9 @@ pub fn identify_step(
     let mut turned = Vec::new();
     for (k, &(joint, letter)) in rotaries.iter().enumerate() {
         let diff = (f1.rotary_deg[k] - f0.rotary_deg[k]).rem_euclid(360.0);
-        if (diff - 180.0).abs() < 1e-9 {
+        if (diff - 180.0).abs() < tol::ANGLE_DEG {
             turned.push((joint, letter));
-        } else if diff.abs() > 1e-9 && (diff - 360.0).abs() > 1e-9 {
+        } else if diff.abs() > tol::ANGLE_DEG && (diff - 360.0).abs() > tol::ANGLE_DEG {
             return Err(IdentifyError::NotAStepPair(format!(
                 "axis {letter} differs by {diff}° between '{}' and '{}'",
                 f0.name, f1.name

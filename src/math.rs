@@ -32,6 +32,30 @@ pub mod tol {
     /// numerical residue of two cuts meeting at the same surface, not material.
     pub const SLIVER: Real = 1e-6;
 
+    /// Relative size below which a coefficient or determinant is treated as zero against
+    /// the magnitude of the terms it is made of: a few tens of f64 ulps (2.2e-16), so only
+    /// genuinely degenerate cases (a ray parallel to a face, a move along the tool axis) are.
+    pub const RELATIVE_EPS: Real = 1e-14;
+
+    /// Slack (mm, or mm² for squared distances) when deciding whether a candidate point of
+    /// the ray/sweep problem satisfies the tool's constraints: 0.1 nm, above rounding of
+    /// coordinates up to 1,000 mm and far below anything physical.
+    pub const FEASIBILITY: Real = 1e-10;
+
+    /// Slack on the move parameter s ∈ [0, 1] (unitless) in the same test.
+    pub const PARAMETER: Real = 1e-12;
+
+    /// A point within this distance (mm) of a tool face lies on it, for choosing the
+    /// surface normal at a crossing: 1 nm.
+    pub const ON_SURFACE: Real = 1e-9;
+
+    /// Below this cosine a ray meets a surface edge-on (grazing): it sees no surface there.
+    pub const GRAZING_COS: Real = 1e-6;
+
+    /// Two rotary positions equal within this (degrees): NC values are printed to far
+    /// fewer digits.
+    pub const ANGLE_DEG: Real = 1e-9;
+
     /// Default bound on how far a rotary move's piecewise-straight approximation may
     /// depart from the true tool motion: 0.1 µm, five times below the 0.5 µm accuracy the
     /// face tests demand.

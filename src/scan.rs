@@ -16,7 +16,7 @@
 //! the machine or the program (a point's source NC line is read off the crossing).
 
 use crate::cloud::{Frame, PointCloud};
-use crate::math::{Aabb, CounterRng, Point3, Real, Vector3};
+use crate::math::{Aabb, CounterRng, Point3, Real, Vector3, tol};
 use crate::progress::Progress;
 use crate::stock::TriDexel;
 use rayon::prelude::*;
@@ -199,7 +199,7 @@ impl SplatIndex {
             for &id in &self.ids[self.offsets[c] as usize..self.offsets[c + 1] as usize] {
                 let s = &self.splats[id as usize];
                 let denom = s.n.dot(d);
-                if denom > -1e-6 {
+                if denom > -tol::GRAZING_COS {
                     continue; // back-facing or edge-on
                 }
                 let t = s.n.dot(&(s.p - o)) / denom;
@@ -260,7 +260,7 @@ impl ScannerConfig {
         if view.norm() < 1.0 {
             return bad("target", "must be at least 1 mm from the camera position");
         }
-        if view.normalize().cross(&self.up).norm() < 1e-6 {
+        if view.normalize().cross(&self.up).norm() < tol::GRAZING_COS {
             return bad("up", "must not be parallel to the viewing direction");
         }
         if !(self.pitch_mm.is_finite() && self.pitch_mm > 0.0) {

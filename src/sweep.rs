@@ -188,7 +188,7 @@ fn roots(a: Real, b: Real, c: Real) -> [Option<Real>; 2] {
     if scale == 0.0 {
         return [None, None];
     }
-    if a.abs() <= 1e-14 * scale {
+    if a.abs() <= tol::RELATIVE_EPS * scale {
         // Linear: 2B x + C = 0.
         return [(b != 0.0).then(|| -c / (2.0 * b)), None];
     }
@@ -226,7 +226,8 @@ fn t_extremes(q: &Quadric, lines: &[Line]) -> Option<(Real, Real, Real, Real)> {
     };
     // (a) The quadric's own extremes in t: ∂Q/∂s = 0 → s = −(b t + e)/c.
     let det = q.a * q.c - q.b * q.b;
-    if q.c > 0.0 && det > 1e-12 * (q.a * q.c).max(Real::MIN_POSITIVE) {
+    // A nearly degenerate ellipse (a strip) has no curved extremes: lines bound it.
+    if q.c > 0.0 && det > 100.0 * tol::RELATIVE_EPS * (q.a * q.c).max(Real::MIN_POSITIVE) {
         for t in roots(det, q.d * q.c - q.b * q.e, q.f * q.c - q.e * q.e)
             .into_iter()
             .flatten()
@@ -260,7 +261,8 @@ fn t_extremes(q: &Quadric, lines: &[Line]) -> Option<(Real, Real, Real, Real)> {
     for (i, l1) in lines.iter().enumerate() {
         for l2 in &lines[i + 1..] {
             let det = l1.p * l2.q - l1.q * l2.p;
-            if det.abs() > 1e-14 * (l1.p.abs() + l1.q.abs()) * (l2.p.abs() + l2.q.abs()) {
+            if det.abs() > tol::RELATIVE_EPS * (l1.p.abs() + l1.q.abs()) * (l2.p.abs() + l2.q.abs())
+            {
                 let t = (-l1.r * l2.q + l1.q * l2.r) / det;
                 let s = (-l1.p * l2.r + l1.r * l2.p) / det;
                 consider(t, s);
@@ -290,20 +292,20 @@ impl TranslatedTool {
     fn pieces(&self, origin: &Point3, e: &Vector3, out: &mut Vec<Piece>) {
         let v = self.v.into_inner();
         let r = self.tool.radius();
-        let tol_q = 1e-10 * (1.0 + r * r);
+        let tol_q = tol::FEASIBILITY * (1.0 + r * r);
         let s_lines = [
             Line {
                 p: 0.0,
                 q: -1.0,
                 r: 0.0,
-                tol: 1e-12,
+                tol: tol::PARAMETER,
                 normal: None,
             },
             Line {
                 p: 0.0,
                 q: 1.0,
                 r: -1.0,
-                tol: 1e-12,
+                tol: tol::PARAMETER,
                 normal: None,
             },
         ];
@@ -336,14 +338,14 @@ impl TranslatedTool {
                     p: -ae,
                     q: -ad,
                     r: h0 - av,
-                    tol: 1e-10,
+                    tol: tol::FEASIBILITY,
                     normal: Some(-v),
                 },
                 Line {
                     p: ae,
                     q: ad,
                     r: av - self.tool.length(),
-                    tol: 1e-10,
+                    tol: tol::FEASIBILITY,
                     normal: Some(v),
                 },
             ];
@@ -390,7 +392,7 @@ impl TranslatedTool {
     ) -> Vector3 {
         let x = origin + e * t;
         let mut cands: [Option<Vector3>; 3] = [None; 3];
-        if piece.quad.eval(t, s).abs() <= piece.quad.tol.max(1e-9) {
+        if piece.quad.eval(t, s).abs() <= piece.quad.tol.max(tol::ON_SURFACE) {
             cands[0] = match piece.radial {
                 Radial::Cylinder { base, v } => {
                     let w = x - (base + self.d * s);
@@ -401,7 +403,7 @@ impl TranslatedTool {
             };
         }
         for (k, l) in piece.lines[..piece.n_lines].iter().enumerate().skip(2) {
-            if l.eval(t, s).abs() <= 1e-9 {
+            if l.eval(t, s).abs() <= tol::ON_SURFACE {
                 cands[k - 1] = l.normal;
             }
         }
@@ -589,7 +591,7 @@ pub fn sweep_program(
             report.rotary_error_bound_mm = report.rotary_error_bound_mm.max(rb.at(n));
             let per = n / COARSE;
             // A coarse sub-step's box, grown by its own bound, holds every fine sub-step in it.
-            let eps_c = rb.at(COARSE) + 1e-6;
+            let eps_c = rb.at(COARSE) + tol::SLIVER;
             let mid = mid_point(tool);
             for j in 0..COARSE {
                 let (l0, l1) = (j as Real / COARSE as Real, (j + 1) as Real / COARSE as Real);
