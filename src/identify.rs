@@ -164,6 +164,8 @@ fn corners(b: &Aabb) -> [Point3; 8] {
 pub struct Face {
     /// Its name.
     pub name: String,
+    /// The cut that made it.
+    pub cut: Move,
     /// The model flank that defined its region.
     pub flank: Flank,
     /// The rotary position of the cut (degrees), per rotary axis in chain order.
@@ -256,6 +258,7 @@ pub fn extract_face(
         .collect();
     Ok(Face {
         name: spec.name.clone(),
+        cut: *mv,
         flank: fl,
         rotary_deg,
         fit,
@@ -382,7 +385,6 @@ const IDENTIFIABLE_RATIO: Real = 1e-8;
 /// Identifies the rotary axis's offset and the angle sum from two faces cut 180° apart.
 pub fn identify_step(
     faces: &[Face; 2],
-    cut_moves: [&Move; 2],
     model: &Chain,
     tool: &Tool,
     stock: &Aabb,
@@ -440,7 +442,7 @@ pub fn identify_step(
         model: model.clone(),
         ids,
         base: [model.deviation(ids[0]), model.deviation(ids[1])],
-        cuts: cut_moves,
+        cuts: [&f0.cut, &f1.cut],
         tool,
         stock,
         frame,
@@ -531,16 +533,4 @@ pub fn predicted_step(
     let f0 = flank(chain, tool, cuts[0], stock)?;
     let f1 = flank(chain, tool, cuts[1], stock)?;
     frame.measure(&f0.plane, &f1.plane)
-}
-
-/// Looks up the cut moves of two face specs.
-pub fn cut_moves<'m>(
-    moves: &'m [Move],
-    specs: &[FaceSpec; 2],
-    chain: &Chain,
-) -> Result<[&'m Move; 2], IdentifyError> {
-    Ok([
-        find_cut(moves, &specs[0], chain)?,
-        find_cut(moves, &specs[1], chain)?,
-    ])
 }

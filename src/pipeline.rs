@@ -120,12 +120,8 @@ pub fn run(
         clock = Instant::now();
     };
 
-    let mut stock = TriDexel::new_box(
-        scene.stock_box,
-        scene.pitch_mm,
-        crate::scene::memory_budget_bytes(),
-    )
-    .map_err(|source| PipelineError::Stock {
+    let mut stock = TriDexel::new_box(scene.stock_box, scene.pitch_mm, scene.memory_budget_bytes)
+        .map_err(|source| PipelineError::Stock {
         path: spath.clone(),
         source,
     })?;
@@ -175,8 +171,8 @@ pub fn run(
     let faces = [f0.map_err(id_err)?, f1.map_err(id_err)?];
     lap("fit", &mut timings);
 
-    let cuts = identify::cut_moves(&program.moves, &scene.faces, &scene.model).map_err(id_err)?;
-    let ident = identify::identify_step(&faces, cuts, &scene.model, &scene.tool, &scene.stock_box)
+    let cuts = [&faces[0].cut, &faces[1].cut];
+    let ident = identify::identify_step(&faces, &scene.model, &scene.tool, &scene.stock_box)
         .map_err(id_err)?;
     let (predicted_step, predicted_tilt) = identify::predicted_step(
         &scene.chain,

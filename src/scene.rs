@@ -176,6 +176,8 @@ pub struct Scene {
     pub stock_box: Aabb,
     /// Tri-dexel pitch (mm).
     pub pitch_mm: Real,
+    /// Bytes the tri-dexel may use on this machine (read once, when the scene loads).
+    pub memory_budget_bytes: Real,
     /// Sweep options.
     pub sweep: SweepOptions,
     /// Scanner.
@@ -421,7 +423,8 @@ impl Scene {
             max: mx.into(),
         };
         let pitch_mm = ctx.positive(&file.stock.pitch_mm, "pitch_mm")?;
-        crate::stock::check_memory(&stock_box, pitch_mm, memory_budget_bytes()).map_err(|e| {
+        let memory_budget = memory_budget_bytes();
+        crate::stock::check_memory(&stock_box, pitch_mm, memory_budget).map_err(|e| {
             ctx.err(
                 file.stock.pitch_mm.span(),
                 format!("pitch_mm = {pitch_mm}: {e}"),
@@ -523,6 +526,7 @@ impl Scene {
             tool,
             stock_box,
             pitch_mm,
+            memory_budget_bytes: memory_budget,
             sweep: SweepOptions {
                 rotary_step_bound_mm: bound,
             },

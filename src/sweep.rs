@@ -273,6 +273,7 @@ fn t_extremes(q: &Quadric, lines: &[Line]) -> Option<(Real, Real, Real, Real)> {
 }
 
 /// One convex piece of the tool (a cylinder part or the ball) swept along `d`.
+#[derive(Clone, Copy)]
 struct Piece {
     quad: Quadric,
     lines: [Line; 4],
@@ -281,6 +282,7 @@ struct Piece {
     radial: Radial,
 }
 
+#[derive(Clone, Copy)]
 enum Radial {
     /// Cylinder about the line `base + s·d + h·v`.
     Cylinder { base: Point3, v: Vector3 },
@@ -289,7 +291,11 @@ enum Radial {
 }
 
 impl TranslatedTool {
-    fn pieces(&self, origin: &Point3, e: &Vector3, out: &mut Vec<Piece>) {
+    /// The convex pieces of the tool's sweep as 2-D problems for this ray: the cylinder, and
+    /// for a ball end mill the swept ball. Returned in a fixed array (no allocation per ray).
+    fn pieces(&self, origin: &Point3, e: &Vector3) -> ([Option<Piece>; 2], usize) {
+        let mut out = [None, None];
+        let mut count = 0;
         let v = self.v.into_inner();
         let r = self.tool.radius();
         let tol_q = tol::FEASIBILITY * (1.0 + r * r);
@@ -349,12 +355,13 @@ impl TranslatedTool {
                     normal: Some(v),
                 },
             ];
-            out.push(Piece {
+            out[count] = Some(Piece {
                 quad,
                 lines,
                 n_lines: 4,
                 radial: Radial::Cylinder { base, v },
             });
+            count += 1;
         }
         if self.tool.kind() == ToolKind::Ball {
             let centre = self.start + v * r;
@@ -370,13 +377,15 @@ impl TranslatedTool {
                 tol: tol_q,
             };
             let lines = [s_lines[0], s_lines[1], s_lines[0], s_lines[0]];
-            out.push(Piece {
+            out[count] = Some(Piece {
                 quad,
                 lines,
                 n_lines: 2,
                 radial: Radial::Sphere { centre },
             });
+            count += 1;
         }
+        (out, count)
     }
 
     /// Tool-outward normals active at (t, s) of a piece; picks the one most against (entry)
@@ -425,10 +434,9 @@ impl Cutter for TranslatedTool {
     fn ray_cut(&self, origin: &Point3, axis: usize) -> Option<RayCut> {
         let mut e = Vector3::zeros();
         e[axis] = 1.0;
-        let mut pieces = Vec::with_capacity(2);
-        self.pieces(origin, &e, &mut pieces);
+        let (pieces, count) = self.pieces(origin, &e);
         let mut acc: Option<(Real, Vector3, Real, Vector3)> = None;
-        for piece in &pieces {
+        for piece in pieces[..count].iter().flatten() {
             let Some((t0, s0, t1, s1)) = t_extremes(&piece.quad, &piece.lines[..piece.n_lines])
             else {
                 continue;
