@@ -112,22 +112,32 @@ impl SplatIndex {
         }
         let bounds = stock.bounds().inflated(radius * 1.01);
         let ext = bounds.max - bounds.min;
-        // Cells at least two splat radii wide (a splat overlaps ≤ 2 cells per axis), and no
-        // more than 2^25 of them.
-        let cell = (2.0 * radius).max((ext.x * ext.y * ext.z / (1u64 << 25) as Real).cbrt());
+        // Cells three splat radii wide (a splat overlaps ≤ 2 cells per axis; measured fastest
+        // of 2, 3 and 4 radii on the built-in scene: fewer index entries against more splats
+        // tested per cell), and no more than 2^25 of them.
+        let cell = (3.0 * radius).max((ext.x * ext.y * ext.z / (1u64 << 25) as Real).cbrt());
         let dims = [0, 1, 2].map(|k| ((ext[k] / cell).ceil() as usize).max(1));
-        let idx = |p: &Point3, k: usize| {
-            (((p[k] - bounds.min[k]) / cell).floor().max(0.0) as usize).min(dims[k] - 1)
-        };
-        let cell_range = |s: &Splat| {
-            let lo = s.p - Vector3::repeat(radius);
-            let hi = s.p + Vector3::repeat(radius);
-            [0, 1, 2].map(|k| (idx(&lo, k), idx(&hi, k)))
-        };
+        // The cells a splat's bounding cube overlaps, computed once per splat. Relative to the
+        // inflated bounds every coordinate is ≥ 0, so truncation is the floor.
+        let inv = 1.0 / cell;
+        let ranges: Vec<[(usize, usize); 3]> = splats
+            .par_iter()
+            .with_min_len(4096)
+            .map(|s| {
+                let span = |k: usize| {
+                    let lo = (s.p[k] - radius - bounds.min[k]).max(0.0) * inv;
+                    let hi = (s.p[k] + radius - bounds.min[k]).max(0.0) * inv;
+                    (
+                        (lo as usize).min(dims[k] - 1),
+                        (hi as usize).min(dims[k] - 1),
+                    )
+                };
+                [span(0), span(1), span(2)]
+            })
+            .collect();
         let ncells = dims[0] * dims[1] * dims[2];
         let mut counts = vec![0u32; ncells + 1];
-        let for_cells = |s: &Splat, f: &mut dyn FnMut(usize)| {
-            let r = cell_range(s);
+        let for_cells = |r: &[(usize, usize); 3], f: &mut dyn FnMut(usize)| {
             for k in r[2].0..=r[2].1 {
                 for j in r[1].0..=r[1].1 {
                     for i in r[0].0..=r[0].1 {
@@ -136,16 +146,16 @@ impl SplatIndex {
                 }
             }
         };
-        for s in &splats {
-            for_cells(s, &mut |c| counts[c + 1] += 1);
+        for r in &ranges {
+            for_cells(r, &mut |c| counts[c + 1] += 1);
         }
         for c in 0..ncells {
             counts[c + 1] += counts[c];
         }
         let mut fill = counts.clone();
         let mut ids = vec![0u32; counts[ncells] as usize];
-        for (id, s) in splats.iter().enumerate() {
-            for_cells(s, &mut |c| {
+        for (id, r) in ranges.iter().enumerate() {
+            for_cells(r, &mut |c| {
                 ids[fill[c] as usize] = id as u32;
                 fill[c] += 1;
             });
