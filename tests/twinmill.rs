@@ -605,6 +605,38 @@ fn bad_input_fails_cleanly_with_a_located_message() {
     );
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 400, failure_persistence: None, ..ProptestConfig::default() })]
+    /// Random edits of a valid scene (deleted, replaced or inserted characters, numbers
+    /// swapped for extreme values) give a scene or an error, never a panic.
+    #[test]
+    fn mutated_scenes_never_panic(
+        edits in proptest::collection::vec((0usize..4000, 0u8..4, proptest::sample::select(vec![
+            "", "=", "[", "]", "\"", "nan", "-inf", "1e308", "-0", "0", "{", "}", ",", "\n", "é", "A", "dy_Q",
+        ])), 1..6)
+    ) {
+        let mut text = builtin("mdx50-step.toml");
+        for (at, kind, piece) in edits {
+            let mut at = at % (text.len() + 1);
+            while !text.is_char_boundary(at) {
+                at -= 1;
+            }
+            match kind {
+                0 => { text.insert_str(at, piece); }
+                1 => { let end = text[at..].chars().next().map_or(at, |c| at + c.len_utf8()); text.replace_range(at..end, piece); }
+                2 => { let end = text[at..].char_indices().nth(8).map_or(text.len(), |(i, _)| at + i); text.replace_range(at..end, ""); }
+                _ => { text.insert_str(at, &format!(" = {piece}")); }
+            }
+        }
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/mutated.toml");
+        if let Ok(scene) = Scene::parse(&text, &path) {
+            // A scene that still parses must still be fully valid.
+            prop_assert!(scene.pitch_mm > 0.0 && scene.pitch_mm.is_finite());
+            prop_assert!(scene.scanner.validate().is_ok());
+        }
+    }
+}
+
 // ---------------------------------------------------------------------------------------
 // Architecture: modules depend only on modules before them in the pipeline.
 
