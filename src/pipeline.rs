@@ -278,7 +278,7 @@ pub fn run(
         scan: ScanReport {
             rays: scanned.rays,
             points: points.len(),
-            shadowed: scanned.shadowed,
+            shadowed: scanned.shadowed(),
             pitch_mm: scene.scanner.pitch_mm,
             noise_sigma_mm: scene.scanner.noise_sigma_mm,
             seed: scene.scanner.seed,

@@ -7,24 +7,36 @@
 //! front-facing splat gives the measured point. On a planar face all splats are coplanar,
 //! so the points lie on the true plane to rounding, at any viewing angle.
 //!
-//! The scanner is a pinhole camera and a projector offset by a baseline: a point is
-//! measured only if the projector lights it too (occlusion, as in real triangulation
-//! scanners). Range noise is Gaussian along the camera ray, from a counter-based generator
-//! keyed by the seed and the pixel index, so the cloud is identical for any thread count.
+//! The scanner is a pinhole camera and a projector offset by a baseline. A point is measured
+//! only if
+//! - the projector lights it too (occlusion, as in real triangulation scanners),
+//! - it lies within the working range of distances from the camera, and
+//! - the surface faces the camera within the grazing limit (steeper surfaces drop out).
+//!
+//! Range noise is Gaussian along the camera ray: independent per pixel, or, with a
+//! correlation length ℓ, a Gaussian random field on the image whose autocorrelation at
+//! distance d (on the target plane) is exp(−d²/(2ℓ²)), as real fringe-projection noise is.
+//! A scan may take several views on a turntable (the part turns about the table's axis, the
+//! scanner stays); each view is merged into the workpiece frame with its own small rigid
+//! misregistration, as a real registration would leave. Every random number comes from a
+//! counter-based generator keyed by the seed, the view and the pixel, so the cloud is
+//! identical for any thread count.
 //!
 //! **Invariant:** the scanner reads the stock and never changes it; it knows nothing about
 //! the machine or the program (a point's source NC line is read off the crossing).
 
 use crate::cloud::{Frame, PointCloud};
-use crate::math::{Aabb, CounterRng, Point3, Real, Vector3, tol};
+use crate::math::{
+    Aabb, CounterRng, Isometry3, Point3, Real, Rotation3, UnitVector3, Vector3, tol,
+};
 use crate::progress::Progress;
 use crate::stock::TriDexel;
 use rayon::prelude::*;
 
 /// Scanner pose and characteristics. All lengths in mm, frame W.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ScannerConfig {
-    /// Camera centre.
+    /// Camera centre (first view).
     pub position: Point3,
     /// The point the camera looks at; the field of view and pitch are given at its distance.
     pub target: Point3,
@@ -38,8 +50,41 @@ pub struct ScannerConfig {
     pub pitch_mm: Real,
     /// Standard deviation of the range noise along the viewing ray; 0 turns noise off.
     pub noise_sigma_mm: Real,
-    /// Seed of the noise.
+    /// Correlation length of the range noise on the target plane (mm); 0: independent per
+    /// point. Typical 0.5–2.
+    pub noise_correlation_mm: Real,
+    /// Distances from the camera at which points are measured (near, far). EinScan-SP:
+    /// 290–480.
+    pub working_range_mm: (Real, Real),
+    /// Largest angle between the surface normal and the direction to the camera at which a
+    /// point is still measured (degrees, (0, 90]). Typical 75–80.
+    pub grazing_limit_deg: Real,
+    /// Per-view rigid registration error.
+    pub misregistration: Misregistration,
+    /// Views on a turntable; `None`: one view from `position`.
+    pub turntable: Option<Turntable>,
+    /// Seed of every random number of the scan.
     pub seed: u64,
+}
+
+/// Standard deviations of the rigid error each view is registered with.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct Misregistration {
+    /// Per component of the translation (mm).
+    pub translation_sigma_mm: Real,
+    /// Per component of the rotation vector (rad), about the view's target point.
+    pub rotation_sigma_rad: Real,
+}
+
+/// A turntable: the part turns by each angle about the axis, the scanner stays.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Turntable {
+    /// A point on the table's axis (W).
+    pub axis_point: Point3,
+    /// The axis direction (W).
+    pub axis: UnitVector3,
+    /// Table angles of the views (degrees).
+    pub angles_deg: Vec<Real>,
 }
 
 /// Errors of the scanner.
@@ -63,21 +108,58 @@ pub enum ScanError {
     },
 }
 
+/// What happened in one view.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ViewReport {
+    /// Turntable angle (degrees; 0 without a turntable).
+    pub table_deg: Real,
+    /// Points measured.
+    pub points: usize,
+    /// Seen by the camera but not lit by the projector.
+    pub shadowed: usize,
+    /// Dropped for facing the camera too obliquely.
+    pub grazing: usize,
+    /// Dropped for lying outside the working range.
+    pub out_of_range: usize,
+    /// The registration error applied: translation (mm).
+    pub misregistration_mm: [Real; 3],
+    /// The registration error applied: rotation vector (rad).
+    pub misregistration_rad: [Real; 3],
+}
+
 /// The result of a scan.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Scan {
-    /// The measured points, frame W.
+    /// The measured points of all views, registered into frame W.
     pub cloud: PointCloud,
     /// For each point, the NC line whose cut made the surface there (0: stock face).
     pub lines: Vec<u32>,
-    /// Camera rays cast.
+    /// For each point, the view it came from.
+    pub view_of_point: Vec<u16>,
+    /// Camera rays cast, over all views.
     pub rays: usize,
-    /// Points seen by the camera but in the projector's shadow (not measured).
-    pub shadowed: usize,
+    /// Per view.
+    pub views: Vec<ViewReport>,
 }
 
-/// Rays per scan, at most.
+impl Scan {
+    /// Points seen by a camera but in the projector's shadow, over all views.
+    pub fn shadowed(&self) -> usize {
+        self.views.iter().map(|v| v.shadowed).sum()
+    }
+}
+
+/// Rays per scan (all views), at most.
 const MAX_RAYS: u64 = 50_000_000;
+/// Views per scan, at most.
+const MAX_VIEWS: usize = 360;
+/// Longest noise correlation, in point pitches: beyond it the noise is a smooth warp of the
+/// whole view, which is what misregistration models.
+const MAX_CORRELATION_PITCHES: Real = 50.0;
+/// Keys separating the random streams of the scan (noise, field, registration).
+const STREAM_REGISTRATION: u64 = 0x5eed_0001;
+/// Key of the correlated-noise streams.
+const STREAM_FIELD: u64 = 0x5eed_0002;
 
 #[derive(Clone, Copy, Debug)]
 struct Splat {
@@ -286,8 +368,48 @@ impl ScannerConfig {
         if !self.baseline_mm.is_finite() {
             return bad("baseline_mm", "must be finite");
         }
+        if !(self.noise_correlation_mm.is_finite() && self.noise_correlation_mm >= 0.0) {
+            return bad("noise_correlation_mm", "must be finite and not negative");
+        }
+        if self.noise_correlation_mm > MAX_CORRELATION_PITCHES * self.pitch_mm {
+            return bad(
+                "noise_correlation_mm",
+                "must be at most 50 point pitches (a longer correlation is a misregistration)",
+            );
+        }
+        let (near, far) = self.working_range_mm;
+        if !(near.is_finite() && far.is_finite() && near >= 0.0 && far > near) {
+            return bad(
+                "working_range_mm",
+                "must be two finite distances, near < far",
+            );
+        }
+        if !(self.grazing_limit_deg > 0.0 && self.grazing_limit_deg <= 90.0) {
+            return bad("grazing_limit_deg", "must be in (0, 90]");
+        }
+        let m = &self.misregistration;
+        if !(m.translation_sigma_mm.is_finite()
+            && m.translation_sigma_mm >= 0.0
+            && m.rotation_sigma_rad.is_finite()
+            && m.rotation_sigma_rad >= 0.0)
+        {
+            return bad("misregistration", "sigmas must be finite and not negative");
+        }
+        if let Some(t) = &self.turntable {
+            if !finite_point(&t.axis_point) || !t.axis.iter().all(|c| c.is_finite()) {
+                return bad("turntable", "axis point and direction must be finite");
+            }
+            if t.angles_deg.is_empty() || t.angles_deg.len() > MAX_VIEWS {
+                return bad("turntable", "needs 1 to 360 view angles");
+            }
+            if !t.angles_deg.iter().all(|a| a.is_finite()) {
+                return bad("turntable", "angles must be finite");
+            }
+        }
         let rays =
             (self.fov_mm.0 / self.pitch_mm).round() * (self.fov_mm.1 / self.pitch_mm).round();
+        let views = self.turntable.as_ref().map_or(1, |t| t.angles_deg.len()) as Real;
+        let rays = rays * views;
         if rays > MAX_RAYS as Real {
             return Err(ScanError::TooManyRays {
                 rays: rays as u64,
@@ -298,42 +420,132 @@ impl ScannerConfig {
     }
 }
 
-/// Scans the stock.
-pub fn scan(
-    stock: &TriDexel,
+/// A unit-variance Gaussian random field on an `nx × ny` pixel grid whose autocorrelation at
+/// a lag of d pixels is exp(−d²/(2·corr_px²)): white noise smoothed by a separable Gaussian of
+/// standard deviation corr_px/√2 (the autocorrelation of a Gaussian smoothing is the kernel
+/// convolved with itself). The white noise covers a margin of the kernel's reach so every
+/// pixel has the full kernel and exactly unit variance.
+fn correlated_field(nx: usize, ny: usize, corr_px: Real, rng: &CounterRng) -> Vec<Real> {
+    let s = corr_px / std::f64::consts::SQRT_2;
+    let reach = (3.0 * s).ceil() as usize;
+    let kernel: Vec<Real> = (0..=2 * reach)
+        .map(|k| {
+            let x = k as Real - reach as Real;
+            (-x * x / (2.0 * s * s)).exp()
+        })
+        .collect();
+    let norm = kernel.iter().map(|w| w * w).sum::<Real>().sqrt();
+    let kernel: Vec<Real> = kernel.iter().map(|w| w / norm).collect();
+    let (wx, wy) = (nx + 2 * reach, ny + 2 * reach);
+    // Rows of white noise, smoothed along x.
+    let rows: Vec<Vec<Real>> = (0..wy)
+        .into_par_iter()
+        .map(|j| {
+            let white: Vec<Real> = (0..wx).map(|i| rng.normal((j * wx + i) as u64)).collect();
+            (0..nx)
+                .map(|i| kernel.iter().zip(&white[i..]).map(|(k, w)| k * w).sum())
+                .collect()
+        })
+        .collect();
+    // Then along y.
+    (0..ny)
+        .into_par_iter()
+        .flat_map_iter(|j| {
+            let rows = &rows;
+            let kernel = &kernel;
+            (0..nx).map(move |i| kernel.iter().zip(&rows[j..]).map(|(k, r)| k * r[i]).sum())
+        })
+        .collect()
+}
+
+/// The rigid registration error of view `view`: rotation about `centre` then translation.
+fn registration_error(
     cfg: &ScannerConfig,
+    view: usize,
+    centre: &Point3,
+) -> (Isometry3, [Real; 3], [Real; 3]) {
+    let rng = CounterRng::new(cfg.seed ^ STREAM_REGISTRATION);
+    let m = &cfg.misregistration;
+    let g = |k: usize| rng.normal((view * 8 + k) as u64);
+    let t = [g(0), g(1), g(2)].map(|x| x * m.translation_sigma_mm);
+    let r = [g(3), g(4), g(5)].map(|x| x * m.rotation_sigma_rad);
+    let rot = Rotation3::from_scaled_axis(Vector3::new(r[0], r[1], r[2]));
+    let c = centre.coords;
+    let shift = c - rot * c + Vector3::new(t[0], t[1], t[2]);
+    (Isometry3::from_parts(shift.into(), rot), t, r)
+}
+
+struct ViewOutput {
+    points: Vec<Point3>,
+    lines: Vec<u32>,
+    report: ViewReport,
+}
+
+/// One view: the part turned by `table` (W → W), scanned from the configured pose.
+fn scan_view(
+    index: &SplatIndex,
+    cfg: &ScannerConfig,
+    view: usize,
+    table_deg: Real,
+    table: &Isometry3,
+    rays_per_view: u64,
     progress: &dyn Progress,
-) -> Result<Scan, ScanError> {
-    cfg.validate()?;
-    let index = SplatIndex::build(stock);
-    let forward = (cfg.target - cfg.position).normalize();
-    let right = forward.cross(&cfg.up).normalize();
+) -> ViewOutput {
+    // Turning the part by `table` is turning the scanner by its inverse.
+    let inv = table.inverse();
+    let position = inv * cfg.position;
+    let target = inv * cfg.target;
+    let forward = (target - position).normalize();
+    let right = forward.cross(&(inv * cfg.up)).normalize();
     let up = right.cross(&forward);
-    let projector = cfg.position + right * cfg.baseline_mm;
+    let projector = position + right * cfg.baseline_mm;
     let nx = ((cfg.fov_mm.0 / cfg.pitch_mm).round() as usize).max(1);
     let ny = ((cfg.fov_mm.1 / cfg.pitch_mm).round() as usize).max(1);
     let (px, py) = (cfg.fov_mm.0 / nx as Real, cfg.fov_mm.1 / ny as Real);
     let rng = CounterRng::new(cfg.seed);
+    let stream = view as u64 * rays_per_view;
+    let field = (cfg.noise_sigma_mm > 0.0 && cfg.noise_correlation_mm > 0.0).then(|| {
+        // Each view's field from its own generator: the white grid is larger than the image.
+        let key = (view as u64 + 1).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+        let field_rng = CounterRng::new(cfg.seed ^ STREAM_FIELD ^ key);
+        correlated_field(nx, ny, cfg.noise_correlation_mm / px.min(py), &field_rng)
+    });
+    let cos_limit = cfg.grazing_limit_deg.to_radians().cos();
+    let (near, far) = cfg.working_range_mm;
     // A projector ray blocked more than this before the point is a shadow: two splat radii
     // cover the splat discs' overhang at edges.
     let shadow_tol = 2.0 * index.radius;
-    progress.start("scan", ny as u64);
-    let rows: Vec<(Vec<Point3>, Vec<u32>, usize)> = (0..ny)
+    let (registration, t, r) = registration_error(cfg, view, &target);
+    #[derive(Default)]
+    struct Row {
+        points: Vec<Point3>,
+        lines: Vec<u32>,
+        shadowed: usize,
+        grazing: usize,
+        out_of_range: usize,
+    }
+    let rows: Vec<Row> = (0..ny)
         .into_par_iter()
         .map(|j| {
-            let mut pts = Vec::new();
-            let mut lines = Vec::new();
-            let mut shadowed = 0;
+            let mut row = Row::default();
             for i in 0..nx {
-                let on_target = cfg.target
+                let on_target = target
                     + right * (-cfg.fov_mm.0 / 2.0 + (i as Real + 0.5) * px)
                     + up * (cfg.fov_mm.1 / 2.0 - (j as Real + 0.5) * py);
-                let d = (on_target - cfg.position).normalize();
-                let Some((t, id)) = index.first_hit(&cfg.position, &d, 0.0) else {
+                let d = (on_target - position).normalize();
+                let Some((t, id)) = index.first_hit(&position, &d, 0.0) else {
                     continue;
                 };
-                let h = cfg.position + d * t;
                 let splat = &index.splats[id];
+                if t < near || t > far {
+                    row.out_of_range += 1;
+                    continue;
+                }
+                if -splat.n.dot(&d) < cos_limit {
+                    row.grazing += 1;
+                    continue;
+                }
+                let h = position + d * t;
                 let to_point = h - projector;
                 let dist = to_point.norm();
                 let lit = splat.n.dot(&to_point) < 0.0
@@ -342,39 +554,92 @@ pub fn scan(
                         None => false,
                     };
                 if !lit {
-                    shadowed += 1;
+                    row.shadowed += 1;
                     continue;
                 }
-                let pixel = (j * nx + i) as u64;
-                let noise = if cfg.noise_sigma_mm > 0.0 {
-                    cfg.noise_sigma_mm * rng.normal(pixel)
-                } else {
-                    0.0
+                let pixel = j * nx + i;
+                let noise = match &field {
+                    Some(f) => cfg.noise_sigma_mm * f[pixel],
+                    None if cfg.noise_sigma_mm > 0.0 => {
+                        cfg.noise_sigma_mm * rng.normal(stream + pixel as u64)
+                    }
+                    None => 0.0,
                 };
-                pts.push(h + d * noise);
-                lines.push(splat.line);
+                row.points.push(registration * (h + d * noise));
+                row.lines.push(splat.line);
             }
             progress.advance(1);
-            (pts, lines, shadowed)
+            row
         })
         .collect();
-    progress.finish();
+    let mut out = ViewOutput {
+        points: Vec::new(),
+        lines: Vec::new(),
+        report: ViewReport {
+            table_deg,
+            points: 0,
+            shadowed: 0,
+            grazing: 0,
+            out_of_range: 0,
+            misregistration_mm: t,
+            misregistration_rad: r,
+        },
+    };
+    for row in rows {
+        out.points.extend(row.points);
+        out.lines.extend(row.lines);
+        out.report.shadowed += row.shadowed;
+        out.report.grazing += row.grazing;
+        out.report.out_of_range += row.out_of_range;
+    }
+    out.report.points = out.points.len();
+    out
+}
+
+/// Scans the stock: every view, merged into frame W.
+pub fn scan(
+    stock: &TriDexel,
+    cfg: &ScannerConfig,
+    progress: &dyn Progress,
+) -> Result<Scan, ScanError> {
+    cfg.validate()?;
+    let index = SplatIndex::build(stock);
+    let tables: Vec<(Real, Isometry3)> = match &cfg.turntable {
+        None => vec![(0.0, Isometry3::identity())],
+        Some(t) => t
+            .angles_deg
+            .iter()
+            .map(|&a| {
+                let rot = Rotation3::from_axis_angle(&t.axis, a.to_radians());
+                let c = t.axis_point.coords;
+                (a, Isometry3::from_parts((c - rot * c).into(), rot))
+            })
+            .collect(),
+    };
+    let nx = ((cfg.fov_mm.0 / cfg.pitch_mm).round() as usize).max(1);
+    let ny = ((cfg.fov_mm.1 / cfg.pitch_mm).round() as usize).max(1);
+    progress.start("scan", (ny * tables.len()) as u64);
     let mut points = Vec::new();
     let mut lines = Vec::new();
-    let mut shadowed = 0;
-    for (p, l, s) in rows {
-        points.extend(p);
-        lines.extend(l);
-        shadowed += s;
+    let mut view_of_point = Vec::new();
+    let mut views = Vec::new();
+    for (v, (deg, table)) in tables.iter().enumerate() {
+        let out = scan_view(&index, cfg, v, *deg, table, (nx * ny) as u64, progress);
+        view_of_point.extend(std::iter::repeat_n(v as u16, out.points.len()));
+        points.extend(out.points);
+        lines.extend(out.lines);
+        views.push(out.report);
     }
+    progress.finish();
     Ok(Scan {
         cloud: PointCloud {
             frame: Frame::Workpiece,
             points,
         },
         lines,
-        rays: nx * ny,
-        shadowed,
+        view_of_point,
+        rays: nx * ny * tables.len(),
+        views,
     })
 }
 
@@ -392,8 +657,119 @@ mod tests {
             fov_mm: (40.0, 30.0),
             pitch_mm: 0.5,
             noise_sigma_mm: 0.0,
+            noise_correlation_mm: 0.0,
+            working_range_mm: (200.0, 400.0),
+            grazing_limit_deg: 80.0,
+            misregistration: Misregistration::default(),
+            turntable: None,
             seed: 1,
         }
+    }
+
+    fn front_face(c: &Scan) -> Vec<Point3> {
+        c.cloud
+            .points
+            .iter()
+            .filter(|p| p.z < 4.0 && p.x.abs() < 9.0 && p.y < 1.0)
+            .copied()
+            .collect()
+    }
+
+    #[test]
+    fn correlated_field_has_unit_variance_and_the_given_correlation() {
+        let (nx, ny, corr) = (400, 400, 5.0);
+        let f = correlated_field(nx, ny, corr, &CounterRng::new(3));
+        let n = f.len() as Real;
+        let mean = f.iter().sum::<Real>() / n;
+        let var = f.iter().map(|x| (x - mean).powi(2)).sum::<Real>() / n;
+        // About 160,000 / (2π·25) ≈ 1,000 independent patches: σ(var) ≈ 0.045.
+        assert!((var - 1.0).abs() < 0.15, "variance {var}");
+        let lag = corr as usize;
+        let mut acc = 0.0;
+        let mut count = 0.0;
+        for j in 0..ny {
+            for i in 0..nx - lag {
+                acc += (f[j * nx + i] - mean) * (f[j * nx + i + lag] - mean);
+                count += 1.0;
+            }
+        }
+        let rho = acc / count / var;
+        // exp(−ℓ²/(2ℓ²)) = e^(−1/2) = 0.607 at a lag of one correlation length.
+        assert!(
+            (rho - (-0.5f64).exp()).abs() < 0.08,
+            "autocorrelation {rho}"
+        );
+    }
+
+    #[test]
+    fn steep_faces_and_far_points_drop_out() {
+        let stock = box_stock();
+        // The top face z = 5 is seen at about 81.5° from its normal from this pose
+        // (camera 50 mm up at 300 mm): an 89° limit keeps it, 60° drops it; the front face
+        // (seen at ~10°) stays.
+        let mut c = cfg();
+        c.grazing_limit_deg = 89.0;
+        let all = scan(&stock, &c, &NoProgress).expect("scans");
+        c.grazing_limit_deg = 60.0;
+        let steep = scan(&stock, &c, &NoProgress).expect("scans");
+        let top = |s: &Scan| {
+            s.cloud
+                .points
+                .iter()
+                .filter(|p| (p.z - 5.0).abs() < 1e-9)
+                .count()
+        };
+        assert!(
+            top(&all) > 0 && top(&steep) == 0,
+            "top {} / {}",
+            top(&all),
+            top(&steep)
+        );
+        assert_eq!(front_face(&all).len(), front_face(&steep).len());
+        assert!(steep.views[0].grazing > 0);
+        // Working range that ends before the part: nothing measured.
+        c.working_range_mm = (100.0, 250.0);
+        let near = scan(&stock, &c, &NoProgress).expect("scans");
+        assert!(near.cloud.points.is_empty() && near.views[0].out_of_range > 0);
+    }
+
+    #[test]
+    fn misregistration_moves_a_view_rigidly() {
+        let stock = box_stock();
+        let exact = scan(&stock, &cfg(), &NoProgress).expect("scans");
+        let mut c = cfg();
+        c.misregistration.translation_sigma_mm = 0.05;
+        let moved = scan(&stock, &c, &NoProgress).expect("scans");
+        let t = moved.views[0].misregistration_mm;
+        assert!(t.iter().any(|x| x.abs() > 1e-4));
+        assert_eq!(exact.cloud.points.len(), moved.cloud.points.len());
+        for (a, b) in exact.cloud.points.iter().zip(&moved.cloud.points) {
+            assert!((b - a - Vector3::new(t[0], t[1], t[2])).norm() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn turntable_views_are_merged_in_the_workpiece_frame() {
+        let stock = box_stock();
+        let mut c = cfg();
+        c.turntable = Some(Turntable {
+            axis_point: Point3::new(0.0, 5.0, 0.0),
+            axis: Vector3::z_axis(),
+            angles_deg: vec![0.0, 180.0],
+        });
+        let s = scan(&stock, &c, &NoProgress).expect("scans");
+        assert_eq!(s.views.len(), 2);
+        assert_eq!(s.view_of_point.len(), s.cloud.points.len());
+        // The second view sees the back face y = 10, registered where it is.
+        let back: Vec<_> = s
+            .cloud
+            .points
+            .iter()
+            .filter(|p| p.z < 4.0 && p.x.abs() < 9.0 && p.y > 9.0)
+            .collect();
+        assert!(back.len() > 600, "back points {}", back.len());
+        assert!(back.iter().all(|p| (p.y - 10.0).abs() < 1e-9));
+        assert!(front_face(&s).iter().all(|p| p.y.abs() < 1e-9));
     }
 
     /// A 20 × 10 × 10 mm box whose front face is y = 0.

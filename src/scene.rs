@@ -11,7 +11,7 @@ use crate::identify::{FaceOptions, FaceSpec};
 use crate::kinematics::{Axis, AxisKind, Chain};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
 use crate::nc::{AxisLetter, AxisValues, NcError, Program, parse_program};
-use crate::scan::{ScanError, ScannerConfig};
+use crate::scan::{Misregistration, ScanError, ScannerConfig, Turntable};
 use crate::sweep::SweepOptions;
 use crate::tool::{Tool, ToolKind};
 use serde::Deserialize;
@@ -127,7 +127,34 @@ struct ScannerFile {
     #[serde(default)]
     noise_sigma_mm: Option<Spanned<Real>>,
     #[serde(default)]
+    noise_correlation_mm: Option<Spanned<Real>>,
+    #[serde(default)]
+    working_range_mm: Option<Spanned<[Real; 2]>>,
+    #[serde(default)]
+    grazing_limit_deg: Option<Spanned<Real>>,
+    #[serde(default)]
+    misregistration: Option<MisregistrationFile>,
+    #[serde(default)]
+    turntable: Option<TurntableFile>,
+    #[serde(default)]
     seed: Option<u64>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MisregistrationFile {
+    #[serde(default)]
+    translation_sigma_mm: Option<Spanned<Real>>,
+    #[serde(default)]
+    rotation_sigma_rad: Option<Spanned<Real>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TurntableFile {
+    axis_point: Spanned<[Real; 3]>,
+    axis: Spanned<[Real; 3]>,
+    angles_deg: Spanned<Vec<Real>>,
 }
 
 #[derive(Deserialize)]
@@ -458,6 +485,32 @@ impl Scene {
             fov_mm: fov,
             pitch_mm: opt(&s.pitch_mm, "pitch_mm", 0.185)?,
             noise_sigma_mm: opt(&s.noise_sigma_mm, "noise_sigma_mm", 0.025)?,
+            noise_correlation_mm: opt(&s.noise_correlation_mm, "noise_correlation_mm", 0.0)?,
+            working_range_mm: match &s.working_range_mm {
+                Some(r) => (r.get_ref()[0], r.get_ref()[1]),
+                None => (290.0, 480.0),
+            },
+            grazing_limit_deg: opt(&s.grazing_limit_deg, "grazing_limit_deg", 80.0)?,
+            misregistration: match &s.misregistration {
+                Some(m) => Misregistration {
+                    translation_sigma_mm: opt(
+                        &m.translation_sigma_mm,
+                        "translation_sigma_mm",
+                        0.0,
+                    )?,
+                    rotation_sigma_rad: opt(&m.rotation_sigma_rad, "rotation_sigma_rad", 0.0)?,
+                },
+                None => Misregistration::default(),
+            },
+            turntable: match &s.turntable {
+                Some(t) => Some(Turntable {
+                    axis_point: ctx.vec3(&t.axis_point, "axis_point")?.into(),
+                    axis: UnitVector3::try_new(ctx.vec3(&t.axis, "axis")?, tol::LENGTH_EPS)
+                        .ok_or_else(|| ctx.err(t.axis.span(), "turntable axis must not be zero"))?,
+                    angles_deg: t.angles_deg.get_ref().clone(),
+                }),
+                None => None,
+            },
             seed: s.seed.unwrap_or(1),
         };
         scanner.validate().map_err(|e| {
@@ -471,6 +524,31 @@ impl Scene {
                     "noise_sigma_mm" => s
                         .noise_sigma_mm
                         .as_ref()
+                        .map_or(s.position.span(), |v| v.span()),
+                    "noise_correlation_mm" => s
+                        .noise_correlation_mm
+                        .as_ref()
+                        .map_or(s.position.span(), |v| v.span()),
+                    "working_range_mm" => s
+                        .working_range_mm
+                        .as_ref()
+                        .map_or(s.position.span(), |v| v.span()),
+                    "grazing_limit_deg" => s
+                        .grazing_limit_deg
+                        .as_ref()
+                        .map_or(s.position.span(), |v| v.span()),
+                    "turntable" => s
+                        .turntable
+                        .as_ref()
+                        .map_or(s.position.span(), |t| t.angles_deg.span()),
+                    "misregistration" => s
+                        .misregistration
+                        .as_ref()
+                        .and_then(|m| {
+                            m.translation_sigma_mm
+                                .as_ref()
+                                .or(m.rotation_sigma_rad.as_ref())
+                        })
                         .map_or(s.position.span(), |v| v.span()),
                     _ => s.position.span(),
                 },

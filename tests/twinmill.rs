@@ -220,7 +220,7 @@ fn check_faces_exact(s: &Scene) -> Result<(), TestCaseError> {
             "A{a}: dexel crossing {worst} mm off the exact plane"
         );
         // And the noise-free scan of the face.
-        let mut sc = s.scanner;
+        let mut sc = s.scanner.clone();
         sc.noise_sigma_mm = 0.0;
         let scanned = twinmill::scan::scan(&stock, &sc, &NoProgress).expect("scans");
         let mut count = 0;
