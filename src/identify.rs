@@ -174,6 +174,108 @@ pub struct Face {
     pub fit: PlaneFit,
     /// Indices of the cloud points in the region.
     pub indices: Vec<usize>,
+    /// How the fitted plane's uncertainty spreads over the face.
+    pub design: FaceDesign,
+}
+
+/// The least-squares design of a face's plane fit, for propagating its uncertainty to any
+/// point and direction: in-plane coordinates along the cut (`u`) and the tool axis (`v`)
+/// relative to the centroid.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FaceDesign {
+    /// In-plane directions (cut direction, tool axis), as on the flank.
+    pub basis: [UnitVector3; 2],
+    /// Scatter matrix Σ q qᵀ of the used points' in-plane coordinates q (mm²).
+    pub scatter: Matrix2<Real>,
+    /// Points used.
+    pub n: usize,
+    /// Residual standard deviation, inflated for correlated residuals (mm).
+    pub sigma_mm: Real,
+    /// The inflation of the variance for correlated residuals (≥ 1; 1 for independent
+    /// noise), from block averaging.
+    pub correlation_inflation: Real,
+}
+
+impl FaceDesign {
+    /// Standard uncertainty (mm) of the plane's offset at the in-plane point `at`.
+    pub fn offset_sigma_at(&self, centroid: &Point3, at: &Point3) -> Real {
+        let d = at - centroid;
+        let q = Vector2::new(self.basis[0].dot(&d), self.basis[1].dot(&d));
+        let minv = self
+            .scatter
+            .try_inverse()
+            .unwrap_or_else(|| Matrix2::from_element(Real::INFINITY));
+        self.sigma_mm * (1.0 / self.n as Real + (q.transpose() * minv * q)[0]).sqrt()
+    }
+
+    /// Standard uncertainty (rad) of the plane's slope along the cut direction.
+    pub fn slope_sigma_along_cut(&self) -> Real {
+        let minv = self
+            .scatter
+            .try_inverse()
+            .unwrap_or_else(|| Matrix2::from_element(Real::INFINITY));
+        self.sigma_mm * minv[(0, 0)].sqrt()
+    }
+}
+
+/// Block edges (mm) over which residual correlation is looked for: from about three point
+/// pitches to a fifth of a typical face.
+const BLOCK_EDGES_MM: [Real; 4] = [0.5, 1.0, 2.0, 4.0];
+/// Fewest points in a block for its mean to count.
+const BLOCK_MIN_POINTS: usize = 4;
+
+/// The design of a fit from its points, with the variance inflation for correlated residuals
+/// found by block averaging (Flyvbjerg & Petersen): residual means over blocks of edge b vary
+/// like σ²·f/n_block if the residuals are correlated over less than b; f is the largest such
+/// ratio over the block sizes, and 1 for independent noise.
+fn face_design(points: &[Point3], fit: &PlaneFit, basis: [UnitVector3; 2]) -> FaceDesign {
+    let c = fit.centroid;
+    let coords: Vec<(Real, Real, Real)> = points
+        .iter()
+        .map(|p| {
+            let d = p - c;
+            (
+                basis[0].dot(&d),
+                basis[1].dot(&d),
+                fit.plane.signed_distance(p),
+            )
+        })
+        .collect();
+    let mut scatter = Matrix2::zeros();
+    let mut ss = 0.0;
+    for &(u, v, r) in &coords {
+        scatter += Matrix2::new(u * u, u * v, u * v, v * v);
+        ss += r * r;
+    }
+    let n = coords.len();
+    let var = ss / (n.saturating_sub(3).max(1)) as Real;
+    let mut inflation: Real = 1.0;
+    for b in BLOCK_EDGES_MM {
+        let mut blocks: std::collections::BTreeMap<(i64, i64), (usize, Real)> = Default::default();
+        for &(u, v, r) in &coords {
+            let e = blocks
+                .entry(((u / b).floor() as i64, (v / b).floor() as i64))
+                .or_default();
+            e.0 += 1;
+            e.1 += r;
+        }
+        let (mut num, mut den) = (0.0, 0usize);
+        for &(k, sum) in blocks.values().filter(|(k, _)| *k >= BLOCK_MIN_POINTS) {
+            let mean = sum / k as Real;
+            num += k as Real * mean * mean;
+            den += 1;
+        }
+        if den >= 8 && var > 0.0 {
+            inflation = inflation.max(num / den as Real / var);
+        }
+    }
+    FaceDesign {
+        basis,
+        scatter,
+        n,
+        sigma_mm: (var * inflation).sqrt(),
+        correlation_inflation: inflation,
+    }
 }
 
 fn find_cut<'m>(
@@ -250,6 +352,15 @@ pub fn extract_face(
         source,
     })?;
     fit.plane = fit.plane.oriented_towards(&fl.plane.normal);
+    let used: Vec<Point3> = sel
+        .iter()
+        .copied()
+        .filter(|p| {
+            fit.plane.signed_distance(p).abs()
+                <= opts.robust.k_sigma * fit.rms_mm.max(tol::LENGTH_EPS)
+        })
+        .collect();
+    let design = face_design(&used, &fit, [fl.u, fl.v]);
     let rotary_deg = model
         .axes()
         .iter()
@@ -263,6 +374,7 @@ pub fn extract_face(
         rotary_deg,
         fit,
         indices,
+        design,
     })
 }
 
@@ -436,8 +548,16 @@ pub fn identify_step(
     let (step, tilt) = frame.measure(&f0.fit.plane, &f1.fit.plane).ok_or_else(|| {
         IdentifyError::NotAStepPair("the fitted faces are perpendicular to each other".into())
     })?;
-    let step_sigma = f0.fit.offset_sigma_mm.hypot(f1.fit.offset_sigma_mm);
-    let tilt_sigma = f0.fit.tilt_sigma_rad[0].hypot(f1.fit.tilt_sigma_rad[0]);
+    // Uncertainties at the point of measurement, not at each face's centroid: the faces'
+    // tilts act over the lever arm from their centroids to `at`.
+    let step_sigma = f0
+        .design
+        .offset_sigma_at(&f0.fit.centroid, &frame.at)
+        .hypot(f1.design.offset_sigma_at(&f1.fit.centroid, &frame.at));
+    let tilt_sigma = f0
+        .design
+        .slope_sigma_along_cut()
+        .hypot(f1.design.slope_sigma_along_cut());
     let problem = StepProblem {
         model: model.clone(),
         ids,

@@ -4,12 +4,14 @@
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::io::{IsTerminal, Write};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
-use twinmill::output::write_outcome;
-use twinmill::pipeline::run;
+use twinmill::nc::Program;
+use twinmill::output::{json_bytes, ply_bytes, write_files, write_outcome};
+use twinmill::pipeline::{machine_part, run, scanner_study};
 use twinmill::progress::Progress;
+use twinmill::report::{ScanFileReport, ScanReport};
 use twinmill::scene::{Scene, SceneError};
 
 /// twinmill: a digital twin of machine-tool accuracy.
@@ -40,6 +42,72 @@ enum Command {
         #[arg(short, long)]
         verbose: bool,
     },
+    /// Simulate the scene's program and scan the part with the scene's scanner (all views);
+    /// write cloud.ply and scan.json. With --study, also scan it again and again with each
+    /// scanner effect alone and together, and report how the identified offset moves.
+    Scan {
+        /// The scene file (TOML).
+        scene: PathBuf,
+        /// Folder for outputs; they go to <out>/<scene name>-scan/.
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
+        /// Print scan.json on stdout instead of the summary.
+        #[arg(long)]
+        json: bool,
+        /// Worker threads (default: all cores). Results do not depend on it.
+        #[arg(long)]
+        threads: Option<usize>,
+        /// Run the scanner-effects study with N seeded trials per case (default: the
+        /// scene's [study] trials, 20 if not given).
+        #[arg(long, num_args = 0..=1, default_missing_value = "0", value_name = "N")]
+        study: Option<usize>,
+        /// List every problem found in the NC program, not only the first.
+        #[arg(short, long)]
+        verbose: bool,
+    },
+}
+
+/// Sets the thread count, loads the scene and its program.
+fn prepare(
+    scene: &Path,
+    threads: Option<usize>,
+    verbose: bool,
+) -> Result<(Scene, Program), ExitCode> {
+    if let Some(n) = threads
+        && let Err(e) = rayon::ThreadPoolBuilder::new()
+            .num_threads(n.max(1))
+            .build_global()
+    {
+        return Err(fail(e));
+    }
+    let scene = Scene::load(scene).map_err(fail)?;
+    let program = match scene.load_program() {
+        Ok(p) => p,
+        Err(SceneError::Program(e)) if verbose => {
+            let _ = write!(std::io::stderr(), "{}", e.full_report());
+            return Err(fail(e));
+        }
+        Err(e) => return Err(fail(e)),
+    };
+    Ok((scene, program))
+}
+
+/// Prints `text` (or `json`) on stdout.
+fn print_out(
+    text: impl FnOnce() -> String,
+    json: Option<Result<String, serde_json::Error>>,
+) -> ExitCode {
+    let mut stdout = std::io::stdout().lock();
+    let printed = match json {
+        Some(j) => j
+            .map_err(std::io::Error::other)
+            .and_then(|s| writeln!(stdout, "{s}")),
+        None => write!(stdout, "{}", text()),
+    };
+    match printed {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => fail(e),
+    }
 }
 
 /// Progress bars on stderr when it is a terminal.
@@ -95,29 +163,11 @@ fn main() -> ExitCode {
             threads,
             verbose,
         } => {
-            if let Some(n) = threads
-                && let Err(e) = rayon::ThreadPoolBuilder::new()
-                    .num_threads(n.max(1))
-                    .build_global()
-            {
-                return fail(e);
-            }
-            let scene = match Scene::load(&scene) {
-                Ok(s) => s,
-                Err(e) => return fail(e),
+            let (scene, program) = match prepare(&scene, threads, verbose) {
+                Ok(x) => x,
+                Err(code) => return code,
             };
-            let program = match scene.load_program() {
-                Ok(p) => p,
-                Err(SceneError::Program(e)) if verbose => {
-                    let _ = write!(std::io::stderr(), "{}", e.full_report());
-                    return fail(e);
-                }
-                Err(e) => return fail(e),
-            };
-            let bars = Bars {
-                bar: Mutex::new(None),
-                enabled: !json && std::io::stderr().is_terminal(),
-            };
+            let bars = bars(json);
             let outcome = match run(&scene, &program, &bars) {
                 Ok(o) => o,
                 Err(e) => return fail(e),
@@ -126,24 +176,96 @@ fn main() -> ExitCode {
             if let Err(e) = write_outcome(&outcome, &dir) {
                 return fail(e);
             }
-            let mut stdout = std::io::stdout().lock();
-            let printed = if json {
-                serde_json::to_string_pretty(&outcome.report)
-                    .map_err(std::io::Error::other)
-                    .and_then(|s| writeln!(stdout, "{s}"))
-            } else {
-                write!(stdout, "{}", outcome.report.summary()).and_then(|_| {
-                    writeln!(
-                        stdout,
-                        "  wrote         {}/{{report.json, cloud.ply, faces.png}}",
+            print_out(
+                || {
+                    format!(
+                        "{}  wrote         {}/{{report.json, cloud.ply, faces.png}}\n",
+                        outcome.report.summary(),
                         dir.display()
                     )
-                })
-            };
-            match printed {
-                Ok(()) => ExitCode::SUCCESS,
-                Err(e) => fail(e),
-            }
+                },
+                json.then(|| serde_json::to_string_pretty(&outcome.report)),
+            )
         }
+        Command::Scan {
+            scene,
+            out,
+            json,
+            threads,
+            study,
+            verbose,
+        } => {
+            let (scene, program) = match prepare(&scene, threads, verbose) {
+                Ok(x) => x,
+                Err(code) => return code,
+            };
+            let bars = bars(json);
+            let part = match machine_part(&scene, &program, &bars) {
+                Ok(p) => p,
+                Err(e) => return fail(e),
+            };
+            let scanned = match twinmill::scan::scan(&part.stock, &scene.scanner, &bars) {
+                Ok(s) => s,
+                Err(e) => return fail(format!("{}: [scanner]: {e}", scene.path.display())),
+            };
+            let cases = match study {
+                None => Vec::new(),
+                Some(n) => {
+                    let mut opts = scene.study;
+                    if n > 0 {
+                        opts.trials = n;
+                    }
+                    match scanner_study(&scene, &program, &opts, &bars) {
+                        Ok(c) => c,
+                        Err(e) => return fail(e),
+                    }
+                }
+            };
+            let report = ScanFileReport {
+                scene: scene.name.clone(),
+                scan: ScanReport {
+                    rays: scanned.rays,
+                    points: scanned.cloud.points.len(),
+                    shadowed: scanned.shadowed(),
+                    pitch_mm: scene.scanner.pitch_mm,
+                    noise_sigma_mm: scene.scanner.noise_sigma_mm,
+                    seed: scene.scanner.seed,
+                    views: scanned.views.clone(),
+                },
+                study: cases,
+            };
+            let dir = out.join(format!("{}-scan", scene.name));
+            let files = json_bytes(&report, &dir.join("scan.json"))
+                .and_then(|j| {
+                    Ok(vec![
+                        ("scan.json", j),
+                        (
+                            "cloud.ply",
+                            ply_bytes(&scanned.cloud, &dir.join("cloud.ply"))?,
+                        ),
+                    ])
+                })
+                .and_then(|files| write_files(&dir, &files));
+            if let Err(e) = files {
+                return fail(e);
+            }
+            print_out(
+                || {
+                    format!(
+                        "{}  wrote         {}/{{scan.json, cloud.ply}}\n",
+                        report.summary(),
+                        dir.display()
+                    )
+                },
+                json.then(|| serde_json::to_string_pretty(&report)),
+            )
+        }
+    }
+}
+
+fn bars(json: bool) -> Bars {
+    Bars {
+        bar: Mutex::new(None),
+        enabled: !json && std::io::stderr().is_terminal(),
     }
 }

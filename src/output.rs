@@ -1,5 +1,6 @@
-//! Writing a run's outputs: `report.json`, `cloud.ply` and `faces.png` into
-//! `<out>/<scene-name>/`, all or nothing.
+//! Writing outputs into a folder, all or nothing: `run` writes `report.json`, `cloud.ply`
+//! and `faces.png` into `<out>/<scene-name>/`; `scan` writes `cloud.ply` and `scan.json`
+//! into `<out>/<scene-name>-scan/`.
 //!
 //! Files are written into a fresh staging folder beside the target, which replaces the
 //! target only when every file is complete; a failure leaves the previous outputs (if any)
@@ -7,7 +8,7 @@
 //!
 //! **Invariant:** with [`crate::scene`], the only module that touches files.
 
-use crate::cloud::write_ply;
+use crate::cloud::{PointCloud, write_ply};
 use crate::pipeline::Outcome;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -29,8 +30,8 @@ fn io<T>(path: &Path, r: std::io::Result<T>) -> Result<T, OutputError> {
     })
 }
 
-/// Writes the outcome into `dir` (created or replaced as a whole). Returns `dir`.
-pub fn write_outcome(outcome: &Outcome, dir: &Path) -> Result<PathBuf, OutputError> {
+/// Writes named files into `dir`, created or replaced as a whole: all of them or none.
+pub fn write_files(dir: &Path, files: &[(&str, Vec<u8>)]) -> Result<PathBuf, OutputError> {
     let parent = dir
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -46,19 +47,14 @@ pub fn write_outcome(outcome: &Outcome, dir: &Path) -> Result<PathBuf, OutputErr
             io(&staging, std::fs::remove_dir_all(&staging))?;
         }
         io(&staging, std::fs::create_dir(&staging))?;
-        let json = serde_json::to_vec_pretty(&outcome.report).map_err(std::io::Error::other);
-        let p = staging.join("report.json");
-        io(&p, json.and_then(|j| std::fs::write(&p, j)))?;
-        let p = staging.join("cloud.ply");
-        let mut buf = Vec::new();
-        io(&p, write_ply(&outcome.cloud, &mut buf))?;
-        io(
-            &p,
-            std::fs::File::create(&p)
-                .and_then(|mut f| f.write_all(&buf).and_then(|_| f.sync_all())),
-        )?;
-        let p = staging.join("faces.png");
-        io(&p, std::fs::write(&p, &outcome.heat_map_png))?;
+        for (file, bytes) in files {
+            let p = staging.join(file);
+            io(
+                &p,
+                std::fs::File::create(&p)
+                    .and_then(|mut f| f.write_all(bytes).and_then(|_| f.sync_all())),
+            )?;
+        }
         if dir.exists() {
             io(dir, std::fs::remove_dir_all(dir))?;
         }
@@ -69,4 +65,35 @@ pub fn write_outcome(outcome: &Outcome, dir: &Path) -> Result<PathBuf, OutputErr
         let _ = std::fs::remove_dir_all(&staging);
     }
     result
+}
+
+/// Serialises `value` as pretty JSON.
+pub fn json_bytes(value: &impl serde::Serialize, path: &Path) -> Result<Vec<u8>, OutputError> {
+    serde_json::to_vec_pretty(value).map_err(|e| OutputError {
+        path: path.to_path_buf(),
+        source: std::io::Error::other(e),
+    })
+}
+
+/// Encodes a cloud as binary PLY.
+pub fn ply_bytes(cloud: &PointCloud, path: &Path) -> Result<Vec<u8>, OutputError> {
+    let mut buf = Vec::new();
+    io(path, write_ply(cloud, &mut buf))?;
+    Ok(buf)
+}
+
+/// Writes the outcome of `run` into `dir`: report.json, cloud.ply, faces.png.
+pub fn write_outcome(outcome: &Outcome, dir: &Path) -> Result<PathBuf, OutputError> {
+    let files = [
+        (
+            "report.json",
+            json_bytes(&outcome.report, &dir.join("report.json"))?,
+        ),
+        (
+            "cloud.ply",
+            ply_bytes(&outcome.cloud, &dir.join("cloud.ply"))?,
+        ),
+        ("faces.png", outcome.heat_map_png.clone()),
+    ];
+    write_files(dir, &files)
 }

@@ -11,11 +11,11 @@ use crate::math::{Point3, Real};
 use crate::nc::Program;
 use crate::progress::Progress;
 use crate::render::{HeatMapOptions, RenderError, encode_png, nice_ceil, render_heat_map};
-use crate::report::{FaceReport, Report, ScanReport, SolverReport, StockReport};
-use crate::scan::{ScanError, scan};
+use crate::report::{FaceReport, Report, ScanReport, SolverReport, StockReport, StudyCase};
+use crate::scan::{Misregistration, ScanError, StudyOptions, Surface, scan};
 use crate::scene::Scene;
 use crate::stock::{StockError, TriDexel};
-use crate::sweep::{SweepError, sweep_program};
+use crate::sweep::{SweepError, SweepReport, sweep_program};
 use std::collections::BTreeMap;
 use std::time::Instant;
 
@@ -106,28 +106,34 @@ fn colour_range_um(points: &[Point3], plane: &Plane) -> Real {
     nice_ceil(p99.max(1e-3))
 }
 
-/// Runs the whole pipeline on `scene` with its parsed `program`.
-pub fn run(
+/// The part as the deviated machine cuts it.
+pub struct Part {
+    /// The cut stock.
+    pub stock: TriDexel,
+    /// Its volume before cutting (mm³).
+    pub volume0: Real,
+    /// What the sweep did.
+    pub sweep: SweepReport,
+    /// Seconds for "stock" and "sweep".
+    pub timings: Vec<(String, Real)>,
+}
+
+/// Makes the stock and sweeps the program through the scene's deviated chain.
+pub fn machine_part(
     scene: &Scene,
     program: &Program,
     progress: &dyn Progress,
-) -> Result<Outcome, PipelineError> {
+) -> Result<Part, PipelineError> {
     let spath = scene.path.display().to_string();
-    let mut timings = Vec::new();
-    let mut clock = Instant::now();
-    let mut lap = |name: &str, timings: &mut Vec<(String, Real)>| {
-        timings.push((name.to_string(), clock.elapsed().as_secs_f64()));
-        clock = Instant::now();
-    };
-
+    let clock = Instant::now();
     let mut stock = TriDexel::new_box(scene.stock_box, scene.pitch_mm, scene.memory_budget_bytes)
         .map_err(|source| PipelineError::Stock {
         path: spath.clone(),
         source,
     })?;
     let volume0 = stock.volume();
-    lap("stock", &mut timings);
-
+    let t_stock = clock.elapsed().as_secs_f64();
+    let clock = Instant::now();
     let sweep = sweep_program(
         &mut stock,
         &scene.chain,
@@ -143,20 +149,29 @@ pub fn run(
         };
         PipelineError::Sweep { location, source }
     })?;
-    lap("sweep", &mut timings);
+    let timings = vec![
+        ("stock".to_string(), t_stock),
+        ("sweep".to_string(), clock.elapsed().as_secs_f64()),
+    ];
+    Ok(Part {
+        stock,
+        volume0,
+        sweep,
+        timings,
+    })
+}
 
-    let scanned = scan(&stock, &scene.scanner, progress).map_err(|source| PipelineError::Scan {
-        path: spath.clone(),
-        source,
-    })?;
-    lap("scan", &mut timings);
-
+/// Segments and fits the scene's two faces in a cloud (workpiece frame).
+pub fn extract_faces(
+    scene: &Scene,
+    program: &Program,
+    points: &[Point3],
+) -> Result<[Face; 2], PipelineError> {
     let id_err = |source| PipelineError::Identify {
-        path: spath.clone(),
+        path: scene.path.display().to_string(),
         source,
     };
-    let points = &scanned.cloud.points;
-    let faces = [0, 1].map(|k| {
+    let face = |k: usize| {
         identify::extract_face(
             points,
             &scene.faces[k],
@@ -166,11 +181,44 @@ pub fn run(
             &scene.stock_box,
             &scene.face_options,
         )
-    });
-    let [f0, f1] = faces;
-    let faces = [f0.map_err(id_err)?, f1.map_err(id_err)?];
+        .map_err(id_err)
+    };
+    Ok([face(0)?, face(1)?])
+}
+
+/// Runs the whole pipeline on `scene` with its parsed `program`.
+pub fn run(
+    scene: &Scene,
+    program: &Program,
+    progress: &dyn Progress,
+) -> Result<Outcome, PipelineError> {
+    let spath = scene.path.display().to_string();
+    let mut timings = Vec::new();
+    let mut clock = Instant::now();
+    let mut lap = |name: &str, timings: &mut Vec<(String, Real)>| {
+        timings.push((name.to_string(), clock.elapsed().as_secs_f64()));
+        clock = Instant::now();
+    };
+
+    let part = machine_part(scene, program, progress)?;
+    let volume0 = part.volume0;
+    let (stock, sweep) = (part.stock, part.sweep);
+    timings.extend(part.timings);
+
+    let scanned = scan(&stock, &scene.scanner, progress).map_err(|source| PipelineError::Scan {
+        path: spath.clone(),
+        source,
+    })?;
+    lap("scan", &mut timings);
+
+    let points = &scanned.cloud.points;
+    let faces = extract_faces(scene, program, points)?;
     lap("fit", &mut timings);
 
+    let id_err = |source| PipelineError::Identify {
+        path: spath.clone(),
+        source,
+    };
     let cuts = [&faces[0].cut, &faces[1].cut];
     let ident = identify::identify_step(&faces, &scene.model, &scene.tool, &scene.stock_box)
         .map_err(id_err)?;
@@ -282,6 +330,7 @@ pub fn run(
             pitch_mm: scene.scanner.pitch_mm,
             noise_sigma_mm: scene.scanner.noise_sigma_mm,
             seed: scene.scanner.seed,
+            views: scanned.views.clone(),
         },
         timings_s: timings,
     };
@@ -290,4 +339,126 @@ pub fn run(
         cloud: scanned.cloud,
         heat_map_png: img,
     })
+}
+
+/// Scans the machined part again and again, each effect of the scanner model alone and
+/// all together, and reports how the identified offset moves: the answer to "how much of
+/// my result is the scanner?".
+pub fn scanner_study(
+    scene: &Scene,
+    program: &Program,
+    opts: &StudyOptions,
+    progress: &dyn Progress,
+) -> Result<Vec<StudyCase>, PipelineError> {
+    let spath = scene.path.display().to_string();
+    let part = machine_part(scene, program, progress)?;
+    let surface = Surface::new(&part.stock);
+    let base = &scene.scanner;
+    let sigma = base.noise_sigma_mm;
+    let variant = |noise: Real, corr: Real, t: Real, r: Real| {
+        let mut c = base.clone();
+        c.noise_sigma_mm = noise;
+        c.noise_correlation_mm = corr;
+        c.misregistration = Misregistration {
+            translation_sigma_mm: t,
+            rotation_sigma_rad: r,
+        };
+        c
+    };
+    let (corr, t, r) = (
+        opts.correlation_mm,
+        opts.translation_sigma_mm,
+        opts.rotation_sigma_rad,
+    );
+    let cases = [
+        (
+            "ideal: no noise, exact registration".to_string(),
+            variant(0.0, 0.0, 0.0, 0.0),
+            1,
+        ),
+        (
+            format!("white noise σ {sigma} mm"),
+            variant(sigma, 0.0, 0.0, 0.0),
+            opts.trials,
+        ),
+        (
+            format!("correlated noise σ {sigma} mm, ℓ {corr} mm"),
+            variant(sigma, corr, 0.0, 0.0),
+            opts.trials,
+        ),
+        (
+            format!("misregistration {t} mm, {r} rad per view"),
+            variant(0.0, 0.0, t, r),
+            opts.trials,
+        ),
+        (
+            format!("all: correlated noise and misregistration"),
+            variant(sigma, corr, t, r),
+            opts.trials,
+        ),
+        (
+            "as the scene configures the scanner".to_string(),
+            base.clone(),
+            opts.trials,
+        ),
+    ];
+    let scan_err = |source| PipelineError::Scan {
+        path: spath.clone(),
+        source,
+    };
+    let id_err = |source| PipelineError::Identify {
+        path: spath.clone(),
+        source,
+    };
+    let mut out = Vec::new();
+    for (case, cfg, trials) in cases {
+        let mut values = Vec::new();
+        let mut sigmas = Vec::new();
+        let mut steps = Vec::new();
+        let mut name = String::new();
+        for k in 0..trials.max(1) {
+            let mut c = cfg.clone();
+            c.seed = base.seed.wrapping_add(k as u64);
+            let scanned = surface
+                .scan(&c, &crate::progress::NoProgress)
+                .map_err(scan_err)?;
+            let faces = extract_faces(scene, program, &scanned.cloud.points)?;
+            let ident =
+                identify::identify_step(&faces, &scene.model, &scene.tool, &scene.stock_box)
+                    .map_err(id_err)?;
+            if let Some((n, v, s)) = &ident.offset {
+                name.clone_from(n);
+                values.push(*v);
+                sigmas.push(*s);
+            }
+            steps.push(ident.step_mm);
+        }
+        let truth = scene
+            .chain
+            .deviation_id(&name)
+            .map(|id| scene.chain.deviation(id))
+            .unwrap_or(Real::NAN);
+        let n = values.len().max(1) as Real;
+        let mean = values.iter().sum::<Real>() / n;
+        let spread = if values.len() > 1 {
+            (values.iter().map(|v| (v - mean).powi(2)).sum::<Real>() / (n - 1.0)).sqrt()
+        } else {
+            0.0
+        };
+        out.push(StudyCase {
+            case,
+            trials: values.len(),
+            parameter: name,
+            truth_mm: truth,
+            mean_mm: mean,
+            spread_mm: spread,
+            worst_error_mm: values
+                .iter()
+                .map(|v| (v - truth).abs())
+                .fold(0.0, Real::max),
+            mean_reported_sigma_mm: sigmas.iter().sum::<Real>() / n,
+            mean_step_mm: steps.iter().sum::<Real>() / steps.len().max(1) as Real,
+        });
+    }
+    Ok(out)
 }

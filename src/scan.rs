@@ -87,6 +87,20 @@ pub struct Turntable {
     pub angles_deg: Vec<Real>,
 }
 
+/// Settings of the scanner-effects study (see `pipeline::scanner_study`): how much each
+/// effect is turned up, and how many seeded trials per case.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StudyOptions {
+    /// Seeded trials per case (≥ 1).
+    pub trials: usize,
+    /// Noise correlation length for the correlated-noise cases (mm).
+    pub correlation_mm: Real,
+    /// Per-view translation σ for the misregistration cases (mm).
+    pub translation_sigma_mm: Real,
+    /// Per-view rotation σ for the misregistration cases (rad).
+    pub rotation_sigma_rad: Real,
+}
+
 /// Errors of the scanner.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum ScanError {
@@ -596,6 +610,26 @@ fn scan_view(
     out
 }
 
+/// The stock's surface prepared for scanning (its splats, indexed): build once, scan many
+/// times with different scanner settings.
+pub struct Surface {
+    index: SplatIndex,
+}
+
+impl Surface {
+    /// Indexes the stock's crossings.
+    pub fn new(stock: &TriDexel) -> Self {
+        Self {
+            index: SplatIndex::build(stock),
+        }
+    }
+
+    /// Scans it: every view, merged into frame W.
+    pub fn scan(&self, cfg: &ScannerConfig, progress: &dyn Progress) -> Result<Scan, ScanError> {
+        scan_surface(&self.index, cfg, progress)
+    }
+}
+
 /// Scans the stock: every view, merged into frame W.
 pub fn scan(
     stock: &TriDexel,
@@ -603,7 +637,15 @@ pub fn scan(
     progress: &dyn Progress,
 ) -> Result<Scan, ScanError> {
     cfg.validate()?;
-    let index = SplatIndex::build(stock);
+    Surface::new(stock).scan(cfg, progress)
+}
+
+fn scan_surface(
+    index: &SplatIndex,
+    cfg: &ScannerConfig,
+    progress: &dyn Progress,
+) -> Result<Scan, ScanError> {
+    cfg.validate()?;
     let tables: Vec<(Real, Isometry3)> = match &cfg.turntable {
         None => vec![(0.0, Isometry3::identity())],
         Some(t) => t
@@ -624,7 +666,7 @@ pub fn scan(
     let mut view_of_point = Vec::new();
     let mut views = Vec::new();
     for (v, (deg, table)) in tables.iter().enumerate() {
-        let out = scan_view(&index, cfg, v, *deg, table, (nx * ny) as u64, progress);
+        let out = scan_view(index, cfg, v, *deg, table, (nx * ny) as u64, progress);
         view_of_point.extend(std::iter::repeat_n(v as u16, out.points.len()));
         points.extend(out.points);
         lines.extend(out.lines);

@@ -11,7 +11,7 @@ use crate::identify::{FaceOptions, FaceSpec};
 use crate::kinematics::{Axis, AxisKind, Chain};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
 use crate::nc::{AxisLetter, AxisValues, NcError, Program, parse_program};
-use crate::scan::{Misregistration, ScanError, ScannerConfig, Turntable};
+use crate::scan::{Misregistration, ScanError, ScannerConfig, StudyOptions, Turntable};
 use crate::sweep::SweepOptions;
 use crate::tool::{Tool, ToolKind};
 use serde::Deserialize;
@@ -62,6 +62,21 @@ struct SceneFile {
     sweep: SweepFile,
     scanner: ScannerFile,
     identify: IdentifyFile,
+    #[serde(default)]
+    study: Option<StudyFile>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct StudyFile {
+    #[serde(default)]
+    trials: Option<Spanned<usize>>,
+    #[serde(default)]
+    correlation_mm: Option<Spanned<Real>>,
+    #[serde(default)]
+    translation_sigma_mm: Option<Spanned<Real>>,
+    #[serde(default)]
+    rotation_sigma_rad: Option<Spanned<Real>>,
 }
 
 #[derive(Deserialize)]
@@ -213,6 +228,8 @@ pub struct Scene {
     pub faces: [FaceSpec; 2],
     /// Face extraction options.
     pub face_options: FaceOptions,
+    /// The scanner-effects study (`twinmill scan --study`).
+    pub study: StudyOptions,
 }
 
 struct Ctx<'a> {
@@ -587,6 +604,49 @@ impl Scene {
                 "band_mm must be positive",
             ));
         }
+        let study = {
+            let f = file.study.as_ref();
+            let pick = |v: Option<&Spanned<Real>>,
+                        what: &str,
+                        default: Real|
+             -> Result<Real, SceneError> {
+                match v {
+                    Some(v) => {
+                        let x = ctx.finite(v, what)?;
+                        if x < 0.0 {
+                            return Err(ctx.err(v.span(), format!("{what} must not be negative")));
+                        }
+                        Ok(x)
+                    }
+                    None => Ok(default),
+                }
+            };
+            let trials = match f.and_then(|f| f.trials.as_ref()) {
+                Some(t) if *t.get_ref() == 0 || *t.get_ref() > 10_000 => {
+                    return Err(ctx.err(t.span(), "study trials must be 1 to 10000"));
+                }
+                Some(t) => *t.get_ref(),
+                None => 20,
+            };
+            StudyOptions {
+                trials,
+                correlation_mm: pick(
+                    f.and_then(|f| f.correlation_mm.as_ref()),
+                    "correlation_mm",
+                    0.5,
+                )?,
+                translation_sigma_mm: pick(
+                    f.and_then(|f| f.translation_sigma_mm.as_ref()),
+                    "translation_sigma_mm",
+                    0.02,
+                )?,
+                rotation_sigma_rad: pick(
+                    f.and_then(|f| f.rotation_sigma_rad.as_ref()),
+                    "rotation_sigma_rad",
+                    5e-5,
+                )?,
+            }
+        };
         let program_path = path
             .parent()
             .unwrap_or(Path::new("."))
@@ -610,6 +670,7 @@ impl Scene {
             },
             scanner,
             faces: [spec(f0), spec(f1)],
+            study,
             face_options: FaceOptions {
                 margin_mm: margin,
                 band_mm: band,
