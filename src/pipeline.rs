@@ -392,7 +392,7 @@ pub fn scanner_study(
             opts.trials,
         ),
         (
-            format!("all: correlated noise and misregistration"),
+            "all: correlated noise and misregistration".to_string(),
             variant(sigma, corr, t, r),
             opts.trials,
         ),
