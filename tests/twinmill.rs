@@ -147,6 +147,72 @@ fn gamma_sum_is_identified_from_the_tilt() {
     assert!((r.tilt_rad - 4e-4).abs() < 1e-6, "tilt {}", r.tilt_rad);
 }
 
+fn realistic_scene() -> Scene {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/mdx50-step-realistic.toml");
+    Scene::load(&path).expect("loads")
+}
+
+#[test]
+fn realistic_scanner_still_gives_dy_ay_within_2_um() {
+    // Correlated noise (ℓ 0.3 mm), three turntable views with registration errors, grazing
+    // drop-out, working range.
+    let s = realistic_scene();
+    assert_eq!(
+        s.scanner.turntable.as_ref().map(|t| t.angles_deg.len()),
+        Some(3)
+    );
+    let r = run_scene(&s).report;
+    assert_eq!(r.scan.views.len(), 3);
+    let (dy, sigma) = (r.identified["dy_AY"], r.uncertainty["dy_AY"]);
+    assert!((dy + 0.5).abs() < 2e-3, "dy_AY {dy}");
+    assert!((dy + 0.5).abs() < 3.0 * sigma, "dy_AY {dy} ± {sigma}");
+}
+
+#[test]
+fn scanner_study_separates_the_effects_and_reports_honest_uncertainties() {
+    let mut s = scene();
+    s.study.trials = 12;
+    let program = s.load_program().expect("parses");
+    let cases =
+        twinmill::pipeline::scanner_study(&s, &program, &s.study, &NoProgress).expect("runs");
+    assert_eq!(cases.len(), 6);
+    let [ideal, white, correlated, misregistered, all, _configured] = &cases[..] else {
+        unreachable!()
+    };
+    assert_eq!(ideal.parameter, "dy_AY");
+    assert_eq!(ideal.truth_mm, -0.5);
+    assert!(
+        ideal.worst_error_mm < 1e-6,
+        "ideal {}",
+        ideal.worst_error_mm
+    );
+    // One view: a rigid registration error moves both faces together; the step is a
+    // difference and does not see it.
+    assert!(
+        misregistered.worst_error_mm < 1e-5,
+        "misregistered {}",
+        misregistered.worst_error_mm
+    );
+    // Correlated noise leaves fewer independent samples: a larger spread...
+    assert!(correlated.spread_mm > 3.0 * white.spread_mm);
+    // ...which the reported uncertainty follows (12 trials: the spread itself is known to ±20 %).
+    for c in [white, correlated, all] {
+        let ratio = c.mean_reported_sigma_mm / c.spread_mm;
+        assert!(
+            (0.6..1.6).contains(&ratio),
+            "{}: reported {} vs spread {}",
+            c.case,
+            c.mean_reported_sigma_mm,
+            c.spread_mm
+        );
+        assert!(
+            (c.mean_mm - c.truth_mm).abs() < 3.0 * c.spread_mm / (c.trials as Real).sqrt() + 1e-7,
+            "{} biased",
+            c.case
+        );
+    }
+}
+
 #[test]
 fn another_chain_needs_only_a_scene_file() {
     // A VMC with the rotary table on the X table: chain A, X, Y, Z; the A axis's offset is
