@@ -674,10 +674,7 @@ fn scan_surface(
     }
     progress.finish();
     Ok(Scan {
-        cloud: PointCloud {
-            frame: Frame::Workpiece,
-            points,
-        },
+        cloud: PointCloud::new(Frame::Workpiece, points),
         lines,
         view_of_point,
         rays: nx * ny * tables.len(),
