@@ -3,7 +3,8 @@
 //! The pipeline, in module order: [`nc`] (program → moves) → [`kinematics`] (axis values →
 //! tool poses through the deviated chain) → [`tool`] → [`stock`] and [`sweep`] (exact
 //! material removal on a tri-dexel) → [`cloud`] → [`scan`] (virtual structured-light
-//! scanner) → [`fit`] (planes) → [`identify`] (deviations from the fitted faces) →
+//! scanner) → [`fit`] (planes, spheres, circles, cylinders) → [`segment`] (normals, planar
+//! regions, RANSAC) → [`identify`] (deviations from the fitted faces) →
 //! [`render`] and [`report`]; [`scene`] loads input files, [`pipeline`] runs it all and
 //! [`output`] writes the results. See README.md, *Architecture*.
 
@@ -20,6 +21,7 @@ pub mod render;
 pub mod report;
 pub mod scan;
 pub mod scene;
+pub mod segment;
 pub mod stock;
 pub mod sweep;
 pub mod tool;

@@ -719,6 +719,7 @@ fn module_dependencies_point_down_the_pipeline() {
         "cloud",
         "scan",
         "fit",
+        "segment",
         "identify",
         "render",
         "report",
