@@ -7,12 +7,17 @@ use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
+use twinmill::cloud::read_cloud_file;
+use twinmill::math::{Aabb, Point3};
 use twinmill::nc::Program;
 use twinmill::output::{json_bytes, ply_bytes, write_files, write_outcome};
-use twinmill::pipeline::{machine_part, run, scanner_study};
+use twinmill::pipeline::{
+    FitRequest, Selection, Shape, fit_cloud, machine_part, run, scanner_study,
+};
 use twinmill::progress::Progress;
 use twinmill::report::{ScanFileReport, ScanReport};
 use twinmill::scene::{Scene, SceneError};
+use twinmill::segment::{PlaneSegmentOptions, RansacOptions};
 
 /// twinmill: a digital twin of machine-tool accuracy.
 #[derive(Parser)]
@@ -64,6 +69,62 @@ enum Command {
         /// List every problem found in the NC program, not only the first.
         #[arg(short, long)]
         verbose: bool,
+    },
+    /// Fit shapes to any point cloud (PLY, XYZ/CSV, PTS): every planar face with the
+    /// distance and angle between each pair (the default), or one plane, sphere, cylinder
+    /// or circle, in all points, a box, or the planar region around a seed point.
+    Fit {
+        /// The cloud file.
+        cloud: PathBuf,
+        /// Every planar face (segmentation) with pairwise distances and angles.
+        #[arg(long, group = "shape")]
+        planes: bool,
+        /// One plane through the selected points.
+        #[arg(long, group = "shape")]
+        plane: bool,
+        /// One sphere (found by RANSAC when nothing is selected).
+        #[arg(long, group = "shape")]
+        sphere: bool,
+        /// One cylinder (found by RANSAC on estimated normals).
+        #[arg(long, group = "shape")]
+        cylinder: bool,
+        /// One circle in 3-D through the selected points.
+        #[arg(long, group = "shape")]
+        circle: bool,
+        /// Use only points in this box: xmin,ymin,zmin,xmax,ymax,zmax (mm).
+        #[arg(
+            long = "box",
+            value_name = "X0,Y0,Z0,X1,Y1,Z1",
+            value_delimiter = ',',
+            num_args = 1,
+            conflicts_with = "seed",
+            allow_hyphen_values = true
+        )]
+        bbox: Option<Vec<f64>>,
+        /// Use the planar region grown around the point nearest to x,y,z (mm).
+        #[arg(
+            long,
+            value_name = "X,Y,Z",
+            value_delimiter = ',',
+            num_args = 1,
+            allow_hyphen_values = true
+        )]
+        seed: Option<Vec<f64>>,
+        /// Reject outliers (iterative 3σ trimming) in the final fit.
+        #[arg(long)]
+        robust: bool,
+        /// Segmentation cell edge (mm).
+        #[arg(long, default_value_t = 1.0)]
+        cell: f64,
+        /// Largest point-to-surface distance of a member or RANSAC inlier (mm).
+        #[arg(long, default_value_t = 0.1)]
+        distance: f64,
+        /// Print the result as JSON.
+        #[arg(long)]
+        json: bool,
+        /// Worker threads (default: all cores). Results do not depend on it.
+        #[arg(long)]
+        threads: Option<usize>,
     },
 }
 
@@ -260,6 +321,95 @@ fn main() -> ExitCode {
                 json.then(|| serde_json::to_string_pretty(&report)),
             )
         }
+        Command::Fit {
+            cloud,
+            planes: _,
+            plane,
+            sphere,
+            cylinder,
+            circle,
+            bbox,
+            seed,
+            robust,
+            cell,
+            distance,
+            json,
+            threads,
+        } => {
+            if let Some(n) = threads
+                && let Err(e) = rayon::ThreadPoolBuilder::new()
+                    .num_threads(n.max(1))
+                    .build_global()
+            {
+                return fail(e);
+            }
+            let selection = match (bbox, seed) {
+                (Some(b), _) if b.len() != 6 => {
+                    return fail("--box needs six numbers: x0,y0,z0,x1,y1,z1");
+                }
+                (Some(b), _) => {
+                    match (finite_point(&b[..3], "box"), finite_point(&b[3..], "box")) {
+                        (Ok(min), Ok(max)) if (0..3).all(|k| min[k] < max[k]) => {
+                            Selection::Box(Aabb { min, max })
+                        }
+                        (Err(e), _) | (_, Err(e)) => return fail(e),
+                        _ => return fail("--box: each min must be below its max"),
+                    }
+                }
+                (None, Some(p)) => match finite_point(&p, "seed") {
+                    Ok(p) => Selection::Seed(p),
+                    Err(e) => return fail(e),
+                },
+                (None, None) => Selection::All,
+            };
+            let shape = if plane {
+                Shape::Plane
+            } else if sphere {
+                Shape::Sphere
+            } else if cylinder {
+                Shape::Cylinder
+            } else if circle {
+                Shape::Circle
+            } else {
+                Shape::Planes
+            };
+            let points = match read_cloud_file(&cloud) {
+                Ok(c) => c,
+                Err(e) => return fail(e),
+            };
+            let request = FitRequest {
+                shape,
+                selection,
+                robust,
+                segment: PlaneSegmentOptions {
+                    cell_mm: cell,
+                    max_distance_mm: distance,
+                    ..PlaneSegmentOptions::default()
+                },
+                ransac: RansacOptions {
+                    distance_mm: distance,
+                    iterations: 2000,
+                    seed: 1,
+                    min_inliers: 10,
+                },
+                normal_neighbours: 12,
+            };
+            let report = match fit_cloud(&points, &request, &cloud.display().to_string()) {
+                Ok(r) => r,
+                Err(e) => return fail(e),
+            };
+            print_out(
+                || report.summary(),
+                json.then(|| serde_json::to_string_pretty(&report)),
+            )
+        }
+    }
+}
+
+fn finite_point(v: &[f64], what: &str) -> Result<Point3, String> {
+    match v {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(Point3::new(*x, *y, *z)),
+        _ => Err(format!("--{what} needs finite numbers")),
     }
 }
 

@@ -332,8 +332,9 @@ pub struct PlanePair {
     /// Indices into the plane list.
     pub planes: [usize; 2],
     /// Signed distance from the first to the second along the first's normal, through the
-    /// midpoint of their centroids (mm).
-    pub distance_mm: f64,
+    /// midpoint of their centroids (mm); only for planes within 10° of parallel, where a
+    /// distance means something.
+    pub distance_mm: Option<f64>,
     /// Angle between the normals (rad).
     pub angle_rad: f64,
 }
@@ -470,14 +471,19 @@ impl FitFileReport {
             );
         }
         for p in &self.pairs {
-            let _ = writeln!(
-                s,
-                "  planes {}–{}: distance {:+.5} mm, angle {:.2} µrad",
-                p.planes[0],
-                p.planes[1],
-                p.distance_mm,
-                p.angle_rad * 1e6
-            );
+            let (a, b) = (p.planes[0], p.planes[1]);
+            let _ = match p.distance_mm {
+                Some(d) => writeln!(
+                    s,
+                    "  planes {a}–{b}: distance {d:+.5} mm, angle {:.2} µrad",
+                    p.angle_rad * 1e6
+                ),
+                None => writeln!(
+                    s,
+                    "  planes {a}–{b}: angle {:.4}°",
+                    p.angle_rad.to_degrees()
+                ),
+            };
         }
         if let Some(c) = &self.sphere {
             let _ = writeln!(

@@ -535,6 +535,54 @@ fn cli_run_writes_report_cloud_and_picture() {
     );
 }
 
+#[test]
+fn cli_fit_segments_any_cloud_and_measures_the_step() {
+    let sb = Sandbox::new("fit");
+    sb.write("s.toml", builtin("mdx50-step.toml").as_bytes());
+    sb.write("mdx50-step.ngc", builtin("mdx50-step.ngc").as_bytes());
+    let (code, _, stderr) = sb.run(&["run", "s.toml"]);
+    assert_eq!(code, 0, "{stderr}");
+    // Every planar face, and the distance between the two halves of the stepped face.
+    let (code, stdout, stderr) = sb.run(&["fit", "out/mdx50-step/cloud.ply", "--json"]);
+    assert_eq!(code, 0, "{stderr}");
+    let r: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    let planes = r["planes"].as_array().expect("planes");
+    assert!(planes.len() >= 2);
+    let step = r["pairs"][0]["distance_mm"]
+        .as_f64()
+        .expect("two parallel faces");
+    assert!((step.abs() - 1.0).abs() < 3e-3, "step {step}");
+    // One plane in a box.
+    let (code, stdout, _) = sb.run(&[
+        "fit",
+        "out/mdx50-step/cloud.ply",
+        "--plane",
+        "--box",
+        "-18,-30,1,18,-15,9",
+        "--json",
+    ]);
+    assert_eq!(code, 0);
+    let r: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    assert!((r["planes"][0]["offset_mm"].as_f64().expect("offset").abs() - 22.5).abs() < 3e-3);
+    // Bad input: a missing file, a truncated file, a bad box.
+    for (args, expect) in [
+        (vec!["fit", "missing.ply"], "missing.ply"),
+        (vec!["fit", "short.ply"], "short.ply"),
+        (
+            vec!["fit", "out/mdx50-step/cloud.ply", "--box", "1,2,3"],
+            "six numbers",
+        ),
+    ] {
+        sb.write("short.ply", b"ply\nformat binary_little_endian 1.0\nelement vertex 10\nproperty double x\nproperty double y\nproperty double z\nend_header\n\x01\x02");
+        let (code, _, stderr) = sb.run(&args);
+        assert_ne!(code, 0);
+        assert!(
+            stderr.contains(expect) && !stderr.contains("panicked"),
+            "{stderr}"
+        );
+    }
+}
+
 /// Runs a broken variant of the built-in scene and checks the failure is clean.
 fn check_bad(name: &str, scene: &str, program: &[u8], expect_in_message: &[&str]) {
     let sb = Sandbox::new(name);
