@@ -583,6 +583,27 @@ fn cli_fit_segments_any_cloud_and_measures_the_step() {
     }
 }
 
+#[test]
+fn clouds_written_by_cloudcompare_read_exactly() {
+    let expect = [
+        [0.0, 0.0, 0.0],
+        [1.5, -2.25, 3.125],
+        [-10.5, 20.25, 0.0625],
+        [100.125, -0.5, 7.75],
+        [3.0, 4.0, 5.0],
+    ];
+    for name in ["cloudcompare-small.ply", "cloudcompare-small-ascii.ply"] {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/data")
+            .join(name);
+        let cloud = twinmill::cloud::read_cloud_file(&path).expect("CloudCompare's PLY reads");
+        assert_eq!(cloud.points.len(), 5, "{name}");
+        for (p, e) in cloud.points.iter().zip(expect) {
+            assert_eq!([p.x, p.y, p.z], e, "{name}");
+        }
+    }
+}
+
 /// Runs a broken variant of the built-in scene and checks the failure is clean.
 fn check_bad(name: &str, scene: &str, program: &[u8], expect_in_message: &[&str]) {
     let sb = Sandbox::new(name);
