@@ -27,6 +27,7 @@ use crate::fit::{FitError, Plane, PlaneFit, RobustRule, fit_plane_robust};
 use crate::kinematics::{AxisKind, Chain, Component, DeviationId};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
 use crate::nc::{Move, MoveKind};
+use crate::segment::{PlaneSegmentOptions, select_box, select_region_from_seed};
 use crate::tool::{Tool, ToolKind};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{Matrix2, Owned, U2, Vector2};
@@ -90,6 +91,20 @@ pub struct FaceSpec {
     pub name: String,
     /// 1-based NC line of the cut.
     pub line: usize,
+    /// Where the face's points are.
+    pub region: FaceRegion,
+}
+
+/// How a face's points are chosen from a cloud.
+#[derive(Clone, Debug, PartialEq)]
+pub enum FaceRegion {
+    /// From the cut's flank on the model chain, clipped to the stock, shrunk by the margin,
+    /// within the band around the expected plane.
+    Auto,
+    /// The points inside a box (W).
+    Box(Aabb),
+    /// The planar region grown from the point nearest to a seed point (W).
+    Seed(Point3),
 }
 
 /// The flank plane of a straight cut, and the frame of its face.
@@ -331,20 +346,31 @@ pub fn extract_face(
     if u0 >= u1 || v0 >= v1 {
         return Err(empty());
     }
-    let indices: Vec<usize> = points
-        .iter()
-        .enumerate()
-        .filter(|(_, p)| {
-            let w = *p - fl.tip;
-            let (u, v) = (fl.u.dot(&w), fl.v.dot(&w));
-            u >= u0
-                && u <= u1
-                && v >= v0
-                && v <= v1
-                && fl.plane.signed_distance(p).abs() <= opts.band_mm
-        })
-        .map(|(i, _)| i)
-        .collect();
+    let indices: Vec<usize> = match &spec.region {
+        FaceRegion::Auto => points
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| {
+                let w = *p - fl.tip;
+                let (u, v) = (fl.u.dot(&w), fl.v.dot(&w));
+                u >= u0
+                    && u <= u1
+                    && v >= v0
+                    && v <= v1
+                    && fl.plane.signed_distance(p).abs() <= opts.band_mm
+            })
+            .map(|(i, _)| i)
+            .collect(),
+        FaceRegion::Box(b) => select_box(points, &b.min, &b.max)
+            .into_iter()
+            .map(|i| i as usize)
+            .collect(),
+        FaceRegion::Seed(seed) => {
+            select_region_from_seed(points, seed, &PlaneSegmentOptions::default())
+                .map(|r| r.indices.into_iter().map(|i| i as usize).collect())
+                .unwrap_or_default()
+        }
+    };
     let sel: Vec<Point3> = indices.iter().map(|&i| points[i]).collect();
     let mut fit = fit_plane_robust(&sel, &opts.robust).map_err(|source| IdentifyError::Fit {
         face: spec.name.clone(),

@@ -7,7 +7,7 @@
 //! **Invariant:** this module and [`crate::output`] are the only ones that touch files.
 
 use crate::fit::RobustRule;
-use crate::identify::{FaceOptions, FaceSpec};
+use crate::identify::{FaceOptions, FaceRegion, FaceSpec};
 use crate::kinematics::{Axis, AxisKind, Chain};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
 use crate::nc::{AxisLetter, AxisValues, NcError, Program, parse_program};
@@ -189,6 +189,17 @@ struct IdentifyFile {
 struct FaceFile {
     name: String,
     line: Spanned<usize>,
+    #[serde(default, rename = "box")]
+    bbox: Option<BoxFile>,
+    #[serde(default)]
+    seed: Option<Spanned<[Real; 3]>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct BoxFile {
+    min: Spanned<[Real; 3]>,
+    max: Spanned<[Real; 3]>,
 }
 
 /// A loaded, validated scene.
@@ -586,9 +597,31 @@ impl Scene {
                 ),
             ));
         };
-        let spec = |f: &FaceFile| FaceSpec {
-            name: f.name.clone(),
-            line: *f.line.get_ref(),
+        let spec = |f: &FaceFile| -> Result<FaceSpec, SceneError> {
+            let region = match (&f.bbox, &f.seed) {
+                (Some(_), Some(s)) => {
+                    return Err(ctx.err(s.span(), "a face takes a box or a seed, not both"));
+                }
+                (Some(b), None) => {
+                    let (mn, mx) = (ctx.vec3(&b.min, "box.min")?, ctx.vec3(&b.max, "box.max")?);
+                    if (0..3).any(|k| mx[k] <= mn[k]) {
+                        return Err(
+                            ctx.err(b.max.span(), "box.max must exceed box.min on every axis")
+                        );
+                    }
+                    FaceRegion::Box(Aabb {
+                        min: mn.into(),
+                        max: mx.into(),
+                    })
+                }
+                (None, Some(s)) => FaceRegion::Seed(ctx.vec3(s, "seed")?.into()),
+                (None, None) => FaceRegion::Auto,
+            };
+            Ok(FaceSpec {
+                name: f.name.clone(),
+                line: *f.line.get_ref(),
+                region,
+            })
         };
         let margin = opt(&file.identify.margin_mm, "margin_mm", 1.0)?;
         let band = opt(&file.identify.band_mm, "band_mm", 2.0)?;
@@ -669,7 +702,7 @@ impl Scene {
                 rotary_step_bound_mm: bound,
             },
             scanner,
-            faces: [spec(f0), spec(f1)],
+            faces: [spec(f0)?, spec(f1)?],
             study,
             face_options: FaceOptions {
                 margin_mm: margin,

@@ -133,6 +133,28 @@ fn zero_deviations_leave_no_step() {
 }
 
 #[test]
+fn faces_selected_in_the_scene_by_box_or_seed_identify_the_same() {
+    let text = builtin("mdx50-step.toml")
+        .replace(
+            "{ name = \"A0\", line = 9 },",
+            "{ name = \"A0\", line = 9, box = { min = [-18.0, -30.0, 1.0], max = [18.0, -15.0, 9.0] } },",
+        )
+        .replace("{ name = \"A180\", line = 14 },", "{ name = \"A180\", line = 14, seed = [0.0, -21.5, -5.0] },");
+    assert!(text.contains("box =") && text.contains("seed ="));
+    let mut s = Scene::parse(&text, Path::new(SCENE)).expect("parses");
+    s.scanner.noise_sigma_mm = 0.0;
+    let r = run_scene(&s).report;
+    assert!((r.step_mm - 1.0).abs() < 0.5e-3, "step {}", r.step_mm);
+    assert!((r.identified["dy_AY"] + 0.5).abs() < 0.5e-3);
+    // Both ways found a sizeable face.
+    assert!(
+        r.faces.iter().all(|f| f.points > 5000),
+        "{:?}",
+        r.faces.iter().map(|f| f.points).collect::<Vec<_>>()
+    );
+}
+
+#[test]
 fn gamma_sum_is_identified_from_the_tilt() {
     // gamma_AY + gamma_YX tilts the two faces oppositely (eq. 6, 7).
     let mut s = scene();
