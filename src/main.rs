@@ -27,48 +27,43 @@ struct Cli {
     command: Command,
 }
 
+/// What `run` and `scan` share.
+#[derive(clap::Args)]
+struct SceneArgs {
+    /// The scene file (TOML).
+    scene: PathBuf,
+    /// Folder for outputs: run writes <out>/<scene name>/, scan <out>/<scene name>-scan/.
+    #[arg(long, default_value = "out")]
+    out: PathBuf,
+    /// Print the report as JSON on stdout instead of the summary.
+    #[arg(long)]
+    json: bool,
+    /// Worker threads (default: all cores). Results do not depend on it.
+    #[arg(long)]
+    threads: Option<usize>,
+    /// List every problem found in the NC program, not only the first.
+    #[arg(short, long)]
+    verbose: bool,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Simulate a scene's program on its deviated machine, scan the part, fit the faces and
     /// identify the deviations; write report.json, cloud.ply and faces.png.
     Run {
-        /// The scene file (TOML).
-        scene: PathBuf,
-        /// Folder for outputs; they go to <out>/<scene name>/.
-        #[arg(long, default_value = "out")]
-        out: PathBuf,
-        /// Print the report as JSON on stdout instead of the summary.
-        #[arg(long)]
-        json: bool,
-        /// Worker threads (default: all cores). Results do not depend on it.
-        #[arg(long)]
-        threads: Option<usize>,
-        /// List every problem found in the NC program, not only the first.
-        #[arg(short, long)]
-        verbose: bool,
+        #[command(flatten)]
+        args: SceneArgs,
     },
     /// Simulate the scene's program and scan the part with the scene's scanner (all views);
     /// write cloud.ply and scan.json. With --study, also scan it again and again with each
     /// scanner effect alone and together, and report how the identified offset moves.
     Scan {
-        /// The scene file (TOML).
-        scene: PathBuf,
-        /// Folder for outputs; they go to <out>/<scene name>-scan/.
-        #[arg(long, default_value = "out")]
-        out: PathBuf,
-        /// Print scan.json on stdout instead of the summary.
-        #[arg(long)]
-        json: bool,
-        /// Worker threads (default: all cores). Results do not depend on it.
-        #[arg(long)]
-        threads: Option<usize>,
+        #[command(flatten)]
+        args: SceneArgs,
         /// Run the scanner-effects study with N seeded trials per case (default: the
         /// scene's [study] trials, 20 if not given).
         #[arg(long, num_args = 0..=1, default_missing_value = "0", value_name = "N")]
         study: Option<usize>,
-        /// List every problem found in the NC program, not only the first.
-        #[arg(short, long)]
-        verbose: bool,
     },
     /// Fit shapes to any point cloud (PLY, XYZ/CSV, PTS): every planar face with the
     /// distance and angle between each pair (the default), or one plane, sphere, cylinder
@@ -218,11 +213,14 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Command::Run {
-            scene,
-            out,
-            json,
-            threads,
-            verbose,
+            args:
+                SceneArgs {
+                    scene,
+                    out,
+                    json,
+                    threads,
+                    verbose,
+                },
         } => {
             let (scene, program) = match prepare(&scene, threads, verbose) {
                 Ok(x) => x,
@@ -249,12 +247,15 @@ fn main() -> ExitCode {
             )
         }
         Command::Scan {
-            scene,
-            out,
-            json,
-            threads,
+            args:
+                SceneArgs {
+                    scene,
+                    out,
+                    json,
+                    threads,
+                    verbose,
+                },
             study,
-            verbose,
         } => {
             let (scene, program) = match prepare(&scene, threads, verbose) {
                 Ok(x) => x,
