@@ -16,6 +16,7 @@ use twinmill::pipeline::{
 };
 use twinmill::progress::Progress;
 use twinmill::report::{ScanFileReport, ScanReport};
+use twinmill::scan::Surface;
 use twinmill::scene::{Scene, SceneError};
 use twinmill::segment::{PlaneSegmentOptions, RansacOptions};
 
@@ -266,7 +267,9 @@ fn main() -> ExitCode {
                 Ok(p) => p,
                 Err(e) => return fail(e),
             };
-            let scanned = match twinmill::scan::scan(&part.stock, &scene.scanner, &bars) {
+            // One surface index for the scan and every scan of the study.
+            let surface = Surface::new(&part.stock);
+            let scanned = match surface.scan(&scene.scanner, &bars) {
                 Ok(s) => s,
                 Err(e) => return fail(format!("{}: [scanner]: {e}", scene.path.display())),
             };
@@ -277,7 +280,7 @@ fn main() -> ExitCode {
                     if n > 0 {
                         opts.trials = n;
                     }
-                    match scanner_study(&scene, &program, &opts, &bars) {
+                    match scanner_study(&scene, &program, &surface, &opts) {
                         Ok(c) => c,
                         Err(e) => return fail(e),
                     }
@@ -285,15 +288,7 @@ fn main() -> ExitCode {
             };
             let report = ScanFileReport {
                 scene: scene.name.clone(),
-                scan: ScanReport {
-                    rays: scanned.rays,
-                    points: scanned.cloud.points.len(),
-                    shadowed: scanned.shadowed(),
-                    pitch_mm: scene.scanner.pitch_mm,
-                    noise_sigma_mm: scene.scanner.noise_sigma_mm,
-                    seed: scene.scanner.seed,
-                    views: scanned.views.clone(),
-                },
+                scan: ScanReport::of(&scanned, &scene.scanner),
                 study: cases,
             };
             let dir = out.join(format!("{}-scan", scene.name));

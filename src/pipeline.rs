@@ -343,15 +343,7 @@ pub fn run(
             memory_mib: stock.memory_bytes() as Real / 1048576.0,
         },
         sweep,
-        scan: ScanReport {
-            rays: scanned.rays,
-            points: points.len(),
-            shadowed: scanned.shadowed(),
-            pitch_mm: scene.scanner.pitch_mm,
-            noise_sigma_mm: scene.scanner.noise_sigma_mm,
-            seed: scene.scanner.seed,
-            views: scanned.views.clone(),
-        },
+        scan: ScanReport::of(&scanned, &scene.scanner),
         timings_s: timings,
     };
     Ok(Outcome {
@@ -364,15 +356,16 @@ pub fn run(
 /// Scans the machined part again and again, each effect of the scanner model alone and
 /// all together, and reports how the identified offset moves: the answer to "how much of
 /// my result is the scanner?".
+///
+/// `surface` is the machined part of `scene` and `program`, prepared for scanning once by
+/// the caller (see [`machine_part`] and [`Surface::new`]).
 pub fn scanner_study(
     scene: &Scene,
     program: &Program,
+    surface: &Surface,
     opts: &StudyOptions,
-    progress: &dyn Progress,
 ) -> Result<Vec<StudyCase>, PipelineError> {
     let spath = scene.path.display().to_string();
-    let part = machine_part(scene, program, progress)?;
-    let surface = Surface::new(&part.stock);
     let base = &scene.scanner;
     let sigma = base.noise_sigma_mm;
     let variant = |noise: Real, corr: Real, t: Real, r: Real| {

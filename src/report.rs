@@ -72,6 +72,21 @@ pub struct ScanReport {
     pub views: Vec<ViewReport>,
 }
 
+impl ScanReport {
+    /// The figures of `scan`, made with `cfg`.
+    pub fn of(scan: &crate::scan::Scan, cfg: &crate::scan::ScannerConfig) -> Self {
+        Self {
+            rays: scan.rays,
+            points: scan.cloud.points.len(),
+            shadowed: scan.shadowed(),
+            pitch_mm: cfg.pitch_mm,
+            noise_sigma_mm: cfg.noise_sigma_mm,
+            seed: cfg.seed,
+            views: scan.views.clone(),
+        }
+    }
+}
+
 /// What `twinmill scan` writes to scan.json.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ScanFileReport {

@@ -195,8 +195,11 @@ fn scanner_study_separates_the_effects_and_reports_honest_uncertainties() {
     let mut s = scene();
     s.study.trials = 12;
     let program = s.load_program().expect("parses");
-    let cases =
-        twinmill::pipeline::scanner_study(&s, &program, &s.study, &NoProgress).expect("runs");
+    let cases = {
+        let part = twinmill::pipeline::machine_part(&s, &program, &NoProgress).expect("machines");
+        let surface = twinmill::scan::Surface::new(&part.stock);
+        twinmill::pipeline::scanner_study(&s, &program, &surface, &s.study).expect("runs")
+    };
     assert_eq!(cases.len(), 6);
     let [ideal, white, correlated, misregistered, all, _configured] = &cases[..] else {
         unreachable!()
