@@ -2,7 +2,8 @@
 //!
 //! The pipeline, in module order: [`nc`] (program → moves) → [`kinematics`] (axis values →
 //! tool poses through the deviated chain) → [`tool`] → [`stock`] and [`sweep`] (exact
-//! material removal on a tri-dexel) → [`cloud`] → [`scan`] (virtual structured-light
+//! material removal on a tri-dexel) → [`mesh`] (surface of the cut stock) and [`zmap`]
+//! (3-axis height-field fast path) → [`cloud`] → [`scan`] (virtual structured-light
 //! scanner) → [`fit`] (planes, spheres, circles, cylinders) → [`segment`] (normals, planar
 //! regions, RANSAC) → [`identify`] (deviations from the fitted faces) →
 //! [`render`] and [`report`]; [`scene`] loads input files, [`pipeline`] runs it all and
@@ -13,6 +14,7 @@ pub mod fit;
 pub mod identify;
 pub mod kinematics;
 pub mod math;
+pub mod mesh;
 pub mod nc;
 pub mod output;
 pub mod pipeline;
@@ -25,3 +27,4 @@ pub mod segment;
 pub mod stock;
 pub mod sweep;
 pub mod tool;
+pub mod zmap;

@@ -810,6 +810,8 @@ fn module_dependencies_point_down_the_pipeline() {
         "tool",
         "stock",
         "sweep",
+        "mesh",
+        "zmap",
         "cloud",
         "scan",
         "fit",

@@ -1,0 +1,74 @@
+//! Meshing the P1 pocket stock (bench/README.md: 100 × 100 × 20 box, Ø6 flat pocket
+//! 1.5 mm deep) at 0.1 mm pitch: throughput in triangles/s.
+//!
+//! `cargo bench --bench mesh`.
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use std::hint::black_box;
+use twinmill::kinematics::{Axis, AxisKind, Chain};
+use twinmill::math::{Point3, UnitVector3, Vector3};
+use twinmill::mesh::mesh_stock;
+use twinmill::nc::AxisLetter;
+use twinmill::progress::NoProgress;
+use twinmill::stock::TriDexel;
+use twinmill::sweep::{SweepOptions, sweep_program};
+use twinmill::tool::{Tool, ToolKind};
+use twinmill::{math, nc};
+
+#[path = "support/p1.rs"]
+mod p1;
+
+fn p1_stock(pitch: f64) -> TriDexel {
+    let ax = |letter, d: Vector3| Axis {
+        letter,
+        kind: AxisKind::Linear,
+        direction: UnitVector3::new_normalize(d),
+        origin: Point3::origin(),
+    };
+    let chain = Chain::new(
+        vec![
+            ax(AxisLetter::Y, Vector3::y()),
+            ax(AxisLetter::X, Vector3::x()),
+            ax(AxisLetter::Z, Vector3::z()),
+        ],
+        "S",
+    )
+    .expect("valid chain");
+    let tool = Tool::try_new(ToolKind::Flat, p1::TOOL_DIAMETER, 30.0).expect("valid");
+    let mut s = TriDexel::new_box(p1::stock_box(), pitch, 8e9).expect("fits");
+    let opts = SweepOptions {
+        rotary_step_bound_mm: math::tol::ROTARY_STEP_BOUND,
+    };
+    sweep_program(&mut s, &chain, &tool, &p1::moves(), &opts, &NoProgress).expect("sweeps");
+    s
+}
+
+#[expect(
+    clippy::print_stdout,
+    reason = "a bench reports the mesh size it measured"
+)]
+fn benches(c: &mut Criterion) {
+    let stock = p1_stock(0.1);
+    let (mesh, report) = mesh_stock(&stock).expect("meshes");
+    println!(
+        "P1 flat at 0.1 mm: {} triangles, {} vertices, {report:?}; mesh volume {:.3} mm³, tri-dexel {:.3} mm³",
+        mesh.triangles.len(),
+        mesh.vertices.len(),
+        mesh.signed_volume(),
+        stock.volume()
+    );
+    let mut g = c.benchmark_group("mesh");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements(mesh.triangles.len() as u64));
+    g.bench_function("P1 flat 0.1 mm (triangles)", |b| {
+        b.iter(|| mesh_stock(black_box(&stock)))
+    });
+    g.finish();
+}
+
+// criterion_group! generates an undocumented public function: keep it in a private module.
+mod group {
+    use super::*;
+    criterion_group!(mesh, benches);
+}
+criterion_main!(group::mesh);
