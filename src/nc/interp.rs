@@ -199,6 +199,9 @@ pub struct Interpreter {
     tool: i32,
     selected: i32,
     mpos: [Real; 6],
+    /// Where the last emitted move ended when that differs from `mpos` (LinuxCNC's G84
+    /// in G18/G19): the start of the next record.
+    out_pos: Option<[Real; 6]>,
     comp_on: bool,
     // control flow
     frames: Vec<Frame>,
@@ -209,6 +212,7 @@ pub struct Interpreter {
     skip: Option<Skip>,
     percent_started: bool,
     first_line: bool,
+    main_title: bool,
     blocks: u64,
 }
 
@@ -277,7 +281,10 @@ impl Interpreter {
             buf: Vec::with_capacity(256),
             params: Params {
                 numbered,
-                globals: HashMap::new(),
+                globals: HashMap::from([
+                    ("_value".to_string(), 0.0),
+                    ("_value_returned".to_string(), 0.0),
+                ]),
                 locals: vec![HashMap::new()],
                 snap_pos: [0.0; 6],
                 snap_line: 0.0,
@@ -303,7 +310,7 @@ impl Interpreter {
             feed: 0.0,
             spindle_cw: None,
             motion: None,
-            retract_r: false,
+            retract_r: true,
             cycle_z: None,
             cycle_r: None,
             cycle_q: None,
@@ -315,6 +322,7 @@ impl Interpreter {
             tool: 0,
             selected: 0,
             mpos,
+            out_pos: None,
             comp_on: false,
             frames: Vec::new(),
             loops: HashMap::new(),
@@ -324,6 +332,7 @@ impl Interpreter {
             skip: None,
             percent_started: false,
             first_line: true,
+            main_title: false,
             blocks: 0,
             opts,
         };
@@ -365,7 +374,10 @@ impl Interpreter {
         self.out.push_back(rec);
     }
 
-    fn motion(&mut self, m: Motion) {
+    fn motion(&mut self, mut m: Motion) {
+        if let Some(p) = self.out_pos.take() {
+            m.start = AxisValues::from_array(p);
+        }
         let rec = Record {
             body: RecordBody::Motion(m),
             path: self.files[self.cur].path.clone(),
@@ -594,9 +606,18 @@ impl Interpreter {
     }
 
     fn at_eof(&mut self) {
+        let last = self.line_no.saturating_sub(1).max(1);
+        self.at_eof_line(last, false);
+    }
+
+    /// The end of the file (or a closing `%`) at line `last`.
+    fn at_eof_line(&mut self, last: usize, percent: bool) {
+        self.line_no = last;
         if let Some(skip) = &self.skip {
             if let Some(call) = skip.call.clone()
                 && !call.searched_external
+                && !percent
+                && !call.fanuc
             {
                 self.skip = None;
                 if let Err(e) = self.call_external(call) {
@@ -605,7 +626,9 @@ impl Interpreter {
                 return;
             }
             let msg = match &skip.call {
-                Some(c) if c.fanuc => format!("Failed to find sub 'O{}' before EOF", c.label),
+                Some(c) if c.fanuc || percent => {
+                    format!("Failed to find sub 'O{}' before EOF", c.label)
+                }
                 Some(c) => format!("Unable to find subroutine o{}", c.label),
                 None => format!("Reached end of file while skipping to O{}", skip.label),
             };
@@ -623,7 +646,6 @@ impl Interpreter {
             self.fail(e);
             return;
         }
-        self.line_no = self.line_no.saturating_sub(1).max(1);
         let e = lerr(1, "", "File ended with no percent sign or program end");
         self.fail(e);
     }
@@ -633,8 +655,11 @@ impl Interpreter {
         let first_non_blank = self.buf.iter().position(|c| !matches!(c, b' ' | b'\t'));
         if let Some(i) = first_non_blank
             && self.buf[i] == b'%'
-            && self.skip.is_none()
         {
+            if self.skip.is_some() && !self.first_line {
+                self.at_eof_line(self.line_no, true);
+                return Ok(());
+            }
             if self.first_line {
                 self.first_line = false;
                 self.percent_started = true;
@@ -699,6 +724,21 @@ impl Interpreter {
                 } else {
                     o.keyword == OKeyword::Sub
                 };
+                let wrong_style = if fanuc {
+                    o.keyword == OKeyword::Sub
+                } else {
+                    o.keyword == OKeyword::Fanuc
+                };
+                if wrong_style && o.label == label {
+                    self.skip = None;
+                    let msg = if fanuc {
+                        "'O.... sub' subroutine must be called with 'O.... call'"
+                    } else {
+                        "Fanuc 'O....' subroutine must be called with 'M98'"
+                    };
+                    let at = self.lexer.block.o_pos;
+                    return Err(self.err_at(at, msg));
+                }
                 if is_def && o.label == label {
                     let skip = self.skip.take();
                     let pos = self.tell();
@@ -718,6 +758,14 @@ impl Interpreter {
                 }
             }
             return Ok(());
+        }
+        if o.keyword == OKeyword::Sub
+            && skip.until == [OKeyword::EndSub]
+            && o.label != skip.label
+        {
+            let at = self.lexer.block.o_pos;
+            self.skip = None;
+            return Err(self.err_at(at, "Nested subroutine definition"));
         }
         if o.label == skip.label && skip.until.contains(&o.keyword) {
             let then = skip.then;
@@ -779,22 +827,22 @@ impl Interpreter {
                 {
                     return Err(self.err_at(opos, "Nested subroutine definition"));
                 }
+                if self.main_title && self.frames.is_empty() {
+                    let msg = format!(
+                        "File:{} line:{} sub: o|{}| found in illegal location",
+                        self.files[self.cur].path.display(),
+                        self.line_no,
+                        o.label.trim_start_matches('<').trim_end_matches('>')
+                    );
+                    return Err(self.err_at(opos, msg));
+                }
                 self.subs.insert(o.label.clone(), pos);
                 self.skip_to(&o.label, &[OKeyword::EndSub], SkipThen::Consume);
             }
             OKeyword::Fanuc => {
-                if !self.opts.fanuc_subs {
-                    return Ok(());
-                }
-                let pos = self.tell();
-                self.fanuc_subs.insert(o.label.clone(), pos);
-                self.skip = Some(Skip {
-                    label: o.label.clone(),
-                    until: &[],
-                    then: SkipThen::Consume,
-                    fanuc_body: true,
-                    call: None,
-                });
+                // in the normal flow a bare O-number is a program title; subprogram bodies
+                // are found by the search of an M98 call
+                self.main_title = true;
             }
             OKeyword::EndSub | OKeyword::Return => {
                 if self.frames.is_empty() {
@@ -1167,15 +1215,17 @@ impl Interpreter {
             }
             *slot = Some((m, pos as usize));
         }
-        let axis_given = [b'x', b'y', b'z', b'a', b'b', b'c']
+        let axis_given = [b'x', b'y', b'z', b'a', b'b', b'c', b'@', b'^']
             .iter()
             .any(|c| b.word(*c).is_some());
 
         // motion mode after this block
         let motion_now = g.motion.or(self.motion);
         let uses_axes = g.nonmodal.is_some_and(|c| matches!(c, 100 | 280 | 300 | 520 | 920))
+            || g.length == Some(431)
             || g.motion.is_some()
-            || (self.motion.is_some() && g.nonmodal.is_none());
+            || (self.motion.is_some()
+                && g.nonmodal.is_none_or(|c| !matches!(c, 100 | 280 | 300 | 520 | 920)));
         if axis_given && !uses_axes {
             let first = [b'x', b'y', b'z', b'a', b'b', b'c']
                 .iter()
@@ -1189,7 +1239,7 @@ impl Interpreter {
         }
         // words without a user
         if b.word(b'r').is_some() {
-            let r_ok = matches!(motion_now, Some(20 | 30 | 730 | 810..=890))
+            let r_ok = matches!(motion_now, Some(20 | 30 | 730 | 740 | 810..=890))
                 && (g.motion.is_some() || axis_given)
                 || g.nonmodal == Some(100);
             if !r_ok {
@@ -1208,7 +1258,7 @@ impl Interpreter {
                 ));
             }
         }
-        if matches!(motion_now, Some(810..=890 | 730)) && (g.motion.is_some() || axis_given) {
+        if matches!(motion_now, Some(810..=890 | 730 | 740)) && (g.motion.is_some() || axis_given) {
             for (c, name) in [(b'a', "a"), (b'b', "b"), (b'c', "c")] {
                 if b.word(c).is_some() {
                     return Err(self.err_word(b, c, format!("Cannot put an {name} in canned cycle")));
@@ -1422,7 +1472,10 @@ impl Interpreter {
         }
         let g53 = g.nonmodal == Some(530);
         let run_motion = g.motion.is_some_and(|m| m != 800)
-            || (axis_given && g.nonmodal.is_none_or(|c| c == 530) && self.motion.is_some());
+            || (axis_given
+                && g.length != Some(431)
+                && g.nonmodal.is_none_or(|c| !matches!(c, 100 | 280 | 300 | 520 | 920))
+                && self.motion.is_some());
         if g53 && !matches!(motion_now, Some(0 | 10)) {
             return Err(self.err_g(b, 530, "Must use G0 or G1 with G53"));
         }
@@ -1593,10 +1646,12 @@ impl Interpreter {
                     }
                     // current point without work offset: m - tool; in the work system
                     // m = rot(p + g92) + off + tool
+                    let xy_given = b.word(b'x').is_some() || b.word(b'y').is_some();
                     for (i, c) in [b'x', b'y', b'z', b'a', b'b', b'c'].iter().enumerate() {
-                        if let Some(v) = b.word(*c) {
+                        let word = b.word(*c).or(if i < 2 && xy_given { Some(0.0) } else { None });
+                        if let Some(v) = word {
                             let vm = if i < 3 { v * self.u } else { v };
-                            // for X/Y use the rotation of the target system
+                            // X and Y together, with the rotation of the target system
                             let off = if i < 2 {
                                 let (s, co) = r_new.to_radians().sin_cos();
                                 let q = [
@@ -1716,6 +1771,20 @@ impl Interpreter {
                 end[i] = if self.incremental { p[i] + vm } else { vm };
             }
         }
+        // LinuxCNC polar words: @ radius, ^ angle (degrees) about the origin of the XY plane
+        let (pr, pa) = (b.word(b'@'), b.word(b'^'));
+        if pr.is_some() || pa.is_some() {
+            let cur_r = p[0].hypot(p[1]);
+            let cur_a = p[1].atan2(p[0]).to_degrees();
+            let (r, a) = if self.incremental {
+                (cur_r + pr.unwrap_or(0.0) * self.u, cur_a + pa.unwrap_or(0.0))
+            } else {
+                (pr.map_or(cur_r, |r| r * self.u), pa.unwrap_or(cur_a))
+            };
+            let (s, c) = a.to_radians().sin_cos();
+            end[0] = r * c;
+            end[1] = r * s;
+        }
         end
     }
 
@@ -1764,7 +1833,7 @@ impl Interpreter {
                     let mut e = self.mpos;
                     for (i, c) in [b'x', b'y', b'z', b'a', b'b', b'c'].iter().enumerate() {
                         if let Some(v) = b.word(*c) {
-                            e[i] = if i < 3 { v * self.u } else { v } + self.tool_off[i];
+                            e[i] = if i < 3 { v * self.u } else { v };
                         }
                     }
                     e
@@ -1816,7 +1885,7 @@ impl Interpreter {
                     }
                 }
             }
-            730 | 810..=890 => self.cycle(m, b, explicit)?,
+            730 | 740 | 810..=890 => self.cycle(m, b, explicit)?,
             _ => {
                 return Err(self.err_g(b, m, "Motion mode not supported"));
             }
@@ -2108,18 +2177,48 @@ impl Interpreter {
                         self.event("START_SPINDLE_CLOCKWISE", vec![EventArg::Num(0.0)]);
                     }
                 }
-                840 => {
-                    if self.spindle_cw != Some(true) {
-                        return Err(self.err_g(b, m, "Spindle not turning clockwise in G84 canned cycle"));
+                740 | 840 => {
+                    let right = m == 840;
+                    if self.spindle_cw != Some(right) {
+                        let msg = if right {
+                            "Spindle not turning clockwise in G84 canned cycle"
+                        } else {
+                            "Spindle not turning counterclockwise in G74 canned cycle"
+                        };
+                        return Err(self.err_g(b, m, msg));
                     }
-                    let t = mk(self, aa, bb, cc);
+                    // LinuxCNC 2.9 feeds the tapping strokes of G18/G19 with the axes of the
+                    // other plane (G18 as G19 and G19 as G18); reproduced move for move
+                    let (t1, t2, tn) = match self.plane {
+                        Plane::Xy => (a1, a2, an),
+                        Plane::Xz => Plane::Yz.axes(),
+                        Plane::Yz => Plane::Xz.axes(),
+                    };
+                    let tap = |s: &Self, c: Real| -> [Real; 6] {
+                        let mut q = s.prog();
+                        q[t1] = aa;
+                        q[t2] = bb;
+                        q[tn] = c;
+                        s.to_machine(&q)
+                    };
+                    let (fwd, rev) = if right {
+                        ("START_SPINDLE_CLOCKWISE", "START_SPINDLE_COUNTERCLOCKWISE")
+                    } else {
+                        ("START_SPINDLE_COUNTERCLOCKWISE", "START_SPINDLE_CLOCKWISE")
+                    };
+                    let t = tap(self, cc);
                     self.emit_line(MotionKind::Linear, t, feed);
                     self.event("STOP_SPINDLE_TURNING", vec![EventArg::Num(0.0)]);
-                    self.event("START_SPINDLE_COUNTERCLOCKWISE", vec![EventArg::Num(0.0)]);
-                    let t = mk(self, aa, bb, clear);
+                    self.event(rev, vec![EventArg::Num(0.0)]);
+                    self.event("DWELL", vec![EventArg::Num(0.0)]);
+                    let t = tap(self, clear);
                     self.emit_line(MotionKind::Linear, t, feed);
                     self.event("STOP_SPINDLE_TURNING", vec![EventArg::Num(0.0)]);
-                    self.event("START_SPINDLE_CLOCKWISE", vec![EventArg::Num(0.0)]);
+                    self.event(fwd, vec![EventArg::Num(0.0)]);
+                    if self.plane != Plane::Xy {
+                        self.out_pos = Some(self.mpos);
+                        self.mpos = mk(self, aa, bb, clear);
+                    }
                 }
                 850 | 890 => {
                     let t = mk(self, aa, bb, cc);

@@ -132,10 +132,11 @@ pub(crate) enum Message {
 pub(crate) struct Block {
     /// `/` at the start.
     pub block_delete: bool,
-    /// Letter words a..z (not g, m, n, o), value in program units.
-    pub words: [Option<Real>; 26],
-    /// Byte offset of each letter word in the original line.
-    pub word_pos: [u32; 26],
+    /// Letter words a..z (not g, m, n, o), then the polar words `@` (26) and `^` (27),
+    /// value in program units.
+    pub words: [Option<Real>; 28],
+    /// Byte offset of each word in the original line.
+    pub word_pos: [u32; 28],
     /// G codes ×10 (`G38.2` = 382) with their byte offsets.
     pub g: [(i32, u32); MAX_CODES],
     /// Number of G codes.
@@ -161,7 +162,7 @@ pub(crate) struct Block {
 impl Block {
     fn clear(&mut self) {
         self.block_delete = false;
-        self.words = [None; 26];
+        self.words = [None; 28];
         self.ng = 0;
         self.nm = 0;
         self.n = None;
@@ -171,14 +172,14 @@ impl Block {
         self.has_words = false;
     }
 
-    /// Value of letter word `c` (lower-case).
+    /// Value of word `c` (lower-case letter, `@` or `^`).
     pub fn word(&self, c: u8) -> Option<Real> {
-        self.words[(c - b'a') as usize]
+        self.words[slot(c)]
     }
 
-    /// Byte offset of letter word `c`.
+    /// Byte offset of word `c`.
     pub fn pos(&self, c: u8) -> usize {
-        self.word_pos[(c - b'a') as usize] as usize
+        self.word_pos[slot(c)] as usize
     }
 
     /// The G codes.
@@ -189,6 +190,15 @@ impl Block {
     /// The M codes.
     pub fn ms(&self) -> &[(i32, u32)] {
         &self.m[..self.nm]
+    }
+}
+
+/// Index of word `c` in [`Block::words`].
+fn slot(c: u8) -> usize {
+    match c {
+        b'@' => 26,
+        b'^' => 27,
+        _ => (c.wrapping_sub(b'a') as usize).min(25),
     }
 }
 
@@ -466,11 +476,10 @@ impl<P: ParamRead + ?Sized> Cursor<'_, P> {
                 let name = self.name()?;
                 if self.params.exists(&name) { 1.0 } else { 0.0 }
             } else {
-                let s = self.i;
                 self.i += 1;
-                let idx = self.param_index(s)?;
-                let _ = self.params.numbered(idx);
-                1.0
+                let v = self.real_value()?;
+                let r = v.round();
+                if (1.0..NUM_PARAMS as Real).contains(&r) { 1.0 } else { 0.0 }
             };
             if self.peek() != Some(b']') {
                 return Err(self.err(self.i, "Expected ] reading bracketed parameter"));
@@ -726,13 +735,13 @@ fn read_block<P: ParamRead + ?Sized>(
                     b.nm += 1;
                 }
             }
-            b'a'..=b'z' if !matches!(ch, b'g' | b'm' | b'n' | b'o') => {
-                if !b"abcdefhijklpqrstuvwxyz".contains(&ch) {
+            b'a'..=b'z' | b'@' | b'^' if !matches!(ch, b'g' | b'm' | b'n' | b'o') => {
+                if !b"abcdefhijklpqrstuvwxyz@^".contains(&ch) {
                     return Err(c.err(start, format!("Bad character '{}' used", ch as char)));
                 }
                 b.has_words = true;
                 c.i += 1;
-                let k = (ch - b'a') as usize;
+                let k = slot(ch);
                 if b.words[k].is_some() {
                     return Err(c.err(start, format!("Multiple {} words on one line", ch as char)));
                 }
@@ -805,11 +814,18 @@ fn read_oword<P: ParamRead + ?Sized>(c: &mut Cursor<'_, P>, start: usize) -> LRe
     let mut value = None;
     let mut args = Vec::new();
     match keyword {
-        OKeyword::Call => {
-            while c.peek() == Some(b'[') {
-                args.push(c.expression()?);
+        OKeyword::Call => loop {
+            match c.peek() {
+                Some(b'[') => args.push(c.expression()?),
+                Some(b'(') => {
+                    while c.peek().is_some_and(|x| x != b')') {
+                        c.i += 1;
+                    }
+                    c.i += 1;
+                }
+                _ => break,
             }
-        }
+        },
         OKeyword::While | OKeyword::If | OKeyword::ElseIf | OKeyword::Repeat => {
             if c.peek() != Some(b'[') {
                 return Err(c.err(start, "Left bracket missing after O-word condition"));
