@@ -296,7 +296,7 @@ fn main() -> ExitCode {
             match r {
                 Ok(Ok(())) => ExitCode::SUCCESS,
                 Ok(Err(e)) => {
-                    eprint!("{}", e.full_report());
+                    let _ = write!(std::io::stderr(), "{}", e.full_report());
                     ExitCode::FAILURE
                 }
                 Err(e) => fail(e),

@@ -1,12 +1,19 @@
 //! The interpreter: executes blocks in LinuxCNC's order and streams [`Record`]s.
 
+#![expect(
+    clippy::needless_range_loop,
+    reason = "six-axis arrays (position, offsets, words) are indexed in parallel"
+)]
+
 use std::collections::{HashMap, VecDeque};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::math::{Point3, Real, Vector3};
 
-use super::lex::{Assign, Block, LexError, Lexer, Message, NUM_PARAMS, NoParams, OKeyword, OWord, ParamRead};
+use super::lex::{
+    Assign, Block, LexError, Lexer, Message, NUM_PARAMS, NoParams, OKeyword, OWord, ParamRead,
+};
 use super::output::{ArcGeom, Event, EventArg, Motion, MotionKind, Plane, Record, RecordBody};
 use super::source::{Pos, Source};
 use super::{AxisValues, Diagnostic, InterpOptions, LengthUnit, NcError};
@@ -337,7 +344,10 @@ impl Interpreter {
             opts,
         };
         it.load_offsets();
-        it.event("USE_LENGTH_UNITS", vec![EventArg::Text("CANON_UNITS_MM".into())]);
+        it.event(
+            "USE_LENGTH_UNITS",
+            vec![EventArg::Text("CANON_UNITS_MM".into())],
+        );
         it.announce_g5x();
         it.announce_g92();
         it
@@ -427,7 +437,11 @@ impl Interpreter {
         self.rot = self.params.numbered[base + 9];
         let on = self.params.numbered[5210] != 0.0;
         for i in 0..6 {
-            let v = if on { self.params.numbered[5211 + i] } else { 0.0 };
+            let v = if on {
+                self.params.numbered[5211 + i]
+            } else {
+                0.0
+            };
             self.g92[i] = if i < 3 { v * self.ext } else { v };
         }
     }
@@ -481,7 +495,11 @@ impl Interpreter {
         let b = byte.min(self.buf.len());
         let rest = &self.buf[b..];
         let mut end = 1.min(rest.len());
-        while end < rest.len() && !rest[end].is_ascii_alphabetic() && rest[end] != b'(' && rest[end] != b';' {
+        while end < rest.len()
+            && !rest[end].is_ascii_alphabetic()
+            && rest[end] != b'('
+            && rest[end] != b';'
+        {
             end += 1;
         }
         String::from_utf8_lossy(&rest[..end]).trim().to_string()
@@ -500,7 +518,11 @@ impl Interpreter {
     }
 
     fn err_g(&self, b: &Block, g: i32, message: impl Into<String>) -> LineErr {
-        let pos = b.gs().iter().find(|(c, _)| *c == g).map_or(0, |(_, p)| *p as usize);
+        let pos = b
+            .gs()
+            .iter()
+            .find(|(c, _)| *c == g)
+            .map_or(0, |(_, p)| *p as usize);
         self.err_at(pos, message)
     }
 
@@ -536,8 +558,13 @@ impl Interpreter {
                 if e.message.contains("not defined") {
                     continue;
                 }
-                let col = String::from_utf8_lossy(&buf[..e.start.min(buf.len())]).chars().count() + 1;
-                let word = String::from_utf8_lossy(&buf[e.start.min(buf.len())..e.end.min(buf.len())]).into_owned();
+                let col = String::from_utf8_lossy(&buf[..e.start.min(buf.len())])
+                    .chars()
+                    .count()
+                    + 1;
+                let word =
+                    String::from_utf8_lossy(&buf[e.start.min(buf.len())..e.end.min(buf.len())])
+                        .into_owned();
                 diags.push(Diagnostic {
                     path: path.clone(),
                     line,
@@ -581,7 +608,14 @@ impl Interpreter {
     fn step(&mut self) {
         self.blocks += 1;
         if self.blocks > self.opts.max_blocks {
-            let e = lerr(1, "", format!("more than {} blocks executed (endless loop?)", self.opts.max_blocks));
+            let e = lerr(
+                1,
+                "",
+                format!(
+                    "more than {} blocks executed (endless loop?)",
+                    self.opts.max_blocks
+                ),
+            );
             self.fail(e);
             return;
         }
@@ -759,10 +793,7 @@ impl Interpreter {
             }
             return Ok(());
         }
-        if o.keyword == OKeyword::Sub
-            && skip.until == [OKeyword::EndSub]
-            && o.label != skip.label
-        {
+        if o.keyword == OKeyword::Sub && skip.until == [OKeyword::EndSub] && o.label != skip.label {
             let at = self.lexer.block.o_pos;
             self.skip = None;
             return Err(self.err_at(at, "Nested subroutine definition"));
@@ -785,7 +816,10 @@ impl Interpreter {
             }
             if let Some(o) = &self.lexer.block.o {
                 let key = (self.frames.len(), o.label.clone());
-                if matches!(o.keyword, OKeyword::EndWhile | OKeyword::EndRepeat | OKeyword::While) {
+                if matches!(
+                    o.keyword,
+                    OKeyword::EndWhile | OKeyword::EndRepeat | OKeyword::While
+                ) {
                     self.loops.remove(&key);
                 }
                 if o.keyword == OKeyword::EndIf {
@@ -878,7 +912,9 @@ impl Interpreter {
                     searched_external: false,
                 };
                 if self.fanuc_subs.contains_key(&o.label) && !self.subs.contains_key(&o.label) {
-                    return Err(self.err_at(opos, "Fanuc 'O....' subroutine must be called with 'M98'"));
+                    return Err(
+                        self.err_at(opos, "Fanuc 'O....' subroutine must be called with 'M98'")
+                    );
                 }
                 self.call(call)?;
             }
@@ -1044,7 +1080,11 @@ impl Interpreter {
 
     fn call_external(&mut self, mut call: PendingCall) -> LR<()> {
         call.searched_external = true;
-        let name = call.label.trim_start_matches('<').trim_end_matches('>').to_string();
+        let name = call
+            .label
+            .trim_start_matches('<')
+            .trim_end_matches('>')
+            .to_string();
         let mut dirs: Vec<PathBuf> = self.opts.subroutine_path.clone();
         if let Some(d) = self.files[0].path.parent() {
             dirs.push(d.to_path_buf());
@@ -1163,9 +1203,13 @@ impl Interpreter {
         let mut g = GCodes::default();
         for &(code, pos) in b.gs() {
             let slot = match code {
-                40 | 100 | 280 | 281 | 300 | 301 | 520 | 530 | 920 | 921 | 922 | 923 => &mut g.nonmodal,
-                0 | 10 | 20 | 30 | 331 | 382 | 383 | 384 | 385 | 730 | 800 | 810 | 820 | 830 | 840 | 850
-                | 860 | 870 | 880 | 890 | 740 | 760 | 50 | 51 | 52 | 330 => &mut g.motion,
+                40 | 100 | 280 | 281 | 300 | 301 | 520 | 530 | 920 | 921 | 922 | 923 => {
+                    &mut g.nonmodal
+                }
+                0 | 10 | 20 | 30 | 331 | 382 | 383 | 384 | 385 | 730 | 800 | 810 | 820 | 830
+                | 840 | 850 | 860 | 870 | 880 | 890 | 740 | 760 | 50 | 51 | 52 | 330 => {
+                    &mut g.motion
+                }
                 170 | 180 | 190 => &mut g.plane,
                 900 | 910 => &mut g.distance,
                 901 | 911 => &mut g.arc_distance,
@@ -1221,21 +1265,35 @@ impl Interpreter {
 
         // motion mode after this block
         let motion_now = g.motion.or(self.motion);
-        let uses_axes = g.nonmodal.is_some_and(|c| matches!(c, 100 | 280 | 300 | 520 | 920))
+        let uses_axes = g
+            .nonmodal
+            .is_some_and(|c| matches!(c, 100 | 280 | 300 | 520 | 920))
             || g.length == Some(431)
             || g.motion.is_some()
             || (self.motion.is_some()
-                && g.nonmodal.is_none_or(|c| !matches!(c, 100 | 280 | 300 | 520 | 920)));
+                && g.nonmodal
+                    .is_none_or(|c| !matches!(c, 100 | 280 | 300 | 520 | 920)));
         if axis_given && !uses_axes {
             let first = [b'x', b'y', b'z', b'a', b'b', b'c']
                 .iter()
                 .find(|c| b.word(**c).is_some())
                 .copied()
                 .unwrap_or(b'x');
-            return Err(self.err_word(b, first, "Cannot use axis values without a g code that uses them"));
+            return Err(self.err_word(
+                b,
+                first,
+                "Cannot use axis values without a g code that uses them",
+            ));
         }
-        if g.nonmodal.is_some_and(|c| matches!(c, 100 | 280 | 300 | 520 | 920)) && g.motion.is_some() {
-            return Err(self.err_g(b, g.nonmodal.unwrap_or(0), "Cannot use two g codes that both use axis values"));
+        if g.nonmodal
+            .is_some_and(|c| matches!(c, 100 | 280 | 300 | 520 | 920))
+            && g.motion.is_some()
+        {
+            return Err(self.err_g(
+                b,
+                g.nonmodal.unwrap_or(0),
+                "Cannot use two g codes that both use axis values",
+            ));
         }
         // words without a user
         if b.word(b'r').is_some() {
@@ -1261,7 +1319,11 @@ impl Interpreter {
         if matches!(motion_now, Some(810..=890 | 730 | 740)) && (g.motion.is_some() || axis_given) {
             for (c, name) in [(b'a', "a"), (b'b', "b"), (b'c', "c")] {
                 if b.word(c).is_some() {
-                    return Err(self.err_word(b, c, format!("Cannot put an {name} in canned cycle")));
+                    return Err(self.err_word(
+                        b,
+                        c,
+                        format!("Cannot put an {name} in canned cycle"),
+                    ));
                 }
             }
         }
@@ -1293,7 +1355,10 @@ impl Interpreter {
             if s < 0.0 {
                 return Err(self.err_word(b, b's', "Negative spindle speed used"));
             }
-            self.event("SET_SPINDLE_SPEED", vec![EventArg::Num(0.0), EventArg::Num(s)]);
+            self.event(
+                "SET_SPINDLE_SPEED",
+                vec![EventArg::Num(0.0), EventArg::Num(s)],
+            );
         }
         // 5. tool select
         if let Some(t) = b.word(b't') {
@@ -1302,7 +1367,11 @@ impl Interpreter {
             }
             let t = t.round() as i32;
             if t != 0 && !self.opts.tool_table.tools.contains_key(&t) {
-                return Err(self.err_word(b, b't', format!("Requested tool {t} not found in the tool table")));
+                return Err(self.err_word(
+                    b,
+                    b't',
+                    format!("Requested tool {t} not found in the tool table"),
+                ));
             }
             self.selected = t;
             self.event("SELECT_TOOL", vec![EventArg::Num(t as Real)]);
@@ -1374,7 +1443,11 @@ impl Interpreter {
         // 12. units
         if let Some(u) = g.units {
             self.u = if u == 200 { MM_PER_INCH } else { 1.0 };
-            let name = if u == 200 { "CANON_UNITS_INCHES" } else { "CANON_UNITS_MM" };
+            let name = if u == 200 {
+                "CANON_UNITS_INCHES"
+            } else {
+                "CANON_UNITS_MM"
+            };
             self.event("USE_LENGTH_UNITS", vec![EventArg::Text(name.into())]);
         }
         // 13. cutter compensation (recorded; not applied to the path)
@@ -1402,7 +1475,11 @@ impl Interpreter {
                 _ => 9,
             };
             if self.comp_on {
-                return Err(self.err_g(b, c, "Cannot change coordinate systems with cutter radius compensation on"));
+                return Err(self.err_g(
+                    b,
+                    c,
+                    "Cannot change coordinate systems with cutter radius compensation on",
+                ));
             }
             self.coord = idx;
             self.params.numbered[5220] = idx as Real;
@@ -1474,7 +1551,8 @@ impl Interpreter {
         let run_motion = g.motion.is_some_and(|m| m != 800)
             || (axis_given
                 && g.length != Some(431)
-                && g.nonmodal.is_none_or(|c| !matches!(c, 100 | 280 | 300 | 520 | 920))
+                && g.nonmodal
+                    .is_none_or(|c| !matches!(c, 100 | 280 | 300 | 520 | 920))
                 && self.motion.is_some());
         if g53 && !matches!(motion_now, Some(0 | 10)) {
             return Err(self.err_g(b, 530, "Must use G0 or G1 with G53"));
@@ -1492,7 +1570,10 @@ impl Interpreter {
             };
             let label = (p.round() as i64).to_string();
             if self.subs.contains_key(&label) && !self.fanuc_subs.contains_key(&label) {
-                return Err(self.err_at(pos, "'O.... sub' subroutine must be called with 'O.... call'"));
+                return Err(self.err_at(
+                    pos,
+                    "'O.... sub' subroutine must be called with 'O.... call'",
+                ));
             }
             let repeat = b.word(b'l').map_or(1, |l| l.round().max(1.0) as u32);
             let call = PendingCall {
@@ -1554,7 +1635,10 @@ impl Interpreter {
         self.plane = Plane::Xy;
         self.incremental = false;
         self.feed_mode = FeedMode::PerMinute;
-        self.event("SET_FEED_MODE", vec![EventArg::Num(0.0), EventArg::Num(0.0)]);
+        self.event(
+            "SET_FEED_MODE",
+            vec![EventArg::Num(0.0), EventArg::Num(0.0)],
+        );
         self.event("SET_FEED_RATE", vec![EventArg::Num(0.0)]);
         self.event("STOP_SPINDLE_TURNING", vec![EventArg::Num(0.0)]);
         self.motion = Some(10);
@@ -1568,7 +1652,11 @@ impl Interpreter {
                 let t = match b.word(b'h') {
                     Some(h) => {
                         if h < 0.0 {
-                            return Err(self.err_word(b, b'h', "Negative H word tool length offset used"));
+                            return Err(self.err_word(
+                                b,
+                                b'h',
+                                "Negative H word tool length offset used",
+                            ));
                         }
                         h.round() as i32
                     }
@@ -1578,10 +1666,18 @@ impl Interpreter {
                     self.tool_off = [0.0; 6];
                 } else {
                     let Some(e) = self.opts.tool_table.tools.get(&t) else {
-                        return Err(self.err_word(b, b'h', format!("Requested tool {t} not found in the tool table")));
+                        return Err(self.err_word(
+                            b,
+                            b'h',
+                            format!("Requested tool {t} not found in the tool table"),
+                        ));
                     };
                     for i in 0..6 {
-                        self.tool_off[i] = if i < 3 { e.offset[i] * self.ext } else { e.offset[i] };
+                        self.tool_off[i] = if i < 3 {
+                            e.offset[i] * self.ext
+                        } else {
+                            e.offset[i]
+                        };
                     }
                 }
             }
@@ -1648,22 +1744,27 @@ impl Interpreter {
                     // m = rot(p + g92) + off + tool
                     let xy_given = b.word(b'x').is_some() || b.word(b'y').is_some();
                     for (i, c) in [b'x', b'y', b'z', b'a', b'b', b'c'].iter().enumerate() {
-                        let word = b.word(*c).or(if i < 2 && xy_given { Some(0.0) } else { None });
+                        let word = b
+                            .word(*c)
+                            .or(if i < 2 && xy_given { Some(0.0) } else { None });
                         if let Some(v) = word {
                             let vm = if i < 3 { v * self.u } else { v };
                             // X and Y together, with the rotation of the target system
                             let off = if i < 2 {
                                 let (s, co) = r_new.to_radians().sin_cos();
                                 let q = [
-                                    b.word(b'x').map_or_else(|| self.prog()[0], |x| x * self.u) + self.g92[0],
-                                    b.word(b'y').map_or_else(|| self.prog()[1], |y| y * self.u) + self.g92[1],
+                                    b.word(b'x').map_or_else(|| self.prog()[0], |x| x * self.u)
+                                        + self.g92[0],
+                                    b.word(b'y').map_or_else(|| self.prog()[1], |y| y * self.u)
+                                        + self.g92[1],
                                 ];
                                 let rq = [q[0] * co - q[1] * s, q[0] * s + q[1] * co];
                                 self.mpos[i] - self.tool_off[i] - rq[i]
                             } else {
                                 self.mpos[i] - self.tool_off[i] - (vm + self.g92[i])
                             };
-                            self.params.numbered[base + i] = if i < 3 { off / self.ext } else { off };
+                            self.params.numbered[base + i] =
+                                if i < 3 { off / self.ext } else { off };
                         }
                     }
                 }
@@ -1677,7 +1778,11 @@ impl Interpreter {
                     return Err(self.err_g(b, 100, "P word missing with G10 L1"));
                 };
                 if !self.opts.tool_table.tools.contains_key(&p) {
-                    return Err(self.err_word(b, b'p', format!("Requested tool {p} not found in the tool table")));
+                    return Err(self.err_word(
+                        b,
+                        b'p',
+                        format!("Requested tool {p} not found in the tool table"),
+                    ));
                 }
                 let prog = self.prog();
                 let mut entry = self.opts.tool_table.tools[&p];
@@ -1718,7 +1823,11 @@ impl Interpreter {
             if let Some(v) = b.word(*c) {
                 any = true;
                 let vm = if i < 3 { v * self.u } else { v };
-                let new = if code == 920 { p[i] + self.g92[i] - vm } else { vm };
+                let new = if code == 920 {
+                    p[i] + self.g92[i] - vm
+                } else {
+                    vm
+                };
                 self.g92[i] = new;
             }
         }
@@ -1726,7 +1835,11 @@ impl Interpreter {
             return Err(self.err_g(b, code, "All axes missing with G92"));
         }
         for i in 0..6 {
-            self.params.numbered[5211 + i] = if i < 3 { self.g92[i] / self.ext } else { self.g92[i] };
+            self.params.numbered[5211 + i] = if i < 3 {
+                self.g92[i] / self.ext
+            } else {
+                self.g92[i]
+            };
         }
         self.params.numbered[5210] = 1.0;
         self.announce_g92();
@@ -1777,7 +1890,10 @@ impl Interpreter {
             let cur_r = p[0].hypot(p[1]);
             let cur_a = p[1].atan2(p[0]).to_degrees();
             let (r, a) = if self.incremental {
-                (cur_r + pr.unwrap_or(0.0) * self.u, cur_a + pa.unwrap_or(0.0))
+                (
+                    cur_r + pr.unwrap_or(0.0) * self.u,
+                    cur_a + pa.unwrap_or(0.0),
+                )
             } else {
                 (pr.map_or(cur_r, |r| r * self.u), pa.unwrap_or(cur_a))
             };
@@ -1805,8 +1921,18 @@ impl Interpreter {
         match self.feed_mode {
             FeedMode::InverseTime => {
                 let Some(f) = b.word(b'f') else {
-                    let name = if code == 10 { "g1" } else if code == 20 { "g2" } else { "g3" };
-                    return Err(self.err_g(b, code, format!("F word missing with inverse time {name} move")));
+                    let name = if code == 10 {
+                        "g1"
+                    } else if code == 20 {
+                        "g2"
+                    } else {
+                        "g3"
+                    };
+                    return Err(self.err_g(
+                        b,
+                        code,
+                        format!("F word missing with inverse time {name} move"),
+                    ));
                 };
                 Ok(f * length_mm)
             }
@@ -1818,7 +1944,11 @@ impl Interpreter {
                         382..=385 => "Cannot probe with zero feed rate".to_string(),
                         _ => "Cannot feed with zero feed rate".to_string(),
                     };
-                    let pos = b.gs().iter().find(|(c, _)| *c == code).map_or(0, |(_, p)| *p as usize);
+                    let pos = b
+                        .gs()
+                        .iter()
+                        .find(|(c, _)| *c == code)
+                        .map_or(0, |(_, p)| *p as usize);
                     return Err(self.err_at(pos, msg));
                 }
                 Ok(self.feed)
@@ -1859,7 +1989,14 @@ impl Interpreter {
                 let mot = Motion {
                     kind: MotionKind::RigidTap,
                     start: AxisValues::from_array(self.mpos),
-                    end: AxisValues::from_array([end_m[0], end_m[1], end_m[2], self.mpos[3], self.mpos[4], self.mpos[5]]),
+                    end: AxisValues::from_array([
+                        end_m[0],
+                        end_m[1],
+                        end_m[2],
+                        self.mpos[3],
+                        self.mpos[4],
+                        self.mpos[5],
+                    ]),
                     feed: Some(k * self.u),
                     feed_per_rev: true,
                     arc: None,
@@ -1867,7 +2004,9 @@ impl Interpreter {
                 self.motion(mot);
             }
             382..=385 => {
-                let axis = [b'x', b'y', b'z', b'a', b'b', b'c'].iter().any(|c| b.word(*c).is_some());
+                let axis = [b'x', b'y', b'z', b'a', b'b', b'c']
+                    .iter()
+                    .any(|c| b.word(*c).is_some());
                 if !axis {
                     return Err(self.err_g(b, m, "All axes missing with motion code"));
                 }
@@ -1877,7 +2016,11 @@ impl Interpreter {
                 let f = self.feed_for(b, m, len)?;
                 let start = self.mpos;
                 self.emit_line(MotionKind::Probe, end_m, Some(f));
-                let d = [start[0] - end_m[0], start[1] - end_m[1], start[2] - end_m[2]];
+                let d = [
+                    start[0] - end_m[0],
+                    start[1] - end_m[1],
+                    start[2] - end_m[2],
+                ];
                 let n = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
                 if n > 0.0 {
                     for i in 0..3 {
@@ -1908,7 +2051,8 @@ impl Interpreter {
         let o2 = b.word(off_letters.1);
         let code = m;
         let axis_letters = [b'x', b'y', b'z'];
-        let in_plane_given = b.word(axis_letters[a1]).is_some() || b.word(axis_letters[a2]).is_some();
+        let in_plane_given =
+            b.word(axis_letters[a1]).is_some() || b.word(axis_letters[a2]).is_some();
         if r_word.is_none() && o1.is_none() && o2.is_none() {
             return Err(self.err_g(b, code, "R i j k words all missing for arc"));
         }
@@ -1928,10 +2072,18 @@ impl Interpreter {
         let (c1, c2);
         if let Some(r) = r_word {
             if !in_plane_given {
-                return Err(self.err_g(b, code, "First axis and second axis both missing with R-format arc"));
+                return Err(self.err_g(
+                    b,
+                    code,
+                    "First axis and second axis both missing with R-format arc",
+                ));
             }
             let r = r * self.u;
-            let tol = if inch { ARC_R_TOL_INCH * MM_PER_INCH } else { ARC_R_TOL_MM };
+            let tol = if inch {
+                ARC_R_TOL_INCH * MM_PER_INCH
+            } else {
+                ARC_R_TOL_MM
+            };
             if e1 == s1 && e2 == s2 {
                 return Err(self.err_g(b, code, "Current point same as end point of arc"));
             }
@@ -1966,7 +2118,11 @@ impl Interpreter {
             }
             let r1 = ((c1 - s1).powi(2) + (c2 - s2).powi(2)).sqrt();
             let r2 = ((c1 - e1).powi(2) + (c2 - e2).powi(2)).sqrt();
-            let tol = if inch { ARC_CENTER_TOL_INCH * MM_PER_INCH } else { ARC_CENTER_TOL_MM };
+            let tol = if inch {
+                ARC_CENTER_TOL_INCH * MM_PER_INCH
+            } else {
+                ARC_CENTER_TOL_MM
+            };
             if r1 < 0.1 * tol * 1e-3 || r2 < 0.1 * tol * 1e-3 {
                 return Err(self.err_g(b, code, "Zero radius arc"));
             }
@@ -2065,7 +2221,14 @@ impl Interpreter {
         let z_letter = letters[an];
         let new_mode = explicit;
         if new_mode && b.word(z_letter).is_none() && self.cycle_z.is_none() {
-            return Err(self.err_g(b, m, format!("{} word missing with canned cycle", (z_letter as char).to_ascii_uppercase())));
+            return Err(self.err_g(
+                b,
+                m,
+                format!(
+                    "{} word missing with canned cycle",
+                    (z_letter as char).to_ascii_uppercase()
+                ),
+            ));
         }
         let z_word = match b.word(z_letter) {
             Some(z) => {
@@ -2081,7 +2244,9 @@ impl Interpreter {
             }
             None => match self.cycle_r {
                 Some(r) => r,
-                None => return Err(self.err_g(b, m, "R clearance plane unspecified in canned cycle")),
+                None => {
+                    return Err(self.err_g(b, m, "R clearance plane unspecified in canned cycle"));
+                }
             },
         };
         if let Some(q) = b.word(b'q') {
@@ -2149,7 +2314,11 @@ impl Interpreter {
         }
         let clear = if self.retract_r { r } else { old_cc };
         let feed = Some(self.feed);
-        let peck = if self.u == 1.0 { PECK_CLEARANCE_MM } else { PECK_CLEARANCE_INCH * MM_PER_INCH };
+        let peck = if self.u == 1.0 {
+            PECK_CLEARANCE_MM
+        } else {
+            PECK_CLEARANCE_INCH * MM_PER_INCH
+        };
         for _ in 0..repeat {
             aa += inc_a;
             bb += inc_b;

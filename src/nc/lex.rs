@@ -236,7 +236,9 @@ impl<P: ParamRead + ?Sized> Cursor<'_, P> {
         let end = self.orig(self.i.max(start + 1).min(self.s.len()));
         LexError {
             start: self.orig(start),
-            end: end.max(self.orig(start) + 1).min(self.orig_len.max(self.orig(start) + 1)),
+            end: end
+                .max(self.orig(start) + 1)
+                .min(self.orig_len.max(self.orig(start) + 1)),
             message: message.into(),
         }
     }
@@ -300,9 +302,7 @@ impl<P: ParamRead + ?Sized> Cursor<'_, P> {
             None => Err(self.err(start, "Unexpected end of line reading value")),
             Some(b'[') => self.expression(),
             Some(b'#') => self.parameter(),
-            Some(c @ (b'+' | b'-'))
-                if !matches!(self.peek_at(1), Some(b'0'..=b'9' | b'.')) =>
-            {
+            Some(c @ (b'+' | b'-')) if !matches!(self.peek_at(1), Some(b'0'..=b'9' | b'.')) => {
                 self.i += 1;
                 let v = self.real_value()?;
                 Ok(if c == b'-' { -v } else { v })
@@ -318,10 +318,7 @@ impl<P: ParamRead + ?Sized> Cursor<'_, P> {
         self.i += 1; // '#'
         if self.peek() == Some(b'<') {
             let name = self.name()?;
-            return self
-                .params
-                .named(&name)
-                .map_err(|m| self.err(start, m));
+            return self.params.named(&name).map_err(|m| self.err(start, m));
         }
         let idx = self.param_index(start)?;
         Ok(self.params.numbered(idx))
@@ -415,10 +412,9 @@ impl<P: ParamRead + ?Sized> Cursor<'_, P> {
         Ok(match id {
             0 => {
                 if a < 0.0 && b.fract() != 0.0 {
-                    return Err(self.err(
-                        at,
-                        "Attempt to raise negative number to non-integer power",
-                    ));
+                    return Err(
+                        self.err(at, "Attempt to raise negative number to non-integer power")
+                    );
                 }
                 a.powf(b)
             }
@@ -455,8 +451,8 @@ impl<P: ParamRead + ?Sized> Cursor<'_, P> {
         let start = self.i;
         let rest = &self.s[self.i..];
         const FUNCS: [&[u8]; 14] = [
-            b"abs", b"acos", b"asin", b"atan", b"cos", b"exp", b"fix", b"fup", b"ln",
-            b"round", b"sin", b"sqrt", b"tan", b"exists",
+            b"abs", b"acos", b"asin", b"atan", b"cos", b"exp", b"fix", b"fup", b"ln", b"round",
+            b"sin", b"sqrt", b"tan", b"exists",
         ];
         let Some(f) = FUNCS.iter().find(|f| rest.starts_with(f)) else {
             let c = rest[0] as char;
@@ -479,7 +475,11 @@ impl<P: ParamRead + ?Sized> Cursor<'_, P> {
                 self.i += 1;
                 let v = self.real_value()?;
                 let r = v.round();
-                if (1.0..NUM_PARAMS as Real).contains(&r) { 1.0 } else { 0.0 }
+                if (1.0..NUM_PARAMS as Real).contains(&r) {
+                    1.0
+                } else {
+                    0.0
+                }
             };
             if self.peek() != Some(b']') {
                 return Err(self.err(self.i, "Expected ] reading bracketed parameter"));
@@ -540,8 +540,8 @@ impl<P: ParamRead + ?Sized> Cursor<'_, P> {
 
 /// Powers of ten exactly representable in f64.
 const POW10: [Real; 23] = [
-    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
-    1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
 ];
 
 const O_KEYWORDS: [(&[u8], OKeyword); 15] = [
@@ -758,10 +758,10 @@ fn read_block<P: ParamRead + ?Sized>(
                 let shown = if ch.is_ascii() {
                     (ch as char).to_string()
                 } else {
-                    String::from_utf8_lossy(&line[c.orig(start)..]).chars().next().map_or_else(
-                        || "?".to_string(),
-                        |x| x.to_string(),
-                    )
+                    String::from_utf8_lossy(&line[c.orig(start)..])
+                        .chars()
+                        .next()
+                        .map_or_else(|| "?".to_string(), |x| x.to_string())
                 };
                 return Err(c.err(start, format!("Bad character '{shown}' used")));
             }
@@ -832,10 +832,8 @@ fn read_oword<P: ParamRead + ?Sized>(c: &mut Cursor<'_, P>, start: usize) -> LRe
             }
             value = Some(c.expression()?);
         }
-        OKeyword::Return | OKeyword::EndSub => {
-            if c.peek() == Some(b'[') {
-                value = Some(c.expression()?);
-            }
+        OKeyword::Return | OKeyword::EndSub if c.peek() == Some(b'[') => {
+            value = Some(c.expression()?);
         }
         _ => {}
     }
@@ -866,7 +864,8 @@ mod tests {
 
     fn val(expr: &str) -> Real {
         let mut lx = Lexer::default();
-        lx.read(format!("x{expr}").as_bytes(), &NoParams).expect("reads");
+        lx.read(format!("x{expr}").as_bytes(), &NoParams)
+            .expect("reads");
         lx.block.word(b'x').expect("x")
     }
 

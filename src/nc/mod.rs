@@ -134,7 +134,8 @@ impl Default for InterpOptions {
 impl InterpOptions {
     /// Applies an INI file's `[RS274NGC]` settings.
     pub fn apply_ini(&mut self, ini: &IniSettings) {
-        self.subroutine_path.extend(ini.subroutine_path.iter().cloned());
+        self.subroutine_path
+            .extend(ini.subroutine_path.iter().cloned());
         if ini.disable_fanuc_subs {
             self.fanuc_subs = false;
         }
@@ -143,7 +144,7 @@ impl InterpOptions {
 
 /// One problem found in a program.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
-#[error("{path}:{line}:{column}: {message}")]
+#[error("{}:{line}:{column}: {}{message}", path.display(), word_prefix(word))]
 pub struct Diagnostic {
     /// File the program came from (only used for messages).
     pub path: PathBuf,
@@ -155,6 +156,18 @@ pub struct Diagnostic {
     pub word: String,
     /// Human-readable explanation; contains the offending word in double quotes.
     pub message: String,
+}
+
+/// `"word": ` for the message, or nothing when there is no word.
+fn word_prefix(word: &str) -> String {
+    if word.is_empty() {
+        String::new()
+    } else if word.chars().count() > 64 {
+        let head: String = word.chars().take(64).collect();
+        format!("\"{head}...\": ")
+    } else {
+        format!("\"{word}\": ")
+    }
 }
 
 /// All problems of a program.
@@ -298,7 +311,6 @@ impl AxisValues {
     }
 }
 
-
 /// Options from a tool table, var file and INI file (each optional), lengths in `unit`.
 pub fn options_from_files(
     tool_table: Option<&Path>,
@@ -374,8 +386,8 @@ impl Move {
         let s = self.start.to_array();
         let e = self.end.to_array();
         let mut q = [0.0; 6];
-        for i in 0..6 {
-            q[i] = s[i] + (e[i] - s[i]) * lambda;
+        for (qi, (si, ei)) in q.iter_mut().zip(s.iter().zip(e.iter())) {
+            *qi = si + (ei - si) * lambda;
         }
         if let MoveKind::Arc(a) = &self.kind {
             let n = a.normal.normalize();
@@ -403,6 +415,53 @@ impl Move {
     }
 }
 
+impl Move {
+    /// The move as straight pieces: itself for a straight move; for an arc, chords whose
+    /// sagitta (largest distance from the arc in its plane) is at most `sagitta_mm`
+    /// (> 0), each a [`MoveKind::Linear`] move with the arc's feed and line.
+    pub fn chords(&self, sagitta_mm: Real) -> impl Iterator<Item = Move> + '_ {
+        let n = match &self.kind {
+            MoveKind::Arc(a) => {
+                let r = a.radius.max(a.radius_end);
+                let step = if r > sagitta_mm {
+                    2.0 * (1.0 - sagitta_mm / r).acos()
+                } else {
+                    std::f64::consts::PI
+                };
+                let n = (a.sweep_deg.to_radians().abs() / step).ceil();
+                if n.is_finite() {
+                    (n as usize).clamp(1, 1_000_000)
+                } else {
+                    1
+                }
+            }
+            _ => 1,
+        };
+        let arc = matches!(self.kind, MoveKind::Arc(_));
+        (0..n).map(move |i| {
+            if !arc {
+                return *self;
+            }
+            let (l0, l1) = (i as Real / n as Real, (i + 1) as Real / n as Real);
+            Move {
+                kind: MoveKind::Linear,
+                start: if i == 0 {
+                    self.start
+                } else {
+                    self.point_at(l0)
+                },
+                end: if i + 1 == n {
+                    self.end
+                } else {
+                    self.point_at(l1)
+                },
+                feed_mm_per_min: self.feed_mm_per_min,
+                line: self.line,
+            }
+        })
+    }
+}
+
 /// A program interpreted in full (the collected form, for small programs).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Program {
@@ -418,11 +477,7 @@ pub struct Program {
 
 /// Interprets program text with `opts` and collects the moves. `path` is used for
 /// messages and to find subroutine files next to the program.
-pub fn interpret_program(
-    text: &str,
-    path: &Path,
-    opts: InterpOptions,
-) -> Result<Program, NcError> {
+pub fn interpret_program(text: &str, path: &Path, opts: InterpOptions) -> Result<Program, NcError> {
     let start = opts.start;
     let mut moves = Vec::new();
     let mut ended_by = None;

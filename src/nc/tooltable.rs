@@ -61,9 +61,10 @@ impl ToolTable {
             for word in line.split_whitespace() {
                 let mut chars = word.chars();
                 let letter = chars.next().unwrap_or(' ').to_ascii_uppercase();
-                let value: Real = chars.as_str().parse().map_err(|_| {
-                    table_error(path, index + 1, format!("bad word \"{word}\""))
-                })?;
+                let value: Real = chars
+                    .as_str()
+                    .parse()
+                    .map_err(|_| table_error(path, index + 1, format!("bad word \"{word}\"")))?;
                 if !value.is_finite() {
                     return Err(table_error(path, index + 1, format!("bad word \"{word}\"")));
                 }
