@@ -22,7 +22,12 @@ const TOL_INCH_PROGRAM: f64 = 3e-3;
 
 /// Programs not matched yet, with the reason. Keep it short and exact: the test fails when a
 /// listed program starts to match (so the list stays true).
-const NOT_MATCHED: &[(&str, &str)] = &[];
+const NOT_MATCHED: &[(&str, &str)] = &[(
+    "linuxcnc/tests/interp/m98m99/05-M98-loops/test.ngc",
+    "LinuxCNC 2.9 starts each M98 L repetition of an incremental (G91) canned cycle from the \
+     Z of the first repetition (R recomputed from Z 0.25 each time although the tool is at \
+     the R plane 0.5); we use the actual position; not reproduced yet",
+)];
 
 fn corpus_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/peer-corpus")

@@ -11,6 +11,9 @@ use std::sync::Arc;
 
 use crate::math::{Point3, Real, Vector3};
 
+use super::comp::{
+    CompError, CompOutput, Compensator, Plane as CompPlane, PlaneMove, PlaneMoveKind, Side,
+};
 use super::lex::{
     Assign, Block, LexError, Lexer, Message, NUM_PARAMS, NoParams, OKeyword, OWord, ParamRead,
 };
@@ -210,6 +213,15 @@ pub struct Interpreter {
     /// in G18/G19): the start of the next record.
     out_pos: Option<[Real; 6]>,
     comp_on: bool,
+    /// Cutter radius compensation in effect (G41/G42 … G40).
+    comp: Option<Compensator<CompPayload>>,
+    /// The plane compensation works in.
+    comp_plane: CompPlane,
+    /// The programmed current point (program coordinates, mm) while compensation or its
+    /// exit move decides it (the machine is then elsewhere).
+    prog_override: Option<[Real; 6]>,
+    /// After G40: the next move is the exit move and must be straight.
+    exit_pending: bool,
     // control flow
     frames: Vec<Frame>,
     loops: HashMap<(usize, String), LoopState>,
@@ -221,6 +233,20 @@ pub struct Interpreter {
     first_line: bool,
     main_title: bool,
     blocks: u64,
+}
+
+/// What the interpreter attaches to a move or event held by the compensator.
+#[derive(Clone, Debug)]
+struct CompPayload {
+    line: usize,
+    n: Option<Real>,
+    file: usize,
+    feed: Option<Real>,
+    per_rev: bool,
+    /// Program A B C at the end of the move.
+    abc: [Real; 3],
+    /// Set for a held event.
+    event: Option<Event>,
 }
 
 /// A located error for the current line.
@@ -331,6 +357,10 @@ impl Interpreter {
             mpos,
             out_pos: None,
             comp_on: false,
+            comp: None,
+            comp_plane: CompPlane::Xy,
+            prog_override: None,
+            exit_pending: false,
             frames: Vec::new(),
             loops: HashMap::new(),
             ifs: HashMap::new(),
@@ -375,6 +405,14 @@ impl Interpreter {
     }
 
     fn event(&mut self, call: &'static str, args: Vec<EventArg>) {
+        if self.comp.is_some() {
+            let mut payload = self.payload(None, &[0.0; 6]);
+            payload.event = Some(Event { call, args });
+            if let Some(c) = self.comp.as_mut() {
+                c.push_event(payload);
+            }
+            return;
+        }
         let rec = Record {
             body: RecordBody::Event(Event { call, args }),
             path: self.files[self.cur].path.clone(),
@@ -483,7 +521,10 @@ impl Interpreter {
     }
 
     fn prog(&self) -> [Real; 6] {
-        self.to_program(&self.mpos)
+        match self.prog_override {
+            Some(p) => p,
+            None => self.to_program(&self.mpos),
+        }
     }
 
     fn col(&self, byte: usize) -> usize {
@@ -1164,6 +1205,197 @@ impl Interpreter {
         self.seek(f.ret)
     }
 
+    // ------------------------------------------------------------------ compensation
+
+    fn payload(&self, feed: Option<Real>, end_p: &[Real; 6]) -> CompPayload {
+        CompPayload {
+            line: self.line_no,
+            n: self.line_n,
+            file: self.cur,
+            feed,
+            per_rev: self.feed_mode == FeedMode::PerRev,
+            abc: [end_p[3], end_p[4], end_p[5]],
+            event: None,
+        }
+    }
+
+    fn comp_err(&self, b: &Block, code: i32, e: CompError) -> LineErr {
+        self.err_g(b, code, e.to_string())
+    }
+
+    fn push_comp(&mut self, mv: PlaneMove<CompPayload>, b: &Block, code: i32) -> LR<()> {
+        let r = match self.comp.as_mut() {
+            Some(c) => c.push_move(mv),
+            None => Ok(()),
+        };
+        r.map_err(|e| self.comp_err(b, code, e))
+    }
+
+    /// G40 / G41 / G42 / G41.1 / G42.1.
+    fn comp_change(&mut self, code: i32, b: &Block) -> LR<()> {
+        if code == 400 {
+            self.comp_on = false;
+            if let Some(mut c) = self.comp.take() {
+                // events of this block before the G40 stay in order
+                let end = c.finish().map_err(|e| self.comp_err(b, code, e))?;
+                self.comp = Some(c);
+                self.flush_comp();
+                self.comp = None;
+                self.exit_pending = end.exit_must_be_straight;
+                if !self.exit_pending {
+                    self.prog_override = None;
+                }
+            }
+            return Ok(());
+        }
+        if self.comp_on {
+            return Err(self.err_g(b, code, "Cannot turn cutter radius comp on when already on"));
+        }
+        let plane = match self.plane {
+            Plane::Xy => CompPlane::Xy,
+            Plane::Xz => CompPlane::Zx,
+            Plane::Yz => CompPlane::Yz,
+        };
+        plane
+            .check_comp_allowed()
+            .map_err(|e| self.comp_err(b, code, e))?;
+        let side = if matches!(code, 410 | 411) {
+            Side::Left
+        } else {
+            Side::Right
+        };
+        let radius = if matches!(code, 411 | 421) {
+            let Some(d) = b.word(b'd') else {
+                return Err(self.err_g(b, code, "D word missing with G41.1 or G42.1"));
+            };
+            d * self.u / 2.0
+        } else {
+            let t = match b.word(b'd') {
+                Some(d) => {
+                    if d < 0.0 || d.fract() != 0.0 {
+                        return Err(self.err_word(b, b'd', "D word must be a positive integer"));
+                    }
+                    d as i32
+                }
+                None => self.tool,
+            };
+            if t == 0 {
+                0.0
+            } else {
+                match self.opts.tool_table.tools.get(&t) {
+                    Some(e) => e.diameter * self.ext / 2.0,
+                    None => {
+                        return Err(self.err_word(
+                            b,
+                            b'd',
+                            format!("Requested tool {t} not found in the tool table"),
+                        ));
+                    }
+                }
+            }
+        };
+        // a pending exit move is replaced by the new entry
+        self.exit_pending = false;
+        let p = self.prog();
+        let (start, along) = plane.split([p[0], p[1], p[2]]);
+        let c =
+            Compensator::new(side, radius, start, along).map_err(|e| self.comp_err(b, code, e))?;
+        self.comp = Some(c);
+        self.comp_plane = plane;
+        self.comp_on = true;
+        self.prog_override = Some(p);
+        Ok(())
+    }
+
+    /// Emits what the compensator has released.
+    fn flush_comp(&mut self) {
+        let Some(mut c) = self.comp.take() else {
+            return;
+        };
+        let outs: Vec<CompOutput<CompPayload>> = c.drain().collect();
+        let plane = self.comp_plane;
+        let (save_line, save_n, save_cur) = (self.line_no, self.line_n, self.cur);
+        for o in outs {
+            match o {
+                CompOutput::Event(p) => {
+                    self.line_no = p.line;
+                    self.line_n = p.n;
+                    self.cur = p.file;
+                    if let Some(e) = p.event {
+                        self.event(e.call, e.args);
+                    }
+                }
+                CompOutput::Straight {
+                    rapid,
+                    end,
+                    along,
+                    payload,
+                } => {
+                    self.line_no = payload.line;
+                    self.line_n = payload.n;
+                    self.cur = payload.file;
+                    let xyz = plane.join(end, along);
+                    let q = [
+                        xyz[0],
+                        xyz[1],
+                        xyz[2],
+                        payload.abc[0],
+                        payload.abc[1],
+                        payload.abc[2],
+                    ];
+                    let m = self.to_machine(&q);
+                    let kind = if rapid {
+                        MotionKind::Rapid
+                    } else {
+                        MotionKind::Linear
+                    };
+                    let feed = if rapid { None } else { payload.feed };
+                    self.emit_line(kind, m, feed);
+                }
+                CompOutput::Arc {
+                    center,
+                    ccw,
+                    turns,
+                    end,
+                    along,
+                    payload,
+                } => {
+                    self.line_no = payload.line;
+                    self.line_n = payload.n;
+                    self.cur = payload.file;
+                    let xyz = plane.join(end, along);
+                    let q = [
+                        xyz[0],
+                        xyz[1],
+                        xyz[2],
+                        payload.abc[0],
+                        payload.abc[1],
+                        payload.abc[2],
+                    ];
+                    let cxyz = plane.join(center, along);
+                    let (a1, a2, _) = self.plane.axes();
+                    let turn = if ccw { turns as i32 } else { -(turns as i32) };
+                    let (end_m, geom, _) =
+                        self.arc_geometry(&q, cxyz[a1], cxyz[a2], turn.max(-1_000_000));
+                    let mot = Motion {
+                        kind: MotionKind::Arc,
+                        start: AxisValues::from_array(self.mpos),
+                        end: AxisValues::from_array(end_m),
+                        feed: payload.feed,
+                        feed_per_rev: payload.per_rev,
+                        arc: Some(geom),
+                    };
+                    self.motion(mot);
+                    self.mpos = end_m;
+                }
+            }
+        }
+        self.line_no = save_line;
+        self.line_n = save_n;
+        self.cur = save_cur;
+        self.comp = Some(c);
+    }
+
     // ------------------------------------------------------------------ blocks
 
     fn exec_block(&mut self, b: &Block) -> LR<()> {
@@ -1450,12 +1682,9 @@ impl Interpreter {
             };
             self.event("USE_LENGTH_UNITS", vec![EventArg::Text(name.into())]);
         }
-        // 13. cutter compensation (recorded; not applied to the path)
+        // 13. cutter compensation
         if let Some(c) = g.comp {
-            if c != 400 && self.comp_on {
-                return Err(self.err_g(b, c, "Cannot turn cutter radius comp on when already on"));
-            }
-            self.comp_on = c != 400;
+            self.comp_change(c, b)?;
         }
         // 14. tool length
         if let Some(l) = g.length {
@@ -1559,6 +1788,13 @@ impl Interpreter {
         }
         if run_motion && let Some(m) = self.motion {
             self.do_motion(m, b, g53, g.motion.is_some())?;
+            if self.exit_pending && matches!(m, 0 | 10) {
+                self.exit_pending = false;
+                self.prog_override = None;
+            }
+        }
+        if self.comp.is_some() {
+            self.flush_comp();
         }
         if g.motion == Some(800) && axis_given {
             return Err(self.err_g(b, 800, "Cannot use axis values with G80"));
@@ -1608,6 +1844,22 @@ impl Interpreter {
                 }
             }
             return Ok(());
+        }
+        if let Some((m, _)) = stop
+            && let Some(c) = self.comp.as_mut()
+        {
+            let r = if matches!(m, 2 | 30) {
+                c.finish().map(|_| ())
+            } else {
+                c.release_held()
+            };
+            r.map_err(|e| lerr(1, "", e.to_string()))?;
+            self.flush_comp();
+            if matches!(m, 2 | 30) {
+                self.comp = None;
+                self.prog_override = None;
+                self.exit_pending = false;
+            }
         }
         if let Some((m, _)) = stop {
             match m {
@@ -1958,6 +2210,29 @@ impl Interpreter {
 
     fn do_motion(&mut self, m: i32, b: &Block, g53: bool, explicit: bool) -> LR<()> {
         match m {
+            0 | 10 if self.comp.is_some() => {
+                if g53 {
+                    return Err(self.err_g(b, 530, "Cannot use g53 with cutter radius comp"));
+                }
+                let end = self.target(b, false);
+                let feed = if m == 0 {
+                    None
+                } else {
+                    let len = dist(&self.prog(), &end);
+                    Some(self.feed_for(b, 10, len)?)
+                };
+                let plane = self.comp_plane;
+                let (end2, along) = plane.split([end[0], end[1], end[2]]);
+                let payload = self.payload(feed, &end);
+                let mv = PlaneMove {
+                    kind: PlaneMoveKind::Straight { rapid: m == 0 },
+                    end: end2,
+                    along,
+                    payload,
+                };
+                self.push_comp(mv, b, m)?;
+                self.prog_override = Some(end);
+            }
             0 | 10 => {
                 let end_m = if g53 {
                     let mut e = self.mpos;
@@ -1979,7 +2254,12 @@ impl Interpreter {
                     self.emit_line(MotionKind::Linear, end_m, Some(f));
                 }
             }
-            20 | 30 => self.arc(m, b)?,
+            20 | 30 => {
+                if self.exit_pending {
+                    return Err(self.err_g(b, m, CompError::ArcAfterCompOff.to_string()));
+                }
+                self.arc(m, b)?
+            }
             331 => {
                 let Some(k) = b.word(b'k') else {
                     return Err(self.err_g(b, 331, "K word missing with G33.1"));
@@ -2037,7 +2317,7 @@ impl Interpreter {
     }
 
     fn arc(&mut self, m: i32, b: &Block) -> LR<()> {
-        let (a1, a2, an) = self.plane.axes();
+        let (a1, a2, _) = self.plane.axes();
         let off_letters = match self.plane {
             Plane::Xy => (b'i', b'j'),
             Plane::Xz => (b'k', b'i'),
@@ -2147,12 +2427,58 @@ impl Interpreter {
                 return Err(self.err_g(b, code, msg));
             }
         }
-        // machine geometry
-        let mut cen_p = end_p;
+        let (end_m, geom, len) = self.arc_geometry(&end_p, c1, c2, turn);
+        let f = self.feed_for(b, code, len)?;
+        if self.comp.is_some() {
+            let plane = self.comp_plane;
+            let (end2, along) = plane.split([end_p[0], end_p[1], end_p[2]]);
+            let mut cen = end_p;
+            cen[a1] = c1;
+            cen[a2] = c2;
+            let (center, _) = plane.split([cen[0], cen[1], cen[2]]);
+            let payload = self.payload(Some(f), &end_p);
+            let mv = PlaneMove {
+                kind: PlaneMoveKind::Arc {
+                    center,
+                    ccw: turn > 0,
+                    turns: turn.unsigned_abs(),
+                },
+                end: end2,
+                along,
+                payload,
+            };
+            self.push_comp(mv, b, code)?;
+            self.prog_override = Some(end_p);
+            return Ok(());
+        }
+        let mot = Motion {
+            kind: MotionKind::Arc,
+            start: AxisValues::from_array(self.mpos),
+            end: AxisValues::from_array(end_m),
+            feed: Some(f),
+            feed_per_rev: self.feed_mode == FeedMode::PerRev,
+            arc: Some(geom),
+        };
+        self.motion(mot);
+        self.mpos = end_m;
+        Ok(())
+    }
+
+    /// Machine geometry of an arc from the machine position to program point `end_p`
+    /// about the program-plane centre (`c1`, `c2`): end, geometry, length (mm).
+    fn arc_geometry(
+        &self,
+        end_p: &[Real; 6],
+        c1: Real,
+        c2: Real,
+        turn: i32,
+    ) -> ([Real; 6], ArcGeom, Real) {
+        let (a1, a2, an) = self.plane.axes();
+        let mut cen_p = *end_p;
         cen_p[a1] = c1;
         cen_p[a2] = c2;
         let cm = self.to_machine(&cen_p);
-        let end_m = self.to_machine(&end_p);
+        let end_m = self.to_machine(end_p);
         let start_m = self.mpos;
         let mut normal = [0.0; 3];
         normal[an] = 1.0;
@@ -2193,26 +2519,16 @@ impl Interpreter {
         let sweep = te - ts + 2.0 * std::f64::consts::PI * full as Real;
         let helix = end_m[an] - start_m[an];
         let len = ((sweep * radius).powi(2) + helix * helix).sqrt();
-        let f = self.feed_for(b, code, len)?;
-        let mot = Motion {
-            kind: MotionKind::Arc,
-            start: AxisValues::from_array(start_m),
-            end: AxisValues::from_array(end_m),
-            feed: Some(f),
-            feed_per_rev: self.feed_mode == FeedMode::PerRev,
-            arc: Some(ArcGeom {
-                center: Point3::new(cm[0], cm[1], cm[2]),
-                normal: Vector3::new(normal[0], normal[1], normal[2]),
-                plane: self.plane,
-                rotation: turn,
-                radius,
-                radius_end,
-                sweep_deg: sweep.to_degrees(),
-            }),
+        let geom = ArcGeom {
+            center: Point3::new(cm[0], cm[1], cm[2]),
+            normal: Vector3::new(normal[0], normal[1], normal[2]),
+            plane: self.plane,
+            rotation: turn,
+            radius,
+            radius_end,
+            sweep_deg: sweep.to_degrees(),
         };
-        self.motion(mot);
-        self.mpos = end_m;
-        Ok(())
+        (end_m, geom, len)
     }
 
     fn cycle(&mut self, m: i32, b: &Block, explicit: bool) -> LR<()> {

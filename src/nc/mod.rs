@@ -71,6 +71,7 @@
 //! offset; G5.x NURBS, G33 spindle-synchronised motion, G76, lathe modes, U V W axes and
 //! Python remaps are not supported.
 
+pub mod comp;
 pub mod interp;
 pub mod lex;
 pub mod output;
