@@ -9,7 +9,7 @@ use std::process::ExitCode;
 use std::sync::Mutex;
 use twinmill::cloud::read_cloud_file;
 use twinmill::math::{Aabb, Point3};
-use twinmill::nc::Program;
+use twinmill::nc::{Interpreter, LengthUnit, Program, write_jsonl};
 use twinmill::output::{json_bytes, ply_bytes, write_files, write_outcome};
 use twinmill::pipeline::{
     FitRequest, Selection, Shape, fit_cloud, machine_part, run, scanner_study,
@@ -47,8 +47,48 @@ struct SceneArgs {
     verbose: bool,
 }
 
+/// Which NC command.
+#[derive(Subcommand)]
+enum NcCommand {
+    /// Interpret a program and print its machine-coordinate motion (LinuxCNC dialect).
+    Motion {
+        /// The NC program (.ngc).
+        program: PathBuf,
+        /// LinuxCNC tool table (.tbl).
+        #[arg(long)]
+        tool_table: Option<PathBuf>,
+        /// LinuxCNC parameter file (.var).
+        #[arg(long)]
+        var: Option<PathBuf>,
+        /// INI file: [RS274NGC] SUBROUTINE_PATH and DISABLE_FANUC_STYLE_SUB.
+        #[arg(long)]
+        ini: Option<PathBuf>,
+        /// Block delete switch on: skip lines starting with '/'.
+        #[arg(long)]
+        block_delete: bool,
+        /// Unit of tool-table / var-file lengths: mm (default) or inch (LinuxCNC's
+        /// standalone rs274).
+        #[arg(long, default_value = "mm", value_parser = ["mm", "inch"])]
+        external_units: String,
+        /// Do not accept Fanuc-style O1000 ... M99 subprograms and M98 calls.
+        #[arg(long)]
+        no_fanuc_subs: bool,
+        /// Print JSON lines (the only output format for now).
+        #[arg(long)]
+        jsonl: bool,
+        /// Also print non-motion records (tool, spindle, offsets, ...).
+        #[arg(long)]
+        events: bool,
+    },
+}
+
 #[derive(Subcommand)]
 enum Command {
+    /// NC program tools.
+    Nc {
+        #[command(subcommand)]
+        command: NcCommand,
+    },
     /// Simulate a scene's program on its deviated machine, scan the part, fit the faces and
     /// identify the deviations; write report.json, cloud.ply and faces.png.
     Run {
@@ -213,6 +253,55 @@ fn fail(msg: impl std::fmt::Display) -> ExitCode {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
+        Command::Nc {
+            command:
+                NcCommand::Motion {
+                    program,
+                    tool_table,
+                    var,
+                    ini,
+                    block_delete,
+                    external_units,
+                    no_fanuc_subs,
+                    jsonl: _,
+                    events,
+                },
+        } => {
+            let unit = if external_units == "inch" {
+                LengthUnit::Inch
+            } else {
+                LengthUnit::Mm
+            };
+            let mut opts = match twinmill::nc::options_from_files(
+                tool_table.as_deref(),
+                var.as_deref(),
+                ini.as_deref(),
+                unit,
+            ) {
+                Ok(o) => o,
+                Err(e) => return fail(e),
+            };
+            opts.block_delete = block_delete;
+            if no_fanuc_subs {
+                opts.fanuc_subs = false;
+            }
+            let interp = match Interpreter::from_file(&program, opts) {
+                Ok(i) => i,
+                Err(e) => return fail(e),
+            };
+            let stdout = std::io::stdout();
+            let mut out = std::io::BufWriter::with_capacity(1 << 16, stdout.lock());
+            let r = write_jsonl(interp, events, |s| out.write_all(s.as_bytes()));
+            let _ = out.flush();
+            match r {
+                Ok(Ok(())) => ExitCode::SUCCESS,
+                Ok(Err(e)) => {
+                    let _ = write!(std::io::stderr(), "{}", e.full_report());
+                    ExitCode::FAILURE
+                }
+                Err(e) => fail(e),
+            }
+        }
         Command::Run {
             args:
                 SceneArgs {

@@ -26,7 +26,7 @@
 
 use crate::kinematics::{AxisKind, Chain};
 use crate::math::{Aabb, Isometry3, Point3, Real, UnitVector3, Vector3, tol};
-use crate::nc::{AxisLetter, AxisValues, Move};
+use crate::nc::{AxisLetter, AxisValues, Move, MoveKind};
 use crate::progress::Progress;
 use crate::stock::{Cutter, RayCut, TriDexel};
 use crate::tool::{Tool, ToolKind};
@@ -568,6 +568,14 @@ pub fn sweep_program(
     if !(bound > 0.0 && bound <= 1.0) {
         return Err(SweepError::BadBound(bound));
     }
+    // Arcs are swept as chords within the rotary step bound.
+    let chords: Vec<Move>;
+    let moves: &[Move] = if moves.iter().any(|m| matches!(m.kind, MoveKind::Arc(_))) {
+        chords = moves.iter().flat_map(|m| m.chords(bound)).collect();
+        &chords
+    } else {
+        moves
+    };
     let mut report = SweepReport::default();
     progress.start("sweep", moves.len() as u64);
     for mv in moves {

@@ -725,10 +725,10 @@ fn bad_input_fails_cleanly_with_a_located_message() {
         program
             .replace(
                 "G0 Z0\nG1 X30 F600 (cut at A = 0",
-                "G0 Z0\nG2 X30 F600 (cut at A = 0",
+                "G0 Z0\nG12 X30 F600 (cut at A = 0",
             )
             .as_bytes(),
-        &["mdx50-step.ngc:9:1:", "G2"],
+        &["mdx50-step.ngc:9:1:", "G12"],
     );
     check_bad(
         "no-such-axis",
@@ -839,7 +839,22 @@ fn module_dependencies_point_down_the_pipeline() {
             .iter()
             .position(|m| *m == stem)
             .unwrap_or_else(|| panic!("module {stem} is not placed in the architecture order"));
-        let text = std::fs::read_to_string(&path).expect("source");
+        // a module is a file or a folder of files (mod.rs and submodules)
+        let text = if path.is_dir() {
+            let mut files: Vec<_> = std::fs::read_dir(&path)
+                .expect("module folder")
+                .map(|e| e.expect("entry").path())
+                .filter(|p| p.extension().is_some_and(|e| e == "rs"))
+                .collect();
+            files.sort();
+            files
+                .iter()
+                .map(|p| std::fs::read_to_string(p).expect("source"))
+                .collect::<Vec<_>>()
+                .join("\n")
+        } else {
+            std::fs::read_to_string(&path).expect("source")
+        };
         let code: String = text
             .lines()
             .filter(|l| !l.trim_start().starts_with("//"))

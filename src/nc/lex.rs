@@ -1,0 +1,904 @@
+//! Byte-level reading of one RS274/NGC line into a [`Block`].
+//!
+//! A line is first normalised into a reusable buffer (spaces and tabs outside comments
+//! dropped, letters lower-cased, the source byte offset of every kept byte remembered), then
+//! read word by word. Values (`X[1+#2]`, `X#<a>`, `Xsin[30]`) are evaluated while reading, as
+//! LinuxCNC does: parameter reads see the values from before the line, and parameter
+//! assignments on the line are collected in [`Block::assigns`] to be applied after the whole
+//! line has been read. Words live in fixed arrays, so reading a plain motion block does not
+//! allocate once the buffers have grown.
+
+use crate::math::Real;
+
+/// Number of numbered parameters (`#1` … `#5601`), as LinuxCNC.
+pub(crate) const NUM_PARAMS: usize = 5602;
+
+/// Two values compare equal in `EQ`/`NE` when closer than this (LinuxCNC's tolerance for
+/// expression equality, in program units).
+const EXPR_EQUAL_TOL: Real = 1e-4;
+
+/// A parameter index must be this close to an integer.
+const PARAM_INDEX_TOL: Real = 1e-4;
+
+/// Maximum number of G codes (and of M codes) kept for one block.
+pub(crate) const MAX_CODES: usize = 16;
+
+/// Read access to parameters while a line is read.
+pub(crate) trait ParamRead {
+    /// Value of `#n` (1 ≤ n < [`NUM_PARAMS`]).
+    fn numbered(&self, n: usize) -> Real;
+    /// Value of `#<name>` (name lower-case, without spaces), or an error message.
+    fn named(&self, name: &str) -> Result<Real, String>;
+    /// Whether `#<name>` exists.
+    fn exists(&self, name: &str) -> bool;
+}
+
+/// Parameters for syntax-only checking: every read gives 0.
+pub(crate) struct NoParams;
+
+impl ParamRead for NoParams {
+    fn numbered(&self, _n: usize) -> Real {
+        0.0
+    }
+    fn named(&self, _name: &str) -> Result<Real, String> {
+        Ok(0.0)
+    }
+    fn exists(&self, _name: &str) -> bool {
+        true
+    }
+}
+
+/// An error while reading a line: byte range in the original line and a message.
+#[derive(Debug, Clone)]
+pub(crate) struct LexError {
+    /// Byte offset (original line) where the offending word starts.
+    pub start: usize,
+    /// Byte offset just after the offending word.
+    pub end: usize,
+    /// LinuxCNC-style message.
+    pub message: String,
+}
+
+/// Keyword of an O-word line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum OKeyword {
+    /// `sub`
+    Sub,
+    /// `endsub`
+    EndSub,
+    /// `call`
+    Call,
+    /// `do`
+    Do,
+    /// `while`
+    While,
+    /// `endwhile`
+    EndWhile,
+    /// `if`
+    If,
+    /// `elseif`
+    ElseIf,
+    /// `else`
+    Else,
+    /// `endif`
+    EndIf,
+    /// `repeat`
+    Repeat,
+    /// `endrepeat`
+    EndRepeat,
+    /// `break`
+    Break,
+    /// `continue`
+    Continue,
+    /// `return`
+    Return,
+    /// No keyword: a Fanuc-style program number `O1000` (subprogram start).
+    Fanuc,
+}
+
+/// The O-word of a line.
+#[derive(Debug, Clone)]
+pub(crate) struct OWord {
+    /// Label: the number as text (`100`) or the name (`<name>` lower-case, spaces removed).
+    pub label: String,
+    /// Keyword.
+    pub keyword: OKeyword,
+    /// Value of the bracketed condition / count / return value, if any.
+    pub value: Option<Real>,
+    /// Call arguments.
+    pub args: Vec<Real>,
+}
+
+/// A parameter assignment collected on a line.
+#[derive(Debug, Clone)]
+pub(crate) enum Assign {
+    /// `#n = value`
+    Numbered(usize, Real),
+    /// `#<name> = value` (name lower-case)
+    Named(String, Real),
+}
+
+/// Comment kinds that do something.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum Message {
+    /// `(MSG, text)`
+    Msg(String),
+    /// `(DEBUG, text)` or `(PRINT, text)` (parameters not substituted).
+    Debug(String),
+}
+
+/// One read line.
+#[derive(Debug, Default)]
+pub(crate) struct Block {
+    /// `/` at the start.
+    pub block_delete: bool,
+    /// Letter words a..z (not g, m, n, o), then the polar words `@` (26) and `^` (27),
+    /// value in program units.
+    pub words: [Option<Real>; 28],
+    /// Byte offset of each word in the original line.
+    pub word_pos: [u32; 28],
+    /// G codes ×10 (`G38.2` = 382) with their byte offsets.
+    pub g: [(i32, u32); MAX_CODES],
+    /// Number of G codes.
+    pub ng: usize,
+    /// M codes with their byte offsets.
+    pub m: [(i32, u32); MAX_CODES],
+    /// Number of M codes.
+    pub nm: usize,
+    /// N word.
+    pub n: Option<Real>,
+    /// O word.
+    pub o: Option<OWord>,
+    /// Byte offset of the O word.
+    pub o_pos: usize,
+    /// Parameter assignments, in order.
+    pub assigns: Vec<Assign>,
+    /// Active comment.
+    pub message: Option<Message>,
+    /// The line had anything but blanks and comments.
+    pub has_words: bool,
+}
+
+impl Block {
+    fn clear(&mut self) {
+        self.block_delete = false;
+        self.words = [None; 28];
+        self.ng = 0;
+        self.nm = 0;
+        self.n = None;
+        self.o = None;
+        self.assigns.clear();
+        self.message = None;
+        self.has_words = false;
+    }
+
+    /// Value of word `c` (lower-case letter, `@` or `^`).
+    pub fn word(&self, c: u8) -> Option<Real> {
+        self.words[slot(c)]
+    }
+
+    /// Byte offset of word `c`.
+    pub fn pos(&self, c: u8) -> usize {
+        self.word_pos[slot(c)] as usize
+    }
+
+    /// The G codes.
+    pub fn gs(&self) -> &[(i32, u32)] {
+        &self.g[..self.ng]
+    }
+
+    /// The M codes.
+    pub fn ms(&self) -> &[(i32, u32)] {
+        &self.m[..self.nm]
+    }
+}
+
+/// Index of word `c` in [`Block::words`].
+fn slot(c: u8) -> usize {
+    match c {
+        b'@' => 26,
+        b'^' => 27,
+        _ => (c.wrapping_sub(b'a') as usize).min(25),
+    }
+}
+
+/// Reusable reader of lines.
+#[derive(Default)]
+pub(crate) struct Lexer {
+    norm: Vec<u8>,
+    cols: Vec<u32>,
+    /// The block of the last line read.
+    pub block: Block,
+}
+
+/// Reading position inside the normalised line.
+struct Cursor<'a, P: ParamRead + ?Sized> {
+    s: &'a [u8],
+    cols: &'a [u32],
+    orig_len: usize,
+    i: usize,
+    params: &'a P,
+}
+
+type LResult<T> = Result<T, LexError>;
+
+impl<P: ParamRead + ?Sized> Cursor<'_, P> {
+    fn peek(&self) -> Option<u8> {
+        self.s.get(self.i).copied()
+    }
+    fn peek_at(&self, k: usize) -> Option<u8> {
+        self.s.get(self.i + k).copied()
+    }
+    fn orig(&self, i: usize) -> usize {
+        self.cols.get(i).map_or(self.orig_len, |&c| c as usize)
+    }
+    fn err(&self, start: usize, message: impl Into<String>) -> LexError {
+        let end = self.orig(self.i.max(start + 1).min(self.s.len()));
+        LexError {
+            start: self.orig(start),
+            end: end
+                .max(self.orig(start) + 1)
+                .min(self.orig_len.max(self.orig(start) + 1)),
+            message: message.into(),
+        }
+    }
+
+    /// A plain number: optional sign, digits, optional point and digits.
+    fn number(&mut self) -> LResult<Real> {
+        let start = self.i;
+        let mut neg = false;
+        if let Some(c @ (b'+' | b'-')) = self.peek() {
+            neg = c == b'-';
+            self.i += 1;
+        }
+        let mut mant: u64 = 0;
+        let mut digits = 0usize;
+        let mut frac = 0i32;
+        let mut exact = true;
+        let mut seen_point = false;
+        let num_start = self.i;
+        while let Some(c) = self.peek() {
+            if c.is_ascii_digit() {
+                if mant < (1u64 << 53) / 10 {
+                    mant = mant * 10 + (c - b'0') as u64;
+                    if seen_point {
+                        frac += 1;
+                    }
+                } else {
+                    exact = false;
+                }
+                digits += 1;
+            } else if c == b'.' && !seen_point {
+                seen_point = true;
+            } else {
+                break;
+            }
+            self.i += 1;
+        }
+        if digits == 0 {
+            let text = String::from_utf8_lossy(&self.s[start..self.i]).into_owned();
+            return Err(self.err(
+                start,
+                format!("bad number format (conversion failed) parsing '{text}'"),
+            ));
+        }
+        let v = if exact && frac <= 22 {
+            mant as Real / POW10[frac as usize]
+        } else {
+            let text = std::str::from_utf8(&self.s[num_start..self.i]).unwrap_or("0");
+            let t = text.strip_suffix('.').unwrap_or(text);
+            t.parse::<Real>().unwrap_or(Real::NAN)
+        };
+        if !v.is_finite() {
+            return Err(self.err(start, "Number out of range"));
+        }
+        Ok(if neg { -v } else { v })
+    }
+
+    /// A real value: number, `[expr]`, `#param`, unary function, or signed value.
+    fn real_value(&mut self) -> LResult<Real> {
+        let start = self.i;
+        match self.peek() {
+            None => Err(self.err(start, "Unexpected end of line reading value")),
+            Some(b'[') => self.expression(),
+            Some(b'#') => self.parameter(),
+            Some(c @ (b'+' | b'-')) if !matches!(self.peek_at(1), Some(b'0'..=b'9' | b'.')) => {
+                self.i += 1;
+                let v = self.real_value()?;
+                Ok(if c == b'-' { -v } else { v })
+            }
+            Some(b'a'..=b'z') => self.unary(),
+            Some(_) => self.number(),
+        }
+    }
+
+    /// `#n`, `##n`, `#[expr]`, `#<name>`.
+    fn parameter(&mut self) -> LResult<Real> {
+        let start = self.i;
+        self.i += 1; // '#'
+        if self.peek() == Some(b'<') {
+            let name = self.name()?;
+            return self.params.named(&name).map_err(|m| self.err(start, m));
+        }
+        let idx = self.param_index(start)?;
+        Ok(self.params.numbered(idx))
+    }
+
+    /// The index after `#`.
+    fn param_index(&mut self, start: usize) -> LResult<usize> {
+        let v = self.real_value()?;
+        let r = v.round();
+        if !(1.0..NUM_PARAMS as Real).contains(&r) || (v - r).abs() > PARAM_INDEX_TOL {
+            return Err(self.err(start, "Parameter number out of range"));
+        }
+        Ok(r as usize)
+    }
+
+    /// `<name>` (cursor on `<`); returns the lower-case name.
+    fn name(&mut self) -> LResult<String> {
+        let start = self.i;
+        self.i += 1;
+        let from = self.i;
+        while let Some(c) = self.peek() {
+            if c == b'>' {
+                let name = String::from_utf8_lossy(&self.s[from..self.i]).into_owned();
+                self.i += 1;
+                return Ok(name);
+            }
+            self.i += 1;
+        }
+        Err(self.err(start, "Named parameter not terminated"))
+    }
+
+    /// `[ expression ]` (cursor on `[`).
+    fn expression(&mut self) -> LResult<Real> {
+        let start = self.i;
+        self.i += 1;
+        let v = self.binary(0)?;
+        if self.peek() != Some(b']') {
+            return Err(self.err(start, "Unclosed expression"));
+        }
+        self.i += 1;
+        Ok(v)
+    }
+
+    /// Operator at the cursor: (precedence, op id, length).
+    fn operator(&self) -> Option<(u8, u8, usize)> {
+        let rest = &self.s[self.i..];
+        let ops: [(&[u8], u8, u8); 15] = [
+            (b"**", 6, 0),
+            (b"*", 5, 1),
+            (b"/", 5, 2),
+            (b"mod", 5, 3),
+            (b"+", 4, 4),
+            (b"-", 4, 5),
+            (b"eq", 3, 6),
+            (b"ne", 3, 7),
+            (b"gt", 3, 8),
+            (b"ge", 3, 9),
+            (b"lt", 3, 10),
+            (b"le", 3, 11),
+            (b"and", 2, 12),
+            (b"or", 2, 13),
+            (b"xor", 2, 14),
+        ];
+        ops.iter()
+            .find(|(t, _, _)| rest.starts_with(t))
+            .map(|(t, p, id)| (*p, *id, t.len()))
+    }
+
+    /// Precedence climbing, all operators left-associative (as LinuxCNC).
+    fn binary(&mut self, min_prec: u8) -> LResult<Real> {
+        let mut lhs = self.real_value()?;
+        loop {
+            if self.peek() == Some(b']') {
+                return Ok(lhs);
+            }
+            let op_start = self.i;
+            let Some((prec, id, len)) = self.operator() else {
+                return Err(self.err(op_start, "Unknown operation"));
+            };
+            if prec <= min_prec {
+                return Ok(lhs);
+            }
+            self.i += len;
+            let rhs = self.binary(prec)?;
+            lhs = self.apply(id, lhs, rhs, op_start)?;
+        }
+    }
+
+    fn apply(&self, id: u8, a: Real, b: Real, at: usize) -> LResult<Real> {
+        let t = |c: bool| if c { 1.0 } else { 0.0 };
+        Ok(match id {
+            0 => {
+                if a < 0.0 && b.fract() != 0.0 {
+                    return Err(
+                        self.err(at, "Attempt to raise negative number to non-integer power")
+                    );
+                }
+                a.powf(b)
+            }
+            1 => a * b,
+            2 => {
+                if b == 0.0 {
+                    return Err(self.err(at, "Attempt to divide by zero"));
+                }
+                a / b
+            }
+            3 => {
+                if b == 0.0 {
+                    return Err(self.err(at, "Attempt to divide by zero"));
+                }
+                let r = a % b;
+                if r < 0.0 { r + b.abs() } else { r }
+            }
+            4 => a + b,
+            5 => a - b,
+            6 => t((a - b).abs() < EXPR_EQUAL_TOL),
+            7 => t((a - b).abs() >= EXPR_EQUAL_TOL),
+            8 => t(a > b),
+            9 => t(a >= b),
+            10 => t(a < b),
+            11 => t(a <= b),
+            12 => t(a != 0.0 && b != 0.0),
+            13 => t(a != 0.0 || b != 0.0),
+            _ => t((a != 0.0) != (b != 0.0)),
+        })
+    }
+
+    /// A unary function (cursor on its first letter).
+    fn unary(&mut self) -> LResult<Real> {
+        let start = self.i;
+        let rest = &self.s[self.i..];
+        const FUNCS: [&[u8]; 14] = [
+            b"abs", b"acos", b"asin", b"atan", b"cos", b"exp", b"fix", b"fup", b"ln", b"round",
+            b"sin", b"sqrt", b"tan", b"exists",
+        ];
+        let Some(f) = FUNCS.iter().find(|f| rest.starts_with(f)) else {
+            let c = rest[0] as char;
+            return Err(self.err(start, format!("Unknown word starting with {c}")));
+        };
+        self.i += f.len();
+        if self.peek() != Some(b'[') {
+            return Err(self.err(start, "Left bracket missing after unary operation name"));
+        }
+        if *f == b"exists" {
+            self.i += 1;
+            if self.peek() != Some(b'#') {
+                return Err(self.err(self.i, "Expected # reading parameter"));
+            }
+            let v = if self.peek_at(1) == Some(b'<') {
+                self.i += 1;
+                let name = self.name()?;
+                if self.params.exists(&name) { 1.0 } else { 0.0 }
+            } else {
+                self.i += 1;
+                let v = self.real_value()?;
+                let r = v.round();
+                if (1.0..NUM_PARAMS as Real).contains(&r) {
+                    1.0
+                } else {
+                    0.0
+                }
+            };
+            if self.peek() != Some(b']') {
+                return Err(self.err(self.i, "Expected ] reading bracketed parameter"));
+            }
+            self.i += 1;
+            return Ok(v);
+        }
+        let v = self.expression()?;
+        let deg = |x: Real| x.to_radians();
+        let out = match *f {
+            b"abs" => v.abs(),
+            b"acos" => {
+                if !(-1.0..=1.0).contains(&v) {
+                    return Err(self.err(start, "Argument to acos out of range"));
+                }
+                v.acos().to_degrees()
+            }
+            b"asin" => {
+                if !(-1.0..=1.0).contains(&v) {
+                    return Err(self.err(start, "Argument to asin out of range"));
+                }
+                v.asin().to_degrees()
+            }
+            b"atan" => {
+                if self.peek() != Some(b'/') {
+                    return Err(self.err(start, "Slash missing after first atan argument"));
+                }
+                self.i += 1;
+                if self.peek() != Some(b'[') {
+                    return Err(self.err(start, "Left bracket missing after slash with atan"));
+                }
+                let x = self.expression()?;
+                v.atan2(x).to_degrees()
+            }
+            b"cos" => deg(v).cos(),
+            b"exp" => v.exp(),
+            b"fix" => v.floor(),
+            b"fup" => v.ceil(),
+            b"ln" => {
+                if v <= 0.0 {
+                    return Err(self.err(start, "Zero or negative argument to ln"));
+                }
+                v.ln()
+            }
+            b"round" => v.round(),
+            b"sin" => deg(v).sin(),
+            b"sqrt" => {
+                if v < 0.0 {
+                    return Err(self.err(start, "Attempt to take square root of negative number"));
+                }
+                v.sqrt()
+            }
+            _ => deg(v).tan(),
+        };
+        Ok(out)
+    }
+}
+
+/// Powers of ten exactly representable in f64.
+const POW10: [Real; 23] = [
+    1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
+    1e17, 1e18, 1e19, 1e20, 1e21, 1e22,
+];
+
+const O_KEYWORDS: [(&[u8], OKeyword); 15] = [
+    (b"endsub", OKeyword::EndSub),
+    (b"endwhile", OKeyword::EndWhile),
+    (b"endif", OKeyword::EndIf),
+    (b"endrepeat", OKeyword::EndRepeat),
+    (b"elseif", OKeyword::ElseIf),
+    (b"else", OKeyword::Else),
+    (b"sub", OKeyword::Sub),
+    (b"call", OKeyword::Call),
+    (b"do", OKeyword::Do),
+    (b"while", OKeyword::While),
+    (b"if", OKeyword::If),
+    (b"repeat", OKeyword::Repeat),
+    (b"break", OKeyword::Break),
+    (b"continue", OKeyword::Continue),
+    (b"return", OKeyword::Return),
+];
+
+impl Lexer {
+    /// Normalises `line` (without its newline) into the internal buffer; returns the
+    /// comment text for `(MSG,` / `(DEBUG,` detection handled by [`Lexer::read`].
+    fn normalise(&mut self, line: &[u8]) -> LResult<()> {
+        self.norm.clear();
+        self.cols.clear();
+        let mut i = 0;
+        while i < line.len() {
+            let c = line[i];
+            match c {
+                b' ' | b'\t' | b'\r' => {}
+                b'(' => {
+                    let start = i;
+                    let mut j = i + 1;
+                    while j < line.len() && line[j] != b')' {
+                        if line[j] == b'(' {
+                            return Err(LexError {
+                                start: j,
+                                end: j + 1,
+                                message: "Nested comment found".into(),
+                            });
+                        }
+                        j += 1;
+                    }
+                    if j >= line.len() {
+                        return Err(LexError {
+                            start,
+                            end: line.len(),
+                            message: "Unclosed comment found".into(),
+                        });
+                    }
+                    // keep the comment verbatim, marked by '(' and ')'
+                    for (k, &b) in line[start..=j].iter().enumerate() {
+                        self.norm.push(b);
+                        self.cols.push((start + k) as u32);
+                    }
+                    i = j;
+                }
+                b';' => {
+                    for (k, &b) in line[i..].iter().enumerate() {
+                        self.norm.push(b);
+                        self.cols.push((i + k) as u32);
+                    }
+                    break;
+                }
+                _ => {
+                    self.norm.push(c.to_ascii_lowercase());
+                    self.cols.push(i as u32);
+                }
+            }
+            i += 1;
+        }
+        Ok(())
+    }
+
+    /// Reads `line` into [`Lexer::block`].
+    pub fn read<P: ParamRead + ?Sized>(&mut self, line: &[u8], params: &P) -> LResult<()> {
+        self.block.clear();
+        self.normalise(line)?;
+        let norm = std::mem::take(&mut self.norm);
+        let cols = std::mem::take(&mut self.cols);
+        let r = read_block(&norm, &cols, line, params, &mut self.block);
+        self.norm = norm;
+        self.cols = cols;
+        r
+    }
+}
+
+fn comment_message(text: &[u8]) -> Option<Message> {
+    // text is between the parentheses
+    let t = String::from_utf8_lossy(text);
+    let trimmed = t.trim_start();
+    let lower = trimmed.to_ascii_lowercase();
+    for (key, debug) in [("msg,", false), ("debug,", true), ("print,", true)] {
+        if lower.starts_with(key) {
+            let body = trimmed[key.len()..].to_string();
+            return Some(if debug {
+                Message::Debug(body)
+            } else {
+                Message::Msg(body)
+            });
+        }
+    }
+    None
+}
+
+fn read_block<P: ParamRead + ?Sized>(
+    s: &[u8],
+    cols: &[u32],
+    line: &[u8],
+    params: &P,
+    b: &mut Block,
+) -> LResult<()> {
+    let mut c = Cursor {
+        s,
+        cols,
+        orig_len: line.len(),
+        i: 0,
+        params,
+    };
+    if c.peek() == Some(b'/') {
+        b.block_delete = true;
+        c.i += 1;
+    }
+    while let Some(ch) = c.peek() {
+        let start = c.i;
+        match ch {
+            b'(' => {
+                let mut j = c.i + 1;
+                while j < s.len() && s[j] != b')' {
+                    j += 1;
+                }
+                if b.message.is_none() {
+                    b.message = comment_message(&s[c.i + 1..j.min(s.len())]);
+                }
+                c.i = j + 1;
+            }
+            b';' => break,
+            b'#' => {
+                b.has_words = true;
+                c.i += 1;
+                let assign = if c.peek() == Some(b'<') {
+                    let name = c.name()?;
+                    expect_eq(&mut c, start)?;
+                    Assign::Named(name, c.real_value()?)
+                } else {
+                    let idx = c.param_index(start)?;
+                    expect_eq(&mut c, start)?;
+                    Assign::Numbered(idx, c.real_value()?)
+                };
+                b.assigns.push(assign);
+            }
+            b'n' => {
+                b.has_words = true;
+                c.i += 1;
+                if b.n.is_some() {
+                    return Err(c.err(start, "Multiple n words on one line"));
+                }
+                b.n = Some(c.number()?);
+            }
+            b'o' => {
+                b.has_words = true;
+                c.i += 1;
+                b.o_pos = c.orig(start);
+                b.o = Some(read_oword(&mut c, start)?);
+            }
+            b'g' | b'm' => {
+                b.has_words = true;
+                c.i += 1;
+                let v = c.real_value()?;
+                let code = (v * 10.0).round();
+                if (v * 10.0 - code).abs() > PARAM_INDEX_TOL || code.abs() > 1e6 {
+                    let what = if ch == b'g' { "G code" } else { "M code" };
+                    return Err(c.err(start, format!("{what} out of range")));
+                }
+                let pos = c.orig(start) as u32;
+                if ch == b'g' {
+                    if b.ng >= MAX_CODES {
+                        return Err(c.err(start, "Too many G codes on line"));
+                    }
+                    b.g[b.ng] = (code as i32, pos);
+                    b.ng += 1;
+                } else {
+                    if code as i32 % 10 != 0 {
+                        return Err(c.err(start, "Unknown m code used"));
+                    }
+                    if b.nm >= MAX_CODES {
+                        return Err(c.err(start, "Too many M codes on line"));
+                    }
+                    b.m[b.nm] = (code as i32 / 10, pos);
+                    b.nm += 1;
+                }
+            }
+            b'a'..=b'z' | b'@' | b'^' if !matches!(ch, b'g' | b'm' | b'n' | b'o') => {
+                if !b"abcdefhijklpqrstuvwxyz@^".contains(&ch) {
+                    return Err(c.err(start, format!("Bad character '{}' used", ch as char)));
+                }
+                b.has_words = true;
+                c.i += 1;
+                let k = slot(ch);
+                if b.words[k].is_some() {
+                    return Err(c.err(start, format!("Multiple {} words on one line", ch as char)));
+                }
+                let v = c.real_value()?;
+                b.words[k] = Some(v);
+                b.word_pos[k] = c.orig(start) as u32;
+            }
+            b'%' if start == 0 => {
+                // a '%' line is handled by the interpreter before reading; here it is
+                // only legal alone
+                c.i += 1;
+            }
+            _ => {
+                let shown = if ch.is_ascii() {
+                    (ch as char).to_string()
+                } else {
+                    String::from_utf8_lossy(&line[c.orig(start)..])
+                        .chars()
+                        .next()
+                        .map_or_else(|| "?".to_string(), |x| x.to_string())
+                };
+                return Err(c.err(start, format!("Bad character '{shown}' used")));
+            }
+        }
+    }
+    Ok(())
+}
+
+fn expect_eq<P: ParamRead + ?Sized>(c: &mut Cursor<'_, P>, start: usize) -> LResult<()> {
+    if c.peek() != Some(b'=') {
+        return Err(c.err(start, "Equal sign missing in parameter setting"));
+    }
+    c.i += 1;
+    Ok(())
+}
+
+fn read_oword<P: ParamRead + ?Sized>(c: &mut Cursor<'_, P>, start: usize) -> LResult<OWord> {
+    let label = if c.peek() == Some(b'<') {
+        format!("<{}>", c.name()?)
+    } else if c.peek() == Some(b'[') || c.peek() == Some(b'#') {
+        let v = c.real_value()?;
+        format!("{}", v.round() as i64)
+    } else {
+        let from = c.i;
+        while c.peek().is_some_and(|x| x.is_ascii_digit()) {
+            c.i += 1;
+        }
+        if from == c.i {
+            return Err(c.err(start, "Bad O-word label"));
+        }
+        let digits = std::str::from_utf8(&c.s[from..c.i]).unwrap_or("0");
+        let v: u64 = digits.parse().unwrap_or(0);
+        v.to_string()
+    };
+    let rest = &c.s[c.i..];
+    let kw = O_KEYWORDS.iter().find(|(t, _)| rest.starts_with(t));
+    let keyword = match kw {
+        Some((t, k)) => {
+            c.i += t.len();
+            *k
+        }
+        None => {
+            if rest.is_empty() || rest[0] == b'(' || rest[0] == b';' {
+                OKeyword::Fanuc
+            } else {
+                return Err(c.err(c.i, "Unknown word in O-word line"));
+            }
+        }
+    };
+    let mut value = None;
+    let mut args = Vec::new();
+    match keyword {
+        OKeyword::Call => loop {
+            match c.peek() {
+                Some(b'[') => args.push(c.expression()?),
+                Some(b'(') => {
+                    while c.peek().is_some_and(|x| x != b')') {
+                        c.i += 1;
+                    }
+                    c.i += 1;
+                }
+                _ => break,
+            }
+        },
+        OKeyword::While | OKeyword::If | OKeyword::ElseIf | OKeyword::Repeat => {
+            if c.peek() != Some(b'[') {
+                return Err(c.err(start, "Left bracket missing after O-word condition"));
+            }
+            value = Some(c.expression()?);
+        }
+        OKeyword::Return | OKeyword::EndSub if c.peek() == Some(b'[') => {
+            value = Some(c.expression()?);
+        }
+        _ => {}
+    }
+    // only comments may follow
+    while let Some(ch) = c.peek() {
+        match ch {
+            b'(' => {
+                while c.peek().is_some_and(|x| x != b')') {
+                    c.i += 1;
+                }
+                c.i += 1;
+            }
+            b';' => break,
+            _ => return Err(c.err(c.i, "Unexpected word after O-word statement")),
+        }
+    }
+    Ok(OWord {
+        label,
+        keyword,
+        value,
+        args,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn val(expr: &str) -> Real {
+        let mut lx = Lexer::default();
+        lx.read(format!("x{expr}").as_bytes(), &NoParams)
+            .expect("reads");
+        lx.block.word(b'x').expect("x")
+    }
+
+    #[test]
+    fn precedence_and_functions() {
+        assert_eq!(val("[1+2*3]"), 7.0);
+        assert_eq!(val("[2**3**2]"), 64.0); // left associative
+        assert_eq!(val("[7 mod 3]"), 1.0);
+        assert_eq!(val("[-7 mod 3]"), 2.0);
+        assert_eq!(val("[1 lt 2 and 3 gt 2]"), 1.0);
+        assert!((val("atan[1]/[1]") - 45.0).abs() < 1e-12);
+        assert!((val("[sin[30]]") - 0.5).abs() < 1e-12);
+        assert_eq!(val("-[2]"), -2.0);
+        assert_eq!(val("[fix[-1.5]+fup[1.2]]"), 0.0);
+    }
+
+    #[test]
+    fn numbers_and_spaces() {
+        assert_eq!(val(" - 3 0 . 5"), -30.5);
+        assert_eq!(val("1."), 1.0);
+        assert_eq!(val(".5"), 0.5);
+        assert_eq!(val("0.1"), 0.1);
+    }
+
+    #[test]
+    fn errors_name_the_problem() {
+        let mut lx = Lexer::default();
+        let e = lx.read(b"g0 x[1/0]", &NoParams).unwrap_err();
+        assert_eq!(e.message, "Attempt to divide by zero");
+        let e = lx.read(b"g0 x1 x2", &NoParams).unwrap_err();
+        assert_eq!(e.message, "Multiple x words on one line");
+        assert_eq!(e.start, 6);
+        let e = lx.read(b"G0 X EXISTS[#<foo]", &NoParams).unwrap_err();
+        assert_eq!(e.message, "Named parameter not terminated");
+    }
+}
