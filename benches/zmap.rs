@@ -47,7 +47,10 @@ fn benches(c: &mut Criterion) {
     for (name, kind) in [("flat", ToolKind::Flat), ("ball", ToolKind::Ball)] {
         let tool = Tool::try_new(kind, p1::TOOL_DIAMETER, 30.0).expect("valid");
         for (mode, merge_collinear) in [("runs joined", true), ("move by move", false)] {
-            let opts = ZMapOptions { merge_collinear };
+            let opts = ZMapOptions {
+                merge_collinear,
+                ..ZMapOptions::default()
+            };
             g.bench_function(format!("zmap 0.05 mm {name}, {mode} (moves)"), |b| {
                 b.iter(|| {
                     let mut z = ZMap::new_box(p1::stock_box(), 0.05, 1e9).expect("fits");

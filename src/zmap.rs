@@ -52,6 +52,9 @@ pub enum ZMapError {
     /// The box is empty, inverted or not finite.
     #[error("Z-map box must be finite with min < max on every axis")]
     BadBox,
+    /// The arc chord tolerance is not positive and finite.
+    #[error("Z-map arc sagitta must be positive and finite, got {0} mm")]
+    BadSagitta(Real),
     /// The pitch is not positive and finite.
     #[error("Z-map pitch must be positive and finite, got {0} mm")]
     BadPitch(Real),
@@ -150,12 +153,16 @@ pub struct ZMapOptions {
     /// whole run, so heights change by at most 2·LENGTH_EPS (rounding aside), while each
     /// cell is evaluated once per run instead of once per overlapping move. Default: true.
     pub merge_collinear: bool,
+    /// Arcs and helices are cut as chords whose sagitta is at most this (mm, > 0). Default:
+    /// 1e-4 mm, the tri-dexel sweep's default step bound.
+    pub arc_sagitta_mm: Real,
 }
 
 impl Default for ZMapOptions {
     fn default() -> Self {
         Self {
             merge_collinear: true,
+            arc_sagitta_mm: 1e-4,
         }
     }
 }
@@ -299,8 +306,13 @@ impl ZMap {
         moves: &[Move],
         opts: &ZMapOptions,
     ) -> Result<ZMapReport, ZMapError> {
+        let sagitta = opts.arc_sagitta_mm;
+        if !(sagitta.is_finite() && sagitta > 0.0) {
+            return Err(ZMapError::BadSagitta(sagitta));
+        }
         let mut tips = Vec::with_capacity(moves.len());
-        for mv in moves {
+        for mv in moves.iter().flat_map(|m| m.chords(sagitta)) {
+            let mv = &mv;
             if let Some(missing) = AxisLetter::ALL
                 .into_iter()
                 .find(|&l| !chain.has_axis(l) && mv.start.get(l) != mv.end.get(l))
@@ -1024,9 +1036,11 @@ mod tests {
     fn joining_collinear_moves_changes_no_height() {
         let joined = ZMapOptions {
             merge_collinear: true,
+            ..ZMapOptions::default()
         };
         let apart = ZMapOptions {
             merge_collinear: false,
+            ..ZMapOptions::default()
         };
         for kind in [ToolKind::Flat, ToolKind::Ball] {
             let (a, _) = p1_map_with(kind, p1::stock_box(), 0.1, &joined);
@@ -1156,5 +1170,48 @@ mod tests {
         assert_eq!(err.line(), Some(12));
         assert!(ZMap::new_box(small_box(), 0.0, 1e8).is_err());
         assert!(ZMap::new_box(small_box(), 1e-4, 1e6).is_err());
+    }
+
+    #[test]
+    fn full_circle_arc_cuts_an_annulus() {
+        // G2 full circle of radius 10 about (0, 0) with a Ø6 flat tool, tip at z = -1 under a
+        // top at z = 0: cells whose centre lies within R of the circle (less the chord
+        // sagitta) are at z = -1; cells farther than R (plus the sagitta) are untouched.
+        let text = "G21 G90 G17\nG0 X10 Y0 Z5\nG1 Z-1 F100\nG2 X10 Y0 I-10 J0\nG0 Z5\nM2\n";
+        let program = crate::nc::parse_program(
+            text,
+            std::path::Path::new("ring.ngc"),
+            AxisValues::default(),
+        )
+        .expect("valid program");
+        let tool = Tool::try_new(ToolKind::Flat, 6.0, 20.0).expect("valid");
+        let bx = Aabb {
+            min: Point3::new(-15.0, -15.0, -5.0),
+            max: Point3::new(15.0, 15.0, 0.0),
+        };
+        let mut zm = ZMap::new_box(bx, 0.1, 1e8).expect("fits");
+        let opts = ZMapOptions {
+            arc_sagitta_mm: 1e-3,
+            ..ZMapOptions::default()
+        };
+        zm.sweep_program(&xyz_chain(), &tool, &program.moves, &opts)
+            .expect("3-axis");
+        let (nx, ny) = zm.dims();
+        let (mut inside, mut outside) = (0, 0);
+        for iy in 0..ny {
+            for ix in 0..nx {
+                let (x, y) = zm.cell_centre(ix, iy);
+                let d = (x.hypot(y) - 10.0).abs();
+                let h = zm.height(ix, iy);
+                if d < 3.0 - 2e-3 {
+                    inside += 1;
+                    assert_eq!(h, -1.0, "cell ({x}, {y}) at {d} mm from the circle");
+                } else if d > 3.0 + 2e-3 && x.hypot(y) > 0.0 {
+                    outside += 1;
+                    assert_eq!(h, 0.0, "cell ({x}, {y}) at {d} mm from the circle");
+                }
+            }
+        }
+        assert!(inside > 10_000 && outside > 10_000, "{inside} {outside}");
     }
 }
