@@ -10,9 +10,11 @@ use std::sync::Mutex;
 use twinmill::cloud::read_cloud_file;
 use twinmill::math::{Aabb, Point3};
 use twinmill::nc::{Interpreter, LengthUnit, Program, write_jsonl};
-use twinmill::output::{json_bytes, ply_bytes, write_files, write_outcome};
+use twinmill::output::{
+    MeshFormat, json_bytes, ply_bytes, write_files, write_outcome, write_simulation,
+};
 use twinmill::pipeline::{
-    FitRequest, Selection, Shape, fit_cloud, machine_part, run, scanner_study,
+    FitRequest, Selection, Shape, fit_cloud, machine_part, run, scanner_study, simulate,
 };
 use twinmill::progress::Progress;
 use twinmill::report::{ScanFileReport, ScanReport};
@@ -94,6 +96,16 @@ enum Command {
     Run {
         #[command(flatten)]
         args: SceneArgs,
+    },
+    /// Cut the scene's program into its stock on the deviated machine (no scan): write the
+    /// part's surface mesh, a picture of it from +z, and report.json with the removed volume
+    /// and the sweep's approximation bounds.
+    Simulate {
+        #[command(flatten)]
+        args: SceneArgs,
+        /// Mesh formats to write, comma separated: stl, obj, ply.
+        #[arg(long, value_delimiter = ',', default_value = "stl", value_parser = ["stl", "obj", "ply"])]
+        mesh: Vec<String>,
     },
     /// Simulate the scene's program and scan the part with the scene's scanner (all views);
     /// write cloud.ply and scan.json. With --study, also scan it again and again with each
@@ -334,6 +346,53 @@ fn main() -> ExitCode {
                     )
                 },
                 json.then(|| serde_json::to_string_pretty(&outcome.report)),
+            )
+        }
+        Command::Simulate {
+            args:
+                SceneArgs {
+                    scene,
+                    out,
+                    json,
+                    threads,
+                    verbose,
+                },
+            mesh,
+        } => {
+            let (scene, program) = match prepare(&scene, threads, verbose) {
+                Ok(x) => x,
+                Err(code) => return code,
+            };
+            let formats: Vec<MeshFormat> = mesh
+                .iter()
+                .map(|f| match f.as_str() {
+                    "obj" => MeshFormat::Obj,
+                    "ply" => MeshFormat::Ply,
+                    _ => MeshFormat::Stl,
+                })
+                .collect();
+            let sim = match simulate(&scene, &program, &bars(json)) {
+                Ok(s) => s,
+                Err(e) => return fail(e),
+            };
+            let dir = out.join(format!("{}-simulate", scene.name));
+            if let Err(e) = write_simulation(&sim, &formats, &dir) {
+                return fail(e);
+            }
+            let names: Vec<&str> = ["report.json", "part.png"]
+                .into_iter()
+                .chain(formats.iter().map(|f| f.file_name()))
+                .collect();
+            print_out(
+                || {
+                    format!(
+                        "{}wrote         {}/{{{}}}\n",
+                        sim.report.summary(),
+                        dir.display(),
+                        names.join(", ")
+                    )
+                },
+                json.then(|| serde_json::to_string_pretty(&sim.report)),
             )
         }
         Command::Scan {

@@ -9,7 +9,8 @@
 //! **Invariant:** with [`crate::scene`], the only module that touches files.
 
 use crate::cloud::{PointCloud, write_ply};
-use crate::pipeline::Outcome;
+use crate::mesh::MeshError;
+use crate::pipeline::{Outcome, Simulation};
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
@@ -95,5 +96,61 @@ pub fn write_outcome(outcome: &Outcome, dir: &Path) -> Result<PathBuf, OutputErr
         ),
         ("faces.png", outcome.heat_map_png.clone()),
     ];
+    write_files(dir, &files)
+}
+
+/// A surface-mesh file format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MeshFormat {
+    /// Binary STL (`part.stl`).
+    Stl,
+    /// Wavefront OBJ (`part.obj`).
+    Obj,
+    /// Binary PLY (`part.ply`).
+    Ply,
+}
+
+impl MeshFormat {
+    /// The file name the format is written to.
+    pub fn file_name(self) -> &'static str {
+        match self {
+            MeshFormat::Stl => "part.stl",
+            MeshFormat::Obj => "part.obj",
+            MeshFormat::Ply => "part.ply",
+        }
+    }
+}
+
+/// Writes the outcome of `simulate` into `dir`: report.json, part.png and the mesh in each
+/// of `formats`.
+pub fn write_simulation(
+    sim: &Simulation,
+    formats: &[MeshFormat],
+    dir: &Path,
+) -> Result<PathBuf, OutputError> {
+    let mut files = vec![
+        (
+            "report.json",
+            json_bytes(&sim.report, &dir.join("report.json"))?,
+        ),
+        ("part.png", sim.top_view_png.clone()),
+    ];
+    for &f in formats {
+        let path = dir.join(f.file_name());
+        let mut buf = Vec::new();
+        let r = match f {
+            MeshFormat::Stl => sim.mesh.write_stl(&mut buf),
+            MeshFormat::Obj => sim.mesh.write_obj(&mut buf),
+            MeshFormat::Ply => sim.mesh.write_ply(&mut buf),
+        };
+        r.map_err(|e| OutputError {
+            path: path.clone(),
+            source: match e {
+                MeshError::Io(e) => e,
+                other => std::io::Error::other(other),
+            },
+        })?;
+        files.push((f.file_name(), buf));
+    }
     write_files(dir, &files)
 }

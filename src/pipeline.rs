@@ -13,12 +13,15 @@ use crate::fit::{
 use crate::identify::{self, Face, IdentifyError};
 use crate::math::Aabb;
 use crate::math::{Point3, Real};
+use crate::mesh::{MeshError, TriMesh, mesh_stock};
 use crate::nc::Program;
 use crate::progress::Progress;
-use crate::render::{HeatMapOptions, RenderError, encode_png, nice_ceil, render_heat_map};
+use crate::render::{
+    HeatMapOptions, RenderError, encode_png, nice_ceil, render_heat_map, render_top_view,
+};
 use crate::report::{
-    CircleReport, CylinderReport, FaceReport, FitFileReport, PlanePair, PlaneReport, Report,
-    ScanReport, SolverReport, SphereReport, StockReport, StudyCase,
+    CircleReport, CylinderReport, FaceReport, FitFileReport, MeshSummary, PlanePair, PlaneReport,
+    Report, ScanReport, SimulationReport, SolverReport, SphereReport, StockReport, StudyCase,
 };
 use crate::scan::{Misregistration, ScanError, StudyOptions, Surface, scan};
 use crate::scene::Scene;
@@ -73,6 +76,14 @@ pub enum PipelineError {
         path: String,
         /// What went wrong.
         message: String,
+    },
+    /// The cut stock could not be meshed.
+    #[error("{path}: surface mesh: {source}")]
+    Mesh {
+        /// Scene file.
+        path: String,
+        /// Why.
+        source: MeshError,
     },
     /// The heat map could not be drawn.
     #[error("{path}: heat map: {source}")]
@@ -334,14 +345,7 @@ pub fn run(
             evaluations: ident.solver.0,
             residual: ident.solver.1,
         },
-        stock: StockReport {
-            pitch_mm: scene.pitch_mm,
-            rays: stock.grids().iter().map(|g| g.dims().0 * g.dims().1).sum(),
-            segments: stock.grids().iter().map(|g| g.segment_count()).sum(),
-            volume_mm3: stock.volume(),
-            removed_mm3: volume0 - stock.volume(),
-            memory_mib: stock.memory_bytes() as Real / 1048576.0,
-        },
+        stock: StockReport::of(&stock, volume0),
         sweep,
         scan: ScanReport::of(&scanned, &scene.scanner),
         timings_s: timings,
@@ -627,4 +631,62 @@ pub fn fit_cloud(
         }
     }
     Ok(report)
+}
+
+/// Everything `simulate` produces.
+#[derive(Clone, Debug)]
+pub struct Simulation {
+    /// The report.
+    pub report: SimulationReport,
+    /// The cut stock's surface (workpiece frame, mm).
+    pub mesh: TriMesh,
+    /// PNG of the part seen from +z.
+    pub top_view_png: Vec<u8>,
+}
+
+/// Cuts the scene's program into its stock on the deviated machine and meshes the result:
+/// no scan, no identification.
+pub fn simulate(
+    scene: &Scene,
+    program: &Program,
+    progress: &dyn Progress,
+) -> Result<Simulation, PipelineError> {
+    let path = scene.path.display().to_string();
+    let part = machine_part(scene, program, progress)?;
+    let mut timings: BTreeMap<String, Real> = part.timings.iter().cloned().collect();
+    let clock = Instant::now();
+    let (mesh, mesh_report) = mesh_stock(&part.stock).map_err(|source| PipelineError::Mesh {
+        path: path.clone(),
+        source,
+    })?;
+    timings.insert("mesh".into(), clock.elapsed().as_secs_f64());
+    let clock = Instant::now();
+    let render_err = |source| PipelineError::Render {
+        path: path.clone(),
+        source,
+    };
+    let title = format!("{}: cut part seen from +z", scene.name);
+    let img = render_top_view(&part.stock, &title).map_err(render_err)?;
+    let top_view_png = encode_png(&img).map_err(render_err)?;
+    timings.insert("render".into(), clock.elapsed().as_secs_f64());
+    let report = SimulationReport {
+        scene: scene.name.clone(),
+        program: program.path.display().to_string(),
+        stock: StockReport::of(&part.stock, part.volume0),
+        sweep: part.sweep,
+        mesh: MeshSummary {
+            vertices: mesh.vertices.len(),
+            triangles: mesh.triangles.len(),
+            euler_characteristic: mesh.euler_characteristic(),
+            volume_mm3: mesh.signed_volume(),
+            area_mm2: mesh.area(),
+            feature_vertices: mesh_report.feature_vertices,
+        },
+        timings_s: timings,
+    };
+    Ok(Simulation {
+        report,
+        mesh,
+        top_view_png,
+    })
 }

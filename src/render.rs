@@ -10,7 +10,8 @@
 //! covered by several points shows the last one drawn.
 
 use crate::fit::Plane;
-use crate::math::{Point3, Real, UnitVector3};
+use crate::math::{Point3, Real, UnitVector3, Vector3, tol};
+use crate::stock::TriDexel;
 use image::{Rgb, RgbImage};
 
 /// Options of a heat map. (Document units and ranges.)
@@ -49,6 +50,135 @@ pub enum RenderError {
     /// PNG encoding failed.
     #[error("PNG encoding failed: {0}")]
     Encode(String),
+}
+
+/// Light direction of the top view (towards the light, W frame): from the upper left, so
+/// walls facing −x and +y are lit and a step reads as a bright or dark line.
+const LIGHT: [Real; 3] = [-0.4, 0.4, 0.82];
+/// Smallest top-view width (px): small stocks are magnified by an integer factor.
+const TOP_VIEW_MIN_PX: usize = 480;
+
+/// Renders the cut stock seen from +z: one square per z-dexel ray, coloured by the height of
+/// its top crossing (dark blue at the lowest, yellow at the highest) and shaded by the
+/// crossing's normal (Lambert, light from the upper left). Rays with no material are light
+/// grey. A colour bar labelled in mm is drawn on the right and `title` above.
+pub fn render_top_view(stock: &TriDexel, title: &str) -> Result<RgbImage, RenderError> {
+    let grid = &stock.grids()[2];
+    let (nu, nv) = grid.dims();
+    if nu == 0 || nv == 0 {
+        return Err(RenderError::NoPoints);
+    }
+    let top = |iu: usize, iv: usize| grid.ray(iu, iv).last().map(|s| s.hi);
+    let (mut zmin, mut zmax) = (Real::INFINITY, Real::NEG_INFINITY);
+    for iv in 0..nv {
+        for iu in 0..nu {
+            if let Some(c) = top(iu, iv) {
+                if !c.t.is_finite() {
+                    return Err(RenderError::NonFinite);
+                }
+                zmin = zmin.min(c.t);
+                zmax = zmax.max(c.t);
+            }
+        }
+    }
+    if !zmin.is_finite() {
+        return Err(RenderError::NoPoints);
+    }
+    // A flat top (one height) is drawn in the middle colour.
+    let level = |z: Real| {
+        if zmax - zmin > tol::LENGTH_EPS {
+            (z - zmin) / (zmax - zmin)
+        } else {
+            0.5
+        }
+    };
+    let k = TOP_VIEW_MIN_PX.div_ceil(nu).clamp(1, MAX_DOT_PX as usize) as u32;
+    let (w, h) = (nu as u32 * k, nv as u32 * k);
+    let bar_x = PLOT_X0 + w + BAR_GAP;
+    let width = bar_x + BAR_W + TICK + 4 + 8 * ADVANCE + MARGIN;
+    let height = PLOT_Y0 + h.max(MIN_BAR_H) + TEXT_H + 2 * MARGIN;
+    let mut img = RgbImage::from_pixel(width, height, Rgb([255, 255, 255]));
+    draw_text(&mut img, MARGIN, MARGIN, title, SCALE, Rgb([0, 0, 0]));
+    let light = Vector3::new(LIGHT[0], LIGHT[1], LIGHT[2]).normalize();
+    for iv in 0..nv {
+        for iu in 0..nu {
+            let colour = match top(iu, iv) {
+                None => Rgb([225, 225, 225]),
+                Some(c) => {
+                    let shade = 0.35 + 0.65 * c.normal().dot(&light).max(0.0);
+                    let Rgb(base) = height_colour(level(c.t));
+                    Rgb(base.map(|b| (b as Real * shade).round().clamp(0.0, 255.0) as u8))
+                }
+            };
+            // Image rows run down; v (y in W) runs up.
+            let (x0, y0) = (PLOT_X0 + iu as u32 * k, PLOT_Y0 + (nv - 1 - iv) as u32 * k);
+            for dy in 0..k {
+                for dx in 0..k {
+                    put(&mut img, x0 + dx, y0 + dy, colour);
+                }
+            }
+        }
+    }
+    frame_rect(
+        &mut img,
+        PLOT_X0 - 1,
+        PLOT_Y0 - 1,
+        w + 2,
+        h + 2,
+        Rgb([0, 0, 0]),
+    );
+    let bar_h = h.max(MIN_BAR_H);
+    for y in 0..bar_h {
+        let c = height_colour(1.0 - y as Real / (bar_h - 1).max(1) as Real);
+        for x in 0..BAR_W {
+            put(&mut img, bar_x + x, PLOT_Y0 + y, c);
+        }
+    }
+    frame_rect(
+        &mut img,
+        bar_x - 1,
+        PLOT_Y0 - 1,
+        BAR_W + 2,
+        bar_h + 2,
+        Rgb([0, 0, 0]),
+    );
+    for (frac, z) in [(0.0, zmax), (1.0, zmin)] {
+        let y = PLOT_Y0 + (frac * (bar_h - 1) as Real) as u32;
+        for t in 0..TICK {
+            put(&mut img, bar_x + BAR_W + t, y, Rgb([0, 0, 0]));
+        }
+        let label = format!("{z:.3} mm");
+        let ty = y.saturating_sub(TEXT_H / 2).min(height - TEXT_H - 1);
+        draw_text(
+            &mut img,
+            bar_x + BAR_W + TICK + 4,
+            ty,
+            &label,
+            SCALE,
+            Rgb([0, 0, 0]),
+        );
+    }
+    Ok(img)
+}
+
+/// A sequential colour for `x` ∈ [0, 1] (clamped): dark blue → teal → green → yellow.
+pub fn height_colour(x: Real) -> Rgb<u8> {
+    const STOPS: [[Real; 3]; 4] = [
+        [40.0, 30.0, 110.0],
+        [30.0, 140.0, 150.0],
+        [90.0, 190.0, 80.0],
+        [250.0, 225.0, 40.0],
+    ];
+    let x = if x.is_finite() {
+        x.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let f = x * (STOPS.len() - 1) as Real;
+    let i = (f.floor() as usize).min(STOPS.len() - 2);
+    let w = f - i as Real;
+    let c = |j: usize| (STOPS[i][j] * (1.0 - w) + STOPS[i + 1][j] * w).round() as u8;
+    Rgb([c(0), c(1), c(2)])
 }
 
 /// Smallest plot-area width (px).
@@ -584,6 +714,66 @@ mod tests {
             .collect();
         let img = render_heat_map(&tall, &z_plane(), &u, &v, &opts(None)).expect("tall");
         assert!(img.height() <= PLOT_Y0 + MAX_PLOT_HEIGHT + 100);
+    }
+
+    #[test]
+    fn top_view_colours_a_pocket_by_depth() {
+        use crate::math::{Aabb, Vector3};
+        use crate::stock::{Cutter, RayCut, TriDexel};
+        // A 4 × 4 mm square pocket 1 mm deep in the middle of a 10 × 10 × 5 box.
+        struct Pocket;
+        impl Cutter for Pocket {
+            fn bounds(&self) -> Aabb {
+                Aabb {
+                    min: Point3::new(3.0, 3.0, 4.0),
+                    max: Point3::new(7.0, 7.0, 6.0),
+                }
+            }
+            fn ray_cut(&self, o: &Point3, axis: usize) -> Option<RayCut> {
+                let b = self.bounds();
+                let inside = (0..3)
+                    .filter(|&k| k != axis)
+                    .all(|k| o[k] > b.min[k] && o[k] < b.max[k]);
+                inside.then(|| {
+                    let mut n = Vector3::zeros();
+                    n[axis] = 1.0;
+                    RayCut {
+                        t_in: b.min[axis],
+                        t_out: b.max[axis],
+                        n_in: n,
+                        n_out: -n,
+                    }
+                })
+            }
+        }
+        let bx = Aabb {
+            min: Point3::new(0.0, 0.0, 0.0),
+            max: Point3::new(10.0, 10.0, 5.0),
+        };
+        let mut stock = TriDexel::new_box(bx, 0.5, 1e9).expect("fits");
+        assert!(stock.remove(&Pocket, 7));
+        let img = render_top_view(&stock, "pocket").expect("renders");
+        let (nu, nv) = stock.grids()[2].dims();
+        let k = TOP_VIEW_MIN_PX.div_ceil(nu) as u32;
+        assert!(img.width() >= PLOT_X0 + nu as u32 * k && img.height() >= PLOT_Y0 + nv as u32 * k);
+        // Pixel at the centre of a ray's square (iu, iv).
+        let px = |iu: usize, iv: usize| {
+            *img.get_pixel(
+                PLOT_X0 + iu as u32 * k + k / 2,
+                PLOT_Y0 + (nv - 1 - iv) as u32 * k + k / 2,
+            )
+        };
+        // The pocket floor (z = 4) is the lowest height: the first colour, full light from
+        // the +z normal's share; the top (z = 5) the last.
+        let light = Vector3::new(LIGHT[0], LIGHT[1], LIGHT[2]).normalize();
+        let shade = 0.35 + 0.65 * light.z;
+        let expect = |x: Real| {
+            Rgb(height_colour(x)
+                .0
+                .map(|b| (b as Real * shade).round() as u8))
+        };
+        assert_eq!(px(nu / 2, nv / 2), expect(0.0));
+        assert_eq!(px(1, 1), expect(1.0));
     }
 
     #[test]

@@ -53,6 +53,74 @@ pub struct StockReport {
     pub memory_mib: f64,
 }
 
+impl StockReport {
+    /// The figures of a cut `stock` whose volume before cutting was `volume0` (mm³).
+    pub fn of(stock: &crate::stock::TriDexel, volume0: f64) -> Self {
+        Self {
+            pitch_mm: stock.pitch(),
+            rays: stock.grids().iter().map(|g| g.dims().0 * g.dims().1).sum(),
+            segments: stock.grids().iter().map(|g| g.segment_count()).sum(),
+            volume_mm3: stock.volume(),
+            removed_mm3: volume0 - stock.volume(),
+            memory_mib: stock.memory_bytes() as f64 / 1048576.0,
+        }
+    }
+}
+
+/// Surface-mesh figures.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MeshSummary {
+    /// Vertices.
+    pub vertices: usize,
+    /// Triangles.
+    pub triangles: usize,
+    /// Euler characteristic V − E + F (2 for a part with no through-holes).
+    pub euler_characteristic: i64,
+    /// Volume enclosed by the mesh (mm³).
+    pub volume_mm3: f64,
+    /// Surface area (mm²).
+    pub area_mm2: f64,
+    /// Vertices added at sharp edges and corners (the rest lie on exact dexel crossings).
+    pub feature_vertices: usize,
+}
+
+/// What `twinmill simulate` reports.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SimulationReport {
+    /// Scene name.
+    pub scene: String,
+    /// Program file.
+    pub program: String,
+    /// Stock figures (removed volume).
+    pub stock: StockReport,
+    /// What the sweep did, with its approximation bounds.
+    pub sweep: SweepReport,
+    /// The surface mesh.
+    pub mesh: MeshSummary,
+    /// Stage timings (s).
+    pub timings_s: BTreeMap<String, f64>,
+}
+
+impl SimulationReport {
+    /// A short text summary.
+    pub fn summary(&self) -> String {
+        format!(
+            "scene         {}\nprogram       {}\nmoves         {} ({} cutting, {} rotary)\nremoved       {:.4} mm³ of {:.4} mm³\nsweep bound   {:.2e} mm (rotary sub-steps and arc chords)\nmesh          {} triangles, {} vertices, Euler characteristic {}\n",
+            self.scene,
+            self.program,
+            self.sweep.moves,
+            self.sweep.cutting_moves,
+            self.sweep.rotary_moves,
+            self.stock.removed_mm3,
+            self.stock.volume_mm3 + self.stock.removed_mm3,
+            self.sweep.rotary_error_bound_mm,
+            self.mesh.triangles,
+            self.mesh.vertices,
+            self.mesh.euler_characteristic,
+        )
+    }
+}
+
 /// Scan figures.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct ScanReport {

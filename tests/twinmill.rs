@@ -561,6 +561,43 @@ fn cli_run_writes_report_cloud_and_picture() {
 }
 
 #[test]
+fn cli_simulate_writes_a_closed_mesh_of_the_cut_part() {
+    let sb = Sandbox::new("simulate");
+    // A coarser pitch keeps the mesh small; the geometry is the built-in scene's.
+    let scene = builtin("mdx50-step.toml").replace("pitch_mm = 0.1 ", "pitch_mm = 0.25");
+    sb.write("s.toml", scene.as_bytes());
+    sb.write("mdx50-step.ngc", builtin("mdx50-step.ngc").as_bytes());
+    let (code, stdout, stderr) = sb.run(&["simulate", "s.toml", "--json", "--mesh", "stl,ply"]);
+    assert_eq!(code, 0, "{stderr}");
+    let report: serde_json::Value = serde_json::from_str(&stdout).expect("--json prints it");
+    // The cut at A = 0 (tool at W y = −25.5 with dy_AY = −0.5, flutes on z ≥ 0) leaves the
+    // face y = −22.5 and removes y ∈ [−24, −22.5] × z ∈ [0, 10] over the 40 mm length; the
+    // cut at A = 180 (W y = −24.5, z ≤ 0) removes y ∈ [−24, −21.5] × z ∈ [−10, 0]:
+    // 40 · 10 · (1.5 + 2.5) = 1,600 mm³. Faces lie on the dexel rays' exact crossings.
+    let removed = report["stock"]["removed_mm3"].as_f64().expect("number");
+    assert!((removed - 1600.0).abs() < 1e-6, "{removed}");
+    // One closed surface with no handle: Euler characteristic 2; its volume is the stock's
+    // less at most (h/2)²/2 per mm of sharp edge (≈ 450 mm of edges at h = 0.25 mm).
+    assert_eq!(report["mesh"]["euler_characteristic"].as_i64(), Some(2));
+    let volume = report["mesh"]["volume_mm3"].as_f64().expect("number");
+    let edge_bound = 450.0 * (0.25_f64 / 2.0).powi(2) / 2.0;
+    assert!(
+        volume <= 24_000.0 + 1e-6 && volume > 24_000.0 - edge_bound,
+        "{volume}"
+    );
+    let dir = sb.dir.join("out/mdx50-step-simulate");
+    let stl = std::fs::read(dir.join("part.stl")).expect("part.stl");
+    let triangles = u32::from_le_bytes(stl[80..84].try_into().expect("4 bytes")) as u64;
+    assert_eq!(Some(triangles), report["mesh"]["triangles"].as_u64());
+    assert_eq!(stl.len() as u64, 84 + 50 * triangles);
+    let ply = std::fs::read(dir.join("part.ply")).expect("part.ply");
+    assert!(ply.starts_with(b"ply\nformat binary_little_endian 1.0\n"));
+    assert!(!dir.join("part.obj").exists());
+    let png = std::fs::read(dir.join("part.png")).expect("part.png");
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+}
+
+#[test]
 fn cli_fit_segments_any_cloud_and_measures_the_step() {
     let sb = Sandbox::new("fit");
     sb.write("s.toml", builtin("mdx50-step.toml").as_bytes());
