@@ -28,7 +28,7 @@ use crate::kinematics::{AxisKind, Chain, Component, DeviationId};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
 use crate::nc::{Move, MoveKind};
 use crate::segment::{PlaneSegmentOptions, select_box, select_region_from_seed};
-use crate::tool::{Tool, ToolKind};
+use crate::tool::Tool;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{Matrix2, Owned, U2, Vector2};
 
@@ -337,11 +337,9 @@ pub fn extract_face(
     let (su, sv) = (extent(stock, &fl.tip, &fl.u), extent(stock, &fl.tip, &fl.v));
     let m = opts.margin_mm;
     let (u0, u1) = (su.0.max(0.0) + m, su.1.min(fl.length) - m);
-    // The flank is the cylindrical part: from the tip (flat) or one radius above it (ball).
-    let flank_start = match tool.kind() {
-        ToolKind::Flat => 0.0,
-        ToolKind::Ball => tool.radius(),
-    };
+    // The flank is the cylindrical part of the tool at its full radius: from the tip (flat)
+    // or one radius above it (ball); a tool with no such part makes no planar flank.
+    let flank_start = tool.flank_start().ok_or_else(empty)?;
     let (v0, v1) = (sv.0.max(flank_start) + m, sv.1.min(tool.length()) - m);
     if u0 >= u1 || v0 >= v1 {
         return Err(empty());

@@ -10,6 +10,7 @@
 //! [`output`] writes the results. See README.md, *Architecture*.
 
 pub mod cloud;
+pub mod cutter;
 pub mod fit;
 pub mod identify;
 pub mod kinematics;

@@ -107,6 +107,11 @@ pub trait Cutter: Sync {
     fn bounds(&self) -> Aabb;
     /// The interval of the ray `origin + t·e_axis` inside the solid, if any.
     fn ray_cut(&self, origin: &Point3, axis: usize) -> Option<RayCut>;
+    /// Every interval of the ray inside the solid, sorted and disjoint, appended to `out`.
+    /// A non-convex solid may have several; the default is [`Cutter::ray_cut`]'s one.
+    fn ray_cuts(&self, origin: &Point3, axis: usize, out: &mut Vec<RayCut>) {
+        out.extend(self.ray_cut(origin, axis));
+    }
 }
 
 #[derive(Clone, Debug, Default)]
@@ -294,24 +299,33 @@ impl DexelGrid {
                 let mut offsets = Vec::with_capacity(BLOCK * BLOCK + 1);
                 offsets.push(0u32);
                 let mut changed = false;
+                let mut cuts = Vec::new();
+                let (mut scratch, mut next) = (Vec::new(), Vec::new());
                 for local in 0..BLOCK * BLOCK {
                     let (iu, iv) = (ru0 + local % BLOCK, rv0 + local / BLOCK);
                     let segs = &block.segs
                         [block.offsets[local] as usize..block.offsets[local + 1] as usize];
-                    let cut = if (iu0..=iu1).contains(&iu)
-                        && (iv0..=iv1).contains(&iv)
-                        && !segs.is_empty()
-                    {
+                    cuts.clear();
+                    if (iu0..=iu1).contains(&iu) && (iv0..=iv1).contains(&iv) && !segs.is_empty() {
                         let mut o = Point3::origin();
                         o[u] = u0 + iu as Real * du;
                         o[v] = v0 + iv as Real * dv;
-                        cutter.ray_cut(&o, axis)
-                    } else {
-                        None
-                    };
-                    match cut {
-                        Some(c) => changed |= subtract(segs, &c, line, &mut out),
-                        None => out.extend_from_slice(segs),
+                        cutter.ray_cuts(&o, axis, &mut cuts);
+                    }
+                    match cuts.as_slice() {
+                        [] => out.extend_from_slice(segs),
+                        [c] => changed |= subtract(segs, c, line, &mut out),
+                        many => {
+                            // Subtract the cuts one after another through a scratch buffer.
+                            scratch.clear();
+                            scratch.extend_from_slice(segs);
+                            for c in many {
+                                next.clear();
+                                changed |= subtract(&scratch, c, line, &mut next);
+                                std::mem::swap(&mut scratch, &mut next);
+                            }
+                            out.extend_from_slice(&scratch);
+                        }
                     }
                     offsets.push(out.len() as u32);
                 }

@@ -24,6 +24,7 @@
 //!
 //! **Invariant:** the sweep reads moves and poses; it never parses text or touches files.
 
+use crate::cutter::SweptTool;
 use crate::kinematics::{AxisKind, Chain};
 use crate::math::{Aabb, Isometry3, Point3, Real, UnitVector3, Vector3, tol};
 use crate::nc::{AxisLetter, AxisValues, Move, MoveKind};
@@ -100,13 +101,16 @@ const MAX_SUBSTEPS: Real = 5e7;
 const COARSE: usize = 64;
 
 /// The tool translated from `start` (tip position) by `d`, with constant axis `v`.
-#[derive(Clone, Copy, Debug)]
+/// Flat and ball end mills use the closed form below; every other shape the piecewise
+/// exact sweep of [`crate::cutter`].
+#[derive(Clone, Debug)]
 pub struct TranslatedTool {
     tool: Tool,
     start: Point3,
     d: Vector3,
     v: UnitVector3,
     bounds: Aabb,
+    general: Option<SweptTool>,
 }
 
 impl TranslatedTool {
@@ -116,12 +120,21 @@ impl TranslatedTool {
         let b1 = tool_bounds(&tool, &(start + d), &v);
         bounds.grow(&b1.min);
         bounds.grow(&b1.max);
+        // The closed form below takes the ball as a whole sphere: exact only if the tool
+        // reaches above it (L ≥ 2R).
+        let closed = match tool.kind() {
+            ToolKind::Flat => true,
+            ToolKind::Ball => tool.length() >= 2.0 * tool.radius(),
+            _ => false,
+        };
+        let general = (!closed).then(|| SweptTool::new(&tool, start, d, v));
         Self {
             tool,
             start,
             d,
             v,
             bounds,
+            general,
         }
     }
 }
@@ -316,8 +329,8 @@ impl TranslatedTool {
             },
         ];
         let h0 = match self.tool.kind() {
-            ToolKind::Flat => 0.0,
             ToolKind::Ball => r,
+            _ => 0.0,
         };
         // Cylinder part between heights h0 and L above the tip.
         {
@@ -432,6 +445,9 @@ impl Cutter for TranslatedTool {
     }
 
     fn ray_cut(&self, origin: &Point3, axis: usize) -> Option<RayCut> {
+        if let Some(g) = &self.general {
+            return g.ray_cut(origin, axis);
+        }
         let mut e = Vector3::zeros();
         e[axis] = 1.0;
         let (pieces, count) = self.pieces(origin, &e);
@@ -462,6 +478,13 @@ impl Cutter for TranslatedTool {
             n_in: -tn_in,
             n_out: -tn_out,
         })
+    }
+
+    fn ray_cuts(&self, origin: &Point3, axis: usize, out: &mut Vec<RayCut>) {
+        match &self.general {
+            Some(g) => g.ray_cuts(origin, axis, out),
+            None => out.extend(self.ray_cut(origin, axis)),
+        }
     }
 }
 
@@ -509,7 +532,7 @@ impl RotaryBound {
             rho = (rho + v) * (1.0 + omega);
         }
         Self {
-            a: omega * tool.radius().hypot(tool.length() / 2.0) / 2.0,
+            a: omega * tool.reach_from(tool.length() / 2.0) / 2.0,
             b: (omega * omega * rho + 2.0 * omega * v) / 8.0,
         }
     }
@@ -543,7 +566,12 @@ fn mid_point(tool: &Tool) -> Point3 {
 
 /// A sub-step: the tool with axis `v` whose mid point moves from `a` to `b`.
 fn substep(tool: &Tool, a: Point3, b: Point3, v: UnitVector3) -> TranslatedTool {
-    TranslatedTool::new(*tool, a - v.into_inner() * (tool.length() / 2.0), b - a, v)
+    TranslatedTool::new(
+        tool.clone(),
+        a - v.into_inner() * (tool.length() / 2.0),
+        b - a,
+        v,
+    )
 }
 
 fn pose_at(chain: &Chain, mv: &Move, lambda: Real) -> Isometry3 {
@@ -597,7 +625,7 @@ pub fn sweep_program(
             let p1 = chain.w_from_t(&mv.end);
             let tip0 = p0 * Point3::origin();
             let axis = UnitVector3::new_normalize(p0.rotation * Vector3::z());
-            let swept = TranslatedTool::new(*tool, tip0, p1 * Point3::origin() - tip0, axis);
+            let swept = TranslatedTool::new(tool.clone(), tip0, p1 * Point3::origin() - tip0, axis);
             report.sweeps += 1;
             cut |= stock.remove(&swept, line);
         } else {

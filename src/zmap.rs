@@ -111,6 +111,9 @@ pub enum ZMapError {
         /// Stock top (mm).
         stock_top_mm: Real,
     },
+    /// The tool is not a flat or ball end mill (the closed forms cover only those).
+    #[error("the Z-map cuts only flat and ball end mills; use the tri-dexel for other tools")]
+    UnsupportedTool,
     /// A position is NaN or infinite.
     #[error("line {line}: the tool position is not finite")]
     NotFinite {
@@ -358,6 +361,9 @@ impl ZMap {
         tips: &[TipMove],
         opts: &ZMapOptions,
     ) -> Result<ZMapReport, ZMapError> {
+        if !matches!(tool.kind(), ToolKind::Flat | ToolKind::Ball) {
+            return Err(ZMapError::UnsupportedTool);
+        }
         let r = tool.radius();
         let ztop = self.bounds.max.z;
         let mut segments: Vec<(Point3, Point3)> = Vec::with_capacity(tips.len());
@@ -397,8 +403,8 @@ impl ZMap {
             segments = merge_collinear(&segments);
         }
         let lift = match tool.kind() {
-            ToolKind::Flat => 0.0,
             ToolKind::Ball => r,
+            _ => 0.0,
         };
         let prepared: Vec<Prepared> = segments
             .iter()
@@ -675,6 +681,8 @@ fn cut_row(
                 }
             }
         }
+        // Refused by `ZMap::cut` before any row is touched.
+        _ => {}
     }
 }
 
@@ -744,8 +752,8 @@ mod tests {
                 let p = a + (b - a) * (i as Real / n as Real);
                 let d2 = (x - p.x).powi(2) + (y - p.y).powi(2);
                 (d2 <= r * r).then(|| match tool.kind() {
-                    ToolKind::Flat => p.z,
                     ToolKind::Ball => p.z + r - (r * r - d2).sqrt(),
+                    _ => p.z,
                 })
             })
             .fold(Real::INFINITY, Real::min)

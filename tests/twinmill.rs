@@ -846,6 +846,7 @@ fn module_dependencies_point_down_the_pipeline() {
         "kinematics",
         "tool",
         "stock",
+        "cutter",
         "sweep",
         "mesh",
         "zmap",
