@@ -9,6 +9,7 @@
 //! [`output`] writes the results. See README.md, *Architecture*.
 
 pub mod cloud;
+pub mod correct;
 pub mod fit;
 pub mod identify;
 pub mod kinematics;
