@@ -592,7 +592,10 @@ fn format_axis(letter: AxisLetter, v: Real) -> String {
     };
     let s = format!("{v:.d$}");
     // No "-0.000000".
-    if s.trim_start_matches('-').chars().all(|c| c == '0' || c == '.') {
+    if s.trim_start_matches('-')
+        .chars()
+        .all(|c| c == '0' || c == '.')
+    {
         format!("{:.d$}", 0.0)
     } else {
         s
@@ -654,9 +657,7 @@ pub fn correct_program(
         for axis in machine.axes() {
             let c = (fit.q.get(axis.letter) - q.get(axis.letter)).abs();
             match axis.kind {
-                AxisKind::Linear => {
-                    s.max_linear_correction_mm = s.max_linear_correction_mm.max(c)
-                }
+                AxisKind::Linear => s.max_linear_correction_mm = s.max_linear_correction_mm.max(c),
                 AxisKind::Rotary => {
                     s.max_rotary_correction_deg = s.max_rotary_correction_deg.max(c)
                 }
@@ -1075,7 +1076,10 @@ pub fn face_errors(
             .ok_or_else(|| err(format!("no move on line {}", spec.line)))?;
         let fl = flank(nominal, tool, mv, stock_box)
             .ok_or_else(|| err("the cut has no flank (no travel across the tool)".into()))?;
-        let (su, sv) = (extent(stock_box, &fl.tip, &fl.u), extent(stock_box, &fl.tip, &fl.v));
+        let (su, sv) = (
+            extent(stock_box, &fl.tip, &fl.u),
+            extent(stock_box, &fl.tip, &fl.v),
+        );
         let m = opts.margin_mm;
         let h0 = match tool.kind() {
             ToolKind::Flat => 0.0,
@@ -1186,7 +1190,11 @@ mod tests {
         for (i, name) in names.iter().enumerate() {
             let id = c.deviation_id(name).expect("known");
             let u = rng.uniform(i as u64, 0) * 2.0 - 1.0;
-            let v = if id.component.is_angle() { u * ang } else { u * off };
+            let v = if id.component.is_angle() {
+                u * ang
+            } else {
+                u * off
+            };
             c.set_deviation(id, v);
         }
         c
@@ -1206,7 +1214,11 @@ mod tests {
     fn nominal_chain_returns_the_commanded_pose() {
         let c = mdx50();
         let s = PoseSolver::new(&c, &tool(), 10.0);
-        for q in [pose(1.0, 2.0, 3.0, 0.0), pose(-12.0, 25.0, 7.0, 180.0), pose(3.0, -4.0, 50.0, 37.5)] {
+        for q in [
+            pose(1.0, 2.0, 3.0, 0.0),
+            pose(-12.0, 25.0, 7.0, 180.0),
+            pose(3.0, -4.0, 50.0, 37.5),
+        ] {
             let fit = s.solve(&q, &q, &FREE, 1).expect("solves");
             assert_eq!(fit.q, q, "a nominal chain needs no correction");
             assert!(fit.residual_rms_mm < 1e-12);
@@ -1217,7 +1229,11 @@ mod tests {
     fn jacobian_matches_central_differences() {
         let c = deviated(5, 0.5, 5e-4);
         let s = PoseSolver::new(&c, &tool(), 10.0);
-        for q in [pose(1.0, 2.0, 3.0, 10.0), pose(-12.0, 25.0, 7.0, 180.0), pose(3.0, -4.0, 50.0, -37.5)] {
+        for q in [
+            pose(1.0, 2.0, 3.0, 10.0),
+            pose(-12.0, 25.0, 7.0, 180.0),
+            pose(3.0, -4.0, 50.0, -37.5),
+        ] {
             let (_, j) = s.jacobian(&q);
             for (i, axis) in c.axes().iter().enumerate() {
                 // Steps 1e-4 (mm or °): truncation O(h²·curvature) ~1e-9, rounding ~1e-12.
@@ -1263,7 +1279,10 @@ mod tests {
                 fit.residual_rms_mm
             );
             let angle = axis_angle_error(&c, &q, &fit.q);
-            assert!((angle - theta).abs() < 1e-9, "seed {seed}: {angle} vs {theta}");
+            assert!(
+                (angle - theta).abs() < 1e-9,
+                "seed {seed}: {angle} vs {theta}"
+            );
             // To first order v_x is the sum of the beta deviations.
             let beta: Real = ["beta_AY", "beta_YX", "beta_XZ", "beta_ZS"]
                 .iter()
@@ -1286,6 +1305,131 @@ mod tests {
             assert!((p.translation.vector - line).norm() < 1e-12);
             assert!(p.rotation.angle_to(&pa.rotation) < 1e-15);
         }
+    }
+
+    /// X, Y, Z, then a B head pivoting 150 mm above the tool tip: deviations before the
+    /// rotary axis make the correction depend on B, so B moves need sub-moves.
+    fn head_machine() -> Chain {
+        let ax = |letter, kind, d: Vector3, o: Point3| Axis {
+            letter,
+            kind,
+            direction: UnitVector3::new_normalize(d),
+            origin: o,
+        };
+        let mut c = Chain::new(
+            vec![
+                ax(
+                    AxisLetter::X,
+                    AxisKind::Linear,
+                    Vector3::x(),
+                    Point3::origin(),
+                ),
+                ax(
+                    AxisLetter::Y,
+                    AxisKind::Linear,
+                    Vector3::y(),
+                    Point3::origin(),
+                ),
+                ax(
+                    AxisLetter::Z,
+                    AxisKind::Linear,
+                    Vector3::z(),
+                    Point3::origin(),
+                ),
+                ax(
+                    AxisLetter::B,
+                    AxisKind::Rotary,
+                    Vector3::y(),
+                    Point3::new(0.0, 0.0, 150.0),
+                ),
+            ],
+            "S",
+        )
+        .expect("valid chain");
+        for (n, v) in [
+            ("dx_XY", 0.3),
+            ("gamma_XY", 5e-4),
+            ("dy_YZ", -0.2),
+            ("alpha_YZ", -4e-4),
+            ("beta_ZB", 3e-4),
+            ("dz_BS", 0.1),
+        ] {
+            c.set_deviation(c.deviation_id(n).expect("known"), v);
+        }
+        c
+    }
+
+    #[test]
+    fn rotary_moves_are_subdivided_until_the_path_is_within_tolerance() {
+        let c = head_machine();
+        let tool = tool();
+        let start = AxisValues::default().with(AxisLetter::Z, 10.0);
+        let turn = start.with(AxisLetter::B, 90.0).with(AxisLetter::X, 40.0);
+        let straight = turn.with(AxisLetter::Y, 30.0);
+        let mv = |line, a: AxisValues, b: AxisValues| Move {
+            kind: MoveKind::Linear,
+            start: a,
+            end: b,
+            feed_mm_per_min: Some(500.0),
+            line,
+        };
+        let program = Program {
+            path: "head.ngc".into(),
+            moves: vec![mv(1, start, turn), mv(2, turn, straight)],
+            axes_used: vec![AxisLetter::X, AxisLetter::Y, AxisLetter::Z, AxisLetter::B],
+            ended_by: Some(3),
+        };
+        let opts = CorrectOptions::for_accuracy(1e-3);
+        let cp = correct_program(&c, &tool, &program, &start, &opts).expect("corrects");
+        let turn_fix = &cp.per_move[0];
+        assert!(turn_fix.sub_moves > 4, "{turn_fix:?}");
+        assert!(turn_fix.subdivision_error_mm <= opts.path_tolerance_mm);
+        // B turns the tool about its own, deviated direction w (Y through the rotations of
+        // the joints before it): the tool axis reaches only directions perpendicular to w,
+        // so a nominal axis v leaves the angle asin|v·w|, at the flute's ends
+        // 2·sin(θ/2)·L/2 away. On the second move v = RotY(90°)·z = x.
+        let rot: Vec<_> = c.deviations()[..3]
+            .iter()
+            .map(|d| d.transform().rotation)
+            .collect();
+        let w = rot[0] * rot[1] * rot[2] * Vector3::y();
+        let theta = w.x.abs().asin();
+        let expect_max = 2.0 * (theta / 2.0).sin() * 25.0 / 2.0;
+        let got = cp.per_move[1].residual_max_mm;
+        assert!(
+            (got - expect_max).abs() < 1e-6 * expect_max,
+            "{got} vs {expect_max}"
+        );
+        // Densely sampled on the machine, the path is within tolerance beyond that residual.
+        let path = path_error(&c, &tool, &program, &cp);
+        assert!(path.samples > 9 * turn_fix.sub_moves);
+        assert!(
+            path.max_mm <= cp.summary.residual_max_mm + opts.path_tolerance_mm,
+            "{path:?} vs residual {}",
+            cp.summary.residual_max_mm
+        );
+        // Without subdivision the chord strays much further: the check is not vacuous.
+        let coarse = CorrectOptions {
+            path_tolerance_mm: 1.0,
+            ..opts
+        };
+        let one = correct_program(&c, &tool, &program, &start, &coarse).expect("corrects");
+        assert_eq!(one.per_move[0].sub_moves, 1);
+        let path1 = path_error(&c, &tool, &program, &one);
+        assert!(path1.max_mm > cp.summary.residual_max_mm + 10.0 * opts.path_tolerance_mm);
+        // The straight move at fixed B stays one block with B exactly unchanged.
+        let last = cp.blocks.last().expect("blocks");
+        let before = cp.blocks[cp.blocks.len() - 2];
+        assert_eq!(last.part, (1, 1));
+        assert_eq!(last.end.get(AxisLetter::B), before.end.get(AxisLetter::B));
+        // Emitted: parts named, feed kept on every sub-move.
+        let mut text = Vec::new();
+        write_gcode(&cp, &["head test".into()], &mut text).expect("writes");
+        let text = String::from_utf8(text).expect("utf-8");
+        let n = turn_fix.sub_moves;
+        assert!(text.contains(&format!("(src line 1, {n}/{n})")), "{text}");
+        assert_eq!(text.matches("F500").count(), n + 1);
+        assert!(text.contains("G21 G90 G94") && text.trim_end().ends_with("M30\n%"));
     }
 
     #[test]

@@ -8,9 +8,9 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
 use twinmill::cloud::read_cloud_file;
+use twinmill::correct::write_gcode;
 use twinmill::math::{Aabb, Point3};
 use twinmill::nc::Program;
-use twinmill::correct::write_gcode;
 use twinmill::output::{json_bytes, ply_bytes, write_files, write_outcome, write_streamed};
 use twinmill::pipeline::{
     FitRequest, Selection, Shape, correct, fit_cloud, machine_part, run, scanner_study,
@@ -75,7 +75,7 @@ enum Command {
         /// The scene file (TOML).
         scene: PathBuf,
         /// Accuracy the corrected part must reach on the twin (mm, > 0).
-        #[arg(long, default_value_t = 0.001)]
+        #[arg(long, default_value_t = 0.001, allow_hyphen_values = true)]
         accuracy_mm: f64,
         /// Folder for the corrected program and the report.
         #[arg(long, default_value = "out")]
@@ -386,7 +386,7 @@ fn main() -> ExitCode {
             if let Err(e) = write_streamed(&out, files) {
                 return fail(e);
             }
-            print_out(
+            let code = print_out(
                 || {
                     format!(
                         "{}  wrote         {}/{{{ngc}, {json_name}}}\n",
@@ -395,7 +395,17 @@ fn main() -> ExitCode {
                     )
                 },
                 json.then(|| serde_json::to_string_pretty(report)),
-            )
+            );
+            if code == ExitCode::SUCCESS && !report.met {
+                // Written and reported, but the twin predicts the accuracy is not met.
+                let _ = writeln!(
+                    std::io::stderr(),
+                    "twinmill: accuracy {accuracy_mm} mm not met: {}",
+                    report.status
+                );
+                return ExitCode::from(2);
+            }
+            code
         }
         Command::Fit {
             cloud,

@@ -110,7 +110,10 @@ pub type StreamedFile<'a> = (
 /// through a buffer into a hidden staging file first; only when every file is complete are
 /// they renamed into place. A failure removes the staging files and leaves any previous
 /// files of those names untouched.
-pub fn write_streamed(dir: &Path, files: Vec<StreamedFile<'_>>) -> Result<Vec<PathBuf>, OutputError> {
+pub fn write_streamed(
+    dir: &Path,
+    files: Vec<StreamedFile<'_>>,
+) -> Result<Vec<PathBuf>, OutputError> {
     io(dir, std::fs::create_dir_all(dir))?;
     let mut staged: Vec<(PathBuf, PathBuf)> = Vec::new();
     let result = (|| {

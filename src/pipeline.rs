@@ -9,22 +9,22 @@ use crate::correct::{
     CorrectError, CorrectOptions, CorrectedProgram, correct_program, face_errors, path_error,
     uncorrected,
 };
-use crate::kinematics::Chain;
 use crate::fit::Plane;
 use crate::fit::{
     RobustRule, fit_circle, fit_circle_robust, fit_cylinder, fit_cylinder_robust, fit_plane,
     fit_plane_robust, fit_sphere, fit_sphere_robust, plane_distance_and_angle,
 };
 use crate::identify::{self, Face, IdentifyError};
+use crate::kinematics::Chain;
 use crate::math::Aabb;
 use crate::math::{Point3, Real};
 use crate::nc::Program;
 use crate::progress::Progress;
 use crate::render::{HeatMapOptions, RenderError, encode_png, nice_ceil, render_heat_map};
 use crate::report::{
-    CorrectIteration, CorrectReport, UncorrectableReport,
-    CircleReport, CylinderReport, FaceReport, FitFileReport, PlanePair, PlaneReport, Report,
-    ScanReport, SolverReport, SphereReport, StockReport, StudyCase,
+    CircleReport, CorrectIteration, CorrectReport, CylinderReport, FaceReport, FitFileReport,
+    PlanePair, PlaneReport, Report, ScanReport, SolverReport, SphereReport, StockReport, StudyCase,
+    UncorrectableReport,
 };
 use crate::scan::{Misregistration, ScanError, StudyOptions, Surface, scan};
 use crate::scene::Scene;
@@ -783,8 +783,8 @@ pub fn correct(
             Some(cp) => cp,
             None => {
                 let clock = Instant::now();
-                let cp = correct_program(model, &scene.tool, program, &start, &opts)
-                    .map_err(cerr)?;
+                let cp =
+                    correct_program(model, &scene.tool, program, &start, &opts).map_err(cerr)?;
                 timings.push((format!("correct {pass}"), clock.elapsed().as_secs_f64()));
                 cp
             }
@@ -814,7 +814,9 @@ pub fn correct(
                 "not met: the faces are off by up to {:.6} mm although the path is within reach; \
                  the model corrected for differs from the simulated machine, or deviations these \
                  axes cannot correct reach the faces (see uncorrectable)",
-                iterations.last().map_or(Real::NAN, |i| i.predicted_error_mm)
+                iterations
+                    .last()
+                    .map_or(Real::NAN, |i| i.predicted_error_mm)
             );
             break;
         }
@@ -858,7 +860,7 @@ pub fn correct(
             scene.name
         ),
         format!(
-            "deviations corrected for (mm, rad): {}",
+            "deviations corrected for, mm and rad: {}",
             if corrected_for.is_empty() {
                 "none".to_string()
             } else {
@@ -872,11 +874,11 @@ pub fn correct(
     ];
     if let Some(f) = &fin {
         header.push(format!(
-            "predicted on the twin: faces within {:.6} mm, path within {:.6} mm (accuracy asked {} mm)",
+            "predicted on the twin: faces within {:.6} mm, path within {:.6} mm, accuracy asked {} mm",
             f.predicted_error_mm, f.path.max_mm, accuracy_mm
         ));
     }
-    header.push("each block names its source line; subdivided moves their part k/n".into());
+    header.push("each block names its source line, subdivided moves also their part k/n".into());
     let report = CorrectReport {
         scene: scene.name.clone(),
         program: program.path.display().to_string(),

@@ -628,18 +628,23 @@ impl CorrectReport {
             let step = it
                 .faces
                 .step_mm
-                .map_or(String::new(), |x| format!(", step {:+.6} mm", x));
+                .map_or(String::new(), |x| format!(", step {:+.4} µm", x * 1e3));
             let _ = writeln!(
                 s,
-                "  {label} faces max {:.6} mm{step}; path max {:.6} mm, rms {:.6} mm ({} blocks)",
-                it.predicted_error_mm, it.path.max_mm, it.path.rms_mm, it.blocks
+                "  {label} faces max {:.4} µm{step}; path max {:.4} µm, rms {:.4} µm ({} blocks)",
+                it.predicted_error_mm * 1e3,
+                it.path.max_mm * 1e3,
+                it.path.rms_mm * 1e3,
+                it.blocks
             );
         }
         let c = &self.correction;
         let _ = writeln!(
             s,
-            "  residual      {:.6} mm RMS over the flute, {:.6} mm at a flute end (uncorrectable); {} moves subdivided",
-            c.residual_rms_mm, c.residual_max_mm, c.subdivided_moves
+            "  residual      {:.4} µm RMS over the flute, {:.4} µm at a flute end (uncorrectable); {} moves subdivided",
+            c.residual_rms_mm * 1e3,
+            c.residual_max_mm * 1e3,
+            c.subdivided_moves
         );
         for u in self
             .uncorrectable
@@ -648,8 +653,9 @@ impl CorrectReport {
         {
             let _ = writeln!(
                 s,
-                "  {:<13} alone leaves {:.6} mm RMS (cannot be corrected with these axes)",
-                u.deviation, u.residual_rms_mm
+                "  {:<13} alone leaves {:.4} µm RMS (cannot be corrected with these axes)",
+                u.deviation,
+                u.residual_rms_mm * 1e3
             );
         }
         let _ = writeln!(s, "  status        {}", self.status);

@@ -917,8 +917,8 @@ fn corrected_program_leaves_no_step_on_the_paper_scene() {
     let step = mean(&a180) - mean(&a0);
     assert!((step.abs() - 1.0).abs() < 1e-6, "uncorrected step {step}");
 
-    let out = twinmill::pipeline::correct(&s, &program, &s.chain, 1e-3, &NoProgress)
-        .expect("corrects");
+    let out =
+        twinmill::pipeline::correct(&s, &program, &s.chain, 1e-3, &NoProgress).expect("corrects");
     assert!(out.report.met, "{}", out.report.status);
     let [a0, a180] = face_distances(&s, &out.corrected.moves);
     assert!(a0.len() > 5000 && a180.len() > 5000);
@@ -973,7 +973,11 @@ fn mixed_deviation_sets_are_corrected_to_within_1_um_on_the_faces() {
         for (k, (name, size)) in NINE.iter().enumerate() {
             // Each deviation in two sets of three, with a random sign; the last set all.
             if set == 11 || rng.uniform(set, k as u64) < 2.0 / 3.0 {
-                let sign = if rng.uniform(set, 100 + k as u64) < 0.5 { -1.0 } else { 1.0 };
+                let sign = if rng.uniform(set, 100 + k as u64) < 0.5 {
+                    -1.0
+                } else {
+                    1.0
+                };
                 set_deviation(&mut s, name, sign * size);
                 any = true;
                 if name.starts_with("beta") {
@@ -1007,7 +1011,11 @@ fn mixed_deviation_sets_are_corrected_to_within_1_um_on_the_faces() {
         // report says the accuracy is met on the faces, not on the path.
         let no_tilt = beta.abs() < 1e-12;
         assert_eq!(out.report.met, no_tilt, "set {set}: {}", out.report.status);
-        assert!(out.report.status.contains(if no_tilt { "met in" } else { "faces within" }));
+        assert!(
+            out.report
+                .status
+                .contains(if no_tilt { "met in" } else { "faces within" })
+        );
     }
 }
 
@@ -1039,19 +1047,39 @@ fn cli_correct_writes_program_and_report_or_nothing() {
     assert_eq!(report["met"], serde_json::Value::Bool(true));
     let its = report["iterations"].as_array().expect("iterations");
     assert!(its.len() >= 2);
-    assert!(its[0]["faces"]["step_mm"].as_f64().is_some_and(|x| (x.abs() - 1.0).abs() < 1e-6));
+    assert!(
+        its[0]["faces"]["step_mm"]
+            .as_f64()
+            .is_some_and(|x| (x.abs() - 1.0).abs() < 1e-6)
+    );
     let ngc = std::fs::read_to_string(sb.dir.join("c/mdx50-step-corrected.ngc")).expect("ngc");
-    assert!(ngc.starts_with("%\n(") && ngc.contains("Y-24.500000") && ngc.trim_end().ends_with("M30\n%"));
+    assert!(
+        ngc.starts_with("%\n(")
+            && ngc.contains("Y-24.500000")
+            && ngc.trim_end().ends_with("M30\n%")
+    );
     assert!(sb.dir.join("c/mdx50-step-correct.json").exists());
     // Bad input: a clear one-line error, no files.
     for (args, words) in [
-        (vec!["correct", "s.toml", "--out", "bad", "--accuracy-mm", "0"], "accuracy"),
-        (vec!["correct", "s.toml", "--out", "bad", "--accuracy-mm", "-1"], "accuracy"),
-        (vec!["correct", "s.toml", "--out", "bad", "--accuracy-mm", "nan"], "accuracy"),
+        (
+            vec!["correct", "s.toml", "--out", "bad", "--accuracy-mm", "0"],
+            "accuracy",
+        ),
+        (
+            vec!["correct", "s.toml", "--out", "bad", "--accuracy-mm", "-1"],
+            "accuracy",
+        ),
+        (
+            vec!["correct", "s.toml", "--out", "bad", "--accuracy-mm", "nan"],
+            "accuracy",
+        ),
     ] {
         let (code, _, stderr) = sb.run(&args);
         assert_ne!(code, 0);
-        assert!(stderr.contains(words) && !stderr.contains("panicked"), "{stderr}");
+        assert!(
+            stderr.contains(words) && !stderr.contains("panicked"),
+            "{stderr}"
+        );
         assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
     }
     sb.write(
@@ -1062,6 +1090,15 @@ fn cli_correct_writes_program_and_report_or_nothing() {
     );
     let (code, _, stderr) = sb.run(&["correct", "far.toml", "--out", "bad"]);
     assert_ne!(code, 0);
-    assert!(stderr.contains("not reachable") && !stderr.contains("panicked"), "{stderr}");
-    assert!(!sb.dir.join("bad").exists() || std::fs::read_dir(sb.dir.join("bad")).expect("dir").next().is_none());
+    assert!(
+        stderr.contains("not reachable") && !stderr.contains("panicked"),
+        "{stderr}"
+    );
+    assert!(
+        !sb.dir.join("bad").exists()
+            || std::fs::read_dir(sb.dir.join("bad"))
+                .expect("dir")
+                .next()
+                .is_none()
+    );
 }
