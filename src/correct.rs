@@ -479,7 +479,12 @@ pub fn straight_at_fixed_rotary(chain: &Chain, mv: &Move) -> bool {
     }
 }
 
-/// The kind a corrected (straight) sub-move of `kind` is emitted as.
+/// The kind a corrected (straight) sub-move of `kind` is emitted as (an arc would become
+/// `Linear` chords).
+#[expect(
+    clippy::needless_match,
+    reason = "one arm per move kind: a new kind must choose how its chords are emitted"
+)]
 fn emitted_kind(kind: MoveKind) -> MoveKind {
     match kind {
         MoveKind::Rapid => MoveKind::Rapid,
