@@ -13,7 +13,8 @@ use twinmill::math::{Aabb, Point3};
 use twinmill::nc::Program;
 use twinmill::output::{json_bytes, ply_bytes, write_files, write_outcome, write_streamed};
 use twinmill::pipeline::{
-    FitRequest, Selection, Shape, correct, fit_cloud, machine_part, run, scanner_study,
+    FitRequest, Selection, Shape, correct, fit_cloud, identified_model, machine_part, run,
+    scanner_study,
 };
 use twinmill::progress::Progress;
 use twinmill::report::{ScanFileReport, ScanReport};
@@ -48,6 +49,15 @@ struct SceneArgs {
     verbose: bool,
 }
 
+/// Which deviations `correct` corrects for.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum ModelSource {
+    /// The scene's injected deviations (the simulated machine itself).
+    Injected,
+    /// The deviations identified from the scene's simulated scan (plus the known ones).
+    Identified,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// Simulate a scene's program on its deviated machine, scan the part, fit the faces and
@@ -74,6 +84,10 @@ enum Command {
     Correct {
         /// The scene file (TOML).
         scene: PathBuf,
+        /// The deviations to correct for: the scene's injected ones, or those identified by
+        /// simulating, scanning and fitting the scene first (`run`), as on a real machine.
+        #[arg(long, value_enum, default_value = "injected")]
+        model: ModelSource,
         /// Accuracy the corrected part must reach on the twin (mm, > 0).
         #[arg(long, default_value_t = 0.001, allow_hyphen_values = true)]
         accuracy_mm: f64,
@@ -343,6 +357,7 @@ fn main() -> ExitCode {
         }
         Command::Correct {
             scene,
+            model,
             accuracy_mm,
             out,
             json,
@@ -359,8 +374,18 @@ fn main() -> ExitCode {
                 Err(code) => return code,
             };
             let bars = bars(json);
-            // The model corrected for: the scene's machine with its injected deviations.
-            let outcome = match correct(&scene, &program, &scene.chain, accuracy_mm, &bars) {
+            let chain = match model {
+                ModelSource::Injected => scene.chain.clone(),
+                ModelSource::Identified => {
+                    match run(&scene, &program, &bars)
+                        .and_then(|o| identified_model(&scene, &o.report))
+                    {
+                        Ok(c) => c,
+                        Err(e) => return fail(e),
+                    }
+                }
+            };
+            let outcome = match correct(&scene, &program, &chain, accuracy_mm, &bars) {
                 Ok(o) => o,
                 Err(e) => return fail(e),
             };

@@ -900,3 +900,33 @@ pub fn correct(
         header,
     })
 }
+
+/// The model to correct for from a run's identification: the scene's identification model
+/// (nominal plus known deviations) with the identified values set. A combination such as
+/// `gamma_AY+gamma_YX` sets its first deviation so that the sum is the identified value,
+/// the others staying at their known values. Errors if nothing was identified.
+pub fn identified_model(scene: &Scene, report: &Report) -> Result<Chain, PipelineError> {
+    let err = |message: String| PipelineError::Measure {
+        path: scene.path.display().to_string(),
+        message,
+    };
+    if report.identified.is_empty() {
+        return Err(err(format!(
+            "no deviation was identified from the scan (not identifiable: {})",
+            report.not_identified.join(", ")
+        )));
+    }
+    let mut model = scene.model.clone();
+    for (name, value) in &report.identified {
+        let mut parts = name.split('+');
+        let first = parts.next().unwrap_or_default();
+        let mut rest = 0.0;
+        for other in parts {
+            let id = model.deviation_id(other).map_err(|e| err(e.to_string()))?;
+            rest += model.deviation(id);
+        }
+        let id = model.deviation_id(first).map_err(|e| err(e.to_string()))?;
+        model.set_deviation(id, value - rest);
+    }
+    Ok(model)
+}

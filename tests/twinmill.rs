@@ -1020,6 +1020,32 @@ fn mixed_deviation_sets_are_corrected_to_within_1_um_on_the_faces() {
 }
 
 #[test]
+fn correcting_for_identified_deviations_closes_the_loop() {
+    // Seed 002 Fig. 1: scan the part, identify, correct for what was identified, and cut
+    // again on the (unchanged) machine. The scanner's noise leaves dy_AY a fraction of a µm
+    // off, and the step after correction is that error twice.
+    let s = scene();
+    let program = s.load_program().expect("parses");
+    let run_out = run(&s, &program, &NoProgress).expect("runs");
+    let model = twinmill::pipeline::identified_model(&s, &run_out.report).expect("identified");
+    let dy = model.deviation(model.deviation_id("dy_AY").expect("known"));
+    assert_eq!(dy, run_out.report.identified["dy_AY"]);
+    let out =
+        twinmill::pipeline::correct(&s, &program, &model, 1e-3, &NoProgress).expect("corrects");
+    let [a0, a180] = face_distances(&s, &out.corrected.moves);
+    let step = mean(&a180) - mean(&a0);
+    let expect = 2.0 * (dy + 0.5);
+    assert!(
+        (step.abs() - expect.abs()).abs() < 1e-5,
+        "step {step} vs {expect}"
+    );
+    assert!(
+        step.abs() < 1e-3,
+        "step {step} mm after correcting for dy_AY = {dy}"
+    );
+}
+
+#[test]
 fn correct_rejects_bad_accuracy_and_unreachable_poses() {
     let s = scene();
     let program = s.load_program().expect("parses");
