@@ -791,6 +791,8 @@ pub fn correct(
         };
         let it = measure(pass, Some(opts.path_tolerance_mm), &cp, &mut timings)?;
         let residual = cp.summary.residual_max_mm;
+        // The same path on the model corrected for: what the correction itself leaves.
+        let on_model = path_error(model, &scene.tool, program, &cp).max_mm - residual;
         let faces_ok = it.predicted_error_mm <= accuracy_mm;
         let path_ok = it.path.max_mm <= accuracy_mm;
         // Path error beyond what no command can remove: subdivision, rounding, the model.
@@ -811,7 +813,7 @@ pub fn correct(
         }
         if correctable <= accuracy_mm {
             status = format!(
-                "not met: the faces are off by up to {:.6} mm although the path is within reach; \
+                "the faces are off by up to {:.6} mm although the path is within reach; \
                  the model corrected for differs from the simulated machine, or deviations these \
                  axes cannot correct reach the faces (see uncorrectable)",
                 iterations
@@ -820,9 +822,18 @@ pub fn correct(
             );
             break;
         }
+        if on_model <= accuracy_mm {
+            // Finer sub-moves cannot remove what they did not cause.
+            status = format!(
+                "the path is off by {correctable:.6} mm beyond the uncorrectable residual \
+                 on the simulated machine but only {on_model:.6} mm on the model corrected for: \
+                 the model differs from the simulated machine"
+            );
+            break;
+        }
         opts.path_tolerance_mm /= 4.0;
         status = format!(
-            "not met after {pass} pass(es): path error beyond the residual {correctable:.6} mm"
+            "after {pass} pass(es) the path is still off by {correctable:.6} mm beyond the residual"
         );
     }
     let corrected = last.unwrap_or(given);
