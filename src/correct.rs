@@ -1143,6 +1143,85 @@ pub fn face_errors(
     Ok(FaceCheck { faces, step_mm })
 }
 
+/// A machined part against the nominal part, ray by ray over the three dexel grids.
+#[derive(Clone, Copy, Debug, PartialEq, Default, serde::Serialize)]
+pub struct PartError {
+    /// Crossings compared (made by a cut in either part, seen at most 60° off the ray).
+    pub crossings: usize,
+    /// Largest distance between corresponding crossings, along the surface normal (mm).
+    pub max_mm: Real,
+    /// RMS of those distances (mm).
+    pub rms_mm: Real,
+    /// Where the largest distance is (workpiece frame, mm).
+    pub worst_at: [Real; 3],
+    /// Rays whose material intervals differ in number or in the orientation of their ends
+    /// (a surface edge moved across the ray): not compared.
+    pub unmatched_rays: usize,
+}
+
+/// A crossing is compared on a grid whose rays meet its surface at most 60° off the normal
+/// (|n·e| ≥ 0.5); every surface has a normal component ≥ 1/√3 on some axis, so each is
+/// compared on at least one grid, never at grazing incidence.
+const PART_RAY_COS: Real = 0.5;
+
+/// Compares every cut surface of `part` with `nominal` (the same stock box and pitch): on
+/// each ray, corresponding crossings' distance along the ray times the cosine between ray
+/// and normal — the distance between the surfaces there, to first order.
+pub fn part_error(part: &TriDexel, nominal: &TriDexel) -> PartError {
+    let mut out = PartError::default();
+    let mut sum = 0.0;
+    for (g, h) in part.grids().iter().zip(nominal.grids()) {
+        let (nu, nv) = g.dims();
+        if h.dims() != (nu, nv) {
+            continue;
+        }
+        let axis = g.axis();
+        for iv in 0..nv {
+            for iu in 0..nu {
+                let (a, b) = (g.ray(iu, iv), h.ray(iu, iv));
+                let cut = |segs: &[crate::stock::Segment]| {
+                    segs.iter().any(|s| s.lo.line != 0 || s.hi.line != 0)
+                };
+                if !cut(a) && !cut(b) {
+                    continue;
+                }
+                let pairs = || {
+                    a.iter()
+                        .zip(b)
+                        .flat_map(|(x, y)| [(&x.lo, &y.lo), (&x.hi, &y.hi)])
+                };
+                if a.len() != b.len()
+                    || pairs().any(|(x, y)| x.normal().dot(&y.normal()) < FACE_NORMAL_COS)
+                {
+                    out.unmatched_rays += 1;
+                    continue;
+                }
+                for (x, y) in pairs() {
+                    let n = y.normal();
+                    if (x.line == 0 && y.line == 0) || n[axis].abs() < PART_RAY_COS {
+                        continue;
+                    }
+                    let d = (x.t - y.t).abs() * n[axis].abs();
+                    out.crossings += 1;
+                    sum += d * d;
+                    if d > out.max_mm {
+                        out.max_mm = d;
+                        let mut p = g.ray_origin(iu, iv);
+                        p[axis] = y.t;
+                        out.worst_at = [p.x, p.y, p.z];
+                    }
+                }
+            }
+        }
+    }
+    out.rms_mm = if out.crossings > 0 {
+        (sum / out.crossings as Real).sqrt()
+    } else {
+        0.0
+    };
+    out
+}
+
 /// The nominal flank plane of a straight cut (for tests and reports).
 pub fn nominal_face(nominal: &Chain, tool: &Tool, mv: &Move, stock_box: &Aabb) -> Option<Plane> {
     flank(nominal, tool, mv, stock_box).map(|f| f.plane)

@@ -6,8 +6,8 @@
 
 use crate::cloud::PointCloud;
 use crate::correct::{
-    CorrectError, CorrectOptions, CorrectedProgram, correct_program, face_errors, path_error,
-    uncorrected,
+    CorrectError, CorrectOptions, CorrectedProgram, correct_program, face_errors, part_error,
+    path_error, uncorrected,
 };
 use crate::fit::Plane;
 use crate::fit::{
@@ -705,6 +705,18 @@ pub fn correct(
             .rotary_step_bound_mm
             .min(accuracy_mm * SWEEP_BOUND_FRACTION),
     };
+    // The nominal part: the program as given on the nominal machine.
+    let nominal_part = {
+        let mut nominal_scene = sweep_scene.clone();
+        nominal_scene.chain = nominal.clone();
+        machine_part(&nominal_scene, program, progress)?
+    };
+    timings.extend(
+        nominal_part
+            .timings
+            .iter()
+            .map(|(n, t)| (format!("{n} nominal"), *t)),
+    );
     // Simulate and measure one program on the scene's machine.
     let measure = |iteration: usize,
                    tol: Option<Real>,
@@ -735,6 +747,7 @@ pub fn correct(
         )
         .map_err(cerr)?;
         let path = path_error(&scene.chain, &scene.tool, program, cp);
+        let whole = part_error(&part.stock, &nominal_part.stock);
         timings.push((
             format!("measure {iteration}"),
             clock.elapsed().as_secs_f64(),
@@ -744,6 +757,7 @@ pub fn correct(
             path_tolerance_mm: tol,
             blocks: cp.blocks.len(),
             path,
+            part: whole,
             predicted_error_mm: faces.max_abs_mm(),
             faces,
             sweep: part.sweep,
@@ -766,6 +780,7 @@ pub fn correct(
             path_tolerance_mm: None,
             blocks: given.blocks.len(),
             path: path_error(&scene.chain, &scene.tool, program, &given),
+            part: crate::correct::PartError::default(),
             faces: crate::correct::FaceCheck {
                 faces: Vec::new(),
                 step_mm: None,

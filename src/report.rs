@@ -556,6 +556,9 @@ pub struct CorrectIteration {
     pub path: crate::correct::PathError,
     /// The milled faces against the nominal faces.
     pub faces: crate::correct::FaceCheck,
+    /// Every cut surface of the part against the nominal part (the program as given swept
+    /// on the nominal machine), ray by ray.
+    pub part: crate::correct::PartError,
     /// The predicted machining error: the largest distance of a milled-face crossing from
     /// its nominal face (mm).
     pub predicted_error_mm: f64,
@@ -631,10 +634,11 @@ impl CorrectReport {
                 .map_or(String::new(), |x| format!(", step {:+.4} µm", x * 1e3));
             let _ = writeln!(
                 s,
-                "  {label} faces max {:.4} µm{step}; path max {:.4} µm, rms {:.4} µm ({} blocks)",
+                "  {label} faces max {:.4} µm{step}; path max {:.4} µm, rms {:.4} µm; whole part max {:.4} µm ({} blocks)",
                 it.predicted_error_mm * 1e3,
                 it.path.max_mm * 1e3,
                 it.path.rms_mm * 1e3,
+                it.part.max_mm * 1e3,
                 it.blocks
             );
         }

@@ -996,6 +996,11 @@ fn mixed_deviation_sets_are_corrected_to_within_1_um_on_the_faces() {
             "set {set} {:?}: faces off by {m0} and {m1} mm",
             s.injected
         );
+        // And every cut surface of the part, against the program as given on the nominal
+        // machine, ray by ray: no floor or other surface shows the uncorrectable tilt.
+        let last = out.report.iterations.last().expect("a pass");
+        assert!(last.part.crossings > 50_000 && last.part.unmatched_rays == 0, "set {set}");
+        assert!(last.part.max_mm < 1e-3, "set {set}: part {:?}", last.part);
         // What four axes cannot correct: the tool's tilt about Y, the beta sum. The best
         // line through the tilted axis crosses the nominal one mid-flute: RMS |β|·L/√12.
         let expect = beta.abs() * s.tool.length() / 12.0_f64.sqrt();
