@@ -58,9 +58,9 @@
 //! equal parts of its source parameter, every sub-point corrected, and the distance between
 //! the deviated tool axis (tip and flute end) on the chord and on the best achievable pose
 //! is checked at ¼, ½ and ¾ of every part; `n` grows until it is within the path tolerance.
-//! Sub-moves keep the source move's feed and kind. Moves are read only through
-//! [`path_point`] and [`straight_at_fixed_rotary`]: a new move kind (an arc) needs one match
-//! arm in each.
+//! Sub-moves keep the source move's feed and kind (rapids stay `G0`, feed moves become `G1`
+//! chords). Moves are read only through [`path_point`] and [`straight_at_fixed_rotary`]: a
+//! new move kind (an arc) needs one match arm in each and nothing else.
 //!
 //! # Verification
 //!
@@ -479,16 +479,13 @@ pub fn straight_at_fixed_rotary(chain: &Chain, mv: &Move) -> bool {
     }
 }
 
-/// The kind a corrected (straight) sub-move of `kind` is emitted as (an arc would become
-/// `Linear` chords).
-#[expect(
-    clippy::needless_match,
-    reason = "one arm per move kind: a new kind must choose how its chords are emitted"
-)]
+/// The kind a corrected (straight) sub-move of `kind` is emitted as: rapids stay rapids,
+/// every feed move (an arc too) becomes straight `G1` chords.
 fn emitted_kind(kind: MoveKind) -> MoveKind {
-    match kind {
-        MoveKind::Rapid => MoveKind::Rapid,
-        MoveKind::Linear => MoveKind::Linear,
+    if matches!(kind, MoveKind::Rapid) {
+        MoveKind::Rapid
+    } else {
+        MoveKind::Linear
     }
 }
 
@@ -929,16 +926,15 @@ pub fn write_gcode(
     let mut line = String::new();
     for b in &program.blocks {
         line.clear();
-        line.push_str(match b.kind {
-            MoveKind::Rapid => "G0",
-            MoveKind::Linear => "G1",
-        });
+        // Blocks are straight (see `emitted_kind`): G0 or G1.
+        let rapid = matches!(b.kind, MoveKind::Rapid);
+        line.push_str(if rapid { "G0" } else { "G1" });
         for &l in &program.axes {
             line.push(' ');
             line.push(l.as_char());
             line.push_str(&format_axis(l, b.end.get(l)));
         }
-        if let (MoveKind::Linear, Some(f)) = (b.kind, b.feed_mm_per_min) {
+        if let (false, Some(f)) = (rapid, b.feed_mm_per_min) {
             line.push_str(" F");
             line.push_str(&format_feed(f));
         }

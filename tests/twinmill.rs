@@ -999,7 +999,10 @@ fn mixed_deviation_sets_are_corrected_to_within_1_um_on_the_faces() {
         // And every cut surface of the part, against the program as given on the nominal
         // machine, ray by ray: no floor or other surface shows the uncorrectable tilt.
         let last = out.report.iterations.last().expect("a pass");
-        assert!(last.part.crossings > 50_000 && last.part.unmatched_rays == 0, "set {set}");
+        assert!(
+            last.part.crossings > 50_000 && last.part.unmatched_rays == 0,
+            "set {set}"
+        );
         assert!(last.part.max_mm < 1e-3, "set {set}: part {:?}", last.part);
         // What four axes cannot correct: the tool's tilt about Y, the beta sum. The best
         // line through the tilted axis crosses the nominal one mid-flute: RMS |β|·L/√12.
@@ -1113,6 +1116,20 @@ fn cli_correct_writes_program_and_report_or_nothing() {
         );
         assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
     }
+    // The nine deviations: faces met, the path not (the beta tilt): exit code 2, files
+    // written, the reason on stderr.
+    let mut nine = builtin("mdx50-step.toml");
+    for (name, size) in NINE.iter().skip(1) {
+        nine = nine.replace("dy_AY = -0.50", &format!("dy_AY = -0.50\n{name} = {size}"));
+    }
+    sb.write("nine.toml", nine.as_bytes());
+    let (code, stdout, stderr) = sb.run(&["correct", "nine.toml", "--out", "nine"]);
+    assert_eq!(code, 2, "{stdout}{stderr}");
+    assert!(
+        stderr.contains("not met") && stderr.contains("cannot correct"),
+        "{stderr}"
+    );
+    assert!(stdout.contains("beta_ZS") && sb.dir.join("nine/mdx50-step-corrected.ngc").exists());
     sb.write(
         "far.toml",
         builtin("mdx50-step.toml")
