@@ -5,11 +5,13 @@
 //! material removal on a tri-dexel) → [`mesh`] (surface of the cut stock) and [`zmap`]
 //! (3-axis height-field fast path) → [`cloud`] → [`scan`] (virtual structured-light
 //! scanner) → [`fit`] (planes, spheres, circles, cylinders) → [`segment`] (normals, planar
-//! regions, RANSAC) → [`identify`] (deviations from the fitted faces) →
-//! [`render`] and [`report`]; [`scene`] loads input files, [`pipeline`] runs it all and
-//! [`output`] writes the results. See README.md, *Architecture*.
+//! regions, RANSAC) → [`identify`] (deviations from the fitted faces) → [`correct`] (the NC
+//! program rewritten for the deviated machine, and verified) → [`render`] and [`report`];
+//! [`scene`] loads input files, [`pipeline`] runs it all and [`output`] writes the results.
+//! See README.md, *Architecture*.
 
 pub mod cloud;
+pub mod correct;
 pub mod cutter;
 pub mod fit;
 pub mod identify;

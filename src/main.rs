@@ -8,13 +8,15 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
 use twinmill::cloud::read_cloud_file;
+use twinmill::correct::write_gcode;
 use twinmill::math::{Aabb, Point3};
 use twinmill::nc::{Interpreter, LengthUnit, Program, write_jsonl};
 use twinmill::output::{
-    MeshFormat, json_bytes, ply_bytes, write_files, write_outcome, write_simulation,
+    MeshFormat, json_bytes, ply_bytes, write_files, write_outcome, write_simulation, write_streamed,
 };
 use twinmill::pipeline::{
-    FitRequest, Selection, Shape, fit_cloud, machine_part, run, scanner_study, simulate,
+    FitRequest, Selection, Shape, correct, fit_cloud, identified_model, machine_part, run,
+    scanner_study, simulate,
 };
 use twinmill::progress::Progress;
 use twinmill::report::{ScanFileReport, ScanReport};
@@ -84,6 +86,15 @@ enum NcCommand {
     },
 }
 
+/// Which deviations `correct` corrects for.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum ModelSource {
+    /// The scene's injected deviations (the simulated machine itself).
+    Injected,
+    /// The deviations identified from the scene's simulated scan (plus the known ones).
+    Identified,
+}
+
 #[derive(Subcommand)]
 enum Command {
     /// NC program tools.
@@ -117,6 +128,33 @@ enum Command {
         /// scene's [study] trials, 20 if not given).
         #[arg(long, num_args = 0..=1, default_missing_value = "0", value_name = "N")]
         study: Option<usize>,
+    },
+    /// Correct the scene's NC program for its machine's deviations: simulate the corrected
+    /// program on the deviated machine, compare the milled faces and the tool path with the
+    /// nominal ones, refine until within the accuracy; write <out>/<scene>-corrected.ngc and
+    /// <out>/<scene>-correct.json.
+    Correct {
+        /// The scene file (TOML).
+        scene: PathBuf,
+        /// The deviations to correct for: the scene's injected ones, or those identified by
+        /// simulating, scanning and fitting the scene first (`run`), as on a real machine.
+        #[arg(long, value_enum, default_value = "injected")]
+        model: ModelSource,
+        /// Accuracy the corrected part must reach on the twin (mm, > 0).
+        #[arg(long, default_value_t = 0.001, allow_hyphen_values = true)]
+        accuracy_mm: f64,
+        /// Folder for the corrected program and the report.
+        #[arg(long, default_value = "out")]
+        out: PathBuf,
+        /// Print the report as JSON on stdout instead of the summary.
+        #[arg(long)]
+        json: bool,
+        /// Worker threads (default: all cores). Results do not depend on it.
+        #[arg(long)]
+        threads: Option<usize>,
+        /// List every problem found in the NC program, not only the first.
+        #[arg(short, long)]
+        verbose: bool,
     },
     /// Fit shapes to any point cloud (PLY, XYZ/CSV, PTS): every planar face with the
     /// distance and angle between each pair (the default), or one plane, sphere, cylinder
@@ -464,6 +502,83 @@ fn main() -> ExitCode {
                 },
                 json.then(|| serde_json::to_string_pretty(&report)),
             )
+        }
+        Command::Correct {
+            scene,
+            model,
+            accuracy_mm,
+            out,
+            json,
+            threads,
+            verbose,
+        } => {
+            if !(accuracy_mm.is_finite() && accuracy_mm > 0.0) {
+                return fail(format!(
+                    "--accuracy-mm must be a positive number of mm, got {accuracy_mm}"
+                ));
+            }
+            let (scene, program) = match prepare(&scene, threads, verbose) {
+                Ok(x) => x,
+                Err(code) => return code,
+            };
+            let bars = bars(json);
+            let chain = match model {
+                ModelSource::Injected => scene.chain.clone(),
+                ModelSource::Identified => {
+                    match run(&scene, &program, &bars)
+                        .and_then(|o| identified_model(&scene, &o.report))
+                    {
+                        Ok(c) => c,
+                        Err(e) => return fail(e),
+                    }
+                }
+            };
+            let outcome = match correct(&scene, &program, &chain, accuracy_mm, &bars) {
+                Ok(o) => o,
+                Err(e) => return fail(e),
+            };
+            let report = &outcome.report;
+            let ngc = report.corrected_program.clone();
+            let json_name = format!("{}-correct.json", scene.name);
+            let report_bytes = match json_bytes(report, &out.join(&json_name)) {
+                Ok(b) => b,
+                Err(e) => return fail(e),
+            };
+            let files: Vec<twinmill::output::StreamedFile> = vec![
+                (
+                    ngc.clone(),
+                    Box::new(|w: &mut dyn Write| {
+                        write_gcode(&outcome.corrected, &outcome.header, w)
+                    }),
+                ),
+                (
+                    json_name.clone(),
+                    Box::new(move |w: &mut dyn Write| w.write_all(&report_bytes)),
+                ),
+            ];
+            if let Err(e) = write_streamed(&out, files) {
+                return fail(e);
+            }
+            let code = print_out(
+                || {
+                    format!(
+                        "{}  wrote         {}/{{{ngc}, {json_name}}}\n",
+                        report.summary(),
+                        out.display()
+                    )
+                },
+                json.then(|| serde_json::to_string_pretty(report)),
+            );
+            if code == ExitCode::SUCCESS && !report.met {
+                // Written and reported, but the twin predicts the accuracy is not met.
+                let _ = writeln!(
+                    std::io::stderr(),
+                    "twinmill: accuracy {accuracy_mm} mm not met: {}",
+                    report.status
+                );
+                return ExitCode::from(2);
+            }
+            code
         }
         Command::Fit {
             cloud,

@@ -1,6 +1,7 @@
 //! Writing outputs into a folder, all or nothing: `run` writes `report.json`, `cloud.ply`
 //! and `faces.png` into `<out>/<scene-name>/`; `scan` writes `cloud.ply` and `scan.json`
-//! into `<out>/<scene-name>-scan/`.
+//! into `<out>/<scene-name>-scan/`; `correct` writes `<scene-name>-corrected.ngc` and
+//! `<scene-name>-correct.json` into `<out>/` ([`write_streamed`], file by file).
 //!
 //! Files are written into a fresh staging folder beside the target, which replaces the
 //! target only when every file is complete; a failure leaves the previous outputs (if any)
@@ -153,4 +154,47 @@ pub fn write_simulation(
         files.push((f.file_name(), buf));
     }
     write_files(dir, &files)
+}
+
+/// A file to write with [`write_streamed`]: its name and the function that writes its
+/// bytes, piece by piece, into the writer it is given.
+pub type StreamedFile<'a> = (
+    String,
+    Box<dyn FnOnce(&mut dyn Write) -> std::io::Result<()> + 'a>,
+);
+
+/// Writes files into `dir` (created if needed) beside whatever else is there, each streamed
+/// through a buffer into a hidden staging file first; only when every file is complete are
+/// they renamed into place. A failure removes the staging files and leaves any previous
+/// files of those names untouched.
+pub fn write_streamed(
+    dir: &Path,
+    files: Vec<StreamedFile<'_>>,
+) -> Result<Vec<PathBuf>, OutputError> {
+    io(dir, std::fs::create_dir_all(dir))?;
+    let mut staged: Vec<(PathBuf, PathBuf)> = Vec::new();
+    let result = (|| {
+        for (name, write) in files {
+            let target = dir.join(&name);
+            let staging = dir.join(format!(".{name}.partial-{}", std::process::id()));
+            staged.push((staging.clone(), target));
+            let file = io(&staging, std::fs::File::create(&staging))?;
+            let mut buf = std::io::BufWriter::new(file);
+            io(&staging, write(&mut buf))?;
+            let file = io(&staging, buf.into_inner().map_err(|e| e.into_error()))?;
+            io(&staging, file.sync_all())?;
+        }
+        let mut done = Vec::new();
+        for (staging, target) in &staged {
+            io(target, std::fs::rename(staging, target))?;
+            done.push(target.clone());
+        }
+        Ok(done)
+    })();
+    if result.is_err() {
+        for (staging, _) in &staged {
+            let _ = std::fs::remove_file(staging);
+        }
+    }
+    result
 }
