@@ -11,8 +11,10 @@
 //! See README.md, *Architecture*.
 
 pub mod cloud;
+pub mod collide;
 pub mod correct;
 pub mod cutter;
+pub mod deviation;
 pub mod fit;
 pub mod identify;
 pub mod kinematics;
@@ -27,6 +29,7 @@ pub mod report;
 pub mod scan;
 pub mod scene;
 pub mod segment;
+pub mod shape;
 pub mod stock;
 pub mod sweep;
 pub mod tool;

@@ -422,6 +422,73 @@ impl TriDexel {
         })
     }
 
+    /// A stock of any [`crate::shape::Solid`] (cylinder, closed mesh, …) on the grids of `bounds` at
+    /// `pitch` (mm): each ray keeps the solid's exact intervals, clipped to `bounds`, with the
+    /// solid's outward normals (line 0). Spans shorter than [`tol::SLIVER`] are dropped and
+    /// gaps shorter than it closed. Refuses like [`TriDexel::new_box`] before allocating.
+    pub fn from_solid(
+        bounds: Aabb,
+        pitch: Real,
+        budget_bytes: Real,
+        solid: &dyn crate::shape::Solid,
+    ) -> Result<Self, StockError> {
+        let mut stock = Self::new_box(bounds, pitch, budget_bytes)?;
+        for g in &mut stock.grids {
+            let (axis, u, v, u0, v0, du, dv) = (g.axis, g.u, g.v, g.u0, g.v0, g.du, g.dv);
+            let (nu, nv, nbu) = (g.nu, g.nv, g.nbu);
+            let (lo_k, hi_k) = (bounds.min[axis], bounds.max[axis]);
+            g.blocks.par_iter_mut().enumerate().for_each(|(b, block)| {
+                let (bu, bv) = (b % nbu, b / nbu);
+                let mut spans = Vec::new();
+                let mut segs: Vec<Segment> = Vec::new();
+                let mut offsets = Vec::with_capacity(BLOCK * BLOCK + 1);
+                offsets.push(0u32);
+                for local in 0..BLOCK * BLOCK {
+                    let (iu, iv) = (bu * BLOCK + local % BLOCK, bv * BLOCK + local / BLOCK);
+                    if iu < nu && iv < nv {
+                        let mut o = Point3::origin();
+                        o[u] = u0 + iu as Real * du;
+                        o[v] = v0 + iv as Real * dv;
+                        spans.clear();
+                        solid.ray_spans(&o, axis, &mut spans);
+                        for sp in &spans {
+                            let (mut t0, mut n0) = (sp.t_in, sp.n_in);
+                            let (mut t1, mut n1) = (sp.t_out, sp.n_out);
+                            let mut e = Vector3::zeros();
+                            e[axis] = 1.0;
+                            if t0 < lo_k {
+                                (t0, n0) = (lo_k, -e);
+                            }
+                            if t1 > hi_k {
+                                (t1, n1) = (hi_k, e);
+                            }
+                            let start = offsets[offsets.len() - 1] as usize;
+                            // A gap thinner than a sliver joins this span to the last one.
+                            let join = segs[start..]
+                                .last()
+                                .is_some_and(|last| t0 - last.hi.t < tol::SLIVER);
+                            if join {
+                                if let Some(last) = segs.last_mut()
+                                    && t1 > last.hi.t
+                                {
+                                    last.hi = Crossing::new(t1, &n1, 0);
+                                }
+                            } else if t1 - t0 >= tol::SLIVER {
+                                segs.push(Segment {
+                                    lo: Crossing::new(t0, &n0, 0),
+                                    hi: Crossing::new(t1, &n1, 0),
+                                });
+                            }
+                        }
+                    }
+                    offsets.push(segs.len() as u32);
+                }
+                *block = Block { offsets, segs };
+            });
+        }
+        Ok(stock)
+    }
+
     /// The initial box.
     pub fn bounds(&self) -> &Aabb {
         &self.bounds
