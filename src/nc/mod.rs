@@ -76,6 +76,7 @@ pub mod interp;
 pub mod lex;
 pub mod output;
 pub mod source;
+pub mod synthetic;
 pub mod tooltable;
 
 use std::path::{Path, PathBuf};
