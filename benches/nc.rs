@@ -43,7 +43,8 @@ fn bench(c: &mut Criterion) {
     });
     g.bench_function("interpret_200k_blocks_in_memory", |b| {
         b.iter(|| {
-            let it = Interpreter::from_text(&text, Path::new("bench.ngc"), InterpOptions::default());
+            let it =
+                Interpreter::from_text(&text, Path::new("bench.ngc"), InterpOptions::default());
             black_box(count(it))
         })
     });

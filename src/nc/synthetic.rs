@@ -21,7 +21,11 @@ pub fn bench_program(blocks: usize, out: &mut String) {
         } else {
             x += 0.25;
             let phase = (k / 5) % 400;
-            y = if phase < 200 { phase as f64 * 0.05 } else { (400 - phase) as f64 * 0.05 };
+            y = if phase < 200 {
+                phase as f64 * 0.05
+            } else {
+                (400 - phase) as f64 * 0.05
+            };
             let a = (k as f64) * 0.1;
             let _ = writeln!(out, "G1 X{x:.4} Y{y:.4} A{a:.3}");
         }
