@@ -84,6 +84,12 @@ enum NcCommand {
         #[arg(long)]
         events: bool,
     },
+    /// Print the synthetic benchmark program (G1 with A words, every fifth block a G3).
+    BenchProgram {
+        /// Number of motion blocks (200000 makes the 6.3 MB benchmark file).
+        #[arg(default_value_t = 200_000)]
+        blocks: usize,
+    },
 }
 
 /// Which deviations `correct` corrects for.
@@ -303,6 +309,16 @@ fn fail(msg: impl std::fmt::Display) -> ExitCode {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
+        Command::Nc {
+            command: NcCommand::BenchProgram { blocks },
+        } => {
+            let mut text = String::new();
+            twinmill::nc::synthetic::bench_program(blocks, &mut text);
+            match std::io::stdout().write_all(text.as_bytes()) {
+                Ok(()) => ExitCode::SUCCESS,
+                Err(e) => fail(e),
+            }
+        }
         Command::Nc {
             command:
                 NcCommand::Motion {

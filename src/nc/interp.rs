@@ -1374,7 +1374,8 @@ impl Interpreter {
                     ];
                     let cxyz = plane.join(center, along);
                     let (a1, a2, _) = self.plane.axes();
-                    let turn = if ccw { turns as i32 } else { -(turns as i32) };
+                    let t = turns.min(i32::MAX as u32) as i32;
+                    let turn = if ccw { t } else { -t };
                     let (end_m, geom, _) =
                         self.arc_geometry(&q, cxyz[a1], cxyz[a2], turn.max(-1_000_000));
                     let mot = Motion {
@@ -2577,6 +2578,9 @@ impl Interpreter {
                 if li < 0.0 {
                     return Err(self.err_word(b, b'l', "Negative L word used"));
                 }
+                if li > self.opts.max_blocks as Real {
+                    return Err(self.err_word(b, b'l', "L word too large"));
+                }
                 li as i64
             }
             None => 1,
@@ -2725,6 +2729,13 @@ impl Interpreter {
                         return Err(self.err_g(b, m, "Q word missing with G73 or G83"));
                     };
                     let delta = q * self.u;
+                    if (r - cc) / delta > self.opts.max_blocks as Real {
+                        return Err(self.err_word(
+                            b,
+                            b'q',
+                            "Q word too small for the depth of the hole",
+                        ));
+                    }
                     let mut cur = r - delta;
                     while cur > cc {
                         let t = mk(self, aa, bb, cur);

@@ -20,6 +20,9 @@ const EXPR_EQUAL_TOL: Real = 1e-4;
 /// A parameter index must be this close to an integer.
 const PARAM_INDEX_TOL: Real = 1e-4;
 
+/// Deepest nesting of brackets, `#` indirections and unary operators in one value.
+const MAX_NESTING: usize = 64;
+
 /// Maximum number of G codes (and of M codes) kept for one block.
 pub(crate) const MAX_CODES: usize = 16;
 
@@ -213,6 +216,7 @@ pub(crate) struct Lexer {
 
 /// Reading position inside the normalised line.
 struct Cursor<'a, P: ParamRead + ?Sized> {
+    depth: usize,
     s: &'a [u8],
     cols: &'a [u32],
     orig_len: usize,
@@ -297,6 +301,17 @@ impl<P: ParamRead + ?Sized> Cursor<'_, P> {
 
     /// A real value: number, `[expr]`, `#param`, unary function, or signed value.
     fn real_value(&mut self) -> LResult<Real> {
+        self.depth += 1;
+        let r = if self.depth > MAX_NESTING {
+            Err(self.err(self.i, "Expression nested too deeply"))
+        } else {
+            self.real_value_inner()
+        };
+        self.depth -= 1;
+        r
+    }
+
+    fn real_value_inner(&mut self) -> LResult<Real> {
         let start = self.i;
         match self.peek() {
             None => Err(self.err(start, "Unexpected end of line reading value")),
@@ -656,6 +671,7 @@ fn read_block<P: ParamRead + ?Sized>(
     b: &mut Block,
 ) -> LResult<()> {
     let mut c = Cursor {
+        depth: 0,
         s,
         cols,
         orig_len: line.len(),
@@ -746,6 +762,9 @@ fn read_block<P: ParamRead + ?Sized>(
                     return Err(c.err(start, format!("Multiple {} words on one line", ch as char)));
                 }
                 let v = c.real_value()?;
+                if !v.is_finite() {
+                    return Err(c.err(start, "Number out of range"));
+                }
                 b.words[k] = Some(v);
                 b.word_pos[k] = c.orig(start) as u32;
             }

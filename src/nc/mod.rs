@@ -12,14 +12,21 @@
 //! converts every end point to *machine coordinates* (LinuxCNC's: program point in mm, plus
 //! G92/G52 offset, rotated by the G10 L2 R rotation, plus the G54–G59.3 offset, plus the
 //! tool length offset). Records ([`output`]) stream out through [`Interpreter`] (an
-//! iterator): memory does not grow with program length.
+//! iterator): memory does not grow with program length. [`parse_program`] /
+//! [`interpret_program`] collect a small program into a [`Program`] of [`Move`]s.
+//!
+//! *Invariant:* the interpreter knows nothing about machines; it reads the files it is
+//! given (program, subroutine files, tool table, var and INI files) and never writes.
 //!
 //! # Language
 //!
 //! G0 G1 G2 G3 (centre I/J/K and R forms, full circles, helices, P turns) in G17/G18/G19;
 //! G4; G10 L1/L2/L10/L11/L20; G20/G21; G28/G30, G28.1/G30.1; G33.1 rigid tap; G38.2–G38.5
 //! probe (rs274's simulated probe: trips at the target, backs off 0.254 mm); G40/G41/G42/
-//! G41.1/G42.1 (recorded, see *Limitations*); G43 (H or current tool), G43.1, G49;
+//! G41.1/G42.1 cutter radius compensation ([`comp`], applied in program coordinates of the
+//! plane between motion generation and the machine conversion, as LinuxCNC does: entry and
+//! exit moves, concave corners by intersection, convex corners by inserted arcs, LinuxCNC's
+//! gouging errors); G43 (H or current tool), G43.1, G49;
 //! G52/G92/G92.1/G92.2/G92.3; G53; G54–G59.3; G61/G61.1/G64; canned cycles G73 G81 G82
 //! G83 G84 G85 G86 G89 with G98/G99, L repeats and sticky Z/R/Q; G80; G90/G91,
 //! G90.1/G91.1; G93/G94/G95; M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30 M60 M61; M98/M99
@@ -67,15 +74,17 @@
 //!
 //! # Limitations
 //!
-//! Cutter radius compensation (G41/G42) is accepted and recorded but the path is not
-//! offset; G5.x NURBS, G33 spindle-synchronised motion, G76, lathe modes, U V W axes and
-//! Python remaps are not supported.
+//! G5.x NURBS, G33 spindle-synchronised motion, G76, G87/G88, lathe modes, U V W axes,
+//! `#5xxx` parameters newer than LinuxCNC 2.9 and Python remaps are not supported. One
+//! corpus program is not reproduced: LinuxCNC 2.9 restarts each `M98 … L` repetition of an
+//! incremental canned cycle from the Z of the first repetition.
 
 pub mod comp;
 pub mod interp;
 pub mod lex;
 pub mod output;
 pub mod source;
+pub mod synthetic;
 pub mod tooltable;
 
 use std::path::{Path, PathBuf};
