@@ -8,7 +8,9 @@
 //! [`render`] and [`report`]; [`scene`] loads input files, [`pipeline`] runs it all and
 //! [`output`] writes the results. See README.md, *Architecture*.
 
+pub mod calibrate;
 pub mod cloud;
+pub mod design;
 pub mod fit;
 pub mod identify;
 pub mod kinematics;

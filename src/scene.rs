@@ -7,7 +7,7 @@
 //! **Invariant:** this module and [`crate::output`] are the only ones that touch files.
 
 use crate::fit::RobustRule;
-use crate::identify::{FaceOptions, FaceRegion, FaceSpec};
+use crate::identify::{FaceKind, FaceOptions, FaceRegion, FaceSpec};
 use crate::kinematics::{Axis, AxisKind, Chain};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
 use crate::nc::{AxisLetter, AxisValues, NcError, Program, parse_program};
@@ -618,6 +618,7 @@ impl Scene {
                 (None, None) => FaceRegion::Auto,
             };
             Ok(FaceSpec {
+                kind: FaceKind::Flank,
                 name: f.name.clone(),
                 line: *f.line.get_ref(),
                 region,
