@@ -881,7 +881,7 @@ pub fn identifiability(model: &Model, x: &DVector<Real>) -> Result<Identifiabili
         let vt = s.v_t.expect("requested");
         let big = s.singular_values.max();
         let keep: Vec<usize> = (0..s.singular_values.len())
-            .filter(|&i| s.singular_values[i] > big.max(1.0) * 1e-6)
+            .filter(|&i| s.singular_values[i] > 0.5 * big.max(1.0))
             .collect();
         DMatrix::from_fn(keep.len(), np, |r, c| vt[(keep[r], c)])
     } else {

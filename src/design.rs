@@ -57,8 +57,8 @@ pub struct DesignOptions {
     pub length_mm: Real,
     /// Shoulder width into the side (mm); must exceed twice the face margin.
     pub width_mm: Real,
-    /// The two shoulder depths the design chooses from (mm).
-    pub depths_mm: [Real; 2],
+    /// The shoulder depths the design chooses from (mm); each below `half_section_mm`.
+    pub depths_mm: [Real; 3],
     /// Scanner range noise σ (mm), for the expected face uncertainties.
     pub noise_sigma_mm: Real,
     /// Scanner point pitch (mm).
@@ -70,14 +70,14 @@ pub struct DesignOptions {
 }
 
 impl DesignOptions {
-    /// The bar and scanner used by `twinmill design` by default: 24 × 24 × 60 mm bar,
-    /// 6 mm shoulders 4 or 10 mm deep, EinScan-class noise 0.025 mm at 0.185 mm pitch.
+    /// The bar and scanner used by `twinmill design` by default: 40 × 40 × 80 mm bar,
+    /// 6 mm shoulders 3, 9 or 15 mm deep, EinScan-class noise 0.025 mm at 0.185 mm pitch.
     pub fn standard() -> Self {
         DesignOptions {
-            half_section_mm: 12.0,
-            length_mm: 60.0,
+            half_section_mm: 20.0,
+            length_mm: 80.0,
             width_mm: 6.0,
-            depths_mm: [4.0, 10.0],
+            depths_mm: [3.0, 9.0, 15.0],
             noise_sigma_mm: 0.025,
             pitch_mm: 0.185,
             margin_mm: 1.0,
@@ -246,6 +246,10 @@ impl Cut {
     }
 }
 
+/// Ranking of a candidate: undetermined directions, parameters not identified alone,
+/// information score (higher is better).
+type Key = (usize, usize, Real);
+
 /// Feed of the designed cuts (mm/min).
 const FEED_MM_PER_MIN: Real = 600.0;
 
@@ -254,28 +258,21 @@ fn expected_points(area: Real, pitch: Real) -> Real {
     area * std::f64::consts::FRAC_1_SQRT_2 / (pitch * pitch)
 }
 
-fn candidates(o: &DesignOptions) -> (Vec<Vec<Option<Cut>>>, Vec<Option<Cut>>) {
-    // Per corner: the X-shoulders that reach it.
-    let mut corners: Vec<((i32, i32), Vec<Option<Cut>>)> = Vec::new();
+fn candidates(o: &DesignOptions) -> Vec<Cut> {
+    let mut out = Vec::new();
     for index in [0.0, 90.0, 180.0, 270.0] {
         for side in [-1.0, 1.0] {
             for depth in o.depths_mm {
-                let c = Cut::XShoulder { index, side, depth };
-                let k = c.corner(o).unwrap_or((0, 0));
-                match corners.iter_mut().find(|(key, _)| *key == k) {
-                    Some((_, v)) => v.push(Some(c)),
-                    None => corners.push((k, vec![None, Some(c)])),
-                }
+                out.push(Cut::XShoulder { index, side, depth });
             }
         }
     }
-    let mut ends = vec![None];
     for index in [0.0, 180.0] {
         for depth in o.depths_mm {
-            ends.push(Some(Cut::YShoulder { index, depth }));
+            out.push(Cut::YShoulder { index, depth });
         }
     }
-    (corners.into_iter().map(|(_, v)| v).collect(), ends)
+    out
 }
 
 fn features_of(
@@ -379,65 +376,77 @@ pub fn design(
     if params.is_empty() {
         return Err(DesignError::Calibrate(CalibrateError::NoParameters));
     }
-    let (corners, ends) = candidates(o);
-    let mut best: Option<((usize, Real, usize), Vec<Cut>, Identifiability, Vec<(String, Real)>)> =
-        None;
+    let pool = candidates(o);
+    let mut chosen: Vec<Cut> = Vec::new();
     let mut evaluated = 0;
-    let mut choice = vec![0usize; corners.len()];
+    let mut best: Option<(Key, Identifiability, Vec<(String, Real)>)> = None;
     loop {
-        for e0 in &ends {
-            for e1 in &ends {
-                // One end shoulder per index at most.
-                if let (Some(a), Some(b)) = (e0, e1)
-                    && a.index() >= b.index()
-                {
-                    continue;
-                }
-                let mut cuts: Vec<Cut> = choice
-                    .iter()
-                    .zip(&corners)
-                    .filter_map(|(&i, opts)| opts[i])
-                    .collect();
-                cuts.extend(e0.iter().chain(e1.iter()).copied());
-                if cuts.is_empty() {
-                    continue;
-                }
-                cuts.sort_by(|a, b| a.index().total_cmp(&b.index()));
-                evaluated += 1;
-                let Some((ident, rel)) = evaluate(&cuts, o, model, tool, params) else {
-                    continue;
-                };
-                let worst = rel.iter().map(|(_, r)| *r).fold(0.0, Real::max);
-                let key = (params.len() - ident.identified.len(), worst, cuts.len());
-                let better = match &best {
-                    None => true,
-                    Some((k, ..)) => {
-                        key.0 < k.0
-                            || (key.0 == k.0 && key.1 < k.1 * (1.0 - 1e-9))
-                            || (key.0 == k.0 && (key.1 - k.1).abs() <= k.1 * 1e-9 && key.2 < k.2)
-                    }
-                };
-                if better {
-                    best = Some((key, cuts, ident, rel));
-                }
+        let mut round: Option<(Key, Cut, Identifiability, Vec<(String, Real)>)> = None;
+        for c in &pool {
+            if chosen.iter().any(|k| conflicts(k, c, o)) {
+                continue;
+            }
+            let mut cuts = chosen.clone();
+            cuts.push(*c);
+            evaluated += 1;
+            let Some((ident, rel)) = evaluate(&cuts, o, model, tool, params) else {
+                continue;
+            };
+            let key = key_of(&ident, params.len());
+            if round.as_ref().is_none_or(|(k, ..)| better(&key, k)) {
+                round = Some((key, *c, ident, rel));
             }
         }
-        // Next combination of corner choices.
-        let mut k = 0;
-        loop {
-            if k == choice.len() {
-                let (_, cuts, ident, rel) = best.ok_or_else(|| {
-                    DesignError::Machine("a bar the candidate cuts can reach".into())
-                })?;
-                return Ok(finish(cuts, ident, rel, o, tool, evaluated));
-            }
-            choice[k] += 1;
-            if choice[k] < corners[k].len() {
-                break;
-            }
-            choice[k] = 0;
-            k += 1;
+        let Some((key, cut, ident, rel)) = round else {
+            break;
+        };
+        // Stop when a cut adds no determined direction and hardly strengthens the weak ones.
+        if let Some((k, ..)) = &best
+            && (key.0, key.1) == (k.0, k.1)
+            && key.2 < k.2 + MIN_GAIN
+        {
+            break;
         }
+        chosen.push(cut);
+        best = Some((key, ident, rel));
+    }
+    let (_, ident, rel) =
+        best.ok_or_else(|| DesignError::Machine("a bar the candidate cuts can reach".into()))?;
+    chosen.sort_by(|a, b| a.index().total_cmp(&b.index()));
+    Ok(finish(chosen, ident, rel, o, tool, evaluated))
+}
+
+/// A cut that determines nothing new is added only if it raises the information score (the
+/// sum of the logs of the capped singular values) by at least this: ln 2, a doubling of the
+/// information along some direction.
+const MIN_GAIN: Real = std::f64::consts::LN_2;
+/// Singular values are credited between these (scaled whitened units): below, a direction is
+/// as good as unseen; above, it is determined to a hundredth of its realistic size and more
+/// precision is not needed.
+const SCORE_FLOOR: Real = 1e-3;
+const SCORE_CAP: Real = 100.0;
+
+fn key_of(ident: &Identifiability, np: usize) -> Key {
+    let score = ident
+        .singular_values
+        .iter()
+        .map(|s| s.clamp(SCORE_FLOOR, SCORE_CAP).ln())
+        .sum();
+    (np - ident.rank, np - ident.identified.len(), score)
+}
+
+fn better(a: &Key, b: &Key) -> bool {
+    (a.0, a.1) < (b.0, b.1) || ((a.0, a.1) == (b.0, b.1) && a.2 > b.2)
+}
+
+/// Whether two cuts touch each other's faces.
+fn conflicts(a: &Cut, b: &Cut, o: &DesignOptions) -> bool {
+    match (a, b) {
+        (Cut::XShoulder { .. }, Cut::XShoulder { .. }) => a.corner(o) == b.corner(o),
+        (Cut::YShoulder { index: i, depth: d }, Cut::YShoulder { index: j, depth: e }) => {
+            i == j || d + e > 2.0 * o.half_section_mm - 2.0 * o.margin_mm
+        }
+        _ => false,
     }
 }
 
