@@ -76,9 +76,7 @@ pub enum CalibrateError {
     #[error("no measured feature was given")]
     NoFeatures,
     /// A requested parameter is not informed by any feature at all.
-    #[error(
-        "no data for {0}: no measured feature depends on it (add cuts that do, or drop it)"
-    )]
+    #[error("no data for {0}: no measured feature depends on it (add cuts that do, or drop it)")]
     NoData(String),
     /// A feature's prediction is degenerate (a cut along the tool axis, a zero-length move).
     #[error("feature '{0}': the model cannot predict it (degenerate cut)")]
@@ -217,7 +215,13 @@ impl Scalar for Dual {
         }
     }
     fn abs(self) -> Self {
-        if self.v < 0.0 { -self } else if self.v > 0.0 { self } else { Dual::c(0.0) }
+        if self.v < 0.0 {
+            -self
+        } else if self.v > 0.0 {
+            self
+        } else {
+            Dual::c(0.0)
+        }
     }
 }
 
@@ -375,7 +379,10 @@ impl Feature {
 impl PlaneFeature {
     /// A feature with the given measured plane and uncertainties: offset σ at the centroid
     /// and independent slope σ along each basis direction.
-    #[expect(clippy::too_many_arguments, reason = "a plain constructor of a data record")]
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "a plain constructor of a data record"
+    )]
     pub fn new(
         name: &str,
         cut: Move,
@@ -397,7 +404,12 @@ impl PlaneFeature {
             centroid,
             basis,
             offset_sigma_mm,
-            slope_whitening: Matrix2::new(1.0 / slope_sigma_rad[0], 0.0, 0.0, 1.0 / slope_sigma_rad[1]),
+            slope_whitening: Matrix2::new(
+                1.0 / slope_sigma_rad[0],
+                0.0,
+                0.0,
+                1.0 / slope_sigma_rad[1],
+            ),
             cross_range_mm,
             points: 0,
             rms_mm: 0.0,
@@ -548,7 +560,10 @@ fn feature_residuals<T: Scalar>(
 pub fn predicted_plane(chain: &Chain, tool: &Tool, f: &PlaneFeature) -> Option<Plane> {
     let (n, d) = predict_plane::<Real>(chain, &[], &[], tool, f)?;
     let n = UnitVector3::new_normalize(values(n));
-    Some(Plane { normal: n, offset: d })
+    Some(Plane {
+        normal: n,
+        offset: d,
+    })
 }
 
 // ---------------------------------------------------------------------------------------
@@ -602,7 +617,9 @@ impl Model<'_> {
         let reg: [T; 6] = std::array::from_fn(|k| rest.get(k).copied().unwrap_or(T::c(0.0)));
         let mut out = Vec::with_capacity(self.rows());
         for f in self.features {
-            out.extend(feature_residuals(self.chain, self.ids, p, &reg, self.tool, f)?);
+            out.extend(feature_residuals(
+                self.chain, self.ids, p, &reg, self.tool, f,
+            )?);
         }
         Some(out)
     }
@@ -677,7 +694,8 @@ pub const COMBINATION_CUTOFF: Real = 1e-2;
 pub struct Combination {
     /// Readable name.
     pub name: String,
-    /// Coefficients in physical units, one per solved parameter (the first nonzero one is 1).
+    /// Coefficients in physical units, one per solved parameter (the leading one is 1); the
+    /// name omits terms below [`COMBINATION_CUTOFF`], the coefficients keep them.
     pub coefficients: Vec<Real>,
 }
 
@@ -808,18 +826,31 @@ fn named_combinations(rows: &DMatrix<Real>, scale: &[Real], names: &[String]) ->
         if big < RANK_EPS {
             continue;
         }
-        // Scaled coefficient a_j on q_j = p_j / s_j → a_j / s_j on p_j.
-        let mut c: Vec<Real> = row
+        // Scaled coefficient a_j on q_j = p_j / s_j → a_j / s_j on p_j. The name drops
+        // the small terms; the coefficients keep them (values must not depend on the
+        // undetermined directions).
+        let mut c: Vec<Real> = row.iter().zip(scale).map(|(a, s)| a / s).collect();
+        let lead_at = row
             .iter()
-            .zip(scale)
-            .map(|(a, s)| if a.abs() < COMBINATION_CUTOFF * big { 0.0 } else { a / s })
-            .collect();
-        let lead = c.iter().copied().find(|v| *v != 0.0).unwrap_or(1.0);
+            .position(|a| a.abs() >= COMBINATION_CUTOFF * big)
+            .unwrap_or(0);
+        let lead = c[lead_at];
         for v in &mut c {
             *v /= lead;
         }
+        let shown: Vec<Real> = row
+            .iter()
+            .zip(&c)
+            .map(|(a, v)| {
+                if a.abs() < COMBINATION_CUTOFF * big {
+                    0.0
+                } else {
+                    *v
+                }
+            })
+            .collect();
         out.push(Combination {
-            name: combo_name(names, &c),
+            name: combo_name(names, &shown),
             coefficients: c,
         });
     }
@@ -828,8 +859,15 @@ fn named_combinations(rows: &DMatrix<Real>, scale: &[Real], names: &[String]) ->
 
 /// Decides what the features determine, at the deviation values `x` (see the module
 /// documentation).
-pub fn identifiability(model: &Model, x: &DVector<Real>) -> Result<Identifiability, CalibrateError> {
-    let names: Vec<String> = model.ids.iter().map(|id| model.chain.deviation_name(*id)).collect();
+pub fn identifiability(
+    model: &Model,
+    x: &DVector<Real>,
+) -> Result<Identifiability, CalibrateError> {
+    let names: Vec<String> = model
+        .ids
+        .iter()
+        .map(|id| model.chain.deviation_name(*id))
+        .collect();
     let np = model.ids.len();
     let j = model.jacobian(x).ok_or_else(|| {
         CalibrateError::Degenerate(
@@ -921,7 +959,11 @@ pub fn identifiability(model: &Model, x: &DVector<Real>) -> Result<Identifiabili
                             .iter()
                             .zip(&scale)
                             .map(|(a, s)| {
-                                if a.abs() < COMBINATION_CUTOFF * coef.amax() { 0.0 } else { a / s }
+                                if a.abs() < COMBINATION_CUTOFF * coef.amax() {
+                                    0.0
+                                } else {
+                                    a / s
+                                }
                             })
                             .collect();
                         format!(
@@ -933,7 +975,10 @@ pub fn identifiability(model: &Model, x: &DVector<Real>) -> Result<Identifiabili
                         format!("registration {}: absorbs no deviation", reg_names[k])
                     }
                 }
-                _ => format!("registration {}: not constrained by the features", reg_names[k]),
+                _ => format!(
+                    "registration {}: not constrained by the features",
+                    reg_names[k]
+                ),
             };
             registration_absorbs.push(text);
         }
@@ -1077,7 +1122,9 @@ pub fn identify(model: &Model) -> Result<Identification, CalibrateError> {
     // Registration directions the features constrain (the others, e.g. a slide along a
     // lone plane, stay zero).
     let reg_dirs: Vec<DVector<Real>> = {
-        let j = model.jacobian(&x0).ok_or_else(|| CalibrateError::Degenerate(String::new()))?;
+        let j = model
+            .jacobian(&x0)
+            .ok_or_else(|| CalibrateError::Degenerate(String::new()))?;
         let jr = j.columns(np, model.cols() - np).into_owned();
         if jr.ncols() == 0 {
             Vec::new()
@@ -1111,14 +1158,19 @@ pub fn identify(model: &Model) -> Result<Identification, CalibrateError> {
         dirs: dirs.clone(),
         z: DVector::zeros(rank + nreg),
     };
-    let (solved, rep) = LevenbergMarquardt::new().with_patience(200).minimize(problem);
+    let (solved, rep) = LevenbergMarquardt::new()
+        .with_patience(200)
+        .minimize(problem);
     if !rep.termination.was_successful() {
-        return Err(CalibrateError::NotConverged(format!("{:?}", rep.termination)));
+        return Err(CalibrateError::NotConverged(format!(
+            "{:?}",
+            rep.termination
+        )));
     }
     let x = solved.full(&solved.z);
-    let r = model
-        .residuals(&x)
-        .ok_or_else(|| CalibrateError::NotConverged("residuals undefined at the solution".into()))?;
+    let r = model.residuals(&x).ok_or_else(|| {
+        CalibrateError::NotConverged("residuals undefined at the solution".into())
+    })?;
     let jz = model
         .jacobian(&x)
         .ok_or_else(|| CalibrateError::NotConverged("Jacobian undefined at the solution".into()))?
@@ -1143,13 +1195,20 @@ pub fn identify(model: &Model) -> Result<Identification, CalibrateError> {
             coefficients: c,
         }
     };
+    // A parameter identified on its own is valued as the determined combination nearest to
+    // it (its projection on the determined subspace), whose other coefficients are below
+    // LEAKAGE in scaled units: so its value does not depend on the undetermined directions.
+    let scale: Vec<Real> = model.ids.iter().map(|id| magnitude(*id)).collect();
+    let basis = &ident.determined_basis;
     let parameters = ident
         .identified
         .iter()
         .map(|name| {
             let k = ident.parameters.iter().position(|n| n == name).unwrap_or(0);
-            let mut c = vec![0.0; np];
-            c[k] = 1.0;
+            let a = basis * basis.row(k).transpose();
+            let c = (0..np)
+                .map(|j| scale[k] * a[j] / (scale[j] * a[k]))
+                .collect();
             estimate(name.clone(), c)
         })
         .collect();
@@ -1226,13 +1285,12 @@ pub fn extract_plane_feature(
             if tool.kind() != ToolKind::Flat {
                 return Err(CalibrateError::FloorNeedsFlatTool(spec.name.clone()));
             }
-            let mv = moves
-                .iter()
-                .find(|m| m.line == spec.line)
-                .ok_or_else(|| crate::identify::IdentifyError::NoMove {
+            let mv = moves.iter().find(|m| m.line == spec.line).ok_or_else(|| {
+                crate::identify::IdentifyError::NoMove {
                     face: spec.name.clone(),
                     line: spec.line,
-                })?;
+                }
+            })?;
             let empty = || {
                 CalibrateError::Face(crate::identify::IdentifyError::EmptyRegion {
                     face: spec.name.clone(),
@@ -1296,10 +1354,12 @@ pub fn extract_plane_feature(
                         <= opts.robust.k_sigma * fit.rms_mm.max(tol::LENGTH_EPS)
                 })
                 .collect();
-            let cross = used.iter().fold((Real::INFINITY, Real::NEG_INFINITY), |(a, b), p| {
-                let x = e2.dot(&(p - fl.tip));
-                (a.min(x), b.max(x))
-            });
+            let cross = used
+                .iter()
+                .fold((Real::INFINITY, Real::NEG_INFINITY), |(a, b), p| {
+                    let x = e2.dot(&(p - fl.tip));
+                    (a.min(x), b.max(x))
+                });
             let design = face_design(&used, &fit, [u, e2]);
             Ok(PlaneFeature::from_design(
                 &spec.name,
@@ -1316,7 +1376,10 @@ pub fn extract_plane_feature(
 
 /// A plane feature exactly as the chain `truth` predicts it, with the given uncertainties:
 /// for synthetic studies and tests (no scan). The nominal frame comes from `model`.
-#[expect(clippy::too_many_arguments, reason = "a plain constructor of a data record")]
+#[expect(
+    clippy::too_many_arguments,
+    reason = "a plain constructor of a data record"
+)]
 pub fn synthetic_plane_feature(
     spec: &FaceSpec,
     cut: &Move,
@@ -1333,7 +1396,8 @@ pub fn synthetic_plane_feature(
         FaceKind::Flank => (fl.plane.normal, [fl.u, fl.v]),
         FaceKind::Floor => {
             let e2 = UnitVector3::try_new(fl.v.cross(&fl.u), tol::LENGTH_EPS)?;
-            let m = UnitVector3::new_normalize(fl.u.into_inner() * fl.u.dot(&fl.v) - fl.v.into_inner());
+            let m =
+                UnitVector3::new_normalize(fl.u.into_inner() * fl.u.dot(&fl.v) - fl.v.into_inner());
             (m, [fl.u, e2])
         }
     };
@@ -1356,8 +1420,12 @@ pub fn synthetic_plane_feature(
     let mid = fl.tip
         + fl.u.into_inner() * along
         + match spec.kind {
-            FaceKind::Flank => fl.v.into_inner() * ((sv.0.max(0.0) + sv.1.min(tool.length())) / 2.0),
-            FaceKind::Floor => basis[1].into_inner() * ((cross_range_mm.0 + cross_range_mm.1) / 2.0),
+            FaceKind::Flank => {
+                fl.v.into_inner() * ((sv.0.max(0.0) + sv.1.min(tool.length())) / 2.0)
+            }
+            FaceKind::Floor => {
+                basis[1].into_inner() * ((cross_range_mm.0 + cross_range_mm.1) / 2.0)
+            }
         };
     f.centroid = plane.project(&mid);
     f.plane = plane;
@@ -1432,36 +1500,45 @@ mod tests {
     ];
 
     fn ids(c: &Chain, names: &[&str]) -> Vec<DeviationId> {
-        names.iter().map(|n| c.deviation_id(n).expect("known")).collect()
+        names
+            .iter()
+            .map(|n| c.deviation_id(n).expect("known"))
+            .collect()
     }
 
     fn step_features(truth: &Chain) -> Vec<Feature> {
         let model = truth.nominal();
-        [("A0", cut(1, 0.0, -25.0, 0.0)), ("A180", cut(2, 180.0, 25.0, 0.0))]
-            .iter()
-            .map(|(n, c)| {
-                Feature::Plane(
-                    synthetic_plane_feature(
-                        &spec(n, FaceKind::Flank),
-                        c,
-                        truth,
-                        &model,
-                        &tool(),
-                        &stock(),
-                        0.5e-3,
-                        [2e-5, 2e-4],
-                        (0.0, 0.0),
-                    )
-                    .expect("a face"),
+        [
+            ("A0", cut(1, 0.0, -25.0, 0.0)),
+            ("A180", cut(2, 180.0, 25.0, 0.0)),
+        ]
+        .iter()
+        .map(|(n, c)| {
+            Feature::Plane(
+                synthetic_plane_feature(
+                    &spec(n, FaceKind::Flank),
+                    c,
+                    truth,
+                    &model,
+                    &tool(),
+                    &stock(),
+                    0.5e-3,
+                    [2e-5, 2e-4],
+                    (0.0, 0.0),
                 )
-            })
-            .collect()
+                .expect("a face"),
+            )
+        })
+        .collect()
     }
 
     #[test]
     fn jacobian_matches_finite_differences() {
         let mut truth = mdx50();
-        for (n, v) in NINE.iter().zip([-0.3, 0.2, 1e-4, -2e-4, 3e-4, 1e-4, -1e-4, 2e-4, -3e-4]) {
+        for (n, v) in NINE
+            .iter()
+            .zip([-0.3, 0.2, 1e-4, -2e-4, 3e-4, 1e-4, -1e-4, 2e-4, -3e-4])
+        {
             truth.set_deviation(truth.deviation_id(n).expect("known"), v);
         }
         let mut feats = step_features(&truth);
@@ -1491,7 +1568,11 @@ mod tests {
         };
         let mut x = model.start();
         for k in 0..x.len() {
-            x[k] = if k < 9 { 0.7 * truth.deviation(id[k]) } else { 1e-4 * (k as Real - 11.0) };
+            x[k] = if k < 9 {
+                0.7 * truth.deviation(id[k])
+            } else {
+                1e-4 * (k as Real - 11.0)
+            };
         }
         let j = model.jacobian(&x).expect("defined");
         for k in 0..x.len() {
@@ -1500,10 +1581,14 @@ mod tests {
             let (mut a, mut b) = (x.clone(), x.clone());
             a[k] += h;
             b[k] -= h;
-            let fd = (model.residuals(&a).expect("a") - model.residuals(&b).expect("b")) / (2.0 * h);
+            let fd =
+                (model.residuals(&a).expect("a") - model.residuals(&b).expect("b")) / (2.0 * h);
             let err = (&fd - j.column(k)).amax();
             let scale = fd.amax().max(1.0);
-            assert!(err <= 1e-5 * scale, "column {k}: AD vs FD differ by {err} (scale {scale})");
+            assert!(
+                err <= 1e-5 * scale,
+                "column {k}: AD vs FD differ by {err} (scale {scale})"
+            );
         }
     }
 
@@ -1533,7 +1618,11 @@ mod tests {
         assert!((dy.value + 0.5).abs() < 2e-3, "dy_AY = {}", dy.value);
         let g = &r.combinations[0];
         assert!((g.value - 4e-4).abs() < 2e-5, "gamma sum = {}", g.value);
-        assert!(!r.identifiability.not_identified.contains(&"dy_AY".to_string()));
+        assert!(
+            !r.identifiability
+                .not_identified
+                .contains(&"dy_AY".to_string())
+        );
         assert_eq!(r.identifiability.not_identified.len(), 8);
         // Flanks never see the offset along the tool axis.
         assert!(r.identifiability.no_data.contains(&"dz_AY".to_string()));

@@ -6,7 +6,8 @@
 //! at every index). At an index the tool works on the bar's top side:
 //!
 //! - an *X-shoulder* on one long edge (base `−y` or `+y`): a straight cut along X, `width`
-//!   into the side and `depth` down, leaving a flank (a wall along X) and a floor;
+//!   into the side and `depth` down, leaving a flank (a wall along X) and a floor (measured
+//!   only when the wall, seen at 45°, leaves enough of it in view);
 //! - a *Y-shoulder* across the `+x` end: a cut along Y leaving a wall facing `+x` and a floor.
 //!
 //! Each of the bar's four long corners takes at most one X-shoulder (two indices reach each
@@ -129,7 +130,11 @@ pub struct Design {
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Cut {
     /// X-shoulder at `index`, on the base edge `side` (±1), at depth `depth`.
-    XShoulder { index: Real, side: Real, depth: Real },
+    XShoulder {
+        index: Real,
+        side: Real,
+        depth: Real,
+    },
     /// Y-shoulder across the +x end at `index`, depth `depth`.
     YShoulder { index: Real, depth: Real },
 }
@@ -219,7 +224,10 @@ impl Cut {
             Cut::YShoulder { index, depth } => {
                 let x = l - o.width_mm + r;
                 let z = h - depth;
-                (axes(index, x, -h - r - 1.0, z), axes(index, x, h + r + 1.0, z))
+                (
+                    axes(index, x, -h - r - 1.0, z),
+                    axes(index, x, h + r + 1.0, z),
+                )
             }
         };
         Move {
@@ -228,6 +236,20 @@ impl Cut {
             end,
             feed_mm_per_min: Some(FEED_MM_PER_MIN),
             line: 0,
+        }
+    }
+
+    /// The faces a scanner can measure: the flank always; the floor only when the wall
+    /// beside it, seen at 45°, leaves more than two margins of it in view (depth + 2·margin
+    /// below the shoulder's width).
+    fn faces(&self, o: &DesignOptions) -> Vec<FaceKind> {
+        let depth = match *self {
+            Cut::XShoulder { depth, .. } | Cut::YShoulder { depth, .. } => depth,
+        };
+        if depth + 2.0 * o.margin_mm < o.width_mm {
+            vec![FaceKind::Flank, FaceKind::Floor]
+        } else {
+            vec![FaceKind::Flank]
         }
     }
 
@@ -241,7 +263,7 @@ impl Cut {
         };
         match kind {
             FaceKind::Flank => ((along - m).max(0.0), (depth - m).max(0.0)),
-            FaceKind::Floor => ((along - m).max(0.0), (o.width_mm - m).max(0.0)),
+            FaceKind::Floor => ((along - m).max(0.0), (o.width_mm - depth - m).max(0.0)),
         }
     }
 }
@@ -286,7 +308,7 @@ fn features_of(
     let mut out = Vec::new();
     for c in cuts {
         let mv = c.motion(o, r);
-        for kind in [FaceKind::Flank, FaceKind::Floor] {
+        for kind in c.faces(o) {
             let (a, b) = c.face_sizes(o, kind);
             let n = expected_points(a * b, o.pitch_mm).max(3.0);
             let s = o.noise_sigma_mm;
@@ -298,7 +320,7 @@ fn features_of(
             };
             // Floors: the part of the track inside the stock, across the feed (symmetric
             // when the shoulder is one tool diameter wide).
-            let half = (o.width_mm.min(2.0 * r) / 2.0 - o.margin_mm).max(0.0);
+            let half = ((o.width_mm.min(2.0 * r) - depth_of(c)) / 2.0 - o.margin_mm).max(0.0);
             let cross = (-half, half);
             let f = synthetic_plane_feature(
                 &spec,
@@ -308,16 +330,19 @@ fn features_of(
                 tool,
                 &stock,
                 s / n.sqrt(),
-                [
-                    s / (n * a * a / 12.0).sqrt(),
-                    s / (n * b * b / 12.0).sqrt(),
-                ],
+                [s / (n * a * a / 12.0).sqrt(), s / (n * b * b / 12.0).sqrt()],
                 cross,
             )?;
             out.push(Feature::Plane(f));
         }
     }
     Some(out)
+}
+
+fn depth_of(c: &Cut) -> Real {
+    match *c {
+        Cut::XShoulder { depth, .. } | Cut::YShoulder { depth, .. } => depth,
+    }
 }
 
 /// "flank" or "floor".
@@ -500,7 +525,8 @@ fn finish(
         );
         push(&mut text, format!("G0 Z{}", o.safe_z_mm));
         mv.line = l;
-        for kind in [FaceKind::Flank, FaceKind::Floor] {
+        let kinds = c.faces(o);
+        for &kind in &kinds {
             faces.push(FaceSpec {
                 name: format!("{}-{}", c.name(), kind_name(kind)),
                 line: l,
@@ -512,7 +538,7 @@ fn finish(
             name: c.name(),
             index_deg: c.index(),
             cut: mv,
-            faces: vec![FaceKind::Flank, FaceKind::Floor],
+            faces: kinds,
         });
     }
     push(&mut text, "G0 A0".into());

@@ -8,18 +8,18 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
 use twinmill::cloud::read_cloud_file;
+use twinmill::design::{DesignOptions, design, kind_name};
 use twinmill::math::{Aabb, Point3};
 use twinmill::nc::Program;
 use twinmill::output::{json_bytes, ply_bytes, write_files, write_outcome};
-use twinmill::design::{DesignOptions, design, kind_name};
 use twinmill::pipeline::{
     FitRequest, Selection, Shape, fit_cloud, identify_scene, machine_part, run, scanner_study,
 };
-use twinmill::report::DesignReport;
-use twinmill::scene::design_scene_toml;
 use twinmill::progress::Progress;
+use twinmill::report::DesignReport;
 use twinmill::report::{ScanFileReport, ScanReport};
 use twinmill::scan::Surface;
+use twinmill::scene::design_scene_toml;
 use twinmill::scene::{Scene, SceneError};
 use twinmill::segment::{PlaneSegmentOptions, RansacOptions};
 

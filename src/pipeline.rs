@@ -4,22 +4,19 @@
 //! **Invariant:** `run` has no side effects beyond the progress calls; the same scene and
 //! program give the same outcome (except the timings) for any thread count.
 
+use crate::calibrate::{
+    CalibrateError, Feature, Identification, Model, PlaneFeature, Registration,
+    extract_plane_feature, predicted_plane,
+};
 use crate::cloud::PointCloud;
+use crate::design::kind_name;
 use crate::fit::Plane;
 use crate::fit::{
     RobustRule, fit_circle, fit_circle_robust, fit_cylinder, fit_cylinder_robust, fit_plane,
     fit_plane_robust, fit_sphere, fit_sphere_robust, plane_distance_and_angle,
 };
-use crate::calibrate::{
-    CalibrateError, Feature, Identification, Model, PlaneFeature, Registration,
-    extract_plane_feature, predicted_plane,
-};
-use crate::design::kind_name;
 use crate::identify::{self, Face, IdentifyError};
 use crate::kinematics::{Chain, DeviationId};
-use crate::report::{
-    EstimateReport, FeatureReport, IdentifyReport, IdentifySolverReport, LoopRound,
-};
 use crate::math::Aabb;
 use crate::math::{Point3, Real};
 use crate::nc::Program;
@@ -28,6 +25,9 @@ use crate::render::{HeatMapOptions, RenderError, encode_png, nice_ceil, render_h
 use crate::report::{
     CircleReport, CylinderReport, FaceReport, FitFileReport, PlanePair, PlaneReport, Report,
     ScanReport, SolverReport, SphereReport, StockReport, StudyCase,
+};
+use crate::report::{
+    EstimateReport, FeatureReport, IdentifyReport, IdentifySolverReport, LoopRound,
 };
 use crate::scan::{Misregistration, ScanError, StudyOptions, Surface, scan};
 use crate::scene::Scene;
@@ -836,12 +836,13 @@ pub fn identify_scene(
         None => {
             let part = machine_part(scene, program, progress)?;
             let surface = Surface::new(&part.stock);
-            let scanned = surface
-                .scan(&scene.scanner, progress)
-                .map_err(|source| PipelineError::Scan {
-                    path: spath.clone(),
-                    source,
-                })?;
+            let scanned =
+                surface
+                    .scan(&scene.scanner, progress)
+                    .map_err(|source| PipelineError::Scan {
+                        path: spath.clone(),
+                        source,
+                    })?;
             (scanned.cloud, "simulated scan".to_string(), Some(surface))
         }
     };
@@ -883,7 +884,12 @@ pub fn identify_scene(
             let r = crate::calibrate::identify(&m).map_err(cal)?;
             // Values of the main run's quantities (same coefficients) in this trial.
             for e in ident.parameters.iter().chain(&ident.combinations) {
-                let v: Real = e.coefficients.iter().zip(&r.solution).map(|(c, x)| c * x).sum();
+                let v: Real = e
+                    .coefficients
+                    .iter()
+                    .zip(&r.solution)
+                    .map(|(c, x)| c * x)
+                    .sum();
                 samples.entry(e.name.clone()).or_default().push(v);
             }
             mc_trials += 1;
@@ -901,8 +907,7 @@ pub fn identify_scene(
             let mean = v.iter().sum::<Real>() / n;
             (v.iter().map(|x| (x - mean).powi(2)).sum::<Real>() / (n - 1.0)).sqrt()
         }),
-        injected: simulated
-            .then(|| e.coefficients.iter().zip(&truth).map(|(c, t)| c * t).sum()),
+        injected: simulated.then(|| e.coefficients.iter().zip(&truth).map(|(c, t)| c * t).sum()),
         coefficients: e.coefficients.clone(),
     };
     let id = &ident.identifiability;

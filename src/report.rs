@@ -718,7 +718,11 @@ impl IdentifyReport {
                 "  loop          {} round(s), worst face {:.2e} mm: {}",
                 self.rounds.len(),
                 last.worst_face_mm,
-                if self.converged { "within tolerance" } else { "NOT within tolerance" }
+                if self.converged {
+                    "within tolerance"
+                } else {
+                    "NOT within tolerance"
+                }
             );
         }
         s

@@ -6,8 +6,8 @@
 //!
 //! **Invariant:** this module and [`crate::output`] are the only ones that touch files.
 
-use crate::fit::RobustRule;
 use crate::calibrate::Registration;
+use crate::fit::RobustRule;
 use crate::identify::{FaceKind, FaceOptions, FaceRegion, FaceSpec};
 use crate::kinematics::{Axis, AxisKind, Chain};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
@@ -739,7 +739,9 @@ impl Scene {
                     .deviation_id(p.get_ref())
                     .map_err(|e| ctx.err(p.span(), e.to_string()))?;
                 if parameters.contains(p.get_ref()) {
-                    return Err(ctx.err(p.span(), format!("parameter '{}' given twice", p.get_ref())));
+                    return Err(
+                        ctx.err(p.span(), format!("parameter '{}' given twice", p.get_ref()))
+                    );
                 }
                 parameters.push(p.get_ref().clone());
             }
@@ -747,7 +749,12 @@ impl Scene {
                 return Err(ctx.err(ps.span(), "identify.parameters is empty"));
             }
         }
-        let registration = match file.identify.registration.as_ref().map(|r| (r.get_ref().as_str(), r.span())) {
+        let registration = match file
+            .identify
+            .registration
+            .as_ref()
+            .map(|r| (r.get_ref().as_str(), r.span()))
+        {
             None | Some(("estimate", _)) => Registration::Estimate,
             Some(("workpiece", _)) => Registration::Workpiece,
             Some((other, span)) => {
@@ -863,7 +870,11 @@ pub fn design_scene_toml(
     use std::fmt::Write as _;
     let mut s = String::new();
     let v = |p: &Vector3| format!("[{}, {}, {}]", p.x, p.y, p.z);
-    let _ = writeln!(s, "# Test cuts designed by twinmill for: {}", parameters.join(", "));
+    let _ = writeln!(
+        s,
+        "# Test cuts designed by twinmill for: {}",
+        parameters.join(", ")
+    );
     let _ = writeln!(s, "name = \"{name}\"\nprogram = \"{program_file}\"\n");
     let _ = writeln!(s, "[machine]\nname = \"{}\"\naxes = [", scene.machine_name);
     for a in scene.chain.axes() {
