@@ -81,7 +81,7 @@ fn benches(c: &mut Criterion) {
         b.iter(solve)
     });
     g.bench_function(
-        &format!("identify (fit + solve, {} points)", cloud.points.len()),
+        format!("identify (fit + solve, {} points)", cloud.points.len()),
         |b| {
             b.iter(|| {
                 let f =

@@ -946,7 +946,7 @@ pub fn identifiability(
     if jr.ncols() > 0 {
         let reg_names = ["dx", "dy", "dz", "alpha", "beta", "gamma"];
         let pinv = jp.clone().pseudo_inverse(RANK_EPS).ok();
-        for k in 0..jr.ncols() {
+        for (k, reg_name) in reg_names.iter().enumerate().take(jr.ncols()) {
             let col = jr.column(k).into_owned();
             let norm = col.norm();
             let text = match &pinv {
@@ -968,17 +968,14 @@ pub fn identifiability(
                             .collect();
                         format!(
                             "registration {}: mimics {}",
-                            reg_names[k],
+                            reg_name,
                             combo_name(&names, &c)
                         )
                     } else {
-                        format!("registration {}: absorbs no deviation", reg_names[k])
+                        format!("registration {}: absorbs no deviation", reg_name)
                     }
                 }
-                _ => format!(
-                    "registration {}: not constrained by the features",
-                    reg_names[k]
-                ),
+                _ => format!("registration {}: not constrained by the features", reg_name),
             };
             registration_absorbs.push(text);
         }

@@ -272,6 +272,9 @@ impl Cut {
 /// information score (higher is better).
 type Key = (usize, usize, Real);
 
+/// A candidate design's ranking, identifiability and relative uncertainties.
+type Evaluated = (Key, Identifiability, Vec<(String, Real)>);
+
 /// Feed of the designed cuts (mm/min).
 const FEED_MM_PER_MIN: Real = 600.0;
 
@@ -404,9 +407,9 @@ pub fn design(
     let pool = candidates(o);
     let mut chosen: Vec<Cut> = Vec::new();
     let mut evaluated = 0;
-    let mut best: Option<(Key, Identifiability, Vec<(String, Real)>)> = None;
+    let mut best: Option<Evaluated> = None;
     loop {
-        let mut round: Option<(Key, Cut, Identifiability, Vec<(String, Real)>)> = None;
+        let mut round: Option<(Cut, Evaluated)> = None;
         for c in &pool {
             if chosen.iter().any(|k| conflicts(k, c, o)) {
                 continue;
@@ -418,11 +421,11 @@ pub fn design(
                 continue;
             };
             let key = key_of(&ident, params.len());
-            if round.as_ref().is_none_or(|(k, ..)| better(&key, k)) {
-                round = Some((key, *c, ident, rel));
+            if round.as_ref().is_none_or(|(_, (k, ..))| better(&key, k)) {
+                round = Some((*c, (key, ident, rel)));
             }
         }
-        let Some((key, cut, ident, rel)) = round else {
+        let Some((cut, (key, ident, rel))) = round else {
             break;
         };
         // Stop when a cut adds no determined direction and hardly strengthens the weak ones.

@@ -844,17 +844,6 @@ impl Scene {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn line_col_counts_from_one() {
-        assert_eq!(line_col("ab\ncd", 0), (1, 1));
-        assert_eq!(line_col("ab\ncd", 4), (2, 2));
-    }
-}
-
 /// A scene file (TOML text) for a designed test: the machine, deviations, tool, sweep and
 /// face options of `scene`, the design's bar as stock, a scanner on a turntable about the
 /// rotary axis (four views at the bar's corners, the camera 30° off the axis so that faces
@@ -975,3 +964,14 @@ pub fn design_scene_toml(
 /// How far the designed scene's camera leans from the rotary axis's normal towards +x
 /// (degrees): enough to see the faces across the bar's +x end at 60° incidence.
 const SCANNER_TILT_DEG: Real = 30.0;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn line_col_counts_from_one() {
+        assert_eq!(line_col("ab\ncd", 0), (1, 1));
+        assert_eq!(line_col("ab\ncd", 4), (2, 2));
+    }
+}

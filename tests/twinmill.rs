@@ -1024,7 +1024,6 @@ fn designed_cuts_round_trip_over_100_seeded_trials() {
     // rate counts the trials in which the quantity was valued.
     assert!(!passes.is_empty(), "nothing identified");
     for (name, (ok, n)) in &passes {
-        eprintln!("round trip: {name}: within 3σ in {ok} of {n} trials where valued");
         assert!(
             *ok * 100 >= 95 * n,
             "{name}: within 3σ in only {ok} of {n} trials"
