@@ -10,7 +10,7 @@
 //!   subspace with the registration, uncertainties, and the model-correction loop, from
 //!   the fitted faces;
 //! * `identify (fit + solve)`: the same, starting from the scanned cloud (face selection
-//!   and robust plane fits of the ten faces included).
+//!   and robust plane fits of the faces included).
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
@@ -77,9 +77,13 @@ fn benches(c: &mut Criterion) {
 
     let mut g = c.benchmark_group("identify");
     g.sample_size(20);
-    g.bench_function("identify (solve, nine deviations, 10 faces)", |b| {
-        b.iter(solve)
-    });
+    g.bench_function(
+        format!(
+            "identify (solve, nine deviations, {} faces)",
+            features.len()
+        ),
+        |b| b.iter(solve),
+    );
     g.bench_function(
         format!("identify (fit + solve, {} points)", cloud.points.len()),
         |b| {
