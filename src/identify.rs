@@ -93,6 +93,18 @@ pub struct FaceSpec {
     pub line: usize,
     /// Where the face's points are.
     pub region: FaceRegion,
+    /// Which face of the cut: its flank (side) or its floor (bottom of a flat end mill).
+    pub kind: FaceKind,
+}
+
+/// Which face of a straight cut.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum FaceKind {
+    /// The side: tangent to the tool cylinder, containing the tool axis and the path.
+    #[default]
+    Flank,
+    /// The bottom of a flat end mill's track.
+    Floor,
 }
 
 /// How a face's points are chosen from a cloud.
@@ -243,7 +255,7 @@ const BLOCK_MIN_POINTS: usize = 4;
 /// found by block averaging (Flyvbjerg & Petersen): residual means over blocks of edge b vary
 /// like σ²·f/n_block if the residuals are correlated over less than b; f is the largest such
 /// ratio over the block sizes, and 1 for independent noise.
-fn face_design(points: &[Point3], fit: &PlaneFit, basis: [UnitVector3; 2]) -> FaceDesign {
+pub fn face_design(points: &[Point3], fit: &PlaneFit, basis: [UnitVector3; 2]) -> FaceDesign {
     let c = fit.centroid;
     let coords: Vec<(Real, Real, Real)> = points
         .iter()
@@ -293,7 +305,8 @@ fn face_design(points: &[Point3], fit: &PlaneFit, basis: [UnitVector3; 2]) -> Fa
     }
 }
 
-fn find_cut<'m>(
+/// The straight cut on the face's NC line, at constant rotary positions.
+pub fn find_cut<'m>(
     moves: &'m [Move],
     spec: &FaceSpec,
     chain: &Chain,

@@ -10,10 +10,12 @@
 //! [`scene`] loads input files, [`pipeline`] runs it all and [`output`] writes the results.
 //! See README.md, *Architecture*.
 
+pub mod calibrate;
 pub mod cloud;
 pub mod collide;
 pub mod correct;
 pub mod cutter;
+pub mod design;
 pub mod deviation;
 pub mod fit;
 pub mod identify;

@@ -9,18 +9,21 @@ use std::process::ExitCode;
 use std::sync::Mutex;
 use twinmill::cloud::read_cloud_file;
 use twinmill::correct::write_gcode;
+use twinmill::design::{DesignOptions, design, kind_name};
 use twinmill::math::{Aabb, Point3};
 use twinmill::nc::{Interpreter, LengthUnit, Program, write_jsonl};
 use twinmill::output::{
     MeshFormat, json_bytes, ply_bytes, write_files, write_outcome, write_simulation, write_streamed,
 };
 use twinmill::pipeline::{
-    FitRequest, Selection, Shape, correct, fit_cloud, identified_model, machine_part, run,
-    scanner_study, simulate,
+    FitRequest, Selection, Shape, correct, fit_cloud, identified_model, identify_scene,
+    machine_part, run, scanner_study, simulate,
 };
 use twinmill::progress::Progress;
+use twinmill::report::DesignReport;
 use twinmill::report::{ScanFileReport, ScanReport};
 use twinmill::scan::Surface;
+use twinmill::scene::design_scene_toml;
 use twinmill::scene::{Scene, SceneError};
 use twinmill::segment::{PlaneSegmentOptions, RansacOptions};
 
@@ -161,6 +164,32 @@ enum Command {
         /// List every problem found in the NC program, not only the first.
         #[arg(short, long)]
         verbose: bool,
+    },
+    /// Identify the scene's `[identify] parameters` from its faces (any number, flanks and
+    /// floors) in its simulated scan or in a given cloud: identifiability (singular values,
+    /// what is and is not determined), values with uncertainties, the model-correction loop;
+    /// write identify.json and cloud.ply.
+    Identify {
+        #[command(flatten)]
+        args: SceneArgs,
+        /// Identify from this cloud (PLY, XYZ/CSV, PTS; workpiece or scanner frame) instead
+        /// of the scene's simulated scan.
+        #[arg(long)]
+        cloud: Option<PathBuf>,
+        /// Monte-Carlo trials over scanner noise (simulated scans only; default: the
+        /// scene's [identify] monte_carlo.trials).
+        #[arg(long, value_name = "N")]
+        monte_carlo: Option<usize>,
+    },
+    /// Design test cuts that make the given deviations observable on the scene's machine;
+    /// write design.ngc, design.toml (a scene that cuts, scans and identifies them) and
+    /// design.json.
+    Design {
+        #[command(flatten)]
+        args: SceneArgs,
+        /// Deviations to make observable, comma separated (e.g. dy_AY,gamma_YX).
+        #[arg(long, value_delimiter = ',', num_args = 1, required = true)]
+        params: Vec<String>,
     },
     /// Fit shapes to any point cloud (PLY, XYZ/CSV, PTS): every planar face with the
     /// distance and angle between each pair (the default), or one plane, sphere, cylinder
@@ -595,6 +624,151 @@ fn main() -> ExitCode {
                 return ExitCode::from(2);
             }
             code
+        }
+        Command::Identify {
+            args:
+                SceneArgs {
+                    scene,
+                    out,
+                    json,
+                    threads,
+                    verbose,
+                },
+            cloud,
+            monte_carlo,
+        } => {
+            let (scene, program) = match prepare(&scene, threads, verbose) {
+                Ok(x) => x,
+                Err(code) => return code,
+            };
+            let given = match &cloud {
+                Some(path) => match read_cloud_file(path) {
+                    Ok(c) => Some((c, path.display().to_string())),
+                    Err(e) => return fail(e),
+                },
+                None => None,
+            };
+            let bars = bars(json);
+            let outcome = match identify_scene(
+                &scene,
+                &program,
+                given.as_ref().map(|(c, s)| (c, s.as_str())),
+                monte_carlo,
+                &bars,
+            ) {
+                Ok(o) => o,
+                Err(e) => return fail(e),
+            };
+            let dir = out.join(format!("{}-identify", scene.name));
+            let files = json_bytes(&outcome.report, &dir.join("identify.json"))
+                .and_then(|j| {
+                    Ok(vec![
+                        ("identify.json", j),
+                        (
+                            "cloud.ply",
+                            ply_bytes(&outcome.cloud, &dir.join("cloud.ply"))?,
+                        ),
+                    ])
+                })
+                .and_then(|files| write_files(&dir, &files));
+            if let Err(e) = files {
+                return fail(e);
+            }
+            print_out(
+                || {
+                    format!(
+                        "{}  wrote         {}/{{identify.json, cloud.ply}}\n",
+                        outcome.report.summary(),
+                        dir.display()
+                    )
+                },
+                json.then(|| serde_json::to_string_pretty(&outcome.report)),
+            )
+        }
+        Command::Design {
+            args:
+                SceneArgs {
+                    scene,
+                    out,
+                    json,
+                    threads,
+                    verbose,
+                },
+            params,
+        } => {
+            let (scene, _) = match prepare(&scene, threads, verbose) {
+                Ok(x) => x,
+                Err(code) => return code,
+            };
+            let mut ids = Vec::new();
+            for p in &params {
+                match scene.model.deviation_id(p) {
+                    Ok(id) => ids.push(id),
+                    Err(e) => return fail(format!("--params: {e}")),
+                }
+            }
+            let mut opts = DesignOptions::standard();
+            opts.noise_sigma_mm = scene.scanner.noise_sigma_mm;
+            opts.pitch_mm = scene.scanner.pitch_mm;
+            let d = match design(&scene.model, &scene.tool, &ids, &opts) {
+                Ok(d) => d,
+                Err(e) => return fail(e),
+            };
+            let name = format!("{}-design", scene.name);
+            let toml = design_scene_toml(&scene, &d, &opts, &params, &name, "design.ngc");
+            let i = &d.identifiability;
+            let report = DesignReport {
+                scene: scene.name.clone(),
+                parameters: params.clone(),
+                cuts: d
+                    .cuts
+                    .iter()
+                    .map(|c| (c.name.clone(), c.index_deg, c.cut.line))
+                    .collect(),
+                faces: d
+                    .faces
+                    .iter()
+                    .map(|f| (f.name.clone(), kind_name(f.kind).to_string()))
+                    .collect(),
+                singular_values: i.singular_values.clone(),
+                condition_number: i.condition_number,
+                identified: i.identified.clone(),
+                determined_combinations: i
+                    .determined_combinations
+                    .iter()
+                    .map(|c| c.name.clone())
+                    .collect(),
+                not_determined: i
+                    .undetermined_combinations
+                    .iter()
+                    .map(|c| c.name.clone())
+                    .collect(),
+                relative_sigma: d.relative_sigma.clone(),
+                evaluated: d.evaluated,
+            };
+            let dir = out.join(&name);
+            let files = json_bytes(&report, &dir.join("design.json"))
+                .map(|j| {
+                    vec![
+                        ("design.json", j),
+                        ("design.ngc", d.program.clone().into_bytes()),
+                        ("design.toml", toml.into_bytes()),
+                    ]
+                })
+                .and_then(|files| write_files(&dir, &files));
+            if let Err(e) = files {
+                return fail(e);
+            }
+            print_out(
+                || {
+                    format!(
+                        "{}  wrote         {}/{{design.ngc, design.toml, design.json}}\n",
+                        report.summary(),
+                        dir.display()
+                    )
+                },
+                json.then(|| serde_json::to_string_pretty(&report)),
+            )
         }
         Command::Fit {
             cloud,

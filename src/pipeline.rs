@@ -4,18 +4,23 @@
 //! **Invariant:** `run` has no side effects beyond the progress calls; the same scene and
 //! program give the same outcome (except the timings) for any thread count.
 
+use crate::calibrate::{
+    CalibrateError, Feature, Identification, Model, PlaneFeature, Registration,
+    extract_plane_feature, predicted_plane,
+};
 use crate::cloud::PointCloud;
 use crate::correct::{
     CorrectError, CorrectOptions, CorrectedProgram, correct_program, face_errors, part_error,
     path_error, uncorrected,
 };
+use crate::design::kind_name;
 use crate::fit::Plane;
 use crate::fit::{
     RobustRule, fit_circle, fit_circle_robust, fit_cylinder, fit_cylinder_robust, fit_plane,
     fit_plane_robust, fit_sphere, fit_sphere_robust, plane_distance_and_angle,
 };
 use crate::identify::{self, Face, IdentifyError};
-use crate::kinematics::Chain;
+use crate::kinematics::{Chain, DeviationId};
 use crate::math::Aabb;
 use crate::math::{Point3, Real};
 use crate::mesh::{MeshError, TriMesh, mesh_stock};
@@ -28,6 +33,9 @@ use crate::report::{
     CircleReport, CorrectIteration, CorrectReport, CylinderReport, FaceReport, FitFileReport,
     MeshSummary, PlanePair, PlaneReport, Report, ScanReport, SimulationReport, SolverReport,
     SphereReport, StockReport, StudyCase, UncorrectableReport,
+};
+use crate::report::{
+    EstimateReport, FeatureReport, IdentifyReport, IdentifySolverReport, LoopRound,
 };
 use crate::scan::{Misregistration, ScanError, StudyOptions, Surface, scan};
 use crate::scene::Scene;
@@ -98,6 +106,14 @@ pub enum PipelineError {
         location: String,
         /// Why.
         source: CorrectError,
+    },
+    /// General identification failed (faces, data, solver).
+    #[error("{path}: [identify]: {source}")]
+    Calibrate {
+        /// Scene file.
+        path: String,
+        /// Why.
+        source: CalibrateError,
     },
     /// The heat map could not be drawn.
     #[error("{path}: heat map: {source}")]
@@ -216,6 +232,12 @@ pub fn extract_faces(
         path: scene.path.display().to_string(),
         source,
     };
+    if scene.faces.len() != 2 {
+        return Err(id_err(IdentifyError::NotAStepPair(format!(
+            "the scene lists {} faces; `run` measures two, use `twinmill identify` for more",
+            scene.faces.len()
+        ))));
+    }
     let face = |k: usize| {
         identify::extract_face(
             points,
@@ -1016,4 +1038,312 @@ pub fn identified_model(scene: &Scene, report: &Report) -> Result<Chain, Pipelin
         model.set_deviation(id, value - rest);
     }
     Ok(model)
+}
+
+// ---------------------------------------------------------------------------------------
+// General identification: `twinmill identify`.
+
+/// Everything `identify_scene` produces.
+#[derive(Clone, Debug)]
+pub struct IdentifyOutcome {
+    /// The report.
+    pub report: IdentifyReport,
+    /// The cloud the features were measured in.
+    pub cloud: PointCloud,
+    /// The final identification (last loop round).
+    pub identification: Identification,
+    /// The twin after the loop: the model chain with the determined directions updated.
+    pub twin: Chain,
+}
+
+/// Most rounds of the model-correction loop: the solve converges in one; a second confirms.
+const MAX_ROUNDS: usize = 5;
+
+/// Measures every face of the scene in `points` as a plane feature.
+pub fn extract_features(
+    scene: &Scene,
+    program: &Program,
+    points: &[Point3],
+) -> Result<Vec<Feature>, PipelineError> {
+    scene
+        .faces
+        .iter()
+        .map(|spec| {
+            extract_plane_feature(
+                points,
+                spec,
+                &program.moves,
+                &scene.model,
+                &scene.tool,
+                &scene.stock_box,
+                &scene.face_options,
+            )
+            .map(Feature::Plane)
+            .map_err(|source| PipelineError::Calibrate {
+                path: scene.path.display().to_string(),
+                source,
+            })
+        })
+        .collect()
+}
+
+fn scene_ids(scene: &Scene) -> Result<Vec<DeviationId>, PipelineError> {
+    let err = |source| PipelineError::Calibrate {
+        path: scene.path.display().to_string(),
+        source,
+    };
+    if scene.parameters.is_empty() {
+        return Err(err(CalibrateError::NoParameters));
+    }
+    Ok(scene
+        .parameters
+        .iter()
+        .filter_map(|n| scene.model.deviation_id(n).ok())
+        .collect())
+}
+
+/// Largest distance (mm) between a feature's predicted plane on `twin` (mapped by the
+/// registration) and its measured centroid, beyond the larger of `tol` and three times the
+/// face's own offset uncertainty.
+fn worst_face(
+    twin: &Chain,
+    tool: &crate::tool::Tool,
+    features: &[Feature],
+    reg: &[Real; 6],
+) -> Real {
+    let s_from_w = crate::kinematics::Deviation { values: *reg }.transform();
+    features
+        .iter()
+        .map(|f| match f {
+            Feature::Plane(p) => predicted_plane(twin, tool, p).map_or(Real::INFINITY, |pl| {
+                let n = s_from_w.rotation * pl.normal.into_inner();
+                let d = pl.offset + n.dot(&s_from_w.translation.vector);
+                (n.dot(&p.centroid.coords) - d).abs()
+            }),
+        })
+        .fold(0.0, Real::max)
+}
+
+/// The model-correction loop on measured features: identify → update the twin → compare
+/// its predicted faces with the measured ones → repeat until they agree within
+/// `tolerance_mm` (or within three standard uncertainties of the noisiest face's offset,
+/// whichever is larger: a twin cannot match noise better than the noise).
+pub fn correction_loop(
+    model: &Chain,
+    ids: &[DeviationId],
+    tool: &crate::tool::Tool,
+    features: &[Feature],
+    registration: Registration,
+    tolerance_mm: Real,
+) -> Result<(Identification, Chain, Vec<LoopRound>, bool), CalibrateError> {
+    let noise = features
+        .iter()
+        .map(|f| match f {
+            Feature::Plane(p) => 3.0 * p.offset_sigma_mm,
+        })
+        .fold(0.0, Real::max);
+    let tol = tolerance_mm.max(noise);
+    let mut twin = model.clone();
+    let mut rounds = Vec::new();
+    let mut last = None;
+    let mut converged = false;
+    for round in 1..=MAX_ROUNDS {
+        let m = Model {
+            chain: &twin,
+            ids,
+            tool,
+            features,
+            registration,
+        };
+        let ident = crate::calibrate::identify(&m)?;
+        for (id, v) in ids.iter().zip(&ident.solution) {
+            twin.set_deviation(*id, *v);
+        }
+        let worst = worst_face(&twin, tool, features, &ident.registration);
+        rounds.push(LoopRound {
+            round,
+            worst_face_mm: worst,
+            chi2: ident.solver.chi2,
+        });
+        last = Some(ident);
+        if worst <= tol {
+            converged = true;
+            break;
+        }
+    }
+    let ident = last.ok_or(CalibrateError::NoFeatures)?;
+    Ok((ident, twin, rounds, converged))
+}
+
+fn feature_report(f: &Feature, residuals: [Real; 3]) -> FeatureReport {
+    match f {
+        Feature::Plane(p) => plane_feature_report(p, residuals),
+    }
+}
+
+fn plane_feature_report(p: &PlaneFeature, residuals: [Real; 3]) -> FeatureReport {
+    let n = p.plane.normal;
+    FeatureReport {
+        name: p.name.clone(),
+        kind: kind_name(p.kind).into(),
+        line: p.cut.line,
+        points: p.points,
+        rms_mm: p.rms_mm,
+        normal: [n.x, n.y, n.z],
+        centroid_mm: [p.centroid.x, p.centroid.y, p.centroid.z],
+        offset_sigma_mm: p.offset_sigma_mm,
+        residuals,
+    }
+}
+
+/// General identification of the scene's `[identify] parameters` from its faces: in the
+/// scene's simulated scan, or in `cloud` (a real scan, `source` naming it); with the
+/// model-correction loop, and Monte-Carlo trials over scanner noise (simulated scans only;
+/// `monte_carlo` overrides the scene's trial count).
+pub fn identify_scene(
+    scene: &Scene,
+    program: &Program,
+    cloud: Option<(&PointCloud, &str)>,
+    monte_carlo: Option<usize>,
+    progress: &dyn Progress,
+) -> Result<IdentifyOutcome, PipelineError> {
+    let spath = scene.path.display().to_string();
+    let cal = |source| PipelineError::Calibrate {
+        path: spath.clone(),
+        source,
+    };
+    let ids = scene_ids(scene)?;
+    let mut timings = Vec::new();
+    let mut clock = Instant::now();
+    let mut lap = |name: &str, timings: &mut Vec<(String, Real)>| {
+        timings.push((name.to_string(), clock.elapsed().as_secs_f64()));
+        clock = Instant::now();
+    };
+    let (cloud, source, surface) = match cloud {
+        Some((c, src)) => (c.clone(), src.to_string(), None),
+        None => {
+            let part = machine_part(scene, program, progress)?;
+            let surface = Surface::new(&part.stock);
+            let scanned =
+                surface
+                    .scan(&scene.scanner, progress)
+                    .map_err(|source| PipelineError::Scan {
+                        path: spath.clone(),
+                        source,
+                    })?;
+            (scanned.cloud, "simulated scan".to_string(), Some(surface))
+        }
+    };
+    lap("scan", &mut timings);
+    let features = extract_features(scene, program, &cloud.points)?;
+    lap("fit", &mut timings);
+    let (ident, twin, rounds, converged) = correction_loop(
+        &scene.model,
+        &ids,
+        &scene.tool,
+        &features,
+        scene.registration,
+        scene.loop_tolerance_mm,
+    )
+    .map_err(cal)?;
+    lap("identify", &mut timings);
+    // Monte Carlo over scanner noise: rescan with other seeds, identify from the model.
+    let trials = monte_carlo.unwrap_or(scene.monte_carlo_trials);
+    let mut samples: BTreeMap<String, Vec<Real>> = BTreeMap::new();
+    let mut mc_trials = 0;
+    if let Some(surface) = &surface {
+        for k in 0..trials {
+            let mut cfg = scene.scanner.clone();
+            cfg.seed = scene.monte_carlo_seed.wrapping_add(k as u64);
+            let scanned = surface
+                .scan(&cfg, &crate::progress::NoProgress)
+                .map_err(|source| PipelineError::Scan {
+                    path: spath.clone(),
+                    source,
+                })?;
+            let f = extract_features(scene, program, &scanned.cloud.points)?;
+            let m = Model {
+                chain: &scene.model,
+                ids: &ids,
+                tool: &scene.tool,
+                features: &f,
+                registration: scene.registration,
+            };
+            let r = crate::calibrate::identify(&m).map_err(cal)?;
+            // Values of the main run's quantities (same coefficients) in this trial.
+            for e in ident.parameters.iter().chain(&ident.combinations) {
+                let v: Real = e
+                    .coefficients
+                    .iter()
+                    .zip(&r.solution)
+                    .map(|(c, x)| c * x)
+                    .sum();
+                samples.entry(e.name.clone()).or_default().push(v);
+            }
+            mc_trials += 1;
+        }
+        lap("monte carlo", &mut timings);
+    }
+    let truth: Vec<Real> = ids.iter().map(|id| scene.chain.deviation(*id)).collect();
+    let simulated = surface.is_some();
+    let estimate = |e: &crate::calibrate::Estimate| EstimateReport {
+        name: e.name.clone(),
+        value: e.value,
+        sigma: e.sigma,
+        monte_carlo_spread: samples.get(&e.name).filter(|v| v.len() > 1).map(|v| {
+            let n = v.len() as Real;
+            let mean = v.iter().sum::<Real>() / n;
+            (v.iter().map(|x| (x - mean).powi(2)).sum::<Real>() / (n - 1.0)).sqrt()
+        }),
+        injected: simulated.then(|| e.coefficients.iter().zip(&truth).map(|(c, t)| c * t).sum()),
+        coefficients: e.coefficients.clone(),
+    };
+    let id = &ident.identifiability;
+    let report = IdentifyReport {
+        scene: scene.name.clone(),
+        chain: scene.chain.to_string(),
+        cloud: source,
+        registration: match scene.registration {
+            Registration::Estimate => "estimate",
+            Registration::Workpiece => "workpiece",
+        }
+        .into(),
+        parameters: scene.parameters.clone(),
+        features: features
+            .iter()
+            .zip(&ident.residuals)
+            .map(|(f, (_, r))| feature_report(f, *r))
+            .collect(),
+        singular_values: id.singular_values.clone(),
+        condition_number: id.condition_number,
+        condition_number_determined: id.condition_number_determined,
+        identified: ident.parameters.iter().map(estimate).collect(),
+        combinations: ident.combinations.iter().map(estimate).collect(),
+        not_determined: id
+            .undetermined_combinations
+            .iter()
+            .map(|c| c.name.clone())
+            .collect(),
+        not_identified: id.not_identified.clone(),
+        no_data: id.no_data.clone(),
+        registration_absorbs: id.registration_absorbs.clone(),
+        registration_estimate: ident.registration,
+        solver: IdentifySolverReport {
+            evaluations: ident.solver.evaluations,
+            termination: ident.solver.termination.clone(),
+            chi2_start: ident.solver.chi2_start,
+            chi2: ident.solver.chi2,
+            dof: ident.solver.dof,
+        },
+        rounds,
+        converged,
+        monte_carlo_trials: mc_trials,
+        timings_s: timings,
+    };
+    Ok(IdentifyOutcome {
+        report,
+        cloud,
+        identification: ident,
+        twin,
+    })
 }

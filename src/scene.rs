@@ -6,8 +6,9 @@
 //!
 //! **Invariant:** this module and [`crate::output`] are the only ones that touch files.
 
+use crate::calibrate::Registration;
 use crate::fit::RobustRule;
-use crate::identify::{FaceOptions, FaceRegion, FaceSpec};
+use crate::identify::{FaceKind, FaceOptions, FaceRegion, FaceSpec};
 use crate::kinematics::{Axis, AxisKind, Chain};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
 use crate::nc::{AxisLetter, AxisValues, NcError, Program, parse_program};
@@ -109,8 +110,13 @@ struct AxisFile {
 #[serde(deny_unknown_fields)]
 struct ToolFile {
     kind: Spanned<String>,
+    /// Flat, ball, bull-nose: the diameter; tapered flat: the tip's; tapered ball: the ball's.
     diameter_mm: Spanned<Real>,
     length_mm: Spanned<Real>,
+    /// Bull-nose only.
+    corner_radius_mm: Option<Spanned<Real>>,
+    /// Tapered flat and tapered ball only (degrees, in (0, 90)).
+    taper_half_angle_deg: Option<Spanned<Real>>,
 }
 
 #[derive(Deserialize)]
@@ -182,6 +188,22 @@ struct IdentifyFile {
     band_mm: Option<Spanned<Real>>,
     #[serde(default)]
     known: BTreeMap<String, Spanned<Real>>,
+    #[serde(default)]
+    parameters: Option<Spanned<Vec<Spanned<String>>>>,
+    #[serde(default)]
+    registration: Option<Spanned<String>>,
+    #[serde(default)]
+    monte_carlo: Option<MonteCarloFile>,
+    #[serde(default)]
+    loop_tolerance_mm: Option<Spanned<Real>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MonteCarloFile {
+    trials: Spanned<usize>,
+    #[serde(default)]
+    seed: Option<u64>,
 }
 
 #[derive(Deserialize)]
@@ -193,6 +215,8 @@ struct FaceFile {
     bbox: Option<BoxFile>,
     #[serde(default)]
     seed: Option<Spanned<[Real; 3]>>,
+    #[serde(default)]
+    kind: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]
@@ -201,6 +225,10 @@ struct BoxFile {
     min: Spanned<[Real; 3]>,
     max: Spanned<[Real; 3]>,
 }
+
+/// Default tolerance of the model-correction loop: 0.5 µm, the accuracy the twin's faces are
+/// tested to.
+pub const DEFAULT_LOOP_TOLERANCE_MM: Real = 5e-4;
 
 /// A loaded, validated scene.
 #[derive(Clone, Debug)]
@@ -235,8 +263,22 @@ pub struct Scene {
     pub sweep: SweepOptions,
     /// Scanner.
     pub scanner: ScannerConfig,
-    /// The two faces of the 0/180 experiment.
-    pub faces: [FaceSpec; 2],
+    /// The faces to measure: the two of the 0/180 experiment (`run`), or any number for
+    /// general identification (`identify`, when `parameters` is given).
+    pub faces: Vec<FaceSpec>,
+    /// Deviations to identify (`[identify] parameters`), by name; empty: the 0/180
+    /// experiment's two.
+    pub parameters: Vec<String>,
+    /// How the scan's frame relates to W (`[identify] registration`: "estimate", the
+    /// default, or "workpiece").
+    pub registration: Registration,
+    /// Monte-Carlo trials over scanner noise (`[identify] monte_carlo.trials`, 0: none).
+    pub monte_carlo_trials: usize,
+    /// Seed of the first Monte-Carlo trial (then +1 per trial).
+    pub monte_carlo_seed: u64,
+    /// The model-correction loop stops when every predicted face is within this of the
+    /// measured one at its centroid (mm); default 0.5 µm.
+    pub loop_tolerance_mm: Real,
     /// Face extraction options.
     pub face_options: FaceOptions,
     /// The scanner-effects study (`twinmill scan --study`).
@@ -448,20 +490,46 @@ impl Scene {
         let mut model = model_nominal;
         let known = deviation_map(&ctx, &mut model, &file.identify.known)?;
         // Tool.
-        let kind = match file.tool.kind.get_ref().as_str() {
-            "flat" => ToolKind::Flat,
-            "ball" => ToolKind::Ball,
-            other => {
+        let diameter = ctx.positive(&file.tool.diameter_mm, "diameter_mm")?;
+        let length = ctx.positive(&file.tool.length_mm, "length_mm")?;
+        let kind_name = file.tool.kind.get_ref().as_str();
+        let extra = |field: &Option<Spanned<Real>>, name: &str, wanted: bool| match (field, wanted)
+        {
+            (Some(f), false) => Err(ctx.err(
+                f.span(),
+                format!("tool.{name} does not apply to a '{kind_name}' tool"),
+            )),
+            (None, true) => Err(ctx.err(
+                file.tool.kind.span(),
+                format!("a '{kind_name}' tool needs tool.{name}"),
+            )),
+            (Some(f), true) => Ok(Some(ctx.finite(f, name)?)),
+            (None, false) => Ok(None),
+        };
+        let bull = kind_name == "bull_nose";
+        let tapered = matches!(kind_name, "tapered_flat" | "tapered_ball");
+        let corner = extra(&file.tool.corner_radius_mm, "corner_radius_mm", bull)?;
+        let angle = extra(
+            &file.tool.taper_half_angle_deg,
+            "taper_half_angle_deg",
+            tapered,
+        )?;
+        let made = match (kind_name, corner, angle) {
+            ("flat", ..) => Tool::try_new(ToolKind::Flat, diameter, length),
+            ("ball", ..) => Tool::try_new(ToolKind::Ball, diameter, length),
+            ("bull_nose", Some(rc), _) => Tool::try_bull_nose(diameter, rc, length),
+            ("tapered_flat", _, Some(a)) => Tool::try_tapered_flat(diameter, a, length),
+            ("tapered_ball", _, Some(a)) => Tool::try_tapered_ball(diameter, a, length),
+            (other, ..) => {
                 return Err(ctx.err(
                     file.tool.kind.span(),
-                    format!("tool kind must be 'flat' or 'ball', got '{other}'"),
+                    format!(
+                        "tool kind must be 'flat', 'ball', 'bull_nose', 'tapered_flat' or 'tapered_ball', got '{other}'"
+                    ),
                 ));
             }
         };
-        let diameter = ctx.positive(&file.tool.diameter_mm, "diameter_mm")?;
-        let length = ctx.positive(&file.tool.length_mm, "length_mm")?;
-        let tool = Tool::try_new(kind, diameter, length)
-            .map_err(|e| ctx.err(file.tool.length_mm.span(), e.to_string()))?;
+        let tool = made.map_err(|e| ctx.err(file.tool.length_mm.span(), e.to_string()))?;
         // Stock.
         let (mn, mx) = (
             ctx.vec3(&file.stock.min, "stock.min")?,
@@ -588,7 +656,11 @@ impl Scene {
         })?;
         // Faces.
         let faces = file.identify.faces.get_ref();
-        let [f0, f1] = &faces[..] else {
+        let general = file.identify.parameters.is_some();
+        if general && faces.is_empty() {
+            return Err(ctx.err(file.identify.faces.span(), "identify.faces is empty"));
+        }
+        if !general && faces.len() != 2 {
             return Err(ctx.err(
                 file.identify.faces.span(),
                 format!(
@@ -596,7 +668,7 @@ impl Scene {
                     faces.len()
                 ),
             ));
-        };
+        }
         let spec = |f: &FaceFile| -> Result<FaceSpec, SceneError> {
             let region = match (&f.bbox, &f.seed) {
                 (Some(_), Some(s)) => {
@@ -617,7 +689,18 @@ impl Scene {
                 (None, Some(s)) => FaceRegion::Seed(ctx.vec3(s, "seed")?.into()),
                 (None, None) => FaceRegion::Auto,
             };
+            let kind = match f.kind.as_ref().map(|k| (k.get_ref().as_str(), k.span())) {
+                None | Some(("flank", _)) => FaceKind::Flank,
+                Some(("floor", _)) => FaceKind::Floor,
+                Some((other, span)) => {
+                    return Err(ctx.err(
+                        span,
+                        format!("face kind must be 'flank' or 'floor', got '{other}'"),
+                    ));
+                }
+            };
             Ok(FaceSpec {
+                kind,
                 name: f.name.clone(),
                 line: *f.line.get_ref(),
                 region,
@@ -680,6 +763,49 @@ impl Scene {
                 )?,
             }
         };
+        let mut parameters = Vec::new();
+        if let Some(ps) = &file.identify.parameters {
+            for p in ps.get_ref() {
+                chain
+                    .deviation_id(p.get_ref())
+                    .map_err(|e| ctx.err(p.span(), e.to_string()))?;
+                if parameters.contains(p.get_ref()) {
+                    return Err(
+                        ctx.err(p.span(), format!("parameter '{}' given twice", p.get_ref()))
+                    );
+                }
+                parameters.push(p.get_ref().clone());
+            }
+            if parameters.is_empty() {
+                return Err(ctx.err(ps.span(), "identify.parameters is empty"));
+            }
+        }
+        let registration = match file
+            .identify
+            .registration
+            .as_ref()
+            .map(|r| (r.get_ref().as_str(), r.span()))
+        {
+            None | Some(("estimate", _)) => Registration::Estimate,
+            Some(("workpiece", _)) => Registration::Workpiece,
+            Some((other, span)) => {
+                return Err(ctx.err(
+                    span,
+                    format!("registration must be 'estimate' or 'workpiece', got '{other}'"),
+                ));
+            }
+        };
+        let (monte_carlo_trials, monte_carlo_seed) = match &file.identify.monte_carlo {
+            Some(m) if *m.trials.get_ref() > 10_000 => {
+                return Err(ctx.err(m.trials.span(), "monte_carlo.trials must be at most 10000"));
+            }
+            Some(m) => (*m.trials.get_ref(), m.seed.unwrap_or(1)),
+            None => (0, 1),
+        };
+        let loop_tolerance_mm = match &file.identify.loop_tolerance_mm {
+            Some(v) => ctx.positive(v, "loop_tolerance_mm")?,
+            None => DEFAULT_LOOP_TOLERANCE_MM,
+        };
         let program_path = path
             .parent()
             .unwrap_or(Path::new("."))
@@ -702,7 +828,12 @@ impl Scene {
                 rotary_step_bound_mm: bound,
             },
             scanner,
-            faces: [spec(f0)?, spec(f1)?],
+            faces: faces.iter().map(spec).collect::<Result<_, _>>()?,
+            parameters,
+            registration,
+            monte_carlo_trials,
+            monte_carlo_seed,
+            loop_tolerance_mm,
             study,
             face_options: FaceOptions {
                 margin_mm: margin,
@@ -743,6 +874,155 @@ impl Scene {
         Ok(program)
     }
 }
+
+/// A scene file (TOML text) for a designed test: the machine, deviations, tool, sweep and
+/// face options of `scene`, the design's bar as stock, a scanner on a turntable about the
+/// rotary axis (four views at the bar's corners, the camera 30° off the axis so that faces
+/// across the bar's +x end are seen too), the design's faces and the parameters.
+pub fn design_scene_toml(
+    scene: &Scene,
+    design: &crate::design::Design,
+    opts: &crate::design::DesignOptions,
+    parameters: &[String],
+    name: &str,
+    program_file: &str,
+) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    let v = |p: &Vector3| format!("[{}, {}, {}]", p.x, p.y, p.z);
+    let _ = writeln!(
+        s,
+        "# Test cuts designed by twinmill for: {}",
+        parameters.join(", ")
+    );
+    let _ = writeln!(s, "name = \"{name}\"\nprogram = \"{program_file}\"\n");
+    let _ = writeln!(s, "[machine]\nname = \"{}\"\naxes = [", scene.machine_name);
+    for a in scene.chain.axes() {
+        let kind = match a.kind {
+            AxisKind::Linear => "linear",
+            AxisKind::Rotary => "rotary",
+        };
+        let _ = writeln!(
+            s,
+            "  {{ name = \"{}\", kind = \"{kind}\", direction = {}, origin = {} }},",
+            a.letter.as_char(),
+            v(&a.direction.into_inner()),
+            v(&a.origin.coords)
+        );
+    }
+    let spindle = scene.chain.joint_name(scene.chain.axes().len() - 1);
+    let _ = writeln!(s, "]\nspindle = \"{}\"", &spindle[1..]);
+    let _ = writeln!(s, "home = {{ Z = {}, A = 0 }}\n", opts.safe_z_mm);
+    let _ = writeln!(s, "[deviations]");
+    for (k, val) in &scene.injected {
+        let _ = writeln!(s, "{k} = {val:e}");
+    }
+    use crate::tool::ToolSizes;
+    let tool_fields = match scene.tool.sizes() {
+        ToolSizes::Plain { diameter } => format!(
+            "kind = \"{}\"\ndiameter_mm = {diameter}",
+            if scene.tool.kind() == crate::tool::ToolKind::Ball {
+                "ball"
+            } else {
+                "flat"
+            }
+        ),
+        ToolSizes::BullNose {
+            diameter,
+            corner_radius,
+        } => format!(
+            "kind = \"bull_nose\"\ndiameter_mm = {diameter}\ncorner_radius_mm = {corner_radius}"
+        ),
+        ToolSizes::TaperedFlat {
+            tip_diameter,
+            half_angle_deg,
+        } => format!(
+            "kind = \"tapered_flat\"\ndiameter_mm = {tip_diameter}\ntaper_half_angle_deg = {half_angle_deg}"
+        ),
+        ToolSizes::TaperedBall {
+            ball_diameter,
+            half_angle_deg,
+        } => format!(
+            "kind = \"tapered_ball\"\ndiameter_mm = {ball_diameter}\ntaper_half_angle_deg = {half_angle_deg}"
+        ),
+        ToolSizes::Profile => format!(
+            "# a general profile cannot be written back; its enclosing flat tool:\nkind = \"flat\"\ndiameter_mm = {}",
+            2.0 * scene.tool.radius()
+        ),
+    };
+    let st = opts.stock();
+    let _ = writeln!(
+        s,
+        "\n[tool]\n{tool_fields}\nlength_mm = {}\n",
+        scene.tool.length()
+    );
+    let _ = writeln!(
+        s,
+        "[stock]\nmin = {}\nmax = {}\npitch_mm = {}\n",
+        v(&st.min.coords),
+        v(&st.max.coords),
+        scene.pitch_mm
+    );
+    let _ = writeln!(
+        s,
+        "[sweep]\nrotary_step_bound_mm = {}\n",
+        scene.sweep.rotary_step_bound_mm
+    );
+    let sc = &scene.scanner;
+    let dist = 0.5 * (sc.working_range_mm.0 + sc.working_range_mm.1);
+    let (sn, cs) = SCANNER_TILT_DEG.to_radians().sin_cos();
+    let _ = writeln!(
+        s,
+        "[scanner]\nposition = [{}, 0.0, {}]\ntarget = [0.0, 0.0, 0.0]\nup = [0.0, 1.0, 0.0]",
+        dist * sn,
+        dist * cs
+    );
+    let _ = writeln!(
+        s,
+        "baseline_mm = {}\nfov_mm = [{}, {}]\npitch_mm = {}\nnoise_sigma_mm = {}",
+        sc.baseline_mm,
+        opts.length_mm * 1.5,
+        opts.half_section_mm * 5.0,
+        sc.pitch_mm,
+        sc.noise_sigma_mm
+    );
+    let _ = writeln!(
+        s,
+        "working_range_mm = [{}, {}]\ngrazing_limit_deg = {}\nseed = {}",
+        sc.working_range_mm.0, sc.working_range_mm.1, sc.grazing_limit_deg, sc.seed
+    );
+    let _ = writeln!(
+        s,
+        "turntable = {{ axis_point = [0.0, 0.0, 0.0], axis = [1.0, 0.0, 0.0], angles_deg = [45.0, 135.0, 225.0, 315.0] }}\n"
+    );
+    let _ = writeln!(s, "[identify]\nfaces = [");
+    for f in &design.faces {
+        let _ = writeln!(
+            s,
+            "  {{ name = \"{}\", line = {}, kind = \"{}\" }},",
+            f.name,
+            f.line,
+            crate::design::kind_name(f.kind)
+        );
+    }
+    let _ = writeln!(
+        s,
+        "]\nparameters = [{}]\nregistration = \"estimate\"\nmargin_mm = {}\nband_mm = {}",
+        parameters
+            .iter()
+            .map(|p| format!("\"{p}\""))
+            .collect::<Vec<_>>()
+            .join(", "),
+        scene.face_options.margin_mm,
+        scene.face_options.band_mm
+    );
+    let _ = writeln!(s, "known = {{}}");
+    s
+}
+
+/// How far the designed scene's camera leans from the rotary axis's normal towards +x
+/// (degrees): enough to see the faces across the bar's +x end at 60° incidence.
+const SCANNER_TILT_DEG: Real = 30.0;
 
 #[cfg(test)]
 mod tests {

@@ -1,0 +1,113 @@
+//! Benchmark of general identification: the nine deviations of seed 002 Fig. 3 from the
+//! test cuts `twinmill design` proposes for them on the built-in MDX-50 scene.
+//!
+//! `cargo bench --bench identify`. Setup (not timed): design the cuts, write the designed
+//! scene and program to a temporary folder, cut them on a machine with all nine deviations
+//! set (offsets 0.2–0.4 mm, angles 1–4e-4 rad), scan with the scene's EinScan-class
+//! scanner (four turntable views, σ 0.025 mm, pitch 0.185 mm). Timed:
+//!
+//! * `identify (solve)`: identifiability analysis, Levenberg–Marquardt in the determined
+//!   subspace with the registration, uncertainties, and the model-correction loop, from
+//!   the fitted faces;
+//! * `identify (fit + solve)`: the same, starting from the scanned cloud (face selection
+//!   and robust plane fits of the faces included).
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use std::hint::black_box;
+use std::path::Path;
+use twinmill::design::{DesignOptions, design};
+use twinmill::pipeline::{correction_loop, extract_features, machine_part};
+use twinmill::progress::NoProgress;
+use twinmill::scan::Surface;
+use twinmill::scene::{Scene, design_scene_toml};
+
+const NINE: [(&str, f64); 9] = [
+    ("dy_AY", -0.4),
+    ("dz_AY", 0.2),
+    ("beta_AY", 1e-4),
+    ("gamma_AY", -2e-4),
+    ("alpha_YX", 3e-4),
+    ("gamma_YX", 1e-4),
+    ("beta_XZ", -4e-4),
+    ("alpha_ZS", 2e-4),
+    ("beta_ZS", -3e-4),
+];
+
+fn benches(c: &mut Criterion) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/mdx50-step.toml");
+    let mut base = Scene::load(&path).expect("scene");
+    for (n, v) in NINE {
+        let id = base.chain.deviation_id(n).expect("known");
+        base.chain.set_deviation(id, v);
+        base.injected.insert(n.into(), v);
+    }
+    let ids: Vec<_> = NINE
+        .iter()
+        .map(|(n, _)| base.model.deviation_id(n).expect("known"))
+        .collect();
+    let opts = DesignOptions::standard();
+    let d = design(&base.model, &base.tool, &ids, &opts).expect("design");
+    let params: Vec<String> = NINE.iter().map(|(n, _)| n.to_string()).collect();
+    let toml = design_scene_toml(&base, &d, &opts, &params, "bench-design", "bench.ngc");
+    let dir = std::env::temp_dir().join(format!("twinmill-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    std::fs::write(dir.join("bench.ngc"), &d.program).expect("program");
+    std::fs::write(dir.join("bench.toml"), &toml).expect("scene");
+    let scene = Scene::load(&dir.join("bench.toml")).expect("designed scene");
+    let program = scene.load_program().expect("program");
+    let part = machine_part(&scene, &program, &NoProgress).expect("part");
+    let cloud = Surface::new(&part.stock)
+        .scan(&scene.scanner, &NoProgress)
+        .expect("scan")
+        .cloud;
+    let _ = std::fs::remove_dir_all(&dir);
+    let features = extract_features(&scene, &program, &cloud.points).expect("features");
+    let solve = || {
+        correction_loop(
+            &scene.model,
+            &ids,
+            &scene.tool,
+            black_box(&features),
+            scene.registration,
+            scene.loop_tolerance_mm,
+        )
+        .expect("identifies")
+    };
+    solve();
+
+    let mut g = c.benchmark_group("identify");
+    g.sample_size(20);
+    g.bench_function(
+        format!(
+            "identify (solve, nine deviations, {} faces)",
+            features.len()
+        ),
+        |b| b.iter(solve),
+    );
+    g.bench_function(
+        format!("identify (fit + solve, {} points)", cloud.points.len()),
+        |b| {
+            b.iter(|| {
+                let f =
+                    extract_features(&scene, &program, black_box(&cloud.points)).expect("features");
+                correction_loop(
+                    &scene.model,
+                    &ids,
+                    &scene.tool,
+                    &f,
+                    scene.registration,
+                    scene.loop_tolerance_mm,
+                )
+                .expect("identifies")
+            })
+        },
+    );
+    g.finish();
+}
+
+// criterion_group! generates an undocumented public function: keep it in a private module.
+mod group {
+    use super::*;
+    criterion_group!(identify, benches);
+}
+criterion_main!(group::identify);
