@@ -11,7 +11,10 @@ use crate::fit::RobustRule;
 use crate::identify::{FaceKind, FaceOptions, FaceRegion, FaceSpec};
 use crate::kinematics::{Axis, AxisKind, Chain};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
-use crate::nc::{AxisLetter, AxisValues, NcError, Program, parse_program};
+use crate::nc::{
+    AxisLetter, AxisValues, InterpOptions, LengthUnit, NcError, Program, interpret_program,
+    options_from_files,
+};
 use crate::scan::{Misregistration, ScanError, ScannerConfig, StudyOptions, Turntable};
 use crate::sweep::SweepOptions;
 use crate::tool::{Tool, ToolKind};
@@ -65,6 +68,22 @@ struct SceneFile {
     identify: IdentifyFile,
     #[serde(default)]
     study: Option<StudyFile>,
+    #[serde(default)]
+    nc: Option<NcFile>,
+}
+
+/// `[nc]`: how the program is interpreted (all optional).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct NcFile {
+    /// LinuxCNC tool table, relative to the scene file.
+    tool_table: Option<Spanned<String>>,
+    /// LinuxCNC parameter (var) file, relative to the scene file.
+    var_file: Option<Spanned<String>>,
+    /// INI file with an [RS274NGC] section, relative to the scene file.
+    ini: Option<Spanned<String>>,
+    /// Unit of tool-table and var-file lengths: "mm" (default) or "inch".
+    external_units: Option<Spanned<String>>,
 }
 
 #[derive(Deserialize)]
@@ -230,6 +249,19 @@ struct BoxFile {
 /// tested to.
 pub const DEFAULT_LOOP_TOLERANCE_MM: Real = 5e-4;
 
+/// Files that set up the interpreter for a scene's program (`[nc]`).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct NcFiles {
+    /// LinuxCNC tool table.
+    pub tool_table: Option<PathBuf>,
+    /// LinuxCNC parameter (var) file.
+    pub var_file: Option<PathBuf>,
+    /// INI file ([RS274NGC] SUBROUTINE_PATH, DISABLE_FANUC_STYLE_SUB).
+    pub ini: Option<PathBuf>,
+    /// Unit of tool-table and var-file lengths.
+    pub external_unit: LengthUnit,
+}
+
 /// A loaded, validated scene.
 #[derive(Clone, Debug)]
 pub struct Scene {
@@ -241,6 +273,8 @@ pub struct Scene {
     pub machine_name: String,
     /// The NC program file.
     pub program_path: PathBuf,
+    /// `[nc]` tool table, var file and INI (resolved paths), and their length unit.
+    pub nc_files: NcFiles,
     /// The simulated (real) machine: chain with the injected deviations.
     pub chain: Chain,
     /// Deviations injected, by name (mm or rad), as written in the scene.
@@ -806,15 +840,33 @@ impl Scene {
             Some(v) => ctx.positive(v, "loop_tolerance_mm")?,
             None => DEFAULT_LOOP_TOLERANCE_MM,
         };
-        let program_path = path
-            .parent()
-            .unwrap_or(Path::new("."))
-            .join(file.program.get_ref());
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let program_path = dir.join(file.program.get_ref());
+        let mut nc_files = NcFiles::default();
+        if let Some(nc) = &file.nc {
+            let resolve = |f: &Option<Spanned<String>>| f.as_ref().map(|f| dir.join(f.get_ref()));
+            nc_files.tool_table = resolve(&nc.tool_table);
+            nc_files.var_file = resolve(&nc.var_file);
+            nc_files.ini = resolve(&nc.ini);
+            if let Some(u) = &nc.external_units {
+                nc_files.external_unit = match u.get_ref().as_str() {
+                    "mm" => LengthUnit::Mm,
+                    "inch" => LengthUnit::Inch,
+                    other => {
+                        return Err(ctx.err(
+                            u.span(),
+                            format!("nc.external_units must be 'mm' or 'inch', got '{other}'"),
+                        ));
+                    }
+                };
+            }
+        }
         Ok(Scene {
             path: path.to_path_buf(),
             name,
             machine_name: file.machine.name,
             program_path,
+            nc_files,
             chain,
             injected,
             model,
@@ -847,8 +899,23 @@ impl Scene {
     /// machine has.
     pub fn load_program(&self) -> Result<Program, SceneError> {
         let text = read_text(&self.program_path)?;
-        let program =
-            parse_program(&text, &self.program_path, self.home).map_err(SceneError::Program)?;
+        let f = &self.nc_files;
+        let opts = options_from_files(
+            f.tool_table.as_deref(),
+            f.var_file.as_deref(),
+            f.ini.as_deref(),
+            f.external_unit,
+        )
+        .map_err(SceneError::Program)?;
+        let program = interpret_program(
+            &text,
+            &self.program_path,
+            InterpOptions {
+                start: self.home,
+                ..opts
+            },
+        )
+        .map_err(SceneError::Program)?;
         if let Some(letter) = program.axes_used.iter().find(|l| !self.chain.has_axis(**l)) {
             let line = program
                 .moves

@@ -632,6 +632,33 @@ fn cli_run_writes_report_cloud_and_picture() {
 }
 
 #[test]
+fn scene_nc_section_sets_tool_table_and_units() {
+    let sb = Sandbox::new("nc-section");
+    let scene = builtin("mdx50-step.toml").replace(
+        "program = \"mdx50-step.ngc\"",
+        "program = \"p.ngc\"\n[nc]\ntool_table = \"t.tbl\"\nexternal_units = \"inch\"\n",
+    );
+    // The [nc] table must come after the top-level keys: move it to the end of the file.
+    let (head, nc) = scene.split_once("[nc]").expect("inserted");
+    let (nc_body, rest) = nc.split_at(nc.find("\n\n").expect("blank line after"));
+    let scene = format!("{head}{rest}\n[nc]{nc_body}\n");
+    let path = sb.write("s.toml", scene.as_bytes());
+    // Tool 1 is 0.5 inch long: after G43 H1 the machine Z (spindle gauge line) is the
+    // programmed tip Z plus 12.7 mm.
+    sb.write("t.tbl", b"T1 P1 Z0.5 D0.25 ;quarter-inch end mill\n");
+    sb.write("p.ngc", b"G21 G90\nT1 M6\nG43 H1\nG0 X1 Y2 Z5\nM2\n");
+    let s = Scene::load(&path).expect("valid scene");
+    let program = s.load_program().expect("valid program");
+    let last = program.moves.last().expect("a move");
+    assert_eq!(last.end.get(AxisLetter::Z), 5.0 + 12.7);
+    assert_eq!(last.end.get(AxisLetter::X), 1.0);
+    // A missing table is an error naming it.
+    std::fs::remove_file(sb.dir.join("t.tbl")).expect("removed");
+    let err = s.load_program().expect_err("missing table").to_string();
+    assert!(err.contains("t.tbl"), "{err}");
+}
+
+#[test]
 fn cli_simulate_writes_a_closed_mesh_of_the_cut_part() {
     let sb = Sandbox::new("simulate");
     // A coarser pitch keeps the mesh small; the geometry is the built-in scene's.
