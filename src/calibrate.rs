@@ -47,12 +47,11 @@
 
 use crate::fit::{Plane, fit_plane_robust};
 use crate::identify::{
-    FaceDesign, FaceOptions, FaceRegion, FaceSpec, extent, extract_face, face_design, flank,
+    FaceDesign, FaceOptions, FaceSpec, extent, extract_face, face_design, flank, region_indices,
 };
 use crate::kinematics::{Chain, DeviationId};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
 use crate::nc::{AxisValues, Move};
-use crate::segment::{PlaneSegmentOptions, select_box, select_region_from_seed};
 use crate::tool::{Tool, ToolKind};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Matrix2, Owned};
@@ -1309,31 +1308,15 @@ pub fn extract_plane_feature(
             if u0 >= u1 || w0 >= w1 {
                 return Err(empty());
             }
-            let indices: Vec<usize> = match &spec.region {
-                FaceRegion::Auto => points
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, p)| {
-                        let w = *p - fl.tip;
-                        let (a, b) = (u.dot(&w), e2.dot(&w));
-                        a >= u0
-                            && a <= u1
-                            && b >= w0
-                            && b <= w1
-                            && plane.signed_distance(p).abs() <= opts.band_mm
-                    })
-                    .map(|(i, _)| i)
-                    .collect(),
-                FaceRegion::Box(b) => select_box(points, &b.min, &b.max)
-                    .into_iter()
-                    .map(|i| i as usize)
-                    .collect(),
-                FaceRegion::Seed(seed) => {
-                    select_region_from_seed(points, seed, &PlaneSegmentOptions::default())
-                        .map(|r| r.indices.into_iter().map(|i| i as usize).collect())
-                        .unwrap_or_default()
-                }
-            };
+            let indices = region_indices(points, &spec.region, |p| {
+                let w = p - fl.tip;
+                let (a, b) = (u.dot(&w), e2.dot(&w));
+                a >= u0
+                    && a <= u1
+                    && b >= w0
+                    && b <= w1
+                    && plane.signed_distance(p).abs() <= opts.band_mm
+            });
             let sel: Vec<Point3> = indices.iter().map(|&i| points[i]).collect();
             let mut fit = fit_plane_robust(&sel, &opts.robust).map_err(|source| {
                 CalibrateError::Face(crate::identify::IdentifyError::Fit {
@@ -1486,7 +1469,7 @@ mod tests {
         FaceSpec {
             name: name.into(),
             line: 0,
-            region: FaceRegion::Auto,
+            region: crate::identify::FaceRegion::Auto,
             kind,
         }
     }

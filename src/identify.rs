@@ -331,6 +331,33 @@ pub fn find_cut<'m>(
     Ok(mv)
 }
 
+/// Indices of the points a face region selects: those passing `auto` for
+/// [`FaceRegion::Auto`] (the model's expectation of the face), those in the box, or the
+/// planar region grown from the seed (none if no region grows there).
+pub fn region_indices(
+    points: &[Point3],
+    region: &FaceRegion,
+    auto: impl Fn(&Point3) -> bool,
+) -> Vec<usize> {
+    match region {
+        FaceRegion::Auto => points
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| auto(p))
+            .map(|(i, _)| i)
+            .collect(),
+        FaceRegion::Box(b) => select_box(points, &b.min, &b.max)
+            .into_iter()
+            .map(|i| i as usize)
+            .collect(),
+        FaceRegion::Seed(seed) => {
+            select_region_from_seed(points, seed, &PlaneSegmentOptions::default())
+                .map(|r| r.indices.into_iter().map(|i| i as usize).collect())
+                .unwrap_or_default()
+        }
+    }
+}
+
 /// Segments and fits one face.
 pub fn extract_face(
     points: &[Point3],
@@ -357,31 +384,15 @@ pub fn extract_face(
     if u0 >= u1 || v0 >= v1 {
         return Err(empty());
     }
-    let indices: Vec<usize> = match &spec.region {
-        FaceRegion::Auto => points
-            .iter()
-            .enumerate()
-            .filter(|(_, p)| {
-                let w = *p - fl.tip;
-                let (u, v) = (fl.u.dot(&w), fl.v.dot(&w));
-                u >= u0
-                    && u <= u1
-                    && v >= v0
-                    && v <= v1
-                    && fl.plane.signed_distance(p).abs() <= opts.band_mm
-            })
-            .map(|(i, _)| i)
-            .collect(),
-        FaceRegion::Box(b) => select_box(points, &b.min, &b.max)
-            .into_iter()
-            .map(|i| i as usize)
-            .collect(),
-        FaceRegion::Seed(seed) => {
-            select_region_from_seed(points, seed, &PlaneSegmentOptions::default())
-                .map(|r| r.indices.into_iter().map(|i| i as usize).collect())
-                .unwrap_or_default()
-        }
-    };
+    let indices = region_indices(points, &spec.region, |p| {
+        let w = p - fl.tip;
+        let (u, v) = (fl.u.dot(&w), fl.v.dot(&w));
+        u >= u0
+            && u <= u1
+            && v >= v0
+            && v <= v1
+            && fl.plane.signed_distance(p).abs() <= opts.band_mm
+    });
     let sel: Vec<Point3> = indices.iter().map(|&i| points[i]).collect();
     let mut fit = fit_plane_robust(&sel, &opts.robust).map_err(|source| IdentifyError::Fit {
         face: spec.name.clone(),
