@@ -678,18 +678,18 @@ enum Radial {
 
 /// A conic constraint `Q(t,s) = a t² + 2b ts + c s² + 2d t + 2e s + f ≤ 0`.
 #[derive(Clone, Copy, Debug)]
-struct Quadric {
-    a: Real,
-    b: Real,
-    c: Real,
-    d: Real,
-    e: Real,
-    f: Real,
-    tol: Real,
+pub(crate) struct Quadric {
+    pub(crate) a: Real,
+    pub(crate) b: Real,
+    pub(crate) c: Real,
+    pub(crate) d: Real,
+    pub(crate) e: Real,
+    pub(crate) f: Real,
+    pub(crate) tol: Real,
 }
 
 impl Quadric {
-    fn eval(&self, t: Real, s: Real) -> Real {
+    pub(crate) fn eval(&self, t: Real, s: Real) -> Real {
         self.a * t * t
             + 2.0 * self.b * t * s
             + self.c * s * s
@@ -701,12 +701,12 @@ impl Quadric {
 
 /// A linear constraint `p t + q s + r ≤ 0` with the tool-outward normal of the face it bounds.
 #[derive(Clone, Copy, Debug)]
-struct Line {
-    p: Real,
-    q: Real,
-    r: Real,
-    tol: Real,
-    normal: Option<Vector3>,
+pub(crate) struct Line {
+    pub(crate) p: Real,
+    pub(crate) q: Real,
+    pub(crate) r: Real,
+    pub(crate) tol: Real,
+    pub(crate) normal: Option<Vector3>,
 }
 
 impl Line {
@@ -720,13 +720,13 @@ impl Line {
         }
     }
 
-    fn eval(&self, t: Real, s: Real) -> Real {
+    pub(crate) fn eval(&self, t: Real, s: Real) -> Real {
         self.p * t + self.q * s + self.r
     }
 }
 
 /// Real roots of `A x² + 2B x + C = 0` (both if double).
-fn roots(a: Real, b: Real, c: Real) -> [Option<Real>; 2] {
+pub(crate) fn roots(a: Real, b: Real, c: Real) -> [Option<Real>; 2] {
     let scale = a.abs().max(b.abs()).max(c.abs());
     if scale == 0.0 {
         return [None, None];
@@ -749,7 +749,7 @@ fn roots(a: Real, b: Real, c: Real) -> [Option<Real>; 2] {
 /// Extremes of `t` over the convex set `{Q ≤ 0} ∩ lines`: (t_min, s there, t_max, s there).
 /// Candidates: the conic's points with ∂Q/∂s = 0, line ∩ conic, line ∩ line; only feasible
 /// ones count, so a spurious candidate can never widen the interval beyond tolerance.
-fn t_extremes(q: &Quadric, lines: &[Line]) -> Option<(Real, Real, Real, Real)> {
+pub(crate) fn t_extremes(q: &Quadric, lines: &[Line]) -> Option<(Real, Real, Real, Real)> {
     let mut best: Option<(Real, Real, Real, Real)> = None;
     let mut consider = |t: Real, s: Real| {
         if !(t.is_finite() && s.is_finite()) {

@@ -24,7 +24,7 @@
 //!
 //! **Invariant:** the sweep reads moves and poses; it never parses text or touches files.
 
-use crate::cutter::SweptTool;
+use crate::cutter::{Line, Quadric, SweptTool, t_extremes};
 use crate::kinematics::{AxisKind, Chain};
 use crate::math::{Aabb, Isometry3, Point3, Real, UnitVector3, Vector3, tol};
 use crate::nc::{AxisLetter, AxisValues, Move, MoveKind};
@@ -154,135 +154,6 @@ fn tool_bounds(tool: &Tool, tip: &Point3, v: &UnitVector3) -> Aabb {
         b.grow(&(c - Vector3::repeat(tool.radius())));
     }
     b
-}
-
-/// A convex quadric constraint `Q(t,s) = a t² + 2b ts + c s² + 2d t + 2e s + f ≤ 0`.
-#[derive(Clone, Copy, Debug)]
-struct Quadric {
-    a: Real,
-    b: Real,
-    c: Real,
-    d: Real,
-    e: Real,
-    f: Real,
-    tol: Real,
-}
-
-impl Quadric {
-    fn eval(&self, t: Real, s: Real) -> Real {
-        self.a * t * t
-            + 2.0 * self.b * t * s
-            + self.c * s * s
-            + 2.0 * self.d * t
-            + 2.0 * self.e * s
-            + self.f
-    }
-}
-
-/// A linear constraint `p t + q s + r ≤ 0` with the tool-outward normal of the face it bounds.
-#[derive(Clone, Copy, Debug)]
-struct Line {
-    p: Real,
-    q: Real,
-    r: Real,
-    tol: Real,
-    normal: Option<Vector3>,
-}
-
-impl Line {
-    fn eval(&self, t: Real, s: Real) -> Real {
-        self.p * t + self.q * s + self.r
-    }
-}
-
-/// Roots of `A x² + 2B x + C = 0` (real ones only, both if double).
-fn roots(a: Real, b: Real, c: Real) -> [Option<Real>; 2] {
-    let scale = a.abs().max(b.abs()).max(c.abs());
-    if scale == 0.0 {
-        return [None, None];
-    }
-    if a.abs() <= tol::RELATIVE_EPS * scale {
-        // Linear: 2B x + C = 0.
-        return [(b != 0.0).then(|| -c / (2.0 * b)), None];
-    }
-    let disc = b * b - a * c;
-    if disc < 0.0 {
-        return [None, None];
-    }
-    let sq = disc.sqrt();
-    // Numerically stable pair.
-    let qv = -(b + b.signum() * sq);
-    if qv == 0.0 {
-        return [Some(0.0), Some(0.0)];
-    }
-    [Some(qv / a), Some(c / qv)]
-}
-
-/// Extremes of `t` over `{Q ≤ 0} ∩ lines`: returns (t_min, s at min, t_max, s at max).
-fn t_extremes(q: &Quadric, lines: &[Line]) -> Option<(Real, Real, Real, Real)> {
-    let mut best: Option<(Real, Real, Real, Real)> = None;
-    let mut consider = |t: Real, s: Real| {
-        if !(t.is_finite() && s.is_finite()) {
-            return;
-        }
-        if q.eval(t, s) > q.tol || lines.iter().any(|l| l.eval(t, s) > l.tol) {
-            return;
-        }
-        best = Some(match best {
-            None => (t, s, t, s),
-            Some((t0, s0, t1, s1)) => {
-                let (t0, s0) = if t < t0 { (t, s) } else { (t0, s0) };
-                let (t1, s1) = if t > t1 { (t, s) } else { (t1, s1) };
-                (t0, s0, t1, s1)
-            }
-        });
-    };
-    // (a) The quadric's own extremes in t: ∂Q/∂s = 0 → s = −(b t + e)/c.
-    let det = q.a * q.c - q.b * q.b;
-    // A nearly degenerate ellipse (a strip) has no curved extremes: lines bound it.
-    if q.c > 0.0 && det > 100.0 * tol::RELATIVE_EPS * (q.a * q.c).max(Real::MIN_POSITIVE) {
-        for t in roots(det, q.d * q.c - q.b * q.e, q.f * q.c - q.e * q.e)
-            .into_iter()
-            .flatten()
-        {
-            consider(t, -(q.b * t + q.e) / q.c);
-        }
-    }
-    // (b) Each line ∩ the quadric boundary.
-    for l in lines {
-        if l.q.abs() >= l.p.abs() {
-            // s = α t + β
-            let (al, be) = (-l.p / l.q, -l.r / l.q);
-            let a2 = q.a + 2.0 * q.b * al + q.c * al * al;
-            let b2 = q.b * be + q.c * al * be + q.d + q.e * al;
-            let c2 = q.c * be * be + 2.0 * q.e * be + q.f;
-            for t in roots(a2, b2, c2).into_iter().flatten() {
-                consider(t, al * t + be);
-            }
-        } else {
-            // t = α s + β
-            let (al, be) = (-l.q / l.p, -l.r / l.p);
-            let a2 = q.a * al * al + 2.0 * q.b * al + q.c;
-            let b2 = q.a * al * be + q.b * be + q.d * al + q.e;
-            let c2 = q.a * be * be + 2.0 * q.d * be + q.f;
-            for s in roots(a2, b2, c2).into_iter().flatten() {
-                consider(al * s + be, s);
-            }
-        }
-    }
-    // (c) Each pair of lines.
-    for (i, l1) in lines.iter().enumerate() {
-        for l2 in &lines[i + 1..] {
-            let det = l1.p * l2.q - l1.q * l2.p;
-            if det.abs() > tol::RELATIVE_EPS * (l1.p.abs() + l1.q.abs()) * (l2.p.abs() + l2.q.abs())
-            {
-                let t = (-l1.r * l2.q + l1.q * l2.r) / det;
-                let s = (-l1.p * l2.r + l1.r * l2.p) / det;
-                consider(t, s);
-            }
-        }
-    }
-    best
 }
 
 /// One convex piece of the tool (a cylinder part or the ball) swept along `d`.
