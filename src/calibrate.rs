@@ -1415,26 +1415,10 @@ pub fn synthetic_plane_feature(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kinematics::{Axis, AxisKind};
     use crate::nc::{AxisLetter, MoveKind};
 
     fn mdx50() -> Chain {
-        let ax = |letter, kind, d: Vector3| Axis {
-            letter,
-            kind,
-            direction: UnitVector3::new_normalize(d),
-            origin: Point3::origin(),
-        };
-        Chain::new(
-            vec![
-                ax(AxisLetter::A, AxisKind::Rotary, Vector3::x()),
-                ax(AxisLetter::Y, AxisKind::Linear, Vector3::y()),
-                ax(AxisLetter::X, AxisKind::Linear, Vector3::x()),
-                ax(AxisLetter::Z, AxisKind::Linear, Vector3::z()),
-            ],
-            "S",
-        )
-        .expect("valid chain")
+        crate::kinematics::mdx50_for_tests()
     }
 
     fn cut(line: usize, a: Real, y: Real, z: Real) -> Move {

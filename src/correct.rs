@@ -1241,22 +1241,7 @@ mod tests {
     use crate::tool::ToolKind;
 
     fn mdx50() -> Chain {
-        let ax = |letter, kind, d: Vector3| Axis {
-            letter,
-            kind,
-            direction: UnitVector3::new_normalize(d),
-            origin: Point3::origin(),
-        };
-        Chain::new(
-            vec![
-                ax(AxisLetter::A, AxisKind::Rotary, Vector3::x()),
-                ax(AxisLetter::Y, AxisKind::Linear, Vector3::y()),
-                ax(AxisLetter::X, AxisKind::Linear, Vector3::x()),
-                ax(AxisLetter::Z, AxisKind::Linear, Vector3::z()),
-            ],
-            "S",
-        )
-        .expect("valid chain")
+        crate::kinematics::mdx50_for_tests()
     }
 
     fn tool() -> Tool {

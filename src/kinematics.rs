@@ -312,27 +312,34 @@ impl fmt::Display for Chain {
     }
 }
 
+/// The MDX-50 chain of seed 002 (A, Y, X, Z from the workpiece; spindle S), nominal: the
+/// chain the unit tests of several modules build on.
+#[cfg(test)]
+pub(crate) fn mdx50_for_tests() -> Chain {
+    let ax = |letter, kind, d: Vector3| Axis {
+        letter,
+        kind,
+        direction: UnitVector3::new_normalize(d),
+        origin: Point3::origin(),
+    };
+    Chain::new(
+        vec![
+            ax(AxisLetter::A, AxisKind::Rotary, Vector3::x()),
+            ax(AxisLetter::Y, AxisKind::Linear, Vector3::y()),
+            ax(AxisLetter::X, AxisKind::Linear, Vector3::x()),
+            ax(AxisLetter::Z, AxisKind::Linear, Vector3::z()),
+        ],
+        "S",
+    )
+    .expect("valid chain")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn mdx50() -> Chain {
-        let ax = |letter, kind, d: Vector3| Axis {
-            letter,
-            kind,
-            direction: UnitVector3::new_normalize(d),
-            origin: Point3::origin(),
-        };
-        Chain::new(
-            vec![
-                ax(AxisLetter::A, AxisKind::Rotary, Vector3::x()),
-                ax(AxisLetter::Y, AxisKind::Linear, Vector3::y()),
-                ax(AxisLetter::X, AxisKind::Linear, Vector3::x()),
-                ax(AxisLetter::Z, AxisKind::Linear, Vector3::z()),
-            ],
-            "S",
-        )
-        .expect("valid chain")
+        crate::kinematics::mdx50_for_tests()
     }
 
     #[test]
