@@ -339,7 +339,7 @@ mod tests {
     use super::*;
 
     fn mdx50() -> Chain {
-        crate::kinematics::mdx50_for_tests()
+        super::mdx50_for_tests()
     }
 
     #[test]
