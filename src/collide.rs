@@ -34,7 +34,7 @@ use crate::nc::{AxisLetter, Move, MoveKind};
 use crate::progress::Progress;
 use crate::shape::ClosedMesh;
 use crate::stock::{Cutter, TriDexel};
-use crate::sweep::{RotaryBound, SweepError, SweepOptions, TranslatedTool};
+use crate::sweep::{RotaryBound, SweepError, SweepOptions, SweepReport, TranslatedTool};
 use crate::tool::{Tool, ToolKind};
 use parry3d_f64::query::{ShapeCastOptions, cast_shapes};
 use parry3d_f64::shape::{Ball, Cylinder as PCylinder, Shape};
@@ -198,8 +198,11 @@ pub struct Event {
 pub struct CollisionReport {
     /// Events in program order.
     pub events: Vec<Event>,
-    /// Moves processed.
+    /// Moves processed (arcs counted once per chord).
     pub moves: usize,
+    /// What the sweep did, counted as [`crate::sweep::sweep_program`] counts it (sweeps:
+    /// the straight pieces evaluated).
+    pub sweep: SweepReport,
 }
 
 /// Overlap of a cutter's volume with the material (nothing removed).
@@ -434,18 +437,26 @@ fn pose_at(chain: &Chain, mv: &Move, lambda: Real) -> Isometry3 {
 }
 
 /// The straight pieces of a move: one for a move at fixed rotary values, else the rotary
-/// bound's sub-steps (tip positions at the sub-step ends, mid-step orientation).
-fn steps(chain: &Chain, tool: &Tool, mv: &Move, bound: Real) -> Result<Vec<Step>, SweepError> {
+/// bound's sub-steps (tip positions at the sub-step ends, mid-step orientation); with the
+/// sub-steps' error bound for a rotary move.
+fn steps(
+    chain: &Chain,
+    tool: &Tool,
+    mv: &Move,
+    bound: Real,
+) -> Result<(Vec<Step>, Option<Real>), SweepError> {
     let rotary = chain
         .axes()
         .iter()
         .any(|a| a.kind == AxisKind::Rotary && mv.start.get(a.letter) != mv.end.get(a.letter));
-    let n = if rotary {
-        RotaryBound::of(chain, tool, mv).steps_for(bound, mv.line)?
+    let (n, error) = if rotary {
+        let rb = RotaryBound::of(chain, tool, mv);
+        let n = rb.steps_for(bound, mv.line)?;
+        (n, Some(rb.at(n)))
     } else {
-        1
+        (1, None)
     };
-    Ok((0..n)
+    let steps = (0..n)
         .map(|i| {
             let (la, lb) = (i as Real / n as Real, (i + 1) as Real / n as Real);
             let mid = pose_at(chain, mv, (la + lb) / 2.0);
@@ -460,11 +471,13 @@ fn steps(chain: &Chain, tool: &Tool, mv: &Move, bound: Real) -> Result<Vec<Step>
                 w_from_t,
             }
         })
-        .collect())
+        .collect();
+    Ok((steps, error))
 }
 
-/// Runs `moves` like [`crate::sweep::sweep_program`] (removing material from `stock`) and
-/// reports the collisions described in the module docs.
+/// Runs `moves` like [`crate::sweep::sweep_program`] (removing material from `stock`; arcs
+/// as chords within the rotary step bound) and reports the collisions described in the
+/// module docs.
 #[expect(
     clippy::too_many_arguments,
     reason = "the sweep's arguments plus holder and fixtures"
@@ -485,6 +498,14 @@ pub fn sweep_with_checks(
     }
     let parts = parry_parts(tool, holder);
     let mut report = CollisionReport::default();
+    // Arcs are swept as chords within the rotary step bound, as the sweep does.
+    let chords: Vec<Move>;
+    let moves: &[Move] = if moves.iter().any(|m| matches!(m.kind, MoveKind::Arc(_))) {
+        chords = moves.iter().flat_map(|m| m.chords(bound)).collect();
+        &chords
+    } else {
+        moves
+    };
     progress.start("collisions", moves.len() as u64);
     for mv in moves {
         if let Some(missing) = AxisLetter::ALL
@@ -497,6 +518,13 @@ pub fn sweep_with_checks(
             });
         }
         report.moves += 1;
+        report.sweep.moves += 1;
+        let (pieces, rotary_error) = steps(chain, tool, mv, bound)?;
+        if let Some(e) = rotary_error {
+            report.sweep.rotary_moves += 1;
+            report.sweep.rotary_error_bound_mm = report.sweep.rotary_error_bound_mm.max(e);
+        }
+        let mut cut = false;
         let mut events: Vec<Event> = Vec::new();
         let mut note = |kind: EventKind, point: Point3, depth: Real, volume: Option<Real>| {
             if let Some(e) = events.iter_mut().find(|e| e.kind == kind) {
@@ -512,9 +540,10 @@ pub fn sweep_with_checks(
                 });
             }
         };
-        for st in steps(chain, tool, mv, bound)? {
-            let cut = TranslatedTool::new(tool.clone(), st.tip, st.d, st.v);
-            let near = cut.bounds().intersects(stock.bounds());
+        for st in pieces {
+            report.sweep.sweeps += 1;
+            let swept = TranslatedTool::new(tool.clone(), st.tip, st.d, st.v);
+            let near = swept.bounds().intersects(stock.bounds());
             if near
                 && mv.kind == MoveKind::Rapid
                 && let Some(o) = first_stock_contact(stock, tool, 0.0, st.tip, st.d, st.v)
@@ -526,7 +555,7 @@ pub fn sweep_with_checks(
                     Some(o.volume_mm3),
                 );
             }
-            stock.remove(&cut, mv.line as u32);
+            cut |= stock.remove(&swept, mv.line as u32);
             if let Some(h) = holder {
                 for (part, piece, offset) in [
                     (Part::Shank, &h.shank, tool.length()),
@@ -559,6 +588,9 @@ pub fn sweep_with_checks(
                     }
                 }
             }
+        }
+        if cut {
+            report.sweep.cutting_moves += 1;
         }
         report.events.extend(events);
         progress.advance(1);

@@ -7,6 +7,8 @@
 //! **Invariant:** this module and [`crate::output`] are the only ones that touch files.
 
 use crate::calibrate::Registration;
+use crate::collide::{Fixture, Holder};
+use crate::deviation::DesignModel;
 use crate::fit::RobustRule;
 use crate::identify::{FaceKind, FaceOptions, FaceRegion, FaceSpec};
 use crate::kinematics::{Axis, AxisKind, Chain};
@@ -16,6 +18,7 @@ use crate::nc::{
     options_from_files,
 };
 use crate::scan::{Misregistration, ScanError, ScannerConfig, StudyOptions, Turntable};
+use crate::shape::{ClosedMesh, Cylinder, Solid, read_obj, read_stl};
 use crate::sweep::SweepOptions;
 use crate::tool::{Tool, ToolKind};
 use serde::Deserialize;
@@ -70,6 +73,27 @@ struct SceneFile {
     study: Option<StudyFile>,
     #[serde(default)]
     nc: Option<NcFile>,
+    #[serde(default)]
+    fixtures: Vec<MeshFile>,
+    #[serde(default)]
+    design: Option<MeshFile>,
+}
+
+/// `[[fixtures]]` and `[design]`: a closed OBJ or STL mesh, relative to the scene file, and
+/// where it sits in the workpiece frame (W).
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MeshFile {
+    /// Name in reports (fixtures only; default: the file name).
+    #[serde(default)]
+    name: Option<Spanned<String>>,
+    file: Spanned<String>,
+    /// Translation (mm), applied after the rotation.
+    #[serde(default)]
+    position: Option<Spanned<[Real; 3]>>,
+    /// Rotation about x, y, z (degrees): a mesh point p goes to position + Rx·Ry·Rz·p.
+    #[serde(default)]
+    rotation_deg: Option<Spanned<[Real; 3]>>,
 }
 
 /// `[nc]`: how the program is interpreted (all optional).
@@ -136,13 +160,31 @@ struct ToolFile {
     corner_radius_mm: Option<Spanned<Real>>,
     /// Tapered flat and tapered ball only (degrees, in (0, 90)).
     taper_half_angle_deg: Option<Spanned<Real>>,
+    /// Shank above the flutes and holder above the shank (all four or none).
+    shank_diameter_mm: Option<Spanned<Real>>,
+    shank_length_mm: Option<Spanned<Real>>,
+    holder_diameter_mm: Option<Spanned<Real>>,
+    holder_length_mm: Option<Spanned<Real>>,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct StockFile {
-    min: Spanned<[Real; 3]>,
-    max: Spanned<[Real; 3]>,
+    /// "box" (default), "cylinder" or "mesh".
+    kind: Option<Spanned<String>>,
+    /// Box.
+    min: Option<Spanned<[Real; 3]>>,
+    max: Option<Spanned<[Real; 3]>>,
+    /// Cylinder: the centres of its end faces, or `base`, `axis` and `length_mm`.
+    ends: Option<Spanned<[[Real; 3]; 2]>>,
+    base: Option<Spanned<[Real; 3]>>,
+    axis: Option<Spanned<[Real; 3]>>,
+    length_mm: Option<Spanned<Real>>,
+    radius_mm: Option<Spanned<Real>>,
+    /// Mesh: file and placement.
+    file: Option<Spanned<String>>,
+    position: Option<Spanned<[Real; 3]>>,
+    rotation_deg: Option<Spanned<[Real; 3]>>,
     pitch_mm: Spanned<Real>,
 }
 
@@ -262,6 +304,22 @@ pub struct NcFiles {
     pub external_unit: LengthUnit,
 }
 
+/// The stock's initial solid (workpiece frame, mm).
+#[derive(Clone, Debug)]
+pub enum StockShape {
+    /// The box [`Scene::stock_box`].
+    Box,
+    /// A circular cylinder.
+    Cylinder(Cylinder),
+    /// A closed mesh read from a file.
+    Mesh {
+        /// The file.
+        path: PathBuf,
+        /// The placed mesh.
+        mesh: ClosedMesh,
+    },
+}
+
 /// A loaded, validated scene.
 #[derive(Clone, Debug)]
 pub struct Scene {
@@ -287,8 +345,18 @@ pub struct Scene {
     pub home: AxisValues,
     /// The cutter.
     pub tool: Tool,
-    /// Stock box (workpiece frame, mm).
+    /// Stock box (workpiece frame, mm): the box stock, or the box around a cylinder or mesh
+    /// stock (the tri-dexel's grids span it).
     pub stock_box: Aabb,
+    /// The stock's initial solid (`[stock] kind`).
+    pub stock_shape: StockShape,
+    /// Shank and holder above the flutes (`[tool] shank_*`, `holder_*`), for collision
+    /// checks.
+    pub holder: Option<Holder>,
+    /// Fixtures (`[[fixtures]]`), never cut; the sweep reports what touches them.
+    pub fixtures: Vec<Fixture>,
+    /// The design model (`[design]`) the cut part is compared with, and its file.
+    pub design: Option<(PathBuf, DesignModel)>,
     /// Tri-dexel pitch (mm).
     pub pitch_mm: Real,
     /// Bytes the tri-dexel may use on this machine (read once, when the scene loads).
@@ -351,6 +419,67 @@ impl Ctx<'_> {
         } else {
             Err(self.err(v.span(), format!("{what} must be positive, got {x}")))
         }
+    }
+
+    /// Reads the closed OBJ or STL mesh `file` (relative to `dir`) named by scene key `key`
+    /// and places it: p ↦ position + Rx·Ry·Rz·p.
+    fn mesh(
+        &self,
+        dir: &Path,
+        file: &Spanned<String>,
+        position: &Option<Spanned<[Real; 3]>>,
+        rotation_deg: &Option<Spanned<[Real; 3]>>,
+        key: &str,
+    ) -> Result<(PathBuf, ClosedMesh), SceneError> {
+        let p = dir.join(file.get_ref());
+        let ext = p
+            .extension()
+            .map(|e| e.to_string_lossy().to_ascii_lowercase());
+        let bytes = match ext.as_deref() {
+            Some("obj" | "stl") => std::fs::read(&p).map_err(|e| {
+                self.err(file.span(), format!("{key}: {}: cannot read: {e}", p.display()))
+            })?,
+            _ => {
+                return Err(self.err(
+                    file.span(),
+                    format!("{key} must name an .obj or .stl file, got '{}'", file.get_ref()),
+                ));
+            }
+        };
+        let read = if ext.as_deref() == Some("obj") {
+            String::from_utf8(bytes)
+                .map_err(|_| {
+                    self.err(file.span(), format!("{key}: {}: not valid UTF-8", p.display()))
+                })
+                .and_then(|text| {
+                    read_obj(&text, &p).map_err(|e| self.err(file.span(), format!("{key}: {e}")))
+                })?
+        } else {
+            read_stl(&bytes, &p).map_err(|e| self.err(file.span(), format!("{key}: {e}")))?
+        };
+        let key_of = |what: &str| format!("{}.{what}", key.trim_end_matches(".file"));
+        let t = match position {
+            Some(v) => self.vec3(v, &key_of("position"))?,
+            None => Vector3::zeros(),
+        };
+        let r = match rotation_deg {
+            Some(v) => self.vec3(v, &key_of("rotation_deg"))?,
+            None => Vector3::zeros(),
+        };
+        if t == Vector3::zeros() && r == Vector3::zeros() {
+            return Ok((p, read));
+        }
+        let rot = |axis: Vector3, deg: Real| {
+            crate::math::Rotation3::from_axis_angle(&UnitVector3::new_unchecked(axis), deg.to_radians())
+        };
+        let w_from_mesh = crate::math::Isometry3::from_parts(
+            t.into(),
+            rot(Vector3::x(), r.x) * rot(Vector3::y(), r.y) * rot(Vector3::z(), r.z),
+        );
+        let vertices = read.vertices().iter().map(|v| w_from_mesh * v).collect();
+        let placed = ClosedMesh::try_new(vertices, read.triangles().to_vec(), &p, &[])
+            .map_err(|e| self.err(file.span(), format!("{key}: placed: {e}")))?;
+        Ok((p, placed))
     }
 
     fn vec3(&self, v: &Spanned<[Real; 3]>, what: &str) -> Result<Vector3, SceneError> {
@@ -564,29 +693,201 @@ impl Scene {
             }
         };
         let tool = made.map_err(|e| ctx.err(file.tool.length_mm.span(), e.to_string()))?;
+        // Shank and holder.
+        let t = &file.tool;
+        let holder_keys = [
+            (&t.shank_diameter_mm, "shank_diameter_mm"),
+            (&t.shank_length_mm, "shank_length_mm"),
+            (&t.holder_diameter_mm, "holder_diameter_mm"),
+            (&t.holder_length_mm, "holder_length_mm"),
+        ];
+        let holder = match holder_keys.iter().find(|(v, _)| v.is_some()) {
+            None => None,
+            Some((given, _)) => {
+                let span = given.as_ref().map_or(0..0, |v| v.span());
+                let mut v = [0.0; 4];
+                for (k, (field, key)) in holder_keys.iter().enumerate() {
+                    let f = field.as_ref().ok_or_else(|| {
+                        ctx.err(
+                            span.clone(),
+                            format!("tool.{key} is missing: a holder needs shank_diameter_mm, shank_length_mm, holder_diameter_mm and holder_length_mm"),
+                        )
+                    })?;
+                    v[k] = ctx.positive(f, &format!("tool.{key}"))?;
+                }
+                Some(
+                    Holder::try_new(v[0] / 2.0, v[1], v[2] / 2.0, v[3])
+                        .map_err(|e| ctx.err(span, format!("tool: {e}")))?,
+                )
+            }
+        };
         // Stock.
-        let (mn, mx) = (
-            ctx.vec3(&file.stock.min, "stock.min")?,
-            ctx.vec3(&file.stock.max, "stock.max")?,
-        );
-        if (0..3).any(|k| mx[k] <= mn[k]) {
+        let dir = path.parent().unwrap_or(Path::new("."));
+        let st = &file.stock;
+        let stock_kind = st.kind.as_ref().map_or("box", |k| k.get_ref().as_str());
+        let kind_span = st.kind.as_ref().map_or(st.pitch_mm.span(), |k| k.span());
+        let keys: [(&str, Option<Range<usize>>); 10] = [
+            ("min", st.min.as_ref().map(|v| v.span())),
+            ("max", st.max.as_ref().map(|v| v.span())),
+            ("ends", st.ends.as_ref().map(|v| v.span())),
+            ("base", st.base.as_ref().map(|v| v.span())),
+            ("axis", st.axis.as_ref().map(|v| v.span())),
+            ("length_mm", st.length_mm.as_ref().map(|v| v.span())),
+            ("radius_mm", st.radius_mm.as_ref().map(|v| v.span())),
+            ("file", st.file.as_ref().map(|v| v.span())),
+            ("position", st.position.as_ref().map(|v| v.span())),
+            ("rotation_deg", st.rotation_deg.as_ref().map(|v| v.span())),
+        ];
+        let allowed: &[&str] = match stock_kind {
+            "box" => &["min", "max"],
+            "cylinder" => &["ends", "base", "axis", "length_mm", "radius_mm"],
+            "mesh" => &["file", "position", "rotation_deg"],
+            other => {
+                return Err(ctx.err(
+                    kind_span,
+                    format!("stock kind must be 'box', 'cylinder' or 'mesh', got '{other}'"),
+                ));
+            }
+        };
+        if let Some((key, Some(span))) = keys
+            .iter()
+            .find(|(k, s)| s.is_some() && !allowed.contains(k))
+        {
             return Err(ctx.err(
-                file.stock.max.span(),
-                "stock.max must exceed stock.min on every axis",
+                span.clone(),
+                format!("stock.{key} does not apply to a '{stock_kind}' stock"),
             ));
         }
-        let stock_box = Aabb {
-            min: mn.into(),
-            max: mx.into(),
+        let need = |v: &Option<Spanned<[Real; 3]>>, key: &str| match v {
+            Some(v) => ctx.vec3(v, &format!("stock.{key}")),
+            None => Err(ctx.err(
+                kind_span.clone(),
+                format!("a '{stock_kind}' stock needs stock.{key}"),
+            )),
+        };
+        let (stock_box, stock_shape) = match stock_kind {
+            "box" => {
+                let (mn, mx) = (need(&st.min, "min")?, need(&st.max, "max")?);
+                if (0..3).any(|k| mx[k] <= mn[k]) {
+                    return Err(ctx.err(
+                        st.max.as_ref().map_or(0..0, |m| m.span()),
+                        "stock.max must exceed stock.min on every axis",
+                    ));
+                }
+                let b = Aabb {
+                    min: mn.into(),
+                    max: mx.into(),
+                };
+                (b, StockShape::Box)
+            }
+            "cylinder" => {
+                let radius = match &st.radius_mm {
+                    Some(r) => ctx.positive(r, "stock.radius_mm")?,
+                    None => {
+                        return Err(ctx.err(kind_span, "a 'cylinder' stock needs stock.radius_mm"));
+                    }
+                };
+                let (base, axis, length, span) = match (&st.ends, &st.base) {
+                    (Some(e), None) => {
+                        let [a, b] = *e.get_ref();
+                        if !a.iter().chain(b.iter()).all(|c| c.is_finite()) {
+                            return Err(ctx.err(
+                                e.span(),
+                                format!("stock.ends must have finite components, got {:?}", e.get_ref()),
+                            ));
+                        }
+                        if st.axis.is_some() || st.length_mm.is_some() {
+                            return Err(ctx.err(
+                                e.span(),
+                                "stock.ends replaces stock.axis and stock.length_mm: give one or the other",
+                            ));
+                        }
+                        let (a, b) = (Vector3::from(a), Vector3::from(b));
+                        (a, b - a, (b - a).norm(), e.span())
+                    }
+                    (None, Some(b)) => {
+                        let base = ctx.vec3(b, "stock.base")?;
+                        let axis = need(&st.axis, "axis")?;
+                        let length = match &st.length_mm {
+                            Some(l) => ctx.positive(l, "stock.length_mm")?,
+                            None => {
+                                return Err(ctx.err(
+                                    kind_span,
+                                    "a 'cylinder' stock needs stock.length_mm with stock.base",
+                                ));
+                            }
+                        };
+                        (base, axis, length, b.span())
+                    }
+                    (Some(e), Some(_)) => {
+                        return Err(ctx.err(e.span(), "give stock.ends or stock.base, not both"));
+                    }
+                    (None, None) => {
+                        return Err(ctx.err(
+                            kind_span,
+                            "a 'cylinder' stock needs stock.ends (or stock.base, stock.axis and stock.length_mm)",
+                        ));
+                    }
+                };
+                let c = Cylinder::try_new(base.into(), axis, radius, length)
+                    .map_err(|e| ctx.err(span, format!("stock: {e}")))?;
+                (c.bounds(), StockShape::Cylinder(c))
+            }
+            _ => {
+                let f = st.file.as_ref().ok_or_else(|| {
+                    ctx.err(kind_span.clone(), "a 'mesh' stock needs stock.file")
+                })?;
+                let (mesh_path, mesh) =
+                    ctx.mesh(dir, f, &st.position, &st.rotation_deg, "stock.file")?;
+                (
+                    mesh.bounds(),
+                    StockShape::Mesh {
+                        path: mesh_path,
+                        mesh,
+                    },
+                )
+            }
         };
         let pitch_mm = ctx.positive(&file.stock.pitch_mm, "pitch_mm")?;
         let memory_budget = memory_budget_bytes();
         crate::stock::check_memory(&stock_box, pitch_mm, memory_budget).map_err(|e| {
             ctx.err(
                 file.stock.pitch_mm.span(),
-                format!("pitch_mm = {pitch_mm}: {e}"),
+                format!("stock.pitch_mm = {pitch_mm}: {e}"),
             )
         })?;
+        // Fixtures and design model.
+        let mut fixtures: Vec<Fixture> = Vec::new();
+        for (k, f) in file.fixtures.iter().enumerate() {
+            let key = format!("fixtures[{k}].file");
+            let (p, mesh) = ctx.mesh(dir, &f.file, &f.position, &f.rotation_deg, &key)?;
+            let name = match &f.name {
+                Some(n) => n.get_ref().clone(),
+                None => p
+                    .file_name()
+                    .map_or_else(|| f.file.get_ref().clone(), |n| n.to_string_lossy().into_owned()),
+            };
+            let span = f.name.as_ref().map_or(f.file.span(), |n| n.span());
+            if fixtures.iter().any(|g| g.name() == name) {
+                return Err(ctx.err(span, format!("fixture name '{name}' given twice")));
+            }
+            fixtures.push(
+                Fixture::try_new(&name, mesh)
+                    .map_err(|e| ctx.err(f.file.span(), format!("{key}: {e}")))?,
+            );
+        }
+        let design = match &file.design {
+            Some(d) => {
+                if let Some(n) = &d.name {
+                    return Err(ctx.err(n.span(), "design.name does not apply (only fixtures have names)"));
+                }
+                let (p, mesh) = ctx.mesh(dir, &d.file, &d.position, &d.rotation_deg, "design.file")?;
+                let model = DesignModel::try_new(mesh)
+                    .map_err(|e| ctx.err(d.file.span(), format!("design.file: {}: {e}", p.display())))?;
+                Some((p, model))
+            }
+            None => None,
+        };
         // Sweep.
         let bound = match &file.sweep.rotary_step_bound_mm {
             Some(v) => {
@@ -840,7 +1141,6 @@ impl Scene {
             Some(v) => ctx.positive(v, "loop_tolerance_mm")?,
             None => DEFAULT_LOOP_TOLERANCE_MM,
         };
-        let dir = path.parent().unwrap_or(Path::new("."));
         let program_path = dir.join(file.program.get_ref());
         let mut nc_files = NcFiles::default();
         if let Some(nc) = &file.nc {
@@ -874,6 +1174,10 @@ impl Scene {
             home,
             tool,
             stock_box,
+            stock_shape,
+            holder,
+            fixtures,
+            design,
             pitch_mm,
             memory_budget_bytes: memory_budget,
             sweep: SweepOptions {
