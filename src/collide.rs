@@ -19,7 +19,10 @@
 //! at the move's start.
 //!
 //! **Rotary moves** are split into the sub-steps the sweep uses for its bound
-//! ([`RotaryBound`]); each is checked as a translation with the mid-step orientation.
+//! ([`RotaryBound`]: the tool's mid point moves straight between its true positions, the axis
+//! held at the mid-step orientation); each is checked as that translation. Arcs are swept as
+//! chords. Sub-steps whose whole assembly stays clear of the stock's box and every fixture's
+//! box are skipped, screened first in coarse groups.
 //!
 //! Order per move: a rapid's cutting part is checked before the move cuts; the move's
 //! material is removed; then shank and holder are checked against what remains, and all parts
@@ -29,10 +32,10 @@
 //! read the fixtures; they never parse text or touch files.
 
 use crate::kinematics::{AxisKind, Chain};
-use crate::math::{Isometry3, Point3, Real, UnitVector3, Vector3, tol};
+use crate::math::{Aabb, Isometry3, Point3, Real, UnitVector3, Vector3, tol};
 use crate::nc::{AxisLetter, Move, MoveKind};
 use crate::progress::Progress;
-use crate::shape::ClosedMesh;
+use crate::shape::{ClosedMesh, Solid};
 use crate::stock::{Cutter, TriDexel};
 use crate::sweep::{RotaryBound, SweepError, SweepOptions, SweepReport, TranslatedTool};
 use crate::tool::{Tool, ToolKind};
@@ -200,8 +203,8 @@ pub struct CollisionReport {
     pub events: Vec<Event>,
     /// Moves processed (arcs counted once per chord).
     pub moves: usize,
-    /// What the sweep did, counted as [`crate::sweep::sweep_program`] counts it (sweeps:
-    /// the straight pieces evaluated).
+    /// What the sweep did (as [`crate::sweep::sweep_program`] reports it; `sweeps` counts
+    /// the straight pieces evaluated, those clear of the stock and fixtures excluded).
     pub sweep: SweepReport,
 }
 
@@ -436,43 +439,106 @@ fn pose_at(chain: &Chain, mv: &Move, lambda: Real) -> Isometry3 {
     chain.w_from_t(&q)
 }
 
-/// The straight pieces of a move: one for a move at fixed rotary values, else the rotary
-/// bound's sub-steps (tip positions at the sub-step ends, mid-step orientation); with the
-/// sub-steps' error bound for a rotary move.
+/// Coarse groups of a rotary move's sub-steps, each skipped as a whole when far from the
+/// stock and the fixtures (n is a multiple of it, see [`RotaryBound::steps_for`]).
+const COARSE: usize = 64;
+
+/// The reach of the spindle assembly: all of it lies within `radius` of the segment from the
+/// tip to `length` up the tool axis (mm).
+#[derive(Clone, Copy)]
+struct Envelope {
+    length: Real,
+    radius: Real,
+}
+
+impl Envelope {
+    /// The box of the envelope moving by `d` from `tip` with axis `v`, grown by `margin`.
+    fn swept_box(&self, tip: Point3, d: Vector3, v: UnitVector3, margin: Real) -> Aabb {
+        let mut b = Aabb::empty();
+        let top = v.into_inner() * self.length;
+        for p in [tip, tip + d, tip + top, tip + d + top] {
+            b.grow(&p);
+        }
+        b.inflated(self.radius + margin)
+    }
+}
+
+/// The straight pieces of a move that may touch something (`near` says which boxes may):
+/// one for a move at fixed rotary values, else the sweep's sub-steps for the rotary bound
+/// (the tool's mid point moves straight between its true positions at the sub-step ends, the
+/// axis held at the mid-step orientation); with the sub-steps' error bound for a rotary
+/// move. Sub-steps are first screened in [`COARSE`] groups, each group's box grown by the
+/// coarse and fine approximation errors of the whole envelope.
 fn steps(
     chain: &Chain,
     tool: &Tool,
+    envelope: Envelope,
     mv: &Move,
     bound: Real,
+    near: impl Fn(&Aabb) -> bool,
 ) -> Result<(Vec<Step>, Option<Real>), SweepError> {
     let rotary = chain
         .axes()
         .iter()
         .any(|a| a.kind == AxisKind::Rotary && mv.start.get(a.letter) != mv.end.get(a.letter));
-    let (n, error) = if rotary {
-        let rb = RotaryBound::of(chain, tool, mv);
-        let n = rb.steps_for(bound, mv.line)?;
-        (n, Some(rb.at(n)))
-    } else {
-        (1, None)
+    let half = tool.length() / 2.0;
+    let mid_point = Point3::new(0.0, 0.0, half);
+    let step = |pa: Point3, pb: Point3, rotation: crate::math::Rotation3| {
+        let v = UnitVector3::new_normalize(rotation * Vector3::z());
+        let tip = pa - v.into_inner() * half;
+        Step {
+            tip,
+            d: pb - pa,
+            v,
+            w_from_t: Isometry3::from_parts(tip.coords.into(), rotation),
+        }
     };
-    let steps = (0..n)
-        .map(|i| {
+    if !rotary {
+        let (p0, p1) = (pose_at(chain, mv, 0.0), pose_at(chain, mv, 1.0));
+        let st = step(p0 * mid_point, p1 * mid_point, p0.rotation);
+        let keep = near(&envelope.swept_box(st.tip, st.d, st.v, tol::SLIVER));
+        return Ok((if keep { vec![st] } else { Vec::new() }, None));
+    }
+    let rb = RotaryBound::of(chain, tool, mv);
+    let n = rb.steps_for(bound, mv.line)?;
+    // The envelope's points lie within `length + radius` of the mid point: holding the
+    // orientation over a rotation ω moves them by at most ω·(length + radius).
+    let omega: Real = chain
+        .axes()
+        .iter()
+        .filter(|a| a.kind == AxisKind::Rotary)
+        .map(|a| (mv.end.get(a.letter) - mv.start.get(a.letter)).abs().to_radians())
+        .sum();
+    let err = |k: usize| {
+        let k = k as Real;
+        omega * (envelope.length + envelope.radius) / k + rb.b / (k * k)
+    };
+    let margin = err(COARSE) + err(n) + tol::SLIVER;
+    let per = n / COARSE;
+    let mut out = Vec::new();
+    for j in 0..COARSE {
+        let (l0, l1) = (j as Real / COARSE as Real, (j + 1) as Real / COARSE as Real);
+        let coarse = step(
+            pose_at(chain, mv, l0) * mid_point,
+            pose_at(chain, mv, l1) * mid_point,
+            pose_at(chain, mv, (l0 + l1) / 2.0).rotation,
+        );
+        if !near(&envelope.swept_box(coarse.tip, coarse.d, coarse.v, margin)) {
+            continue;
+        }
+        let mut prev = pose_at(chain, mv, l0) * mid_point;
+        for k in 0..per {
+            let i = j * per + k;
             let (la, lb) = (i as Real / n as Real, (i + 1) as Real / n as Real);
-            let mid = pose_at(chain, mv, (la + lb) / 2.0);
-            let (pa, pb) = (pose_at(chain, mv, la), pose_at(chain, mv, lb));
-            let tip = pa * Point3::origin();
-            let v = UnitVector3::new_normalize(mid.rotation * Vector3::z());
-            let w_from_t = Isometry3::from_parts(tip.coords.into(), mid.rotation);
-            Step {
-                tip,
-                d: pb * Point3::origin() - tip,
-                v,
-                w_from_t,
+            let next = pose_at(chain, mv, lb) * mid_point;
+            let st = step(prev, next, pose_at(chain, mv, (la + lb) / 2.0).rotation);
+            prev = next;
+            if near(&envelope.swept_box(st.tip, st.d, st.v, tol::SLIVER)) {
+                out.push(st);
             }
-        })
-        .collect();
-    Ok((steps, error))
+        }
+    }
+    Ok((out, Some(rb.at(n))))
 }
 
 /// Runs `moves` like [`crate::sweep::sweep_program`] (removing material from `stock`; arcs
@@ -497,6 +563,17 @@ pub fn sweep_with_checks(
         return Err(SweepError::BadBound(bound));
     }
     let parts = parry_parts(tool, holder);
+    let envelope = match holder {
+        Some(h) => Envelope {
+            length: tool.length() + h.shank.length() + h.holder.length(),
+            radius: tool.radius().max(h.shank.radius()).max(h.holder.radius()),
+        },
+        None => Envelope {
+            length: tool.length(),
+            radius: tool.radius(),
+        },
+    };
+    let fixture_bounds: Vec<Aabb> = fixtures.iter().map(|f| f.mesh.bounds()).collect();
     let mut report = CollisionReport::default();
     // Arcs are swept as chords within the rotary step bound, as the sweep does.
     let chords: Vec<Move>;
@@ -519,7 +596,9 @@ pub fn sweep_with_checks(
         }
         report.moves += 1;
         report.sweep.moves += 1;
-        let (pieces, rotary_error) = steps(chain, tool, mv, bound)?;
+        let (pieces, rotary_error) = steps(chain, tool, envelope, mv, bound, |b| {
+            b.intersects(stock.bounds()) || fixture_bounds.iter().any(|f| b.intersects(f))
+        })?;
         if let Some(e) = rotary_error {
             report.sweep.rotary_moves += 1;
             report.sweep.rotary_error_bound_mm = report.sweep.rotary_error_bound_mm.max(e);

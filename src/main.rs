@@ -118,8 +118,10 @@ enum Command {
         args: SceneArgs,
     },
     /// Cut the scene's program into its stock on the deviated machine (no scan): write the
-    /// part's surface mesh, a picture of it from +z, and report.json with the removed volume
-    /// and the sweep's approximation bounds.
+    /// part's surface mesh, a picture of it from +z, and report.json with the removed volume,
+    /// the sweep's approximation bounds and the collisions (rapids through material, shank or
+    /// holder in the stock, fixtures hit); with a [design] mesh, also its deviation map
+    /// (deviation.png, max/min/RMS in report.json).
     Simulate {
         #[command(flatten)]
         args: SceneArgs,
@@ -464,6 +466,7 @@ fn main() -> ExitCode {
             }
             let names: Vec<&str> = ["report.json", "part.png"]
                 .into_iter()
+                .chain(sim.deviation_png.as_ref().map(|_| "deviation.png"))
                 .chain(formats.iter().map(|f| f.file_name()))
                 .collect();
             print_out(

@@ -1,5 +1,7 @@
 //! Writing outputs into a folder, all or nothing: `run` writes `report.json`, `cloud.ply`
-//! and `faces.png` into `<out>/<scene-name>/`; `scan` writes `cloud.ply` and `scan.json`
+//! and `faces.png` into `<out>/<scene-name>/`; `simulate` writes `report.json`, `part.png`,
+//! `deviation.png` (with a design model) and the part's mesh into
+//! `<out>/<scene-name>-simulate/`; `scan` writes `cloud.ply` and `scan.json`
 //! into `<out>/<scene-name>-scan/`; `correct` writes `<scene-name>-corrected.ngc` and
 //! `<scene-name>-correct.json` into `<out>/` ([`write_streamed`], file by file).
 //!
@@ -122,8 +124,8 @@ impl MeshFormat {
     }
 }
 
-/// Writes the outcome of `simulate` into `dir`: report.json, part.png and the mesh in each
-/// of `formats`.
+/// Writes the outcome of `simulate` into `dir`: report.json, part.png, deviation.png (when
+/// the scene has a design model) and the mesh in each of `formats`.
 pub fn write_simulation(
     sim: &Simulation,
     formats: &[MeshFormat],
@@ -136,6 +138,9 @@ pub fn write_simulation(
         ),
         ("part.png", sim.top_view_png.clone()),
     ];
+    if let Some(png) = &sim.deviation_png {
+        files.push(("deviation.png", png.clone()));
+    }
     for &f in formats {
         let path = dir.join(f.file_name());
         let mut buf = Vec::new();

@@ -13,7 +13,11 @@ use crate::correct::{
     CorrectError, CorrectOptions, CorrectedProgram, correct_program, face_errors, part_error,
     path_error, uncorrected,
 };
+use crate::collide::sweep_with_checks;
 use crate::design::kind_name;
+use crate::deviation::{
+    DeviationError, DeviationImageOptions, deviation_map, render_deviation_map,
+};
 use crate::fit::Plane;
 use crate::fit::{
     RobustRule, fit_circle, fit_circle_robust, fit_cylinder, fit_cylinder_robust, fit_plane,
@@ -34,11 +38,12 @@ use crate::report::{
     MeshSummary, PlanePair, PlaneReport, Report, ScanReport, SimulationReport, SolverReport,
     SphereReport, StockReport, StudyCase, UncorrectableReport,
 };
+use crate::report::{CollisionEvent, DeviationSummary};
 use crate::report::{
     EstimateReport, FeatureReport, IdentifyReport, IdentifySolverReport, LoopRound,
 };
 use crate::scan::{Misregistration, ScanError, StudyOptions, Surface, scan};
-use crate::scene::Scene;
+use crate::scene::{Scene, StockShape};
 use crate::segment::{
     PlaneSegmentOptions, RansacOptions, estimate_normals, ransac_cylinder, ransac_sphere,
     segment_planes, select_box, select_region_from_seed,
@@ -115,6 +120,14 @@ pub enum PipelineError {
         /// Why.
         source: CalibrateError,
     },
+    /// The deviation map against the design model failed.
+    #[error("{path}: [design]: {source}")]
+    Deviation {
+        /// Scene file.
+        path: String,
+        /// Why.
+        source: DeviationError,
+    },
     /// The heat map could not be drawn.
     #[error("{path}: heat map: {source}")]
     Render {
@@ -179,6 +192,22 @@ pub struct Part {
     pub timings: Vec<(String, Real)>,
 }
 
+/// The scene's stock before cutting: its box, cylinder or mesh on the grids of
+/// [`Scene::stock_box`] at the scene's pitch (refused before allocating if over the memory
+/// budget).
+pub fn make_stock(scene: &Scene) -> Result<TriDexel, PipelineError> {
+    let (b, h, budget) = (scene.stock_box, scene.pitch_mm, scene.memory_budget_bytes);
+    match &scene.stock_shape {
+        StockShape::Box => TriDexel::new_box(b, h, budget),
+        StockShape::Cylinder(c) => TriDexel::from_solid(b, h, budget, c),
+        StockShape::Mesh { mesh, .. } => TriDexel::from_solid(b, h, budget, mesh),
+    }
+    .map_err(|source| PipelineError::Stock {
+        path: scene.path.display().to_string(),
+        source,
+    })
+}
+
 /// Makes the stock and sweeps the program through the scene's deviated chain.
 pub fn machine_part(
     scene: &Scene,
@@ -187,11 +216,7 @@ pub fn machine_part(
 ) -> Result<Part, PipelineError> {
     let spath = scene.path.display().to_string();
     let clock = Instant::now();
-    let mut stock = TriDexel::new_box(scene.stock_box, scene.pitch_mm, scene.memory_budget_bytes)
-        .map_err(|source| PipelineError::Stock {
-        path: spath.clone(),
-        source,
-    })?;
+    let mut stock = make_stock(scene)?;
     let volume0 = stock.volume();
     let t_stock = clock.elapsed().as_secs_f64();
     let clock = Instant::now();
@@ -678,20 +703,49 @@ pub struct Simulation {
     pub mesh: TriMesh,
     /// PNG of the part seen from +z.
     pub top_view_png: Vec<u8>,
+    /// PNG of the deviation map against the scene's design model, if it has one.
+    pub deviation_png: Option<Vec<u8>>,
 }
 
-/// Cuts the scene's program into its stock on the deviated machine and meshes the result:
-/// no scan, no identification.
+/// Size of the deviation picture (px).
+const DEVIATION_IMAGE_PX: (u32, u32) = (1200, 900);
+
+/// Cuts the scene's program into its stock on the deviated machine, reporting collisions
+/// (rapids through material, shank or holder in the stock, anything touching a fixture),
+/// meshes the result and, when the scene has a design model, maps the part's deviation
+/// from it: no scan, no identification.
 pub fn simulate(
     scene: &Scene,
     program: &Program,
     progress: &dyn Progress,
 ) -> Result<Simulation, PipelineError> {
     let path = scene.path.display().to_string();
-    let part = machine_part(scene, program, progress)?;
-    let mut timings: BTreeMap<String, Real> = part.timings.iter().cloned().collect();
+    let mut timings: BTreeMap<String, Real> = BTreeMap::new();
     let clock = Instant::now();
-    let (mesh, mesh_report) = mesh_stock(&part.stock).map_err(|source| PipelineError::Mesh {
+    let mut stock = make_stock(scene)?;
+    let volume0 = stock.volume();
+    timings.insert("stock".into(), clock.elapsed().as_secs_f64());
+    let clock = Instant::now();
+    let checked = sweep_with_checks(
+        &mut stock,
+        &scene.chain,
+        &scene.tool,
+        scene.holder.as_ref(),
+        &scene.fixtures,
+        &program.moves,
+        &scene.sweep,
+        progress,
+    )
+    .map_err(|source| {
+        let location = match source.line() {
+            Some(line) => format!("{}:{line}", program.path.display()),
+            None => format!("{path}: [sweep]"),
+        };
+        PipelineError::Sweep { location, source }
+    })?;
+    timings.insert("sweep".into(), clock.elapsed().as_secs_f64());
+    let clock = Instant::now();
+    let (mesh, mesh_report) = mesh_stock(&stock).map_err(|source| PipelineError::Mesh {
         path: path.clone(),
         source,
     })?;
@@ -702,14 +756,48 @@ pub fn simulate(
         source,
     };
     let title = format!("{}: cut part seen from +z", scene.name);
-    let img = render_top_view(&part.stock, &title).map_err(render_err)?;
+    let img = render_top_view(&stock, &title).map_err(render_err)?;
     let top_view_png = encode_png(&img).map_err(render_err)?;
     timings.insert("render".into(), clock.elapsed().as_secs_f64());
+    let (deviation, deviation_png) = match &scene.design {
+        Some((design_path, design)) => {
+            let clock = Instant::now();
+            let (points, summary) =
+                deviation_map(&stock, design).map_err(|source| PipelineError::Deviation {
+                    path: path.clone(),
+                    source,
+                })?;
+            let opts = DeviationImageOptions {
+                title: format!(
+                    "{}: deviation from {} (+ material left, - gouge)",
+                    scene.name,
+                    design_path
+                        .file_name()
+                        .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+                ),
+                width_px: DEVIATION_IMAGE_PX.0,
+                height_px: DEVIATION_IMAGE_PX.1,
+                range_mm: None,
+                point_pitch_mm: stock.max_spacing(),
+            };
+            let img = render_deviation_map(&points, &opts).map_err(render_err)?;
+            let png = encode_png(&img).map_err(render_err)?;
+            timings.insert("deviation".into(), clock.elapsed().as_secs_f64());
+            (
+                Some(DeviationSummary {
+                    design: design_path.display().to_string(),
+                    map: summary,
+                }),
+                Some(png),
+            )
+        }
+        None => (None, None),
+    };
     let report = SimulationReport {
         scene: scene.name.clone(),
         program: program.path.display().to_string(),
-        stock: StockReport::of(&part.stock, part.volume0),
-        sweep: part.sweep,
+        stock: StockReport::of(&stock, volume0),
+        sweep: checked.sweep,
         mesh: MeshSummary {
             vertices: mesh.vertices.len(),
             triangles: mesh.triangles.len(),
@@ -718,12 +806,15 @@ pub fn simulate(
             area_mm2: mesh.area(),
             feature_vertices: mesh_report.feature_vertices,
         },
+        collisions: checked.events.iter().map(CollisionEvent::of).collect(),
+        deviation,
         timings_s: timings,
     };
     Ok(Simulation {
         report,
         mesh,
         top_view_png,
+        deviation_png,
     })
 }
 /// Largest number of correction passes: each refines the subdivision fourfold; exact

@@ -97,14 +97,84 @@ pub struct SimulationReport {
     pub sweep: SweepReport,
     /// The surface mesh.
     pub mesh: MeshSummary,
+    /// Collisions in program order (empty: none).
+    pub collisions: Vec<CollisionEvent>,
+    /// The deviation from the scene's design model, if it has one.
+    pub deviation: Option<DeviationSummary>,
     /// Stage timings (s).
     pub timings_s: BTreeMap<String, f64>,
+}
+
+/// A collision found while sweeping (see [`crate::collide`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CollisionEvent {
+    /// `rapid_through_material`, `shank_in_stock`, `holder_in_stock` or `fixture_hit`.
+    pub kind: &'static str,
+    /// The part that collided: `tool`, `shank` or `holder`.
+    pub part: &'static str,
+    /// The fixture's name (`fixture_hit` only).
+    pub fixture: Option<String>,
+    /// NC line of the move.
+    pub line: usize,
+    /// First contact point (mm, workpiece frame W).
+    pub point_mm: [f64; 3],
+    /// Stock: penetration depth estimate; fixture: travel after first contact (mm).
+    pub depth_mm: f64,
+    /// Stock: estimated overlap volume (mm³); fixtures: `None`.
+    pub volume_mm3: Option<f64>,
+}
+
+impl CollisionEvent {
+    /// The report of a collision event.
+    pub fn of(e: &crate::collide::Event) -> Self {
+        use crate::collide::{EventKind, Part};
+        let part_name = |p: &Part| match p {
+            Part::Tool => "tool",
+            Part::Shank => "shank",
+            Part::Holder => "holder",
+        };
+        let (kind, part, fixture) = match &e.kind {
+            EventKind::RapidThroughMaterial => ("rapid_through_material", "tool", None),
+            EventKind::NonCuttingInStock(p) => (
+                if *p == Part::Holder {
+                    "holder_in_stock"
+                } else {
+                    "shank_in_stock"
+                },
+                part_name(p),
+                None,
+            ),
+            EventKind::FixtureHit { part, fixture } => {
+                ("fixture_hit", part_name(part), Some(fixture.clone()))
+            }
+        };
+        Self {
+            kind,
+            part,
+            fixture,
+            line: e.line,
+            point_mm: e.point,
+            depth_mm: e.depth_mm,
+            volume_mm3: e.volume_mm3,
+        }
+    }
+}
+
+/// The cut part's deviation from a design model (signed distances of the part's surface
+/// points: + material left, − gouge).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct DeviationSummary {
+    /// The design mesh file.
+    pub design: String,
+    /// Max, min, mean and RMS of the signed distances, and where the extremes are.
+    #[serde(flatten)]
+    pub map: crate::deviation::DeviationReport,
 }
 
 impl SimulationReport {
     /// A short text summary.
     pub fn summary(&self) -> String {
-        format!(
+        let mut s = format!(
             "scene         {}\nprogram       {}\nmoves         {} ({} cutting, {} rotary)\nremoved       {:.4} mm³ of {:.4} mm³\nsweep bound   {:.2e} mm (rotary sub-steps and arc chords)\nmesh          {} triangles, {} vertices, Euler characteristic {}\n",
             self.scene,
             self.program,
@@ -117,7 +187,30 @@ impl SimulationReport {
             self.mesh.triangles,
             self.mesh.vertices,
             self.mesh.euler_characteristic,
-        )
+        );
+        s.push_str(&format!("collisions    {}\n", self.collisions.len()));
+        for e in &self.collisions {
+            s.push_str(&format!(
+                "  line {:<6} {} ({}{}) at [{:.3}, {:.3}, {:.3}] mm, depth {:.3} mm\n",
+                e.line,
+                e.kind,
+                e.part,
+                e.fixture
+                    .as_ref()
+                    .map_or_else(String::new, |f| format!(", fixture '{f}'")),
+                e.point_mm[0],
+                e.point_mm[1],
+                e.point_mm[2],
+                e.depth_mm
+            ));
+        }
+        if let Some(d) = &self.deviation {
+            s.push_str(&format!(
+                "deviation     max {:+.4} mm, min {:+.4} mm, RMS {:.4} mm over {} points from {}\n",
+                d.map.max_mm, d.map.min_mm, d.map.rms_mm, d.map.points, d.design
+            ));
+        }
+        s
     }
 }
 
