@@ -507,7 +507,11 @@ fn steps(
         .axes()
         .iter()
         .filter(|a| a.kind == AxisKind::Rotary)
-        .map(|a| (mv.end.get(a.letter) - mv.start.get(a.letter)).abs().to_radians())
+        .map(|a| {
+            (mv.end.get(a.letter) - mv.start.get(a.letter))
+                .abs()
+                .to_radians()
+        })
         .sum();
     let err = |k: usize| {
         let k = k as Real;

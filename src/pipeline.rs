@@ -9,11 +9,11 @@ use crate::calibrate::{
     extract_plane_feature, predicted_plane,
 };
 use crate::cloud::PointCloud;
+use crate::collide::sweep_with_checks;
 use crate::correct::{
     CorrectError, CorrectOptions, CorrectedProgram, correct_program, face_errors, part_error,
     path_error, uncorrected,
 };
-use crate::collide::sweep_with_checks;
 use crate::design::kind_name;
 use crate::deviation::{
     DeviationError, DeviationImageOptions, deviation_map, render_deviation_map,

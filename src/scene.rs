@@ -1,5 +1,6 @@
 //! Scene files (TOML): the machine chain and its deviations, tool, stock, program, scanner
-//! and the faces to identify. Also reads the NC program the scene names.
+//! and the faces to identify. Also reads the NC program the scene names, and the closed
+//! OBJ/STL meshes of a mesh stock, fixtures and the design model (paths relative to the scene).
 //!
 //! Every value is checked when the scene loads; an error names the file, line and column
 //! of the offending value. TOML accepts `nan` and `inf`: they are rejected here.
@@ -437,19 +438,28 @@ impl Ctx<'_> {
             .map(|e| e.to_string_lossy().to_ascii_lowercase());
         let bytes = match ext.as_deref() {
             Some("obj" | "stl") => std::fs::read(&p).map_err(|e| {
-                self.err(file.span(), format!("{key}: {}: cannot read: {e}", p.display()))
+                self.err(
+                    file.span(),
+                    format!("{key}: {}: cannot read: {e}", p.display()),
+                )
             })?,
             _ => {
                 return Err(self.err(
                     file.span(),
-                    format!("{key} must name an .obj or .stl file, got '{}'", file.get_ref()),
+                    format!(
+                        "{key} must name an .obj or .stl file, got '{}'",
+                        file.get_ref()
+                    ),
                 ));
             }
         };
         let read = if ext.as_deref() == Some("obj") {
             String::from_utf8(bytes)
                 .map_err(|_| {
-                    self.err(file.span(), format!("{key}: {}: not valid UTF-8", p.display()))
+                    self.err(
+                        file.span(),
+                        format!("{key}: {}: not valid UTF-8", p.display()),
+                    )
                 })
                 .and_then(|text| {
                     read_obj(&text, &p).map_err(|e| self.err(file.span(), format!("{key}: {e}")))
@@ -470,7 +480,10 @@ impl Ctx<'_> {
             return Ok((p, read));
         }
         let rot = |axis: Vector3, deg: Real| {
-            crate::math::Rotation3::from_axis_angle(&UnitVector3::new_unchecked(axis), deg.to_radians())
+            crate::math::Rotation3::from_axis_angle(
+                &UnitVector3::new_unchecked(axis),
+                deg.to_radians(),
+            )
         };
         let w_from_mesh = crate::math::Isometry3::from_parts(
             t.into(),
@@ -793,7 +806,10 @@ impl Scene {
                         if !a.iter().chain(b.iter()).all(|c| c.is_finite()) {
                             return Err(ctx.err(
                                 e.span(),
-                                format!("stock.ends must have finite components, got {:?}", e.get_ref()),
+                                format!(
+                                    "stock.ends must have finite components, got {:?}",
+                                    e.get_ref()
+                                ),
                             ));
                         }
                         if st.axis.is_some() || st.length_mm.is_some() {
@@ -834,9 +850,10 @@ impl Scene {
                 (c.bounds(), StockShape::Cylinder(c))
             }
             _ => {
-                let f = st.file.as_ref().ok_or_else(|| {
-                    ctx.err(kind_span.clone(), "a 'mesh' stock needs stock.file")
-                })?;
+                let f = st
+                    .file
+                    .as_ref()
+                    .ok_or_else(|| ctx.err(kind_span.clone(), "a 'mesh' stock needs stock.file"))?;
                 let (mesh_path, mesh) =
                     ctx.mesh(dir, f, &st.position, &st.rotation_deg, "stock.file")?;
                 (
@@ -863,9 +880,10 @@ impl Scene {
             let (p, mesh) = ctx.mesh(dir, &f.file, &f.position, &f.rotation_deg, &key)?;
             let name = match &f.name {
                 Some(n) => n.get_ref().clone(),
-                None => p
-                    .file_name()
-                    .map_or_else(|| f.file.get_ref().clone(), |n| n.to_string_lossy().into_owned()),
+                None => p.file_name().map_or_else(
+                    || f.file.get_ref().clone(),
+                    |n| n.to_string_lossy().into_owned(),
+                ),
             };
             let span = f.name.as_ref().map_or(f.file.span(), |n| n.span());
             if fixtures.iter().any(|g| g.name() == name) {
@@ -879,11 +897,16 @@ impl Scene {
         let design = match &file.design {
             Some(d) => {
                 if let Some(n) = &d.name {
-                    return Err(ctx.err(n.span(), "design.name does not apply (only fixtures have names)"));
+                    return Err(ctx.err(
+                        n.span(),
+                        "design.name does not apply (only fixtures have names)",
+                    ));
                 }
-                let (p, mesh) = ctx.mesh(dir, &d.file, &d.position, &d.rotation_deg, "design.file")?;
-                let model = DesignModel::try_new(mesh)
-                    .map_err(|e| ctx.err(d.file.span(), format!("design.file: {}: {e}", p.display())))?;
+                let (p, mesh) =
+                    ctx.mesh(dir, &d.file, &d.position, &d.rotation_deg, "design.file")?;
+                let model = DesignModel::try_new(mesh).map_err(|e| {
+                    ctx.err(d.file.span(), format!("design.file: {}: {e}", p.display()))
+                })?;
                 Some((p, model))
             }
             None => None,

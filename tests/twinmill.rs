@@ -1406,3 +1406,1395 @@ fn designed_cuts_round_trip_over_100_seeded_trials() {
         "fewer than four quantities valued in every trial"
     );
 }
+
+// ---------------------------------------------------------------------------------------
+// Mesh text shared by the solid, fixture and design tests.
+
+fn aabb(min: [Real; 3], max: [Real; 3]) -> Aabb {
+    Aabb {
+        min: Point3::from(min),
+        max: Point3::from(max),
+    }
+}
+
+/// OBJ text of a mesh given as vertices and 0-based triangles.
+fn obj(vertices: &[[Real; 3]], triangles: &[[usize; 3]]) -> String {
+    let mut s = String::new();
+    for v in vertices {
+        s.push_str(&format!("v {:?} {:?} {:?}\n", v[0], v[1], v[2]));
+    }
+    for t in triangles {
+        s.push_str(&format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1));
+    }
+    s
+}
+
+/// A prism over the counter-clockwise polygon `poly` (x, y) from z0 to z1, caps
+/// triangulated by `cap` (0-based triangles of the polygon, counter-clockwise).
+fn prism(poly: &[[Real; 2]], cap: &[[usize; 3]], z0: Real, z1: Real) -> String {
+    let n = poly.len();
+    let mut v: Vec<[Real; 3]> = poly.iter().map(|p| [p[0], p[1], z0]).collect();
+    v.extend(poly.iter().map(|p| [p[0], p[1], z1]));
+    let mut t = Vec::new();
+    for c in cap {
+        t.push([c[0], c[2], c[1]]);
+        t.push([c[0] + n, c[1] + n, c[2] + n]);
+    }
+    for i in 0..n {
+        let j = (i + 1) % n;
+        t.push([i, j, j + n]);
+        t.push([i, j + n, i + n]);
+    }
+    obj(&v, &t)
+}
+
+fn fan(n: usize) -> Vec<[usize; 3]> {
+    (1..n - 1).map(|k| [0, k, k + 1]).collect()
+}
+
+// ---------------------------------------------------------------------------------------
+// Tool shapes through the sweep: the closed-form flat/ball sweep and the piecewise cutter
+// agree, and a whole program swept with a bull-nose through a machine chain removes the
+// analytic slot volume.
+
+mod tool_shapes {
+    use super::*;
+    use twinmill::cutter::SweptTool;
+    use twinmill::kinematics::{Axis, AxisKind, Chain};
+    use twinmill::math::{CounterRng, UnitVector3};
+    use twinmill::nc::{AxisLetter, AxisValues, Move, MoveKind};
+    use twinmill::progress::NoProgress;
+    use twinmill::stock::{Cutter, TriDexel};
+    use twinmill::sweep::{SweepOptions, TranslatedTool, sweep_program};
+    use twinmill::tool::{Tool, ToolKind};
+    /// The sweep module's closed form (flat, ball) and the cutter's piecewise closed form
+    /// agree to rounding on random moves and axis rays, with the tool at least 2R long (the
+    /// sweep module's ball is a whole sphere).
+    #[test]
+    fn flat_and_ball_closed_forms_agree_with_the_piecewise_cutter() {
+        let rng = CounterRng::new(5);
+        let mut k = 0u64;
+        let mut next = || {
+            k += 1;
+            rng.uniform(k, 0) * 2.0 - 1.0
+        };
+        let mut compared = 0;
+        for case in 0..200 {
+            let kind = if case % 2 == 0 {
+                ToolKind::Flat
+            } else {
+                ToolKind::Ball
+            };
+            let tool = Tool::try_new(kind, 4.0, 8.0).expect("valid");
+            let v = UnitVector3::new_normalize(Vector3::new(next() * 0.6, next() * 0.6, 1.0));
+            let start = Point3::new(next() * 3.0, next() * 3.0, next() * 3.0);
+            let d = Vector3::new(next() * 8.0, next() * 8.0, next() * 4.0);
+            let a = TranslatedTool::new(tool.clone(), start, d, v);
+            let b = SweptTool::new(&tool, start, d, v);
+            for _ in 0..50 {
+                let axis = ((next() + 1.0) * 1.5) as usize % 3;
+                let o = Point3::new(next() * 8.0, next() * 8.0, next() * 8.0);
+                match (a.ray_cut(&o, axis), b.ray_cut(&o, axis)) {
+                    (Some(p), Some(q)) => {
+                        assert!(
+                            (p.t_in - q.t_in).abs() < 1e-9 && (p.t_out - q.t_out).abs() < 1e-9,
+                            "{p:?} vs {q:?}"
+                        );
+                        compared += 1;
+                    }
+                    (None, None) => {}
+                    // A grazing ray: one side may see a sliver the other does not.
+                    (p, q) => {
+                        let len = |c: Option<twinmill::stock::RayCut>| {
+                            c.map_or(0.0, |c| c.t_out - c.t_in)
+                        };
+                        assert!(len(p).max(len(q)) < 1e-6, "{p:?} vs {q:?}");
+                    }
+                }
+            }
+        }
+        assert!(compared > 1000, "only {compared} rays hit");
+    }
+
+    fn xyz_chain() -> Chain {
+        let lin = |letter, dir: Vector3| Axis {
+            letter,
+            kind: AxisKind::Linear,
+            direction: UnitVector3::new_normalize(dir),
+            origin: Point3::origin(),
+        };
+        Chain::new(
+            vec![
+                lin(AxisLetter::X, Vector3::x()),
+                lin(AxisLetter::Y, Vector3::y()),
+                lin(AxisLetter::Z, Vector3::z()),
+            ],
+            "S",
+        )
+        .expect("valid chain")
+    }
+
+    fn at(x: Real, y: Real, z: Real) -> AxisValues {
+        AxisValues::from_array([x, y, z, 0.0, 0.0, 0.0])
+    }
+
+    fn mv(start: AxisValues, end: AxisValues, line: usize) -> Move {
+        Move {
+            kind: MoveKind::Linear,
+            start,
+            end,
+            feed_mm_per_min: Some(500.0),
+            line,
+        }
+    }
+
+    /// A bull-nose slot swept through the machine chain: plunge (straight down, inside the
+    /// slot's start), slot along x, retract. Removed volume = vol(K ∩ H) + ℓ·area(K ∩ H along x),
+    /// the plunge and retract adding nothing outside the slot's own volume.
+    #[test]
+    fn bull_nose_program_removes_the_analytic_slot() {
+        let (r, rc, depth, len): (Real, Real, Real, Real) = (3.0, 1.0, 4.0, 10.0);
+        let tool = Tool::try_bull_nose(2.0 * r, rc, 20.0).expect("valid");
+        let mut stock = TriDexel::new_box(
+            Aabb {
+                min: Point3::new(0.0, -6.0, 0.0),
+                max: Point3::new(20.0, 6.0, 10.0),
+            },
+            0.1,
+            1e9,
+        )
+        .expect("fits");
+        let before = stock.volume();
+        let z = 10.0 - depth;
+        let moves = [
+            mv(at(5.0, 0.0, 15.0), at(5.0, 0.0, z), 1),
+            mv(at(5.0, 0.0, z), at(5.0 + len, 0.0, z), 2),
+            mv(at(5.0 + len, 0.0, z), at(5.0 + len, 0.0, 15.0), 3),
+        ];
+        let report = sweep_program(
+            &mut stock,
+            &xyz_chain(),
+            &tool,
+            &moves,
+            &SweepOptions {
+                rotary_step_bound_mm: 1e-4,
+            },
+            &NoProgress,
+        )
+        .expect("sweeps");
+        assert_eq!(report.moves, 3);
+        let a = r - rc;
+        let pi = std::f64::consts::PI;
+        let area = 2.0 * (a * rc + pi * rc * rc / 4.0 + r * (depth - rc));
+        let vol = pi
+            * (a * a * rc + pi * a * rc * rc / 2.0 + 2.0 * rc.powi(3) / 3.0 + r * r * (depth - rc));
+        let want = vol + len * area;
+        let got = before - stock.volume();
+        assert!(((got - want) / want).abs() < 1e-3, "got {got}, want {want}");
+    }
+
+    /// A rotary move with a tapered ball: the sub-step bound uses the tool's largest radius
+    /// and length, and the sweep meets the requested bound.
+    #[test]
+    fn rotary_move_with_a_tapered_tool_meets_its_bound() {
+        let chain = Chain::new(
+            vec![
+                Axis {
+                    letter: AxisLetter::A,
+                    kind: AxisKind::Rotary,
+                    direction: Vector3::x_axis(),
+                    origin: Point3::origin(),
+                },
+                Axis {
+                    letter: AxisLetter::Z,
+                    kind: AxisKind::Linear,
+                    direction: Vector3::z_axis(),
+                    origin: Point3::origin(),
+                },
+            ],
+            "S",
+        )
+        .expect("valid chain");
+        let tool = Tool::try_tapered_ball(2.0, 5.0, 15.0).expect("valid");
+        let mut stock = TriDexel::new_box(
+            Aabb {
+                min: Point3::new(-5.0, -12.0, -12.0),
+                max: Point3::new(5.0, 12.0, 12.0),
+            },
+            0.5,
+            1e9,
+        )
+        .expect("fits");
+        let start = AxisValues::from_array([0.0, 0.0, 9.0, 0.0, 0.0, 0.0]);
+        let moves = [mv(start, start.with(AxisLetter::A, 30.0), 1)];
+        let bound = 1e-3;
+        let report = sweep_program(
+            &mut stock,
+            &chain,
+            &tool,
+            &moves,
+            &SweepOptions {
+                rotary_step_bound_mm: bound,
+            },
+            &NoProgress,
+        )
+        .expect("sweeps");
+        assert_eq!(report.rotary_moves, 1);
+        assert!(report.rotary_error_bound_mm <= bound && report.rotary_error_bound_mm > 0.0);
+        assert_eq!(report.cutting_moves, 1);
+    }
+
+    /// Regression: a ball end mill shorter than its diameter is not a whole sphere above the
+    /// tip; a ray above the flutes' top must see nothing.
+    #[test]
+    fn short_ball_tool_ends_at_its_length() {
+        let tool = Tool::try_new(ToolKind::Ball, 6.0, 4.0).expect("valid");
+        let t = TranslatedTool::new(tool, Point3::origin(), Vector3::x(), Vector3::z_axis());
+        // z = 5 lies inside the whole sphere about (0, 0, 3) but above the tool's 4 mm length.
+        assert!(t.ray_cut(&Point3::new(0.5, 0.0, 5.0), 1).is_none());
+        let c = t.ray_cut(&Point3::new(0.5, 0.0, 0.0), 2).expect("cuts");
+        assert!((c.t_out - 4.0).abs() < 1e-12, "{c:?}");
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Stock from solids (cylinder, closed meshes), collision events and the deviation map,
+// through the library.
+
+mod solids_collisions_deviation {
+    use super::*;
+    use std::f64::consts::PI;
+    use twinmill::collide::{EventKind, Fixture, Holder, Part, sweep_with_checks};
+    use twinmill::deviation::{
+        DesignModel, DeviationImageOptions, deviation_map, render_deviation_map,
+    };
+    use twinmill::kinematics::{Axis, AxisKind, Chain};
+    use twinmill::math::{Point3, Real, UnitVector3, Vector3};
+    use twinmill::nc::{AxisLetter, AxisValues, Move, MoveKind};
+    use twinmill::progress::NoProgress;
+    use twinmill::render::encode_png;
+    use twinmill::shape::Solid;
+    use twinmill::shape::{ClosedMesh, Cylinder, read_obj};
+    use twinmill::stock::TriDexel;
+    use twinmill::sweep::SweepOptions;
+    use twinmill::tool::{Tool, ToolKind};
+    /// Upper bound on |V_dexel − V| for a convex solid of area `a` and integral mean curvature
+    /// `m`: every point where the dexel prisms and the solid disagree lies within half a cell
+    /// diagonal ρ = h/√2 of the surface, so the error is at most the outer parallel shell
+    /// (Steiner): aρ + mρ² + (4π/3)ρ³.
+    fn convex_bound(a: Real, m: Real, h: Real) -> Real {
+        let r = h / 2f64.sqrt();
+        a * r + m * r * r + 4.0 * PI / 3.0 * r * r * r
+    }
+
+    #[test]
+    fn cylinder_stock_volume_within_the_pitch_bound() {
+        let (r, l, pitch) = (10.0, 30.0, 0.2);
+        let c = Cylinder::try_new(Point3::new(0.0, 0.0, -5.0), Vector3::z(), r, l).expect("valid");
+        let s = TriDexel::from_solid(
+            aabb([-10.0, -10.0, -5.0], [10.0, 10.0, 25.0]),
+            pitch,
+            1e9,
+            &c,
+        )
+        .expect("fits");
+        let exact = PI * r * r * l;
+        let bound = convex_bound(
+            2.0 * PI * r * l + 2.0 * PI * r * r,
+            PI * l + PI * PI * r,
+            s.max_spacing(),
+        );
+        let err = (s.volume() - exact).abs();
+        assert!(err < bound, "error {err} bound {bound}");
+        // The z grid is exact per ray: L times the count of ray centres in the disc.
+        let g = &s.grids()[2];
+        let (nu, nv) = g.dims();
+        let (du, dv) = g.pitches();
+        let mut count = 0usize;
+        for iv in 0..nv {
+            for iu in 0..nu {
+                let o = g.ray_origin(iu, iv);
+                if o.x * o.x + o.y * o.y < r * r {
+                    count += 1;
+                }
+            }
+        }
+        assert!((g.volume() - count as Real * du * dv * l).abs() < 1e-6);
+        // The x grid's chords are 2·sqrt(r² − y²) to rounding.
+        let g = &s.grids()[0];
+        let (nu, nv) = g.dims();
+        for iv in 0..nv {
+            for iu in 0..nu {
+                let o = g.ray_origin(iu, iv);
+                let segs = g.ray(iu, iv);
+                if o.y.abs() < r - 1e-3 {
+                    assert_eq!(segs.len(), 1);
+                    let half = (r * r - o.y * o.y).sqrt();
+                    assert!(
+                        (segs[0].lo.t + half).abs() < 1e-9 && (segs[0].hi.t - half).abs() < 1e-9
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn tilted_cylinder_stock_volume_within_the_pitch_bound() {
+        let (r, l) = (4.0, 20.0);
+        let c = Cylinder::try_new(
+            Point3::new(1.0, 2.0, 3.0),
+            Vector3::new(1.0, 1.0, 1.0),
+            r,
+            l,
+        )
+        .expect("valid");
+        let s = TriDexel::from_solid(Solid::bounds(&c), 0.25, 1e9, &c).expect("fits");
+        let bound = convex_bound(
+            2.0 * PI * r * l + 2.0 * PI * r * r,
+            PI * l + PI * PI * r,
+            s.max_spacing(),
+        );
+        let err = (s.volume() - PI * r * r * l).abs();
+        assert!(err < bound, "error {err} bound {bound}");
+    }
+
+    #[test]
+    fn obj_cube_stock_equals_the_box_stock() {
+        let v = [
+            [0.0, 0.0, 0.0],
+            [10.0, 0.0, 0.0],
+            [10.0, 8.0, 0.0],
+            [0.0, 8.0, 0.0],
+            [0.0, 0.0, 6.0],
+            [10.0, 0.0, 6.0],
+            [10.0, 8.0, 6.0],
+            [0.0, 8.0, 6.0],
+        ];
+        let t = [
+            [0, 2, 1],
+            [0, 3, 2],
+            [4, 5, 6],
+            [4, 6, 7],
+            [0, 1, 5],
+            [0, 5, 4],
+            [1, 2, 6],
+            [1, 6, 5],
+            [2, 3, 7],
+            [2, 7, 6],
+            [3, 0, 4],
+            [3, 4, 7],
+        ];
+        let mesh = read_obj(&obj(&v, &t), Path::new("cube.obj")).expect("closed");
+        let b = aabb([0.0; 3], [10.0, 8.0, 6.0]);
+        // Pitch 0.5: ray centres fall on the faces' diagonals.
+        let a = TriDexel::from_solid(b, 0.5, 1e9, &mesh).expect("fits");
+        let e = TriDexel::new_box(b, 0.5, 1e9).expect("fits");
+        for (ga, ge) in a.grids().iter().zip(e.grids()) {
+            let (nu, nv) = ge.dims();
+            for iv in 0..nv {
+                for iu in 0..nu {
+                    let (sa, se) = (ga.ray(iu, iv), ge.ray(iu, iv));
+                    assert_eq!(sa.len(), se.len());
+                    for (x, y) in sa.iter().zip(se) {
+                        assert!((x.lo.t - y.lo.t).abs() < 1e-9 && (x.hi.t - y.hi.t).abs() < 1e-9);
+                        assert_eq!((x.lo.normal, x.hi.normal), (y.lo.normal, y.hi.normal));
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn tessellated_cylinder_obj_matches_its_polyhedral_volume() {
+        let (n, r, l) = (48usize, 10.0, 12.0);
+        let poly: Vec<[Real; 2]> = (0..n)
+            .map(|i| {
+                let a = 2.0 * PI * i as Real / n as Real;
+                [r * a.cos(), r * a.sin()]
+            })
+            .collect();
+        let mesh = read_obj(&prism(&poly, &fan(n), 0.0, l), Path::new("cyl.obj")).expect("closed");
+        // Exact volume of the prism over the regular n-gon as written.
+        let area = 0.5 * n as Real * r * r * (2.0 * PI / n as Real).sin();
+        assert!((mesh.volume() - area * l).abs() < 1e-9);
+        let s = TriDexel::from_solid(mesh.bounds(), 0.2, 1e9, &mesh).expect("fits");
+        let side = 2.0 * r * (PI / n as Real).sin();
+        let perimeter = n as Real * side;
+        // Polyhedral integral mean curvature: ½ Σ edge length × exterior angle.
+        let m = 0.5 * (n as Real * l * 2.0 * PI / n as Real + 2.0 * perimeter * PI / 2.0);
+        let bound = convex_bound(2.0 * area + perimeter * l, m, s.max_spacing());
+        let err = (s.volume() - area * l).abs();
+        assert!(err < bound, "error {err} bound {bound}");
+    }
+
+    #[test]
+    fn mesh_stock_respects_the_memory_budget() {
+        let c = Cylinder::try_new(Point3::origin(), Vector3::x(), 50.0, 200.0).expect("valid");
+        assert!(TriDexel::from_solid(c.bounds(), 1e-3, 1e9, &c).is_err());
+    }
+
+    fn xyz() -> Chain {
+        let ax = |letter, d: Vector3| Axis {
+            letter,
+            kind: AxisKind::Linear,
+            direction: UnitVector3::new_normalize(d),
+            origin: Point3::origin(),
+        };
+        Chain::new(
+            vec![
+                ax(AxisLetter::Y, Vector3::y()),
+                ax(AxisLetter::X, Vector3::x()),
+                ax(AxisLetter::Z, Vector3::z()),
+            ],
+            "S",
+        )
+        .expect("chain")
+    }
+
+    fn mv(kind: MoveKind, a: [Real; 3], b: [Real; 3], line: usize) -> Move {
+        let q = |p: [Real; 3]| AxisValues::from_array([p[0], p[1], p[2], 0.0, 0.0, 0.0]);
+        Move {
+            kind,
+            start: q(a),
+            end: q(b),
+            feed_mm_per_min: (kind == MoveKind::Linear).then_some(500.0),
+            line,
+        }
+    }
+
+    const OPTS: SweepOptions = SweepOptions {
+        rotary_step_bound_mm: 1e-4,
+    };
+
+    #[test]
+    fn rapid_through_stock_is_reported_at_its_line_with_a_contact_on_the_tool() {
+        let mut s = TriDexel::new_box(aabb([0.0; 3], [40.0, 30.0, 20.0]), 0.25, 1e9).expect("fits");
+        let tool = Tool::try_new(ToolKind::Flat, 6.0, 25.0).expect("tool");
+        let moves = [
+            // Above the stock: nothing.
+            mv(MoveKind::Rapid, [-10.0, 15.0, 25.0], [50.0, 15.0, 25.0], 10),
+            // Through it, 5 mm deep, entering the face x = 0.
+            mv(MoveKind::Rapid, [-10.0, 15.1, 15.0], [50.0, 15.1, 15.0], 20),
+            // Feeding through material is cutting, not a collision.
+            mv(MoveKind::Linear, [-10.0, 5.0, 15.0], [50.0, 5.0, 15.0], 30),
+        ];
+        let r = sweep_with_checks(&mut s, &xyz(), &tool, None, &[], &moves, &OPTS, &NoProgress)
+            .expect("runs");
+        assert_eq!(r.events.len(), 1, "{:?}", r.events);
+        let e = &r.events[0];
+        assert_eq!(
+            (e.kind.clone(), e.line),
+            (EventKind::RapidThroughMaterial, 20)
+        );
+        let p = Point3::from(e.point);
+        // First contact: on the face x = 0, on the tool's cylinder (axis at x = −3 then),
+        // between the tip and the stock top.
+        assert!(p.x.abs() < 0.26, "{p:?}");
+        assert!(p.z >= 15.0 - 1e-9 && p.z <= 20.0 + 1e-9, "{p:?}");
+        // The point lies on the tool's boundary at its first contact: radial distance 3 from an
+        // axis at y = 15.1 with its centre left of the face by at most the radius.
+        let dy = (p.y - 15.1).abs();
+        let cx = p.x - (9.0 - dy * dy).max(0.0).sqrt();
+        assert!((-3.0 - 0.26..=1e-9).contains(&cx), "axis at x {cx}");
+        // Overlap: a slot 6 wide, 5 deep through 40 mm of stock (the move removed it after).
+        let vol = e.volume_mm3.expect("volume");
+        assert!(
+            (vol - (6.0 * 5.0 * 40.0)).abs() < 0.05 * 1200.0,
+            "volume {vol}"
+        );
+        // Depth: 5 mm below the top (z rays); x rays see 40 mm, y rays 6 mm.
+        assert!((e.depth_mm - 5.0).abs() < 1e-6, "depth {}", e.depth_mm);
+    }
+
+    #[test]
+    fn holder_dipping_into_a_pocket_wall_is_reported() {
+        // 60 × 60 × 30 block; a channel along x, 40 wide (y 10..50), floor at z = 5.
+        let mut s = TriDexel::new_box(aabb([0.0; 3], [60.0, 60.0, 30.0]), 0.5, 1e9).expect("fits");
+        let tool = Tool::try_new(ToolKind::Flat, 10.0, 15.0).expect("tool");
+        // Shank Ø9 × 20 above the flutes, holder Ø40 × 50 above it: the holder stays above the
+        // top (tip ≥ 5, holder bottom ≥ 40) and the shank inside the channel.
+        let holder = Holder::try_new(4.5, 20.0, 20.0, 50.0).expect("holder");
+        let mut moves = Vec::new();
+        let mut line = 1;
+        for z in [20.0, 10.0, 5.0] {
+            for y in [15.0, 25.0, 35.0, 45.0] {
+                moves.push(mv(MoveKind::Linear, [-10.0, y, z], [70.0, y, z], line));
+                line += 1;
+            }
+        }
+        let r = sweep_with_checks(
+            &mut s,
+            &xyz(),
+            &tool,
+            Some(&holder),
+            &[],
+            &moves,
+            &OPTS,
+            &NoProgress,
+        )
+        .expect("runs");
+        assert!(r.events.is_empty(), "{:?}", r.events);
+        // A short shank puts the Ø44 holder's underside at z = 5 + 15 + 5 = 25, below the top
+        // (30), 2 mm into each channel wall (y = 10 and 50).
+        let holder = Holder::try_new(4.5, 5.0, 22.0, 50.0).expect("holder");
+        let dip = [mv(
+            MoveKind::Linear,
+            [30.0, 30.0, 5.0],
+            [31.0, 30.0, 5.0],
+            99,
+        )];
+        let r = sweep_with_checks(
+            &mut s,
+            &xyz(),
+            &tool,
+            Some(&holder),
+            &[],
+            &dip,
+            &OPTS,
+            &NoProgress,
+        )
+        .expect("runs");
+        assert_eq!(r.events.len(), 1, "{:?}", r.events);
+        let e = &r.events[0];
+        assert_eq!(
+            (e.kind.clone(), e.line),
+            (EventKind::NonCuttingInStock(Part::Holder), 99)
+        );
+        let p = Point3::from(e.point);
+        // The contact is on the holder at the start (radius 22 about (30, 30), z 25..30).
+        let rad = ((p.x - 30.0).powi(2) + (p.y - 30.0).powi(2)).sqrt();
+        assert!(
+            (rad - 22.0).abs() < 1e-6 || (p.z - 25.0).abs() < 1e-9,
+            "{p:?}"
+        );
+        assert!(
+            rad <= 22.0 + 1e-9 && p.z >= 25.0 - 1e-9 && p.z <= 30.0 + 1e-9,
+            "{p:?}"
+        );
+        // Penetration: 2 mm into the walls along y (y rays; z rays see 5, x rays long chords).
+        assert!((e.depth_mm - 2.0).abs() < 1e-9, "{e:?}");
+        // Overlap ≈ two circular segments of height 2 (radius 22) × 5 mm, swept 1 mm along x.
+        let seg = 22.0 * 22.0 * (20.0_f64 / 22.0).acos() - 20.0 * (22.0_f64 * 22.0 - 400.0).sqrt();
+        let expect = 2.0 * seg * 5.0 + 2.0 * 2.0 * 5.0 * 1.0;
+        let vol = e.volume_mm3.expect("volume");
+        assert!(
+            (vol - expect).abs() < 0.15 * expect,
+            "volume {vol} vs {expect}"
+        );
+    }
+
+    #[test]
+    fn fixture_hit_is_reported_and_a_clear_path_is_not() {
+        // A clamp block at x 30..40, y 0..10, z 0..20.
+        let v = [
+            [30.0, 0.0, 0.0],
+            [40.0, 0.0, 0.0],
+            [40.0, 10.0, 0.0],
+            [30.0, 10.0, 0.0],
+            [30.0, 0.0, 20.0],
+            [40.0, 0.0, 20.0],
+            [40.0, 10.0, 20.0],
+            [30.0, 10.0, 20.0],
+        ];
+        let t = [
+            [0, 2, 1],
+            [0, 3, 2],
+            [4, 5, 6],
+            [4, 6, 7],
+            [0, 1, 5],
+            [0, 5, 4],
+            [1, 2, 6],
+            [1, 6, 5],
+            [2, 3, 7],
+            [2, 7, 6],
+            [3, 0, 4],
+            [3, 4, 7],
+        ];
+        let clamp = Fixture::try_new(
+            "clamp",
+            read_obj(&obj(&v, &t), Path::new("clamp.obj")).expect("closed"),
+        )
+        .expect("fixture");
+        let mut s = TriDexel::new_box(aabb([0.0; 3], [20.0, 20.0, 10.0]), 0.5, 1e9).expect("fits");
+        let tool = Tool::try_new(ToolKind::Ball, 6.0, 20.0).expect("tool");
+        let moves = [
+            mv(MoveKind::Rapid, [0.0, 5.0, 25.0], [60.0, 5.0, 25.0], 5),
+            mv(MoveKind::Linear, [0.0, 5.0, 15.0], [60.0, 5.0, 15.0], 6),
+        ];
+        let r = sweep_with_checks(
+            &mut s,
+            &xyz(),
+            &tool,
+            None,
+            &[clamp],
+            &moves,
+            &OPTS,
+            &NoProgress,
+        )
+        .expect("runs");
+        assert_eq!(r.events.len(), 1, "{:?}", r.events);
+        let e = &r.events[0];
+        assert_eq!(e.line, 6);
+        assert_eq!(
+            e.kind,
+            EventKind::FixtureHit {
+                part: Part::Tool,
+                fixture: "clamp".into()
+            }
+        );
+        let p = Point3::from(e.point);
+        // First contact on the clamp's face x = 30, tool at x = 27 then; travel after it 30 mm.
+        assert!((p.x - 30.0).abs() < 1e-6, "{p:?}");
+        assert!((e.depth_mm - 33.0).abs() < 1e-6, "{}", e.depth_mm);
+    }
+
+    /// The design: the block [0,40]×[0,30]×[0,20] with a slot along x, y 12..18, floor z = 14.
+    fn slot_design(floor: Real) -> ClosedMesh {
+        read_obj(&slot_design_obj(floor), Path::new("design.obj")).expect("closed")
+    }
+
+    /// OBJ text of [`slot_design`].
+    pub(super) fn slot_design_obj(floor: Real) -> String {
+        let (w, h, a, b) = (30.0, 20.0, 12.0, 18.0);
+        // U profile in (y, z), counter-clockwise seen from +x, extruded along x.
+        let prof = [
+            [0.0, 0.0],
+            [w, 0.0],
+            [w, h],
+            [b, h],
+            [b, floor],
+            [a, floor],
+            [a, h],
+            [0.0, h],
+        ];
+        let cap = [
+            [0, 1, 4],
+            [0, 4, 5],
+            [1, 2, 3],
+            [1, 3, 4],
+            [0, 5, 6],
+            [0, 6, 7],
+        ];
+        // prism() extrudes along z over (x, y): rotate coordinates (y, z, x) → (x, y, z).
+        let text = prism(&prof, &cap, 0.0, 40.0);
+        let rotated: String = text
+            .lines()
+            .map(|l| match l.strip_prefix("v ") {
+                Some(rest) => {
+                    let c: Vec<&str> = rest.split_whitespace().collect();
+                    format!("v {} {} {}\n", c[2], c[0], c[1])
+                }
+                None => format!("{l}\n"),
+            })
+            .collect();
+        rotated
+    }
+
+    fn cut_slot(floor: Real) -> TriDexel {
+        let mut s = TriDexel::new_box(aabb([0.0; 3], [40.0, 30.0, 20.0]), 0.25, 1e9).expect("fits");
+        let tool = Tool::try_new(ToolKind::Flat, 6.0, 25.0).expect("tool");
+        let moves = [mv(
+            MoveKind::Linear,
+            [-5.0, 15.0, floor],
+            [45.0, 15.0, floor],
+            7,
+        )];
+        sweep_with_checks(&mut s, &xyz(), &tool, None, &[], &moves, &OPTS, &NoProgress)
+            .expect("runs");
+        s
+    }
+
+    #[test]
+    fn exact_cut_has_no_deviation() {
+        let design = DesignModel::try_new(slot_design(14.0)).expect("design");
+        let (points, rep) = deviation_map(&cut_slot(14.0), &design).expect("map");
+        // Crossings lie on the planar cut faces to rounding (coordinates ≤ 40 mm: ~1e-14).
+        assert!(
+            rep.max_mm.abs() < 1e-9 && rep.min_mm.abs() < 1e-9,
+            "{rep:?}"
+        );
+        assert!(points.len() > 10_000);
+        let img = render_deviation_map(
+            &points,
+            &DeviationImageOptions {
+                title: "slot".into(),
+                width_px: 640,
+                height_px: 400,
+                range_mm: None,
+                point_pitch_mm: 0.25,
+            },
+        )
+        .expect("image");
+        let png = encode_png(&img).expect("png");
+        let back = image::load_from_memory(&png).expect("decodes");
+        assert_eq!((back.width(), back.height()), (640, 400));
+    }
+
+    #[test]
+    fn a_floor_left_high_shows_its_offset() {
+        let design = DesignModel::try_new(slot_design(14.0)).expect("design");
+        let (points, rep) = deviation_map(&cut_slot(14.1), &design).expect("map");
+        let floor: Vec<_> = points
+            .iter()
+            .filter(|p| p.line == 7 && p.normal.z > 0.99 && (p.point.y - 15.0).abs() < 2.5)
+            .collect();
+        assert!(floor.len() > 100);
+        for p in floor {
+            assert!((p.distance_mm - 0.1).abs() < 1e-6, "{p:?}");
+        }
+        assert!((rep.max_mm - 0.1).abs() < 1e-6, "{rep:?}");
+        // Nothing is gouged.
+        assert!(rep.min_mm > -1e-9, "{rep:?}");
+        let img = render_deviation_map(
+            &points,
+            &DeviationImageOptions {
+                title: "floor +0.1 mm".into(),
+                width_px: 800,
+                height_px: 600,
+                range_mm: None,
+                point_pitch_mm: 0.25,
+            },
+        )
+        .expect("image");
+        std::fs::write(
+            std::env::temp_dir().join("twinmill_deviation.png"),
+            encode_png(&img).expect("png"),
+        )
+        .expect("write");
+    }
+
+    #[test]
+    fn fixture_hit_during_a_rotary_move_is_reported() {
+        // Workpiece on A (about +X), tool at machine (0, 0, 20): its tip circles the X axis.
+        let ax = |letter, kind, d: Vector3| Axis {
+            letter,
+            kind,
+            direction: UnitVector3::new_normalize(d),
+            origin: Point3::origin(),
+        };
+        let chain = Chain::new(
+            vec![
+                ax(AxisLetter::A, AxisKind::Rotary, Vector3::x()),
+                ax(AxisLetter::Y, AxisKind::Linear, Vector3::y()),
+                ax(AxisLetter::X, AxisKind::Linear, Vector3::x()),
+                ax(AxisLetter::Z, AxisKind::Linear, Vector3::z()),
+            ],
+            "S",
+        )
+        .expect("chain");
+        // A block on the tip's path at 45° (tip at (0, −14.1, 14.1) in W for A = +45°).
+        let v = [
+            [-5.0, -16.0, 12.0],
+            [5.0, -16.0, 12.0],
+            [5.0, -12.0, 12.0],
+            [-5.0, -12.0, 12.0],
+            [-5.0, -16.0, 16.0],
+            [5.0, -16.0, 16.0],
+            [5.0, -12.0, 16.0],
+            [-5.0, -12.0, 16.0],
+        ];
+        let t = [
+            [0, 2, 1],
+            [0, 3, 2],
+            [4, 5, 6],
+            [4, 6, 7],
+            [0, 1, 5],
+            [0, 5, 4],
+            [1, 2, 6],
+            [1, 6, 5],
+            [2, 3, 7],
+            [2, 7, 6],
+            [3, 0, 4],
+            [3, 4, 7],
+        ];
+        let block = Fixture::try_new(
+            "block",
+            read_obj(&obj(&v, &t), Path::new("b.obj")).expect("closed"),
+        )
+        .expect("fixture");
+        let mut s = TriDexel::new_box(aabb([-2.0; 3], [2.0; 3]), 0.5, 1e9).expect("fits");
+        let tool = Tool::try_new(ToolKind::Flat, 2.0, 10.0).expect("tool");
+        let q = |a: Real| AxisValues::from_array([0.0, 0.0, 20.0, a, 0.0, 0.0]);
+        let turn = |a: Real, line| Move {
+            kind: MoveKind::Rapid,
+            start: q(0.0),
+            end: q(a),
+            feed_mm_per_min: None,
+            line,
+        };
+        let opts = SweepOptions {
+            rotary_step_bound_mm: 1e-2,
+        };
+        // Turning the other way misses it.
+        let r = sweep_with_checks(
+            &mut s,
+            &chain,
+            &tool,
+            None,
+            std::slice::from_ref(&block),
+            &[turn(-90.0, 3)],
+            &opts,
+            &NoProgress,
+        )
+        .expect("runs");
+        assert!(r.events.is_empty(), "{:?}", r.events);
+        let r = sweep_with_checks(
+            &mut s,
+            &chain,
+            &tool,
+            None,
+            &[block],
+            &[turn(90.0, 4)],
+            &opts,
+            &NoProgress,
+        )
+        .expect("runs");
+        assert_eq!(r.events.len(), 1, "{:?}", r.events);
+        let e = &r.events[0];
+        assert_eq!(e.line, 4);
+        assert_eq!(
+            e.kind,
+            EventKind::FixtureHit {
+                part: Part::Tool,
+                fixture: "block".into()
+            }
+        );
+        // The contact is on the block's surface.
+        let p = Point3::from(e.point);
+        let inside = |k: usize, lo: Real, hi: Real| p[k] >= lo - 1e-6 && p[k] <= hi + 1e-6;
+        assert!(
+            inside(0, -5.0, 5.0) && inside(1, -16.0, -12.0) && inside(2, 12.0, 16.0),
+            "{p:?}"
+        );
+    }
+
+    #[test]
+    fn mesh_of_two_blocks_gives_two_sorted_segments_per_ray() {
+        let cube = |x0: Real, x1: Real, base: usize| {
+            let v = [
+                [x0, 0.0, 0.0],
+                [x1, 0.0, 0.0],
+                [x1, 2.0, 0.0],
+                [x0, 2.0, 0.0],
+                [x0, 0.0, 2.0],
+                [x1, 0.0, 2.0],
+                [x1, 2.0, 2.0],
+                [x0, 2.0, 2.0],
+            ];
+            let t = [
+                [0, 2, 1],
+                [0, 3, 2],
+                [4, 5, 6],
+                [4, 6, 7],
+                [0, 1, 5],
+                [0, 5, 4],
+                [1, 2, 6],
+                [1, 6, 5],
+                [2, 3, 7],
+                [2, 7, 6],
+                [3, 0, 4],
+                [3, 4, 7],
+            ];
+            (v, t.map(|f| f.map(|i| i + base)))
+        };
+        let (va, ta) = cube(0.0, 1.0, 0);
+        let (vb, tb) = cube(1.5, 3.0, 8);
+        let v: Vec<_> = va.iter().chain(&vb).copied().collect();
+        let t: Vec<_> = ta.iter().chain(&tb).copied().collect();
+        let mesh = read_obj(&obj(&v, &t), Path::new("two.obj")).expect("closed");
+        let s = TriDexel::from_solid(mesh.bounds(), 0.25, 1e9, &mesh).expect("fits");
+        let per: Vec<_> = s.grids().iter().map(|g| g.volume()).collect();
+        assert!(
+            (s.volume() - (1.0 * 4.0 + 1.5 * 4.0)).abs() < 1e-9,
+            "{per:?}"
+        );
+        let g = &s.grids()[0];
+        let (nu, nv) = g.dims();
+        for iv in 0..nv {
+            for iu in 0..nu {
+                let t: Vec<_> = g.ray(iu, iv).iter().map(|s| (s.lo.t, s.hi.t)).collect();
+                assert_eq!(t, vec![(0.0, 1.0), (1.5, 3.0)]);
+            }
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// `simulate` on scenes with cylinder and mesh stock, fixtures, holders and a design model.
+
+/// A three-axis scene (X, Y, Z; the tool tip at W = (x, y, z)) with `tool`, `stock` and
+/// `extra` TOML; the program is `p.ngc`. Scanner and faces are there only because a scene
+/// needs them.
+fn xyz_scene(tool: &str, stock: &str, extra: &str) -> String {
+    format!(
+        r#"name = "t"
+program = "p.ngc"
+
+[machine]
+axes = [
+  {{ name = "X", kind = "linear", direction = [1, 0, 0] }},
+  {{ name = "Y", kind = "linear", direction = [0, 1, 0] }},
+  {{ name = "Z", kind = "linear", direction = [0, 0, 1] }},
+]
+home = {{ X = -20, Y = 0, Z = 60 }}
+
+[tool]
+{tool}
+
+[stock]
+{stock}
+
+{extra}
+
+[scanner]
+position = [0.0, -330.0, 80.0]
+target = [0.0, 0.0, 0.0]
+up = [0.0, 0.0, 1.0]
+
+[identify]
+faces = [{{ name = "a", line = 1 }}, {{ name = "b", line = 2 }}]
+"#
+    )
+}
+
+const FLAT6: &str = "kind = \"flat\"\ndiameter_mm = 6.0\nlength_mm = 20.0";
+
+/// OBJ text of the box [min, max].
+fn box_obj(min: [Real; 3], max: [Real; 3]) -> String {
+    let v: Vec<[Real; 3]> = (0..8)
+        .map(|k| {
+            [
+                if k & 1 == 0 { min[0] } else { max[0] },
+                if k & 2 == 0 { min[1] } else { max[1] },
+                if k & 4 == 0 { min[2] } else { max[2] },
+            ]
+        })
+        .collect();
+    // Outward, counter-clockwise seen from outside.
+    let t = [
+        [0, 2, 1],
+        [1, 2, 3],
+        [4, 5, 6],
+        [5, 7, 6],
+        [0, 1, 4],
+        [1, 5, 4],
+        [2, 6, 3],
+        [3, 6, 7],
+        [0, 4, 2],
+        [2, 4, 6],
+        [1, 3, 5],
+        [3, 7, 5],
+    ];
+    obj(&v, &t)
+}
+
+/// Runs `twinmill simulate` on a scene with the given files; returns the exit code, the
+/// report (if it printed one) and stderr.
+fn simulate_in(
+    sb: &Sandbox,
+    scene: &str,
+    program: &str,
+    files: &[(&str, &str)],
+) -> (i32, serde_json::Value, String) {
+    sb.write("s.toml", scene.as_bytes());
+    sb.write("p.ngc", program.as_bytes());
+    for (name, text) in files {
+        sb.write(name, text.as_bytes());
+    }
+    let (code, stdout, stderr) = sb.run(&["simulate", "s.toml", "--json"]);
+    let report = serde_json::from_str(&stdout).unwrap_or(serde_json::Value::Null);
+    (code, report, stderr)
+}
+
+/// Upper bound on the dexel error of a convex body's volume (area `s`, diameter `diam`) at
+/// ray spacing `h`: the outer parallel shell at half a cell diagonal ρ = h/√2 (Steiner,
+/// with the integral mean curvature at most 2π·diameter).
+fn convex_shell_bound(s: Real, diam: Real, h: Real) -> Real {
+    let r = h / 2f64.sqrt();
+    s * r + 2.0 * std::f64::consts::PI * diam * r * r + 4.0 * std::f64::consts::PI / 3.0 * r * r * r
+}
+
+#[test]
+fn simulate_cylinder_stock_removes_the_analytic_volume() {
+    let sb = Sandbox::new("sim-cylinder");
+    let (r, len, pitch, z_cut, half) = (10.0_f64, 40.0_f64, 0.2_f64, 7.0_f64, 3.0_f64);
+    let stock = format!(
+        "kind = \"cylinder\"\nends = [[0.0, 0.0, 0.0], [{len}, 0.0, 0.0]]\nradius_mm = {r}\npitch_mm = {pitch}"
+    );
+    // A flat Ø6 end mill at z = 7 along the whole bar, entering and leaving in the air.
+    let program = "G21 G90\nG0 X-10 Y0 Z60\nG0 Z7\nG1 X50 F600\nG0 Z60\nM30\n";
+    let (code, report, stderr) = simulate_in(&sb, &xyz_scene(FLAT6, &stock, ""), program, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    // Removed: the bar's section cut by z ≥ 7, |y| ≤ 3, times its length:
+    // A = ∫_{−3}^{3} (√(r² − y²) − 7) dy = [y/2·√(r² − y²) + r²/2·asin(y/r)]_{−3}^{3} − 6·7.
+    let area = half * (r * r - half * half).sqrt() + r * r * (half / r).asin() - 2.0 * half * z_cut;
+    let exact = len * area;
+    // The removed region is convex: its dexel volume is within the parallel-shell bound.
+    // Section perimeter: the floor (6), two sides up to the arc, the arc.
+    let side = (r * r - half * half).sqrt() - z_cut;
+    let perimeter = 2.0 * half + 2.0 * side + 2.0 * r * (half / r).asin();
+    let s = 2.0 * area + len * perimeter;
+    let diam = (len * len + 4.0 * half * half + (r - z_cut) * (r - z_cut)).sqrt();
+    let bound = convex_shell_bound(s, diam, pitch);
+    let removed = report["stock"]["removed_mm3"].as_f64().expect("number");
+    assert!(
+        (removed - exact).abs() < bound,
+        "removed {removed}, exact {exact}, bound {bound}"
+    );
+    // And the bar itself: π r² L within its own bound.
+    let total = removed + report["stock"]["volume_mm3"].as_f64().expect("number");
+    let bar = std::f64::consts::PI * r * r * len;
+    let bar_bound = convex_shell_bound(
+        2.0 * std::f64::consts::PI * r * (r + len),
+        (len * len + 4.0 * r * r).sqrt(),
+        pitch,
+    );
+    assert!(
+        (total - bar).abs() < bar_bound,
+        "{total} vs {bar} ± {bar_bound}"
+    );
+    assert_eq!(report["collisions"].as_array().map(Vec::len), Some(0));
+    assert!(report["deviation"].is_null());
+}
+
+#[test]
+fn simulate_reports_a_fixture_hit_at_its_line() {
+    let sb = Sandbox::new("sim-fixture");
+    let stock = "min = [0.0, -10.0, 0.0]\nmax = [40.0, 10.0, 10.0]\npitch_mm = 0.25";
+    let extra = "[[fixtures]]\nname = \"clamp\"\nfile = \"clamp.obj\"\nposition = [45.0, 0.0, 0.0]";
+    // The clamp is [45, 55] × [−5, 5] × [0, 20] once placed; line 4 cuts along the stock
+    // at z = 5 and runs on into it: the Ø6 tool touches x = 45 with its tip at x = 42.
+    let program = "G21 G90\nG0 X-10 Y0 Z60\nG0 Z5\nG1 X60 F600\nG0 Z60\nM30\n";
+    let clamp = box_obj([0.0, -5.0, 0.0], [10.0, 5.0, 20.0]);
+    let (code, report, stderr) = simulate_in(
+        &sb,
+        &xyz_scene(FLAT6, stock, extra),
+        program,
+        &[("clamp.obj", &clamp)],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    let events = report["collisions"].as_array().expect("list");
+    assert_eq!(events.len(), 1, "{events:?}");
+    let e = &events[0];
+    assert_eq!(e["kind"], "fixture_hit");
+    assert_eq!(e["fixture"], "clamp");
+    assert_eq!(e["part"], "tool");
+    assert_eq!(e["line"], 4);
+    let p: Vec<Real> = e["point_mm"]
+        .as_array()
+        .expect("point")
+        .iter()
+        .map(|c| c.as_f64().expect("number"))
+        .collect();
+    assert!(
+        (p[0] - 45.0).abs() < 1e-6 && p[1].abs() <= 3.0 + 1e-9 && (5.0..=25.0).contains(&p[2]),
+        "{p:?}"
+    );
+    // Travel after first contact: from x = 42 to 60.
+    assert!(
+        (e["depth_mm"].as_f64().expect("number") - 18.0).abs() < 1e-6,
+        "{e}"
+    );
+    // The cut itself is unchanged by the checks: a 6 × 5 slot through the 40 mm stock.
+    let removed = report["stock"]["removed_mm3"].as_f64().expect("number");
+    assert!((removed - 40.0 * 6.0 * 5.0).abs() < 1e-6, "{removed}");
+}
+
+#[test]
+fn simulate_reports_a_rapid_through_material_and_a_holder_in_the_stock() {
+    let sb = Sandbox::new("sim-rapid");
+    let stock = "min = [0.0, -10.0, 0.0]\nmax = [40.0, 10.0, 10.0]\npitch_mm = 0.25";
+    // Line 3 rapids through the stock at z = 5. Line 5 feeds at z = −12, so the flutes
+    // (20 mm) end 2 mm below the top of the stock at z = 8 and the shank (Ø10) dips 2 mm in.
+    let program = "G21 G90\nG0 X-10 Y0 Z5\nG0 X60\nG0 X20 Y30 Z-12\nG1 Y-30 F600\nG0 Z60\nM30\n";
+    let tool = format!(
+        "{FLAT6}\nshank_diameter_mm = 10.0\nshank_length_mm = 30.0\nholder_diameter_mm = 40.0\nholder_length_mm = 50.0"
+    );
+    let (code, report, stderr) = simulate_in(&sb, &xyz_scene(&tool, stock, ""), program, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    let events = report["collisions"].as_array().expect("list");
+    let kinds: Vec<(String, i64)> = events
+        .iter()
+        .map(|e| {
+            (
+                e["kind"].as_str().unwrap_or("").to_string(),
+                e["line"].as_i64().unwrap_or(0),
+            )
+        })
+        .collect();
+    assert_eq!(
+        kinds,
+        [
+            ("rapid_through_material".to_string(), 3),
+            ("shank_in_stock".to_string(), 5)
+        ],
+        "{events:?}"
+    );
+    // The rapid's first contact is on the stock's face x = 0 (to a dexel spacing); the
+    // deepest overlap is along z: from the tip at z = 5 to the top at z = 10.
+    let rapid = &events[0];
+    let x = rapid["point_mm"][0].as_f64().expect("number");
+    assert!(x.abs() <= 0.25 + 1e-3, "{rapid}");
+    assert!(
+        (rapid["depth_mm"].as_f64().expect("number") - 5.0).abs() < 1e-6,
+        "{rapid}"
+    );
+    // The shank's overlap: 2 mm deep (tip at −12, flutes 20 mm, shank from z = 8 to 10).
+    let shank = &events[1];
+    assert!(
+        (shank["depth_mm"].as_f64().expect("number") - 2.0).abs() < 1e-6,
+        "{shank}"
+    );
+    assert_eq!(shank["part"], "shank");
+}
+
+/// Signed distance of a point on the cut slot part to the slot design with floor
+/// `design_floor` (≤ the part's floor 14): inside the design's slot void the distance to its
+/// floor or nearer wall, else 0 (the part's other faces lie on the design's).
+fn slot_distance(p: &Point3, design_floor: Real) -> Real {
+    if p.y > 12.0 && p.y < 18.0 && p.z > design_floor && p.z < 20.0 {
+        (p.z - design_floor).min(p.y - 12.0).min(18.0 - p.y)
+    } else {
+        0.0
+    }
+}
+
+#[test]
+fn simulate_maps_the_deviation_from_a_design_mesh() {
+    let pitch = 0.25;
+    let stock = format!("min = [0.0, 0.0, 0.0]\nmax = [40.0, 30.0, 20.0]\npitch_mm = {pitch}");
+    // A Ø6 flat end mill cuts the slot y 12..18, floor z = 14, straight through along x.
+    let program = "G21 G90\nG0 X-10 Y15 Z60\nG0 Z14\nG1 X50 F600\nG0 Z60\nM30\n";
+    for (tag, design_floor) in [("exact", 14.0), ("offset", 13.9)] {
+        let sb = Sandbox::new(&format!("sim-design-{tag}"));
+        let design = solids_collisions_deviation::slot_design_obj(design_floor);
+        let scene = xyz_scene(FLAT6, &stock, "[design]\nfile = \"design.obj\"");
+        let (code, report, stderr) = simulate_in(&sb, &scene, program, &[("design.obj", &design)]);
+        assert_eq!(code, 0, "{stderr}");
+        let d = &report["deviation"];
+        let (max, min, rms) = (
+            d["max_mm"].as_f64().expect("max"),
+            d["min_mm"].as_f64().expect("min"),
+            d["rms_mm"].as_f64().expect("rms"),
+        );
+        // The same part, cut through the library; the distances from the analytic design.
+        let s = Scene::load(&sb.dir.join("s.toml")).expect("scene");
+        let prog = s.load_program().expect("program");
+        let mut stock = twinmill::pipeline::make_stock(&s).expect("stock");
+        sweep_program(
+            &mut stock,
+            &s.chain,
+            &s.tool,
+            &prog.moves,
+            &s.sweep,
+            &NoProgress,
+        )
+        .expect("sweep");
+        let mut dist = Vec::new();
+        for g in stock.grids() {
+            g.for_each_crossing(|p, _| dist.push(slot_distance(&p, design_floor)));
+        }
+        assert_eq!(d["points"].as_u64(), Some(dist.len() as u64));
+        let want_max = dist.iter().copied().fold(Real::NEG_INFINITY, Real::max);
+        let want_rms = (dist.iter().map(|x| x * x).sum::<Real>() / dist.len() as Real).sqrt();
+        assert!(
+            (max - want_max).abs() < 1e-9,
+            "{tag}: max {max} vs {want_max}"
+        );
+        assert!(
+            (rms - want_rms).abs() < 1e-9,
+            "{tag}: rms {rms} vs {want_rms}"
+        );
+        assert!(min > -1e-9, "{tag}: no gouge expected, min {min}");
+        assert!(
+            (want_max - (14.0 - design_floor)).abs() < 1e-9,
+            "{tag}: {want_max}"
+        );
+        let png =
+            std::fs::read(sb.dir.join("out/t-simulate/deviation.png")).expect("deviation.png");
+        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    }
+}
+
+/// Runs `simulate` on a broken scene or program and checks the failure is clean: non-zero
+/// exit, one line naming what is expected, nothing written.
+fn check_bad_simulate(
+    name: &str,
+    scene: &str,
+    program: &str,
+    files: &[(&str, &str)],
+    expect: &[&str],
+) {
+    let sb = Sandbox::new(&format!("bad-sim-{name}"));
+    let (code, report, stderr) = simulate_in(&sb, scene, program, files);
+    assert_ne!(code, 0, "{name}: should fail");
+    assert!(report.is_null(), "{name}: printed a report");
+    assert!(!stderr.contains("panicked"), "{name}: panicked: {stderr}");
+    assert_eq!(
+        stderr.trim_end().lines().count(),
+        1,
+        "{name}: one line expected: {stderr}"
+    );
+    for e in expect {
+        assert!(stderr.contains(e), "{name}: '{e}' not in: {stderr}");
+    }
+    let leftovers: Vec<_> = std::fs::read_dir(sb.dir.join("out"))
+        .map(|d| d.flatten().map(|e| e.path()).collect())
+        .unwrap_or_default();
+    assert!(leftovers.is_empty(), "{name}: left {leftovers:?}");
+}
+
+#[test]
+fn simulate_refuses_bad_tools_stocks_meshes_and_numbers() {
+    let stock = "min = [0.0, -10.0, 0.0]\nmax = [40.0, 10.0, 10.0]\npitch_mm = 0.25";
+    let program = "G21 G90\nG0 X-10 Y0 Z5\nG1 X50 F600\nM30\n";
+    let bad_tool = |name: &str, tool: &str, expect: &[&str]| {
+        check_bad_simulate(name, &xyz_scene(tool, stock, ""), program, &[], expect);
+    };
+    for d in ["0.0", "-6.0", "nan"] {
+        bad_tool(
+            &format!("diameter{d}"),
+            &FLAT6.replace("6.0", d),
+            &["s.toml:", "diameter_mm must be"],
+        );
+    }
+    bad_tool(
+        "corner-radius",
+        "kind = \"bull_nose\"\ndiameter_mm = 6.0\ncorner_radius_mm = 3.5\nlength_mm = 20.0",
+        &["s.toml:", "corner"],
+    );
+    bad_tool(
+        "holder-incomplete",
+        &format!("{FLAT6}\nshank_diameter_mm = 6.0"),
+        &["s.toml:", "tool.shank_length_mm is missing"],
+    );
+    // A pitch whose tri-dexel cannot fit: the error names the scene key and a pitch that fits.
+    check_bad_simulate(
+        "pitch",
+        &xyz_scene(FLAT6, &stock.replace("0.25", "0.00001"), ""),
+        program,
+        &[],
+        &[
+            "s.toml:",
+            "stock.pitch_mm",
+            "MiB",
+            "use a pitch of at least",
+        ],
+    );
+    // A mesh with a hole: the cube without its last triangle.
+    let cube = box_obj([0.0; 3], [10.0; 3]);
+    let open: String = cube
+        .lines()
+        .take(8 + 11)
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let mesh_stock = "kind = \"mesh\"\nfile = \"open.obj\"\npitch_mm = 0.25";
+    check_bad_simulate(
+        "open-stock",
+        &xyz_scene(FLAT6, mesh_stock, ""),
+        program,
+        &[("open.obj", &open)],
+        &[
+            "s.toml:",
+            "stock.file",
+            "open.obj",
+            "not a closed",
+            "for example edge",
+            "used by one triangle only",
+        ],
+    );
+    check_bad_simulate(
+        "open-fixture",
+        &xyz_scene(FLAT6, stock, "[[fixtures]]\nfile = \"open.obj\""),
+        program,
+        &[("open.obj", &open)],
+        &[
+            "s.toml:",
+            "fixtures[0].file",
+            "open.obj",
+            "for example edge",
+        ],
+    );
+    check_bad_simulate(
+        "open-design",
+        &xyz_scene(FLAT6, stock, "[design]\nfile = \"open.obj\""),
+        program,
+        &[("open.obj", &open)],
+        &["s.toml:", "design.file", "open.obj", "for example edge"],
+    );
+    check_bad_simulate(
+        "missing-mesh",
+        &xyz_scene(FLAT6, stock, "[design]\nfile = \"nowhere.stl\""),
+        program,
+        &[],
+        &["s.toml:", "design.file", "nowhere.stl", "cannot read"],
+    );
+    let nan_vertex = cube.replacen("v 0.0 0.0 0.0", "v nan 0.0 0.0", 1);
+    check_bad_simulate(
+        "nan-vertex",
+        &xyz_scene(FLAT6, mesh_stock.replace("open", "nan").as_str(), ""),
+        program,
+        &[("nan.obj", &nan_vertex)],
+        &["s.toml:", "nan.obj:1", "not finite"],
+    );
+    // Non-finite numbers in the scene.
+    check_bad_simulate(
+        "nan-stock",
+        &xyz_scene(FLAT6, &stock.replace("min = [0.0", "min = [nan"), ""),
+        program,
+        &[],
+        &["s.toml:", "stock.min must have finite components"],
+    );
+    check_bad_simulate(
+        "inf-cylinder",
+        &xyz_scene(
+            FLAT6,
+            "kind = \"cylinder\"\nends = [[0.0, 0.0, 0.0], [inf, 0.0, 0.0]]\nradius_mm = 5.0\npitch_mm = 0.25",
+            "",
+        ),
+        program,
+        &[],
+        &["s.toml:", "stock.ends must have finite components"],
+    );
+    check_bad_simulate(
+        "nan-fixture-position",
+        &xyz_scene(
+            FLAT6,
+            stock,
+            "[[fixtures]]\nfile = \"c.obj\"\nposition = [0.0, nan, 0.0]",
+        ),
+        program,
+        &[("c.obj", &cube)],
+        &[
+            "s.toml:",
+            "fixtures[0].position must have finite components",
+        ],
+    );
+    check_bad_simulate(
+        "box-key-on-cylinder",
+        &xyz_scene(
+            FLAT6,
+            &format!("kind = \"cylinder\"\nradius_mm = 5.0\n{stock}"),
+            "",
+        ),
+        program,
+        &[],
+        &["s.toml:", "stock.min does not apply to a 'cylinder' stock"],
+    );
+    // Non-finite numbers in the NC program.
+    let scene = xyz_scene(FLAT6, stock, "");
+    check_bad_simulate(
+        "nc-overflow",
+        &scene,
+        "G21 G90\n#1 = [10 ** 400]\nG1 X#1 F600\nM30\n",
+        &[],
+        &["p.ngc:3:", "out of range"],
+    );
+    check_bad_simulate(
+        "nc-divide-by-zero",
+        &scene,
+        "G21 G90\nG1 X[1/0] F600\nM30\n",
+        &[],
+        &["p.ngc:2:", "divide by zero"],
+    );
+}
