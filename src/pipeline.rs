@@ -200,7 +200,7 @@ pub fn make_stock(scene: &Scene) -> Result<TriDexel, PipelineError> {
     match &scene.stock_shape {
         StockShape::Box => TriDexel::new_box(b, h, budget),
         StockShape::Cylinder(c) => TriDexel::from_solid(b, h, budget, c),
-        StockShape::Mesh { mesh, .. } => TriDexel::from_solid(b, h, budget, mesh),
+        StockShape::Mesh { mesh, .. } => TriDexel::from_solid(b, h, budget, mesh.as_ref()),
     }
     .map_err(|source| PipelineError::Stock {
         path: scene.path.display().to_string(),

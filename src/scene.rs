@@ -317,7 +317,7 @@ pub enum StockShape {
         /// The file.
         path: PathBuf,
         /// The placed mesh.
-        mesh: ClosedMesh,
+        mesh: Box<ClosedMesh>,
     },
 }
 
@@ -860,7 +860,7 @@ impl Scene {
                     mesh.bounds(),
                     StockShape::Mesh {
                         path: mesh_path,
-                        mesh,
+                        mesh: Box::new(mesh),
                     },
                 )
             }
