@@ -2548,6 +2548,32 @@ fn simulate_reports_a_rapid_through_material_and_a_holder_in_the_stock() {
     assert_eq!(shank["part"], "shank");
 }
 
+#[test]
+fn simulate_mesh_stock_cuts_like_the_box_it_describes() {
+    let sb = Sandbox::new("sim-mesh-stock");
+    // The box [−20, 20] × [−5, 5] × [−10, 10] turned 90° about x ((x, y, z) ↦ (x, −z, y))
+    // and moved by (20, 0, 5) is the stock [0, 40] × [−10, 10] × [0, 10].
+    let blank = box_obj([-20.0, -5.0, -10.0], [20.0, 5.0, 10.0]);
+    let stock = "kind = \"mesh\"\nfile = \"blank.obj\"\nposition = [20.0, 0.0, 5.0]\nrotation_deg = [90.0, 0.0, 0.0]\npitch_mm = 0.25";
+    let program = "G21 G90\nG0 X-10 Y0 Z60\nG0 Z5\nG1 X50 F600\nG0 Z60\nM30\n";
+    let (code, report, stderr) = simulate_in(
+        &sb,
+        &xyz_scene(FLAT6, stock, ""),
+        program,
+        &[("blank.obj", &blank)],
+    );
+    assert_eq!(code, 0, "{stderr}");
+    // A 6 × 5 slot through the 40 mm length; the blank is 40 × 20 × 10.
+    let removed = report["stock"]["removed_mm3"].as_f64().expect("number");
+    let left = report["stock"]["volume_mm3"].as_f64().expect("number");
+    assert!((removed - 40.0 * 6.0 * 5.0).abs() < 1e-6, "{removed}");
+    assert!(
+        (removed + left - 40.0 * 20.0 * 10.0).abs() < 1e-6,
+        "{}",
+        removed + left
+    );
+}
+
 /// Signed distance of a point on the cut slot part to the slot design with floor
 /// `design_floor` (≤ the part's floor 14): inside the design's slot void the distance to its
 /// floor or nearer wall, else 0 (the part's other faces lie on the design's).
