@@ -85,11 +85,13 @@ impl SweepError {
 pub struct SweepReport {
     /// Moves processed.
     pub moves: usize,
-    /// Moves that removed material.
+    /// Moves that removed material. Moves swept as one joined run count when a cut of the
+    /// run that removed material names them at one of its ends.
     pub cutting_moves: usize,
     /// Moves that turned a rotary axis.
     pub rotary_moves: usize,
-    /// Translation sweeps evaluated (1 per straight move, N per rotary move, pruned ones excluded).
+    /// Translation sweeps evaluated (1 per run of joined straight moves, N per rotary move,
+    /// pruned ones excluded).
     pub sweeps: usize,
     /// Largest bound on the rotary sub-step approximation over all rotary moves (mm); 0 if none.
     pub rotary_error_bound_mm: Real,
@@ -111,23 +113,57 @@ pub struct TranslatedTool {
     v: UnitVector3,
     bounds: Aabb,
     general: Option<SweptTool>,
+    /// For a run of joined moves: each move's end parameter along `d` and its NC line.
+    parts: Vec<(Real, u32)>,
 }
 
 impl TranslatedTool {
+    /// Whether `tool` has the closed form (flat, or ball reaching above its sphere); other
+    /// shapes go through [`SweptTool`].
+    pub fn has_closed_form(tool: &Tool) -> bool {
+        match tool.kind() {
+            ToolKind::Flat => true,
+            // The closed form takes the ball as a whole sphere: exact only if the tool
+            // reaches above it (L ≥ 2R).
+            ToolKind::Ball => tool.length() >= 2.0 * tool.radius(),
+            _ => false,
+        }
+    }
+
+    /// Consecutive collinear moves swept as one: the tip moves from `start` to `start + d`;
+    /// `parts` lists each move's end as a fraction of `d` (increasing, the last 1) with its
+    /// NC line. Every crossing is tagged with the line of the earliest move whose tool
+    /// position reaches it. Only for tools with [`TranslatedTool::has_closed_form`].
+    pub fn joined(
+        tool: Tool,
+        start: Point3,
+        d: Vector3,
+        v: UnitVector3,
+        parts: Vec<(Real, u32)>,
+    ) -> Self {
+        debug_assert!(Self::has_closed_form(&tool));
+        Self {
+            parts,
+            ..Self::new(tool, start, d, v)
+        }
+    }
+
+    /// The NC line of the move at parameter `s` (the first whose end is at or past `s`).
+    fn line_at(&self, s: Real, line: u32) -> u32 {
+        let k = self.parts.partition_point(|&(end, _)| end < s);
+        self.parts
+            .get(k)
+            .or(self.parts.last())
+            .map_or(line, |&(_, l)| l)
+    }
+
     /// The tool with its tip moving from `start` to `start + d`, axis `v`.
     pub fn new(tool: Tool, start: Point3, d: Vector3, v: UnitVector3) -> Self {
         let mut bounds = tool_bounds(&tool, &start, &v);
         let b1 = tool_bounds(&tool, &(start + d), &v);
         bounds.grow(&b1.min);
         bounds.grow(&b1.max);
-        // The closed form below takes the ball as a whole sphere: exact only if the tool
-        // reaches above it (L ≥ 2R).
-        let closed = match tool.kind() {
-            ToolKind::Flat => true,
-            ToolKind::Ball => tool.length() >= 2.0 * tool.radius(),
-            _ => false,
-        };
-        let general = (!closed).then(|| SweptTool::new(&tool, start, d, v));
+        let general = (!Self::has_closed_form(&tool)).then(|| SweptTool::new(&tool, start, d, v));
         Self {
             tool,
             start,
@@ -135,6 +171,7 @@ impl TranslatedTool {
             v,
             bounds,
             general,
+            parts: Vec::new(),
         }
     }
 }
@@ -310,51 +347,86 @@ impl TranslatedTool {
     }
 }
 
+impl TranslatedTool {
+    /// The closed form's cut of the ray with the move parameters `s` of its two ends.
+    fn closed_cut(&self, origin: &Point3, axis: usize) -> Option<(RayCut, Real, Real)> {
+        let mut e = Vector3::zeros();
+        e[axis] = 1.0;
+        let (pieces, count) = self.pieces(origin, &e);
+        let mut acc: Option<(Real, Vector3, Real, Real, Vector3, Real)> = None;
+        for piece in pieces[..count].iter().flatten() {
+            let Some((t0, s0, t1, s1)) = t_extremes(&piece.quad, &piece.lines[..piece.n_lines])
+            else {
+                continue;
+            };
+            let n_in = self.normal_at(piece, origin, &e, t0, s0, true);
+            let n_out = self.normal_at(piece, origin, &e, t1, s1, false);
+            acc = Some(match acc {
+                None => (t0, n_in, s0, t1, n_out, s1),
+                Some((a0, m0, r0, a1, m1, r1)) => {
+                    // On a tie the earlier tool position, as within a piece.
+                    let lo = if t0 < a0 || (t0 == a0 && s0 < r0) {
+                        (t0, n_in, s0)
+                    } else {
+                        (a0, m0, r0)
+                    };
+                    let hi = if t1 > a1 || (t1 == a1 && s1 < r1) {
+                        (t1, n_out, s1)
+                    } else {
+                        (a1, m1, r1)
+                    };
+                    (lo.0, lo.1, lo.2, hi.0, hi.1, hi.2)
+                }
+            });
+        }
+        let (t_in, tn_in, s_in, t_out, tn_out, s_out) = acc?;
+        (t_out - t_in > tol::LENGTH_EPS).then_some((
+            RayCut {
+                t_in,
+                t_out,
+                // Material normals point into the removed region: opposite the tool's
+                // outward normal.
+                n_in: -tn_in,
+                n_out: -tn_out,
+            },
+            s_in,
+            s_out,
+        ))
+    }
+}
+
 impl Cutter for TranslatedTool {
     fn bounds(&self) -> Aabb {
         self.bounds
     }
 
     fn ray_cut(&self, origin: &Point3, axis: usize) -> Option<RayCut> {
-        if let Some(g) = &self.general {
-            return g.ray_cut(origin, axis);
+        match &self.general {
+            Some(g) => g.ray_cut(origin, axis),
+            None => self.closed_cut(origin, axis).map(|(c, _, _)| c),
         }
-        let mut e = Vector3::zeros();
-        e[axis] = 1.0;
-        let (pieces, count) = self.pieces(origin, &e);
-        let mut acc: Option<(Real, Vector3, Real, Vector3)> = None;
-        for piece in pieces[..count].iter().flatten() {
-            let Some((t0, s0, t1, s1)) = t_extremes(&piece.quad, &piece.lines[..piece.n_lines])
-            else {
-                continue;
-            };
-            let lo = (t0, piece, s0);
-            let hi = (t1, piece, s1);
-            let n_in = self.normal_at(lo.1, origin, &e, lo.0, lo.2, true);
-            let n_out = self.normal_at(hi.1, origin, &e, hi.0, hi.2, false);
-            acc = Some(match acc {
-                None => (t0, n_in, t1, n_out),
-                Some((a0, m0, a1, m1)) => {
-                    let (a0, m0) = if t0 < a0 { (t0, n_in) } else { (a0, m0) };
-                    let (a1, m1) = if t1 > a1 { (t1, n_out) } else { (a1, m1) };
-                    (a0, m0, a1, m1)
-                }
-            });
-        }
-        let (t_in, tn_in, t_out, tn_out) = acc?;
-        (t_out - t_in > tol::LENGTH_EPS).then_some(RayCut {
-            t_in,
-            t_out,
-            // Material normals point into the removed region: opposite the tool's outward normal.
-            n_in: -tn_in,
-            n_out: -tn_out,
-        })
     }
 
     fn ray_cuts(&self, origin: &Point3, axis: usize, out: &mut Vec<RayCut>) {
         match &self.general {
             Some(g) => g.ray_cuts(origin, axis, out),
             None => out.extend(self.ray_cut(origin, axis)),
+        }
+    }
+
+    fn ray_cuts_lined(
+        &self,
+        origin: &Point3,
+        axis: usize,
+        line: u32,
+        out: &mut Vec<RayCut>,
+        lines: &mut Vec<[u32; 2]>,
+    ) {
+        if let Some(g) = &self.general {
+            g.ray_cuts_lined(origin, axis, line, out, lines);
+        } else if let Some((c, s_in, s_out)) = self.closed_cut(origin, axis) {
+            out.push(c);
+            lines.push([self.line_at(s_in, line), self.line_at(s_out, line)]);
         }
     }
 }
@@ -477,11 +549,14 @@ pub fn sweep_program(
     };
     let mut report = SweepReport::default();
     progress.start("sweep", moves.len() as u64);
+    let joinable = TranslatedTool::has_closed_form(tool);
+    let mut run: Option<Run> = None;
     for mv in moves {
         if let Some(missing) = AxisLetter::ALL
             .into_iter()
             .find(|&l| !chain.has_axis(l) && mv.start.get(l) != mv.end.get(l))
         {
+            flush(run.take(), stock, tool, &mut report);
             return Err(SweepError::MissingAxis {
                 line: mv.line,
                 axis: missing.as_char(),
@@ -490,16 +565,23 @@ pub fn sweep_program(
         let line = mv.line as u32;
         report.moves += 1;
         let (omega, _) = rotation_and_travel(chain, &mv.start, &mv.end);
-        let mut cut = false;
         if omega == 0.0 {
             let p0 = chain.w_from_t(&mv.start);
-            let p1 = chain.w_from_t(&mv.end);
             let tip0 = p0 * Point3::origin();
+            let tip1 = chain.w_from_t(&mv.end) * Point3::origin();
             let axis = UnitVector3::new_normalize(p0.rotation * Vector3::z());
-            let swept = TranslatedTool::new(tool.clone(), tip0, p1 * Point3::origin() - tip0, axis);
-            report.sweeps += 1;
-            cut |= stock.remove(&swept, line);
+            if let Some(r) = &mut run
+                && joinable
+                && r.extend(mv, &tip1, &axis)
+            {
+                progress.advance(1);
+                continue;
+            }
+            flush(run.take(), stock, tool, &mut report);
+            run = Some(Run::new(mv, tip0, tip1, axis));
         } else {
+            flush(run.take(), stock, tool, &mut report);
+            let mut cut = false;
             report.rotary_moves += 1;
             let rb = RotaryBound::of(chain, tool, mv);
             let n = rb.steps_for(bound, mv.line)?;
@@ -531,14 +613,114 @@ pub fn sweep_program(
                     prev = next;
                 }
             }
-        }
-        if cut {
-            report.cutting_moves += 1;
+            if cut {
+                report.cutting_moves += 1;
+            }
         }
         progress.advance(1);
     }
+    flush(run.take(), stock, tool, &mut report);
     progress.finish();
     Ok(report)
+}
+
+/// Largest distance (mm) of a move's end from the line of the run it joins. Far below any
+/// length the stock resolves (crossings are exact to about this), so sweeping the joined
+/// segment instead of its pieces moves no surface beyond rounding.
+const JOIN_TOL: Real = tol::LENGTH_EPS;
+
+/// Consecutive straight moves at the same rotary values along one line in one direction,
+/// each starting where the previous ended: the union of their sweeps is the sweep of the
+/// whole segment, so they are swept as one.
+struct Run {
+    /// Tip positions (W) at the run's start and current end.
+    tip0: Point3,
+    tip1: Point3,
+    /// Tool axis (W), the same for every move (same rotary values).
+    axis: UnitVector3,
+    /// The direction of travel, once a move of non-zero length fixed it.
+    dir: Option<UnitVector3>,
+    /// Axis values at the current end.
+    end: AxisValues,
+    /// Each move's end tip (W) and NC line.
+    parts: Vec<(Point3, u32)>,
+}
+
+impl Run {
+    fn new(mv: &Move, tip0: Point3, tip1: Point3, axis: UnitVector3) -> Self {
+        let d = tip1 - tip0;
+        Self {
+            tip0,
+            tip1,
+            axis,
+            dir: (d.norm() > JOIN_TOL).then(|| UnitVector3::new_normalize(d)),
+            end: mv.end,
+            parts: vec![(tip1, mv.line as u32)],
+        }
+    }
+
+    /// Appends `mv` (tip ending at `tip1`, tool axis `axis`) if it continues the run.
+    fn extend(&mut self, mv: &Move, tip1: &Point3, axis: &UnitVector3) -> bool {
+        if mv.start != self.end || axis != &self.axis {
+            return false;
+        }
+        let d = tip1 - self.tip1;
+        let along = match self.dir {
+            Some(u) => {
+                let from0 = tip1 - self.tip0;
+                let off_line = (from0 - u.into_inner() * u.dot(&from0)).norm();
+                (u.dot(&d) > 0.0 || d.norm() <= JOIN_TOL) && off_line <= JOIN_TOL
+            }
+            None => true,
+        };
+        if !along {
+            return false;
+        }
+        if self.dir.is_none() && (tip1 - self.tip0).norm() > JOIN_TOL {
+            self.dir = Some(UnitVector3::new_normalize(tip1 - self.tip0));
+        }
+        self.tip1 = *tip1;
+        self.end = mv.end;
+        self.parts.push((*tip1, mv.line as u32));
+        true
+    }
+}
+
+/// Sweeps a run of joined moves; counts the moves that removed material (for a run, the
+/// moves a cut that removed material names at one of its ends).
+fn flush(run: Option<Run>, stock: &mut TriDexel, tool: &Tool, report: &mut SweepReport) {
+    let Some(run) = run else {
+        return;
+    };
+    let d = run.tip1 - run.tip0;
+    let first = run.parts[0].1;
+    let swept = if run.parts.len() == 1 {
+        TranslatedTool::new(tool.clone(), run.tip0, d, run.axis)
+    } else {
+        let dd = d.norm_squared();
+        let last = run.parts.len() - 1;
+        let parts = run
+            .parts
+            .iter()
+            .enumerate()
+            .map(|(k, (tip, line))| {
+                let s = if k == last || dd == 0.0 {
+                    1.0
+                } else {
+                    (tip - run.tip0).dot(&d) / dd
+                };
+                (s, *line)
+            })
+            .collect();
+        TranslatedTool::joined(tool.clone(), run.tip0, d, run.axis, parts)
+    };
+    report.sweeps += 1;
+    let used = stock.remove_lines(&swept, first);
+    report.cutting_moves += run
+        .parts
+        .iter()
+        .filter(|(_, l)| used.binary_search(l).is_ok())
+        .count();
 }
 
 #[cfg(test)]
