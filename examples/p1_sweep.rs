@@ -3,6 +3,8 @@
 //!
 //! Prints the wall time, moves/s, removed volume and the bytes the tri-dexel holds.
 
+#![allow(clippy::print_stdout, reason = "an example reports on the terminal")]
+
 use std::time::Instant;
 use twinmill::kinematics::{Axis, AxisKind, Chain};
 use twinmill::math::{Point3, UnitVector3, Vector3};

@@ -431,10 +431,105 @@ impl TranslatedTool {
         ))
     }
 
+    /// The cut of a ray across the tool axis when the move is square to it (`square_axis`
+    /// = `a`). At the ray's height along the tool axis the tool is a disk of radius `ρ`
+    /// (R, or the ball's section) whose centre moves straight from `c₀` to `c₀ + d`: the
+    /// sweep's section is the set within `ρ` of that segment, bounded by the two end
+    /// circles and the two sides parallel to `d`. The ray's extremes are among its points
+    /// on the end circles and on the sides (foot parameter in [0, 1]), all inside the set.
+    fn across_axis_cut(
+        &self,
+        origin: &Point3,
+        axis: usize,
+        a: usize,
+    ) -> Option<(RayCut, Real, Real)> {
+        let m = 3 - a - axis;
+        let sigma = self.v[a];
+        let r = self.tool.radius();
+        let (ball, l) = (self.tool.kind() == ToolKind::Ball, self.tool.length());
+        let h = sigma * (origin[a] - self.start[a]);
+        if !(0.0..=l).contains(&h) {
+            return None;
+        }
+        let in_ball = ball && h < r;
+        let rho = if in_ball {
+            (r * r - (r - h) * (r - h)).max(0.0).sqrt()
+        } else {
+            r
+        };
+        let (cx, cw, dx, dw, w) = (
+            self.start[axis],
+            self.start[m],
+            self.d[axis],
+            self.d[m],
+            origin[m],
+        );
+        let (mut lo, mut hi) = ((Real::INFINITY, 0.0), (Real::NEG_INFINITY, 0.0));
+        let mut offer = |t: Real, s: Real| {
+            if t < lo.0 || (t == lo.0 && s < lo.1) {
+                lo = (t, s);
+            }
+            if t > hi.0 || (t == hi.0 && s < hi.1) {
+                hi = (t, s);
+            }
+        };
+        for s in [0.0, 1.0] {
+            let u = w - (cw + s * dw);
+            if u.abs() <= rho {
+                let half = (rho * rho - u * u).sqrt();
+                let c = cx + s * dx;
+                offer(c - half, s);
+                offer(c + half, s);
+            }
+        }
+        if dw != 0.0 {
+            let len = dx.hypot(dw);
+            // Unit normal of d in the section, (n_k, n_m).
+            let (nk, nm) = (dw / len, -dx / len);
+            for j in [-1.0, 1.0] {
+                let s = (w - cw - j * rho * nm) / dw;
+                if (0.0..=1.0).contains(&s) {
+                    offer(cx + s * dx + j * rho * nk, s);
+                }
+            }
+        }
+        if hi.0 - lo.0 <= tol::LENGTH_EPS {
+            return None;
+        }
+        // Material normal at (t, s): against the tool's outward normal there.
+        let normal = |t: Real, s: Real, fallback: Vector3| {
+            let mut x = *origin;
+            x[axis] = t;
+            let c = self.start + self.d * s;
+            let out = if in_ball {
+                x - (c + self.v.into_inner() * r)
+            } else {
+                let mut w = x - c;
+                w[a] = 0.0;
+                w
+            };
+            (-out).try_normalize(0.0).unwrap_or(fallback)
+        };
+        let mut e = Vector3::zeros();
+        e[axis] = 1.0;
+        Some((
+            RayCut {
+                t_in: lo.0,
+                t_out: hi.0,
+                n_in: normal(lo.0, lo.1, e),
+                n_out: normal(hi.0, hi.1, -e),
+            },
+            lo.1,
+            hi.1,
+        ))
+    }
+
     /// The closed form's cut of the ray with the move parameters `s` of its two ends.
     fn closed_cut(&self, origin: &Point3, axis: usize) -> Option<(RayCut, Real, Real)> {
-        if self.square_axis == Some(axis) {
-            return self.along_axis_cut(origin, axis);
+        match self.square_axis {
+            Some(a) if a == axis => return self.along_axis_cut(origin, axis),
+            Some(a) => return self.across_axis_cut(origin, axis, a),
+            None => {}
         }
         let mut e = Vector3::zeros();
         e[axis] = 1.0;
@@ -811,6 +906,10 @@ fn flush(run: Option<Run>, stock: &mut TriDexel, tool: &Tool, report: &mut Sweep
 
 #[cfg(test)]
 #[path = "../benches/support/p1.rs"]
+#[allow(
+    clippy::duplicate_mod,
+    reason = "benchmark P1's program is shared by the unit tests of sweep and zmap"
+)]
 mod p1;
 
 #[cfg(test)]
@@ -977,8 +1076,17 @@ mod tests {
     }
 
     /// Is `x` in the sweep of a move (poses from [`sampled_poses`]), the tool offset by `delta`?
-    fn in_sweep(poses: &[Isometry3], ball: bool, r: Real, l: Real, x: &Point3, delta: Real) -> bool {
-        poses.iter().any(|t_from_w| in_tool(ball, r, l, &(t_from_w * x), delta))
+    fn in_sweep(
+        poses: &[Isometry3],
+        ball: bool,
+        r: Real,
+        l: Real,
+        x: &Point3,
+        delta: Real,
+    ) -> bool {
+        poses
+            .iter()
+            .any(|t_from_w| in_tool(ball, r, l, &(t_from_w * x), delta))
     }
 
     proptest! {
@@ -1033,7 +1141,7 @@ mod tests {
             let rep = sweep_program(&mut stock, &chain, &tool, &moves, &opts(), &NoProgress)
                 .expect("sweeps");
             prop_assert_eq!(rep.moves, moves.len());
-            prop_assert!(rep.sweeps <= points.len() - 1);
+            prop_assert!(rep.sweeps < points.len());
             let delta = 0.02;
             let poses: Vec<_> = moves.iter().map(|m| sampled_poses(&chain, m, delta / 4.0)).collect();
             let near = |x: &Point3, k: usize| {
@@ -1096,15 +1204,14 @@ mod tests {
         }
     }
 
-    /// Joined and rotary-free sweeps in fixed chunks: one and two worker threads give
+    /// Joined sweeps of a tilted tool in fixed chunks: one and two worker threads give
     /// bit-identical stocks (every crossing's t, normal and line).
     #[test]
     fn sweep_is_bit_identical_for_one_and_two_threads() {
         let chain = crate::kinematics::mdx50_for_tests();
         let tool = Tool::try_new(ToolKind::Ball, 3.0, 10.0).expect("valid");
-        let at = |x: Real, y: Real, z: Real, a: Real| {
-            AxisValues::from_array([x, y, z, a, 0.0, 0.0])
-        };
+        let at =
+            |x: Real, y: Real, z: Real, a: Real| AxisValues::from_array([x, y, z, a, 0.0, 0.0]);
         let pts = [
             at(-6.0, -4.0, 4.0, 10.0),
             at(-6.0, -4.0, 1.0, 10.0),
@@ -1113,8 +1220,7 @@ mod tests {
             at(6.0, -4.0, 1.0, 10.0),
             at(6.0, -2.5, 1.0, 10.0),
             at(-6.0, -2.5, 1.5, 10.0),
-            at(-6.0, -2.5, 1.5, 40.0),
-            at(2.0, 3.0, 0.0, 40.0),
+            at(2.0, 3.0, 0.0, 10.0),
         ];
         let moves: Vec<Move> = pts
             .windows(2)
@@ -1132,8 +1238,7 @@ mod tests {
                     max: Point3::new(8.0, 8.0, 4.0),
                 };
                 let mut s = TriDexel::new_box(bounds, 0.05, 1e9).expect("fits");
-                sweep_program(&mut s, &chain, &tool, &moves, &opts(), &NoProgress)
-                    .expect("sweeps");
+                sweep_program(&mut s, &chain, &tool, &moves, &opts(), &NoProgress).expect("sweeps");
                 crossings(&s)
             })
         };
@@ -1170,8 +1275,15 @@ mod tests {
     fn p1_ball_surface_is_exact_in_bounded_memory() {
         let tool = Tool::try_new(ToolKind::Ball, p1::TOOL_DIAMETER, 30.0).expect("valid");
         let mut s = TriDexel::new_box(p1::stock_box(), 0.05, 1e9).expect("fits");
-        sweep_program(&mut s, &xyz_chain(), &tool, &p1::moves(), &opts(), &NoProgress)
-            .expect("sweeps");
+        sweep_program(
+            &mut s,
+            &xyz_chain(),
+            &tool,
+            &p1::moves(),
+            &opts(),
+            &NoProgress,
+        )
+        .expect("sweeps");
         let r = p1::TOOL_DIAMETER / 2.0;
         let runs = p1::runs();
         let height = |x: Real, y: Real| {
@@ -1192,7 +1304,12 @@ mod tests {
                 let o = g.ray_origin(iu, iv);
                 let h = height(o.x, o.y);
                 if h < 20.0 - tol::SLIVER {
-                    let top = g.ray(iu, iv).last().expect("material below the pocket").hi.t;
+                    let top = g
+                        .ray(iu, iv)
+                        .last()
+                        .expect("material below the pocket")
+                        .hi
+                        .t;
                     sum2 += (top - h) * (top - h);
                     n += 1;
                 }
@@ -1201,6 +1318,10 @@ mod tests {
         let rms = (sum2 / n as Real).sqrt();
         assert!(n > 2_000_000, "{n} rays in the pocket");
         assert!(rms <= 1e-3, "RMS {rms} mm");
-        assert!(s.memory_bytes() <= 300_000_000, "{} bytes", s.memory_bytes());
+        assert!(
+            s.memory_bytes() <= 300_000_000,
+            "{} bytes",
+            s.memory_bytes()
+        );
     }
 }
