@@ -2,7 +2,8 @@
 //! comparison: throughput in moves/s.
 //!
 //! `cargo bench --bench zmap`; goals: Z-map ≥ 15,000 moves/s at 0.05 mm (FreeCAD 0.20:
-//! 14.2 k), tri-dexel sweep ≥ 2,000 moves/s.
+//! 14.2 k), tri-dexel sweep ≥ 2,000 moves/s on P1-flat (`cargo bench --bench zmap --
+//! tri-dexel`).
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
@@ -61,18 +62,20 @@ fn benches(c: &mut Criterion) {
             });
         }
     }
-    let tool = Tool::try_new(ToolKind::Flat, p1::TOOL_DIAMETER, 30.0).expect("valid");
     let opts = SweepOptions {
         rotary_step_bound_mm: math::tol::ROTARY_STEP_BOUND,
     };
-    g.bench_function("tri-dexel 0.05 mm flat (moves)", |b| {
-        b.iter(|| {
-            let mut s = TriDexel::new_box(p1::stock_box(), 0.05, 8e9).expect("fits");
-            sweep_program(&mut s, &chain, &tool, black_box(&moves), &opts, &NoProgress)
-                .expect("sweeps");
-            s
-        })
-    });
+    for (name, kind) in [("flat", ToolKind::Flat), ("ball", ToolKind::Ball)] {
+        let tool = Tool::try_new(kind, p1::TOOL_DIAMETER, 30.0).expect("valid");
+        g.bench_function(format!("tri-dexel 0.05 mm {name} (moves)"), |b| {
+            b.iter(|| {
+                let mut s = TriDexel::new_box(p1::stock_box(), 0.05, 8e9).expect("fits");
+                sweep_program(&mut s, &chain, &tool, black_box(&moves), &opts, &NoProgress)
+                    .expect("sweeps");
+                s
+            })
+        });
+    }
     g.finish();
 }
 

@@ -746,7 +746,8 @@ pub(crate) fn roots(a: Real, b: Real, c: Real) -> [Option<Real>; 2] {
     [Some(qv / a), Some(c / qv)]
 }
 
-/// Extremes of `t` over the convex set `{Q ≤ 0} ∩ lines`: (t_min, s there, t_max, s there).
+/// Extremes of `t` over the convex set `{Q ≤ 0} ∩ lines`: (t_min, s there, t_max, s there),
+/// the smallest such `s` among candidates tied on `t`.
 /// Candidates: the conic's points with ∂Q/∂s = 0, line ∩ conic, line ∩ line; only feasible
 /// ones count, so a spurious candidate can never widen the interval beyond tolerance.
 pub(crate) fn t_extremes(q: &Quadric, lines: &[Line]) -> Option<(Real, Real, Real, Real)> {
@@ -761,8 +762,17 @@ pub(crate) fn t_extremes(q: &Quadric, lines: &[Line]) -> Option<(Real, Real, Rea
         best = Some(match best {
             None => (t, s, t, s),
             Some((t0, s0, t1, s1)) => {
-                let (t0, s0) = if t < t0 { (t, s) } else { (t0, s0) };
-                let (t1, s1) = if t > t1 { (t, s) } else { (t1, s1) };
+                // On a tie the smaller s: the earliest tool position reaching the extreme.
+                let (t0, s0) = if t < t0 || (t == t0 && s < s0) {
+                    (t, s)
+                } else {
+                    (t0, s0)
+                };
+                let (t1, s1) = if t > t1 || (t == t1 && s < s1) {
+                    (t, s)
+                } else {
+                    (t1, s1)
+                };
                 (t0, s0, t1, s1)
             }
         });

@@ -7,8 +7,11 @@
 //! bias: each crossing lies on the true surface to rounding.
 //!
 //! Storage is flat per block of 16 × 16 rays: one `Vec<Segment>` and an offset table per
-//! block, not a `Vec` per ray. A cut rebuilds only the blocks it touches, in parallel,
-//! each block independently, so the result does not depend on the thread count.
+//! block, not a `Vec` per ray. A block whose rays all still hold the untouched box stock
+//! has no storage at all until a cut changes it. A cut visits only the blocks in its
+//! bounds, in parallel, each block independently, so the result does not depend on the
+//! thread count; within a block it evaluates the cutter only on rays with material inside
+//! the cutter's bounds along the ray, and rewrites the block only where a ray changed.
 //!
 //! **Invariant:** the stock knows nothing about G-code, machines or tools: it only asks a
 //! [`Cutter`] for the interval it removes along a ray.
@@ -112,13 +115,51 @@ pub trait Cutter: Sync {
     fn ray_cuts(&self, origin: &Point3, axis: usize, out: &mut Vec<RayCut>) {
         out.extend(self.ray_cut(origin, axis));
     }
+    /// Like [`Cutter::ray_cuts`], and appends to `lines` the NC lines `[at t_in, at t_out]`
+    /// of each interval's ends, one entry per interval. A cutter standing for several moves
+    /// at once names the move each end comes from; the default names `line` for both.
+    fn ray_cuts_lined(
+        &self,
+        origin: &Point3,
+        axis: usize,
+        line: u32,
+        out: &mut Vec<RayCut>,
+        lines: &mut Vec<[u32; 2]>,
+    ) {
+        let before = out.len();
+        self.ray_cuts(origin, axis, out);
+        lines.resize(lines.len() + out.len() - before, [line, line]);
+    }
 }
 
 #[derive(Clone, Debug, Default)]
 struct Block {
-    /// `offsets[i]..offsets[i+1]` are ray i's segments in `segs`.
+    /// `offsets[i]..offsets[i+1]` are ray i's segments in `segs`. Empty while every ray of
+    /// the block still holds the grid's `fill` segment (untouched box stock, no storage).
     offsets: Vec<u32>,
     segs: Vec<Segment>,
+}
+
+impl Block {
+    fn is_fill(&self) -> bool {
+        self.offsets.is_empty()
+    }
+
+    /// Ray `local`'s segments; `fill` for an untouched block.
+    fn ray<'a>(&'a self, local: usize, fill: &'a [Segment; 1]) -> &'a [Segment] {
+        if self.is_fill() {
+            fill
+        } else {
+            &self.segs[self.offsets[local] as usize..self.offsets[local + 1] as usize]
+        }
+    }
+}
+
+/// A ray of a block whose segments a cut replaced: `new[start..end]` of the block's scratch.
+struct RayChange {
+    local: usize,
+    start: usize,
+    end: usize,
 }
 
 /// One grid of parallel rays.
@@ -134,6 +175,8 @@ pub struct DexelGrid {
     nu: usize,
     nv: usize,
     nbu: usize,
+    /// The untouched stock's segment, held by every ray of a block without storage.
+    fill: [Segment; 1],
     blocks: Vec<Block>,
 }
 
@@ -150,26 +193,11 @@ impl DexelGrid {
         let (nbu, nbv) = (nu.div_ceil(BLOCK), nv.div_ceil(BLOCK));
         let mut lo_n = Vector3::zeros();
         lo_n[axis] = -1.0;
-        let seg = Segment {
+        let fill = [Segment {
             lo: Crossing::new(bounds.min[axis], &lo_n, 0),
             hi: Crossing::new(bounds.max[axis], &-lo_n, 0),
-        };
-        let blocks = (0..nbu * nbv)
-            .map(|b| {
-                let (bu, bv) = (b % nbu, b / nbu);
-                let mut offsets = Vec::with_capacity(BLOCK * BLOCK + 1);
-                let mut segs = Vec::new();
-                offsets.push(0);
-                for local in 0..BLOCK * BLOCK {
-                    let (iu, iv) = (bu * BLOCK + local % BLOCK, bv * BLOCK + local / BLOCK);
-                    if iu < nu && iv < nv {
-                        segs.push(seg);
-                    }
-                    offsets.push(segs.len() as u32);
-                }
-                Block { offsets, segs }
-            })
-            .collect();
+        }];
+        let blocks = vec![Block::default(); nbu * nbv];
         Self {
             axis,
             u,
@@ -181,8 +209,17 @@ impl DexelGrid {
             nu,
             nv,
             nbu,
+            fill,
             blocks,
         }
+    }
+
+    /// Number of the grid's rays in block `b`.
+    fn rays_in_block(&self, b: usize) -> usize {
+        let (bu, bv) = (b % self.nbu, b / self.nbu);
+        let w = (self.nu - bu * BLOCK).min(BLOCK);
+        let h = (self.nv - bv * BLOCK).min(BLOCK);
+        w * h
     }
 
     /// The ray direction (0 = x, 1 = y, 2 = z).
@@ -211,8 +248,7 @@ impl DexelGrid {
     /// The segments of ray `(iu, iv)`.
     pub fn ray(&self, iu: usize, iv: usize) -> &[Segment] {
         let b = &self.blocks[(iv / BLOCK) * self.nbu + iu / BLOCK];
-        let local = (iv % BLOCK) * BLOCK + iu % BLOCK;
-        &b.segs[b.offsets[local] as usize..b.offsets[local + 1] as usize]
+        b.ray((iv % BLOCK) * BLOCK + iu % BLOCK, &self.fill)
     }
 
     /// Calls `f(point, crossing)` for every crossing of the grid, in a fixed order.
@@ -233,18 +269,48 @@ impl DexelGrid {
 
     /// Material volume measured by this grid (mm³): summed lengths times the ray cell area.
     pub fn volume(&self) -> Real {
+        let fill = self.fill[0].hi.t - self.fill[0].lo.t;
         let len: Real = self
             .blocks
             .iter()
-            .flat_map(|b| b.segs.iter())
-            .map(|s| s.hi.t - s.lo.t)
+            .enumerate()
+            .map(|(i, b)| {
+                if b.is_fill() {
+                    self.rays_in_block(i) as Real * fill
+                } else {
+                    b.segs.iter().map(|s| s.hi.t - s.lo.t).sum()
+                }
+            })
             .sum();
         len * self.du * self.dv
     }
 
-    /// Number of stored segments.
+    /// Number of segments (held by untouched blocks too).
     pub fn segment_count(&self) -> usize {
-        self.blocks.iter().map(|b| b.segs.len()).sum()
+        self.blocks
+            .iter()
+            .enumerate()
+            .map(|(i, b)| {
+                if b.is_fill() {
+                    self.rays_in_block(i)
+                } else {
+                    b.segs.len()
+                }
+            })
+            .sum()
+    }
+
+    /// Bytes held on the heap by this grid's blocks.
+    fn heap_bytes(&self) -> usize {
+        self.blocks.capacity() * std::mem::size_of::<Block>()
+            + self
+                .blocks
+                .iter()
+                .map(|b| {
+                    b.segs.capacity() * std::mem::size_of::<Segment>()
+                        + b.offsets.capacity() * std::mem::size_of::<u32>()
+                })
+                .sum::<usize>()
     }
 
     fn index_range(
@@ -262,7 +328,9 @@ impl DexelGrid {
         Some((a as usize, (b as usize).min(n - 1)))
     }
 
-    fn remove(&mut self, cutter: &dyn Cutter, bounds: &Aabb, line: u32) -> bool {
+    /// Removes what `cutter` occupies within `bounds`; appends to `used` the NC lines of
+    /// the cuts that changed a ray (in a fixed order, with repeats).
+    fn remove(&mut self, cutter: &dyn Cutter, bounds: &Aabb, line: u32, used: &mut Vec<u32>) {
         let Some((iu0, iu1)) = Self::index_range(
             bounds.min[self.u],
             bounds.max[self.u],
@@ -270,7 +338,7 @@ impl DexelGrid {
             self.du,
             self.nu,
         ) else {
-            return false;
+            return;
         };
         let Some((iv0, iv1)) = Self::index_range(
             bounds.min[self.v],
@@ -279,86 +347,228 @@ impl DexelGrid {
             self.dv,
             self.nv,
         ) else {
-            return false;
+            return;
         };
-        let nbu = self.nbu;
-        let (axis, u, v, u0, v0, du, dv) = (
-            self.axis, self.u, self.v, self.u0, self.v0, self.du, self.dv,
-        );
-        self.blocks
-            .par_iter_mut()
+        let ctx = CutContext {
+            cutter,
+            line,
+            axis: self.axis,
+            u: self.u,
+            v: self.v,
+            u0: self.u0,
+            v0: self.v0,
+            du: self.du,
+            dv: self.dv,
+            iu: (iu0, iu1),
+            iv: (iv0, iv1),
+            along: (bounds.min[self.axis], bounds.max[self.axis]),
+            fill: self.fill,
+            nu: self.nu,
+            nv: self.nv,
+        };
+        let (nbu, bu0, bu1) = (self.nbu, iu0 / BLOCK, iu1 / BLOCK);
+        let (bv0, bv1) = (iv0 / BLOCK, iv1 / BLOCK);
+        // Only the blocks in the index range, in a fixed order.
+        let touched: Vec<(usize, &mut Block)> = self
+            .blocks
+            .chunks_mut(nbu)
             .enumerate()
-            .map(|(b, block)| {
-                let (bu, bv) = (b % nbu, b / nbu);
-                let (ru0, ru1) = (bu * BLOCK, bu * BLOCK + BLOCK - 1);
-                let (rv0, rv1) = (bv * BLOCK, bv * BLOCK + BLOCK - 1);
-                if ru1 < iu0 || ru0 > iu1 || rv1 < iv0 || rv0 > iv1 {
-                    return false;
-                }
-                let mut out = Vec::with_capacity(block.segs.len() + 8);
-                let mut offsets = Vec::with_capacity(BLOCK * BLOCK + 1);
-                offsets.push(0u32);
-                let mut changed = false;
-                let mut cuts = Vec::new();
-                let (mut scratch, mut next) = (Vec::new(), Vec::new());
-                for local in 0..BLOCK * BLOCK {
-                    let (iu, iv) = (ru0 + local % BLOCK, rv0 + local / BLOCK);
-                    let segs = &block.segs
-                        [block.offsets[local] as usize..block.offsets[local + 1] as usize];
-                    cuts.clear();
-                    if (iu0..=iu1).contains(&iu) && (iv0..=iv1).contains(&iv) && !segs.is_empty() {
-                        let mut o = Point3::origin();
-                        o[u] = u0 + iu as Real * du;
-                        o[v] = v0 + iv as Real * dv;
-                        cutter.ray_cuts(&o, axis, &mut cuts);
-                    }
-                    match cuts.as_slice() {
-                        [] => out.extend_from_slice(segs),
-                        [c] => changed |= subtract(segs, c, line, &mut out),
-                        many => {
-                            // Subtract the cuts one after another through a scratch buffer.
-                            scratch.clear();
-                            scratch.extend_from_slice(segs);
-                            for c in many {
-                                next.clear();
-                                changed |= subtract(&scratch, c, line, &mut next);
-                                std::mem::swap(&mut scratch, &mut next);
-                            }
-                            out.extend_from_slice(&scratch);
-                        }
-                    }
-                    offsets.push(out.len() as u32);
-                }
-                if changed {
-                    block.segs = out;
-                    block.offsets = offsets;
-                }
-                changed
+            .skip(bv0)
+            .take(bv1 - bv0 + 1)
+            .flat_map(|(bv, row)| {
+                row[bu0..=bu1]
+                    .iter_mut()
+                    .enumerate()
+                    .map(move |(k, b)| (bv * nbu + bu0 + k, b))
             })
-            .reduce(|| false, |a, b| a || b)
+            .collect();
+        let lines: Vec<Vec<u32>> = touched
+            .into_par_iter()
+            .map(|(b, block)| ctx.cut_block(b % nbu, b / nbu, block))
+            .collect();
+        for l in lines {
+            used.extend(l);
+        }
     }
 }
 
-/// Appends `segs` minus the cut to `out`; returns whether anything changed.
-fn subtract(segs: &[Segment], c: &RayCut, line: u32, out: &mut Vec<Segment>) -> bool {
+/// What a cut of one grid needs to know, shared by its blocks.
+struct CutContext<'a> {
+    cutter: &'a dyn Cutter,
+    line: u32,
+    axis: usize,
+    u: usize,
+    v: usize,
+    u0: Real,
+    v0: Real,
+    du: Real,
+    dv: Real,
+    /// Ray index ranges (inclusive) in the cutter's bounds.
+    iu: (usize, usize),
+    iv: (usize, usize),
+    /// The cutter's bounds along the rays.
+    along: (Real, Real),
+    fill: [Segment; 1],
+    nu: usize,
+    nv: usize,
+}
+
+impl CutContext<'_> {
+    /// Cuts the rays of block `(bu, bv)` in range; returns the NC lines of the cuts that
+    /// changed a ray (consecutive repeats dropped).
+    fn cut_block(&self, bu: usize, bv: usize, block: &mut Block) -> Vec<u32> {
+        let mut used = Vec::new();
+        let (mut cuts, mut lines) = (Vec::new(), Vec::new());
+        let (mut scratch, mut next) = (Vec::new(), Vec::new());
+        let mut new: Vec<Segment> = Vec::new();
+        let mut changes: Vec<RayChange> = Vec::new();
+        let (lo_a, hi_a) = self.along;
+        let iv_range = self.iv.0.max(bv * BLOCK)..=self.iv.1.min(bv * BLOCK + BLOCK - 1);
+        let iu_range = self.iu.0.max(bu * BLOCK)..=self.iu.1.min(bu * BLOCK + BLOCK - 1);
+        for iv in iv_range {
+            for iu in iu_range.clone() {
+                let local = (iv % BLOCK) * BLOCK + iu % BLOCK;
+                let segs = block.ray(local, &self.fill);
+                // A ray with no material inside the cutter's extent along it cannot change.
+                if !segs.iter().any(|s| s.hi.t > lo_a && s.lo.t < hi_a) {
+                    continue;
+                }
+                let mut o = Point3::origin();
+                o[self.u] = self.u0 + iu as Real * self.du;
+                o[self.v] = self.v0 + iv as Real * self.dv;
+                cuts.clear();
+                lines.clear();
+                self.cutter
+                    .ray_cuts_lined(&o, self.axis, self.line, &mut cuts, &mut lines);
+                let start = new.len();
+                let changed = match cuts.as_slice() {
+                    [] => false,
+                    [c] => subtract(segs, c, lines[0], &mut new, &mut used),
+                    many => {
+                        // Subtract the cuts one after another through a scratch buffer.
+                        scratch.clear();
+                        scratch.extend_from_slice(segs);
+                        let mut changed = false;
+                        for (c, l) in many.iter().zip(&lines) {
+                            next.clear();
+                            changed |= subtract(&scratch, c, *l, &mut next, &mut used);
+                            std::mem::swap(&mut scratch, &mut next);
+                        }
+                        new.extend_from_slice(&scratch);
+                        changed
+                    }
+                };
+                if changed {
+                    changes.push(RayChange {
+                        local,
+                        start,
+                        end: new.len(),
+                    });
+                } else {
+                    new.truncate(start);
+                }
+            }
+        }
+        if changes.is_empty() {
+            return used;
+        }
+        let in_grid = |local: usize| {
+            bu * BLOCK + local % BLOCK < self.nu && bv * BLOCK + local / BLOCK < self.nv
+        };
+        apply_changes(block, &new, &changes, &self.fill, in_grid);
+        used
+    }
+}
+
+/// Replaces the changed rays of `block` (`changes` sorted by ray) by their new segments in
+/// `new`: in place when every changed ray keeps its segment count, else by one rebuild of
+/// the block at its exact size. An untouched block is materialised, its rays in the grid
+/// (`in_grid`) holding `fill`.
+fn apply_changes(
+    block: &mut Block,
+    new: &[Segment],
+    changes: &[RayChange],
+    fill: &[Segment; 1],
+    in_grid: impl Fn(usize) -> bool,
+) {
+    let old_len = |local: usize| block.ray(local, fill).len();
+    if !block.is_fill() && changes.iter().all(|c| c.end - c.start == old_len(c.local)) {
+        for c in changes {
+            let at = block.offsets[c.local] as usize;
+            block.segs[at..at + c.end - c.start].copy_from_slice(&new[c.start..c.end]);
+        }
+        return;
+    }
+    let before = if block.is_fill() {
+        (0..BLOCK * BLOCK).filter(|&l| in_grid(l)).count()
+    } else {
+        block.segs.len()
+    };
+    let total = changes
+        .iter()
+        .fold(before, |n, c| n + (c.end - c.start) - old_len(c.local));
+    let mut segs = Vec::with_capacity(total);
+    let mut offsets = Vec::with_capacity(BLOCK * BLOCK + 1);
+    offsets.push(0u32);
+    let mut pending = changes.iter().peekable();
+    for local in 0..BLOCK * BLOCK {
+        match pending.peek() {
+            Some(c) if c.local == local => {
+                segs.extend_from_slice(&new[c.start..c.end]);
+                pending.next();
+            }
+            _ if block.is_fill() => {
+                if in_grid(local) {
+                    segs.push(fill[0]);
+                }
+            }
+            _ => segs.extend_from_slice(block.ray(local, fill)),
+        }
+        offsets.push(segs.len() as u32);
+    }
+    *block = Block { offsets, segs };
+}
+/// Appends `segs` minus the cut to `out`; returns whether anything changed. The new
+/// crossings carry `lines` (`[at t_in, at t_out]`); the lines of the cut's ends that left a
+/// crossing, or of both ends when a segment vanished whole, are appended to `used`.
+fn subtract(
+    segs: &[Segment],
+    c: &RayCut,
+    lines: [u32; 2],
+    out: &mut Vec<Segment>,
+    used: &mut Vec<u32>,
+) -> bool {
     let mut changed = false;
+    let mut note = |l: u32| {
+        if used.last() != Some(&l) {
+            used.push(l);
+        }
+    };
     for s in segs {
         if c.t_out <= s.lo.t || c.t_in >= s.hi.t {
             out.push(*s);
             continue;
         }
         changed = true;
-        if c.t_in - s.lo.t >= tol::SLIVER {
+        let keep_lo = c.t_in - s.lo.t >= tol::SLIVER;
+        let keep_hi = s.hi.t - c.t_out >= tol::SLIVER;
+        if keep_lo {
             out.push(Segment {
                 lo: s.lo,
-                hi: Crossing::new(c.t_in, &c.n_in, line),
+                hi: Crossing::new(c.t_in, &c.n_in, lines[0]),
             });
+            note(lines[0]);
         }
-        if s.hi.t - c.t_out >= tol::SLIVER {
+        if keep_hi {
             out.push(Segment {
-                lo: Crossing::new(c.t_out, &c.n_out, line),
+                lo: Crossing::new(c.t_out, &c.n_out, lines[1]),
                 hi: s.hi,
             });
+            note(lines[1]);
+        }
+        if !(keep_lo || keep_hi) {
+            note(lines[0]);
+            note(lines[1]);
         }
     }
     changed
@@ -515,15 +725,24 @@ impl TriDexel {
     /// Removes what `cutter` occupies; `line` tags the new surfaces. Returns whether any
     /// material was removed.
     pub fn remove(&mut self, cutter: &dyn Cutter, line: u32) -> bool {
+        !self.remove_lines(cutter, line).is_empty()
+    }
+
+    /// Removes what `cutter` occupies, tagging the new surfaces with the NC lines the
+    /// cutter names ([`Cutter::ray_cuts_lined`], `line` by default). Returns the distinct
+    /// lines of the cuts that removed material, sorted: empty if nothing was removed.
+    pub fn remove_lines(&mut self, cutter: &dyn Cutter, line: u32) -> Vec<u32> {
         let b = cutter.bounds();
+        let mut used = Vec::new();
         if !b.intersects(&self.bounds) {
-            return false;
+            return used;
         }
-        let mut changed = false;
         for g in &mut self.grids {
-            changed |= g.remove(cutter, &b, line);
+            g.remove(cutter, &b, line, &mut used);
         }
-        changed
+        used.sort_unstable();
+        used.dedup();
+        used
     }
 
     /// Material volume (mm³): the mean of the three grids' measures.
@@ -531,13 +750,10 @@ impl TriDexel {
         self.grids.iter().map(DexelGrid::volume).sum::<Real>() / 3.0
     }
 
-    /// Bytes held by the segment and offset storage.
+    /// Bytes held on the heap: the blocks, their segments and offset tables (untouched
+    /// blocks hold none).
     pub fn memory_bytes(&self) -> usize {
-        self.grids
-            .iter()
-            .flat_map(|g| g.blocks.iter())
-            .map(|b| b.segs.capacity() * std::mem::size_of::<Segment>() + b.offsets.capacity() * 4)
-            .sum()
+        self.grids.iter().map(DexelGrid::heap_bytes).sum()
     }
 }
 
