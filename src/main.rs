@@ -745,6 +745,7 @@ fn main() -> ExitCode {
                     .collect(),
                 relative_sigma: d.relative_sigma.clone(),
                 evaluated: d.evaluated,
+                notes: d.notes.clone(),
             };
             let dir = out.join(&name);
             let files = json_bytes(&report, &dir.join("design.json"))
