@@ -10,17 +10,47 @@
 //!   only when the wall, seen at 45°, leaves enough of it in view);
 //! - a *Y-shoulder* across the `+x` end: a cut along Y leaving a wall facing `+x` and a floor.
 //!
-//! Each of the bar's four long corners takes at most one X-shoulder (two indices reach each
-//! corner); Y-shoulders are cut only at indices 0° and 180° (opposite sides, never
-//! touching). X-shoulders stop short of the Y-shoulders. Depths vary so that faces of the same
-//! orientation are cut with the tool's tip at different heights (the lever arm that separates
-//! the spindle's tilt from the squareness of the axes).
+//! Depths come from [`DesignOptions::depths_mm`], limited to the tool's cutting length less a
+//! margin. Two cuts are combined only if the parts of the cross-section they remove (in W,
+//! grown by the face margin) do not meet, so no face is touched by another cut; X-shoulders
+//! stop short of the end shoulders.
 //!
-//! **Choice.** Every compatible combination is evaluated on the model chain: synthetic plane
-//! features with the uncertainties the scanner would give (points on the face from its area
-//! and the scan pitch, range noise σ), the identifiability analysis of [`crate::calibrate`]
-//! with the registration estimated. The design that determines the most of what was asked,
-//! then with the smallest worst relative uncertainty, then with the fewest cuts, wins.
+//! **Choice.** A candidate set is evaluated on the model chain: synthetic plane features with
+//! the uncertainties the scanner would give (points on the face from its area and the scan
+//! pitch, range noise σ), the identifiability analysis of [`crate::calibrate`] with the
+//! registration estimated. Ranking: fewest undetermined directions, then fewest parameters
+//! not identified alone, then the largest information (sum of the logs of the capped
+//! singular values). A beam search keeps the best few sets each round and extends each by
+//! every compatible cut; it stops when a round adds no determined direction and does not
+//! double the information along any direction. (A greedy search of width one settled on two
+//! end shoulders of one depth, which leaves `beta_XZ − beta_ZS` exactly unseen.)
+//!
+//! **The tip-height lever.** To first order, a deviation turn ω at a joint moves the tool by
+//! ω × (p − c), c the joint's origin. The Z-to-X squareness `beta_XZ` turns about the X
+//! carriage's origin `(x, y, 0)`, the spindle tilt `beta_ZS` about the programmed tip
+//! `(x, y, z)`; the two give the tool the same tilt, and `beta_XZ = −beta_ZS = b` moves the
+//! whole tool by `b·e_y × (0, 0, z) = b·z·e_x`: a slide along X by the *programmed tip height*
+//! z times the angle, whatever the index, the position and the direction of the cut.
+//! Likewise `alpha_YX = −alpha_ZS = b` (about `(0, y, 0)` and the tip) slides the tool by
+//! `b·e_x × (x, 0, z) = −b·z·e_y`, exactly what `dy_AY = −b·z` does. So on every face
+//!
+//! ```text
+//! ∂f/∂beta_XZ − ∂f/∂beta_ZS = z·∂f/∂dx_AY      ∂f/∂alpha_YX − ∂f/∂alpha_ZS = −z·∂f/∂dy_AY
+//! ```
+//!
+//! (checked on the model's own Jacobian at random poses in the tests). A slide along X is
+//! what the registration absorbs (X is the rotary axis: the same slide at every index), so
+//! `beta_XZ − beta_ZS` is seen only through *differences* of z between faces across X (the
+//! Y-shoulder walls), and `alpha_YX − alpha_ZS` only through differences of z between faces
+//! across Y at one index (separating it from `dy_AY`). With all cuts at one tip height both
+//! are exactly unseen. In this chain the tool frame is the tip and the axis values are tip
+//! positions, so a longer tool at the same tip height is the same lever; only the spread of
+//! tip heights counts. On the standard bar with a Ø6 × 25 mm tool the tips reach 17 … −3 mm
+//! (Y-shoulder pairs at 0° and 180° must leave a margin of the section between them); with an
+//! EinScan-class scanner (σ 0.025 mm, 0.185 mm pitch) the end walls measure
+//! `(beta_XZ − beta_ZS)/√2` to about 12 % of 5e-4 rad — just short of the tenth that counts
+//! as determined; a scanner of σ 0.01 mm at 0.3 mm pitch determines all nine. [`Design::notes`]
+//! states the spread and the expected uncertainty for the pairs asked for.
 //!
 //! **Invariant:** plans and writes text; runs no sweep or scan and touches no files.
 
@@ -563,7 +593,8 @@ const LEVER_PAIRS: [(&str, &str, bool); 2] = [
 ];
 
 /// For the requested lever pairs: the tip-height spread of the faces that see them and the
-/// expected standard uncertainty of their difference.
+/// expected standard uncertainty along their difference's unit direction `(p₁ − p₂)/√2`
+/// (the quantity the identifiability threshold applies to).
 fn lever_notes(
     cuts: &[Cut],
     o: &DesignOptions,
@@ -600,9 +631,11 @@ fn lever_notes(
         let lo = tips.iter().copied().fold(Real::INFINITY, Real::min);
         let hi = tips.iter().copied().fold(Real::NEG_INFINITY, Real::max);
         let spread = if tips.is_empty() { 0.0 } else { hi - lo };
-        let sigma = cov
-            .as_ref()
-            .map(|c| (c[(i, i)] + c[(k, k)] - 2.0 * c[(i, k)]).max(0.0).sqrt());
+        let sigma = cov.as_ref().map(|c| {
+            ((c[(i, i)] + c[(k, k)] - 2.0 * c[(i, k)]) / 2.0)
+                .max(0.0)
+                .sqrt()
+        });
         let faces = if across_x { "across X" } else { "across Y" };
         let mut note = format!(
             "{a} − {b}: seen only through the spread of programmed tip heights of the faces \
@@ -610,8 +643,8 @@ fn lever_notes(
         );
         if let Some(s) = sigma {
             note.push_str(&format!(
-                "; expected σ {s:.2e} rad = {:.0} % of {ANGLE_MAGNITUDE_RAD:e} rad \
-                 (determined below {:.0} %)",
+                "; expected σ of ({a} − {b})/√2 {s:.2e} rad = {:.0} % of \
+                 {ANGLE_MAGNITUDE_RAD:e} rad (determined below {:.0} %)",
                 100.0 * s / ANGLE_MAGNITUDE_RAD,
                 100.0 * crate::calibrate::DETERMINED_FRACTION
             ));
