@@ -521,9 +521,13 @@ pub fn design(
             break;
         };
         // Stop when a cut adds no determined direction and hardly strengthens the weak ones.
-        if let Some((_, (k, ..))) = &best
+        // A design whose weakest determined direction is close to the threshold keeps
+        // growing while the weakest direction strengthens: a real scan (correlated noise,
+        // points lost at edges) gives less than the expected uncertainties promise.
+        if let Some((_, (k, bi, _))) = &best
             && (top.1.0.0, top.1.0.1) == (k.0, k.1)
             && top.1.0.2 < k.2 + MIN_GAIN
+            && !(weakest(bi) < ROBUST_SINGULAR_VALUE && weakest(&top.1.1) > weakest(bi))
         {
             break;
         }
@@ -538,6 +542,21 @@ pub fn design(
     let mut d = finish(chosen, ident, rel, o, tool, evaluated);
     d.notes = notes;
     Ok(d)
+}
+
+/// The weakest determined direction's singular value a design keeps growing towards: 2.5
+/// times the threshold of determination, so that a real scan, which measures a face less
+/// well than its expected uncertainties (correlated noise, points lost at edges), still
+/// determines it.
+const ROBUST_SINGULAR_VALUE: Real = 2.5 / crate::calibrate::DETERMINED_FRACTION;
+
+/// The smallest singular value of the determined subspace (0 when nothing is determined).
+fn weakest(i: &Identifiability) -> Real {
+    i.rank
+        .checked_sub(1)
+        .and_then(|k| i.singular_values.get(k))
+        .copied()
+        .unwrap_or(0.0)
 }
 
 /// Designs kept per round of the beam search: enough to carry the alternatives a greedy
