@@ -10,29 +10,60 @@
 //!   only when the wall, seen at 45°, leaves enough of it in view);
 //! - a *Y-shoulder* across the `+x` end: a cut along Y leaving a wall facing `+x` and a floor.
 //!
-//! Each of the bar's four long corners takes at most one X-shoulder (two indices reach each
-//! corner); Y-shoulders are cut only at indices 0° and 180° (opposite sides, never
-//! touching). X-shoulders stop short of the Y-shoulders. Depths vary so that faces of the same
-//! orientation are cut with the tool's tip at different heights (the lever arm that separates
-//! the spindle's tilt from the squareness of the axes).
+//! Depths come from [`DesignOptions::depths_mm`], limited to the tool's cutting length less a
+//! margin. Two cuts are combined only if the parts of the cross-section they remove (in W,
+//! grown by the face margin) do not meet, so no face is touched by another cut; X-shoulders
+//! stop short of the end shoulders.
 //!
-//! **Choice.** Every compatible combination is evaluated on the model chain: synthetic plane
-//! features with the uncertainties the scanner would give (points on the face from its area
-//! and the scan pitch, range noise σ), the identifiability analysis of [`crate::calibrate`]
-//! with the registration estimated. The design that determines the most of what was asked,
-//! then with the smallest worst relative uncertainty, then with the fewest cuts, wins.
+//! **Choice.** A candidate set is evaluated on the model chain: synthetic plane features with
+//! the uncertainties the scanner would give (points on the face from its area and the scan
+//! pitch, range noise σ), the identifiability analysis of [`crate::calibrate`] with the
+//! registration estimated. Ranking: fewest undetermined directions, then fewest parameters
+//! not identified alone, then the largest information (sum of the logs of the capped
+//! singular values). A beam search keeps the best few sets each round and extends each by
+//! every compatible cut; it stops when a round adds no determined direction and does not
+//! double the information along any direction. (A greedy search of width one settled on two
+//! end shoulders of one depth, which leaves `beta_XZ − beta_ZS` exactly unseen.)
+//!
+//! **The tip-height lever.** To first order, a deviation turn ω at a joint moves the tool by
+//! ω × (p − c), c the joint's origin. The Z-to-X squareness `beta_XZ` turns about the X
+//! carriage's origin `(x, y, 0)`, the spindle tilt `beta_ZS` about the programmed tip
+//! `(x, y, z)`; the two give the tool the same tilt, and `beta_XZ = −beta_ZS = b` moves the
+//! whole tool by `b·e_y × (0, 0, z) = b·z·e_x`: a slide along X by the *programmed tip height*
+//! z times the angle, whatever the index, the position and the direction of the cut.
+//! Likewise `alpha_YX = −alpha_ZS = b` (about `(0, y, 0)` and the tip) slides the tool by
+//! `b·e_x × (x, 0, z) = −b·z·e_y`, exactly what `dy_AY = −b·z` does. So on every face
+//!
+//! ```text
+//! ∂f/∂beta_XZ − ∂f/∂beta_ZS = z·∂f/∂dx_AY      ∂f/∂alpha_YX − ∂f/∂alpha_ZS = −z·∂f/∂dy_AY
+//! ```
+//!
+//! (checked on the model's own Jacobian at random poses in the tests). A slide along X is
+//! what the registration absorbs (X is the rotary axis: the same slide at every index), so
+//! `beta_XZ − beta_ZS` is seen only through *differences* of z between faces across X (the
+//! Y-shoulder walls), and `alpha_YX − alpha_ZS` only through differences of z between faces
+//! across Y at one index (separating it from `dy_AY`). With all cuts at one tip height both
+//! are exactly unseen. In this chain the tool frame is the tip and the axis values are tip
+//! positions, so a longer tool at the same tip height is the same lever; only the spread of
+//! tip heights counts. On the standard bar with a Ø6 × 25 mm tool the tips reach 17 … −3 mm
+//! (Y-shoulder pairs at 0° and 180° must leave a margin of the section between them); with an
+//! EinScan-class scanner (σ 0.025 mm, 0.185 mm pitch) the end walls measure
+//! `(beta_XZ − beta_ZS)/√2` to about 12 % of 5e-4 rad — just short of the tenth that counts
+//! as determined; a scanner of σ 0.01 mm at 0.3 mm pitch determines all nine. [`Design::notes`]
+//! states the spread and the expected uncertainty for the pairs asked for.
 //!
 //! **Invariant:** plans and writes text; runs no sweep or scan and touches no files.
 
 use crate::calibrate::{
-    CalibrateError, Feature, Identifiability, Model, Registration, identifiability, magnitude,
-    synthetic_plane_feature,
+    ANGLE_MAGNITUDE_RAD, CalibrateError, Feature, Identifiability, Model, Registration,
+    identifiability, magnitude, synthetic_plane_feature,
 };
 use crate::identify::{FaceKind, FaceRegion, FaceSpec};
 use crate::kinematics::{AxisKind, Chain, DeviationId};
 use crate::math::{Aabb, Point3, Real, Vector3};
 use crate::nc::{AxisLetter, AxisValues, Move, MoveKind};
 use crate::tool::{Tool, ToolKind};
+use rayon::prelude::*;
 use std::fmt::Write as _;
 
 /// Errors of test-cut design.
@@ -58,8 +89,10 @@ pub struct DesignOptions {
     pub length_mm: Real,
     /// Shoulder width into the side (mm); must exceed twice the face margin.
     pub width_mm: Real,
-    /// The shoulder depths the design chooses from (mm); each below `half_section_mm`.
-    pub depths_mm: [Real; 3],
+    /// The shoulder depths the design chooses from (mm). A depth is used only where the
+    /// tool's cutting length reaches it with a margin to spare and it leaves a margin of
+    /// the bar's section; cuts whose removed cross-sections would meet are not combined.
+    pub depths_mm: [Real; 5],
     /// Scanner range noise σ (mm), for the expected face uncertainties.
     pub noise_sigma_mm: Real,
     /// Scanner point pitch (mm).
@@ -72,13 +105,15 @@ pub struct DesignOptions {
 
 impl DesignOptions {
     /// The bar and scanner used by `twinmill design` by default: 40 × 40 × 80 mm bar,
-    /// 6 mm shoulders 3, 9 or 15 mm deep, EinScan-class noise 0.025 mm at 0.185 mm pitch.
+    /// 6 mm shoulders 3, 8, 13, 18 or 23 mm deep (tip heights 17 … −3 mm above the rotary
+    /// axis: the lever that separates the spindle's tilt from the squareness of Z), EinScan-
+    /// class noise 0.025 mm at 0.185 mm pitch.
     pub fn standard() -> Self {
         DesignOptions {
             half_section_mm: 20.0,
             length_mm: 80.0,
             width_mm: 6.0,
-            depths_mm: [3.0, 9.0, 15.0],
+            depths_mm: [3.0, 8.0, 13.0, 18.0, 23.0],
             noise_sigma_mm: 0.025,
             pitch_mm: 0.185,
             margin_mm: 1.0,
@@ -125,6 +160,10 @@ pub struct Design {
     pub relative_sigma: Vec<(String, Real)>,
     /// Candidates evaluated.
     pub evaluated: usize,
+    /// Why what is weak is weak: for each requested pair that only the spread of tip
+    /// heights separates (`beta_XZ`/`beta_ZS`, `alpha_YX`/`alpha_ZS`), that spread and the
+    /// expected standard uncertainty of the difference.
+    pub notes: Vec<String>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -197,17 +236,28 @@ impl Cut {
         }
     }
 
-    /// The W corner (sign of y, sign of z) an X-shoulder cuts.
-    fn corner(&self, o: &DesignOptions) -> Option<(i32, i32)> {
-        match *self {
-            Cut::XShoulder { index, side, .. } => {
-                let (s, c) = index.to_radians().sin_cos();
-                let (y, z) = (side * o.half_section_mm, o.half_section_mm);
-                let (yw, zw) = (y * c - z * s, y * s + z * c);
-                Some((yw.signum() as i32, zw.signum() as i32))
+    /// The part of the bar's cross-section (W y, z: min and max corners) the cut removes.
+    fn section(&self, o: &DesignOptions) -> ([Real; 2], [Real; 2]) {
+        let h = o.half_section_mm;
+        let (ys, index, depth) = match *self {
+            Cut::XShoulder { index, side, depth } => {
+                ([side * (h - o.width_mm), side * h], index, depth)
             }
-            Cut::YShoulder { .. } => None,
+            Cut::YShoulder { index, depth } => ([-h, h], index, depth),
+        };
+        let (s, c) = index.to_radians().sin_cos();
+        let mut lo = [Real::INFINITY; 2];
+        let mut hi = [Real::NEG_INFINITY; 2];
+        for y in ys {
+            for z in [h - depth, h] {
+                let w = [y * c - z * s, y * s + z * c];
+                for k in 0..2 {
+                    lo[k] = lo[k].min(w[k]);
+                    hi[k] = hi[k].max(w[k]);
+                }
+            }
         }
+        (lo, hi)
     }
 
     /// The straight cut in axis values (base frame = axis values at this index).
@@ -283,22 +333,35 @@ fn expected_points(area: Real, pitch: Real) -> Real {
     area * std::f64::consts::FRAC_1_SQRT_2 / (pitch * pitch)
 }
 
-fn candidates(o: &DesignOptions) -> Vec<Cut> {
+/// The candidate cuts: X-shoulders on both edges and Y-shoulders across the +x end at the
+/// four indices, at every depth the tool reaches (its cutting length less a margin) that
+/// leaves a margin of the section.
+fn candidates(o: &DesignOptions, tool: &Tool) -> Vec<Cut> {
+    let reach = tool.length() - o.margin_mm;
+    let depths: Vec<Real> = o
+        .depths_mm
+        .iter()
+        .copied()
+        .filter(|d| *d > 0.0 && *d <= reach && *d < 2.0 * o.half_section_mm - o.margin_mm)
+        .collect();
     let mut out = Vec::new();
-    for index in [0.0, 90.0, 180.0, 270.0] {
+    for index in INDICES_DEG {
         for side in [-1.0, 1.0] {
-            for depth in o.depths_mm {
+            for &depth in &depths {
                 out.push(Cut::XShoulder { index, side, depth });
             }
         }
     }
-    for index in [0.0, 180.0] {
-        for depth in o.depths_mm {
+    for index in INDICES_DEG {
+        for &depth in &depths {
             out.push(Cut::YShoulder { index, depth });
         }
     }
     out
 }
+
+/// The rotary indices the bar is cut at (degrees).
+const INDICES_DEG: [Real; 4] = [0.0, 90.0, 180.0, 270.0];
 
 fn features_of(
     cuts: &[Cut],
@@ -404,45 +467,101 @@ pub fn design(
     if params.is_empty() {
         return Err(DesignError::Calibrate(CalibrateError::NoParameters));
     }
-    let pool = candidates(o);
-    let mut chosen: Vec<Cut> = Vec::new();
+    let pool = candidates(o, tool);
+    // Beam search over sets of compatible cuts (indices into the pool, kept sorted): each
+    // round extends every design in the beam by every compatible cut, keeps the BEAM_WIDTH
+    // best distinct designs, and stops when the best no longer improves. A greedy search
+    // (width 1) can settle on cuts that leave a direction exactly unseen (two end shoulders
+    // at one depth); the beam keeps the alternatives that a later cut completes.
+    let mut beam: Vec<(Vec<usize>, Evaluated)> = Vec::new();
+    let mut best: Option<(Vec<usize>, Evaluated)> = None;
     let mut evaluated = 0;
-    let mut best: Option<Evaluated> = None;
+    let mut seen = std::collections::BTreeSet::new();
     loop {
-        let mut round: Option<(Cut, Evaluated)> = None;
-        for c in &pool {
-            if chosen.iter().any(|k| conflicts(k, c, o)) {
-                continue;
-            }
-            let mut cuts = chosen.clone();
-            cuts.push(*c);
-            evaluated += 1;
-            let Some((ident, rel)) = evaluate(&cuts, o, model, tool, params) else {
-                continue;
-            };
-            let key = key_of(&ident, params.len());
-            if round.as_ref().is_none_or(|(_, (k, ..))| better(&key, k)) {
-                round = Some((*c, (key, ident, rel)));
+        let parents: Vec<Vec<usize>> = if beam.is_empty() && best.is_none() {
+            vec![Vec::new()]
+        } else {
+            beam.iter().map(|(c, _)| c.clone()).collect()
+        };
+        let mut children: Vec<Vec<usize>> = Vec::new();
+        for p in &parents {
+            for c in 0..pool.len() {
+                if p.contains(&c) || p.iter().any(|&k| conflicts(&pool[k], &pool[c], o)) {
+                    continue;
+                }
+                let mut set = p.clone();
+                set.push(c);
+                set.sort_unstable();
+                if seen.insert(set.clone()) {
+                    children.push(set);
+                }
             }
         }
-        let Some((cut, (key, ident, rel))) = round else {
+        if children.is_empty() {
+            break;
+        }
+        evaluated += children.len();
+        let scored: Vec<Option<Evaluated>> = children
+            .par_iter()
+            .map(|set| {
+                let cuts: Vec<Cut> = set.iter().map(|&k| pool[k]).collect();
+                let (ident, rel) = evaluate(&cuts, o, model, tool, params)?;
+                Some((key_of(&ident, params.len()), ident, rel))
+            })
+            .collect();
+        let mut round: Vec<(Vec<usize>, Evaluated)> = children
+            .into_iter()
+            .zip(scored)
+            .filter_map(|(c, e)| e.map(|e| (c, e)))
+            .collect();
+        // Stable sort: ties keep the pool order, so the design is deterministic.
+        round.sort_by(|a, b| order(&a.1.0, &b.1.0));
+        round.truncate(BEAM_WIDTH);
+        let Some(top) = round.first() else {
             break;
         };
         // Stop when a cut adds no determined direction and hardly strengthens the weak ones.
-        if let Some((k, ..)) = &best
-            && (key.0, key.1) == (k.0, k.1)
-            && key.2 < k.2 + MIN_GAIN
+        // A design whose weakest determined direction is close to the threshold keeps
+        // growing while the weakest direction strengthens: a real scan (correlated noise,
+        // points lost at edges) gives less than the expected uncertainties promise.
+        if let Some((_, (k, bi, _))) = &best
+            && (top.1.0.0, top.1.0.1) == (k.0, k.1)
+            && top.1.0.2 < k.2 + MIN_GAIN
+            && !(weakest(bi) < ROBUST_SINGULAR_VALUE && weakest(&top.1.1) > weakest(bi))
         {
             break;
         }
-        chosen.push(cut);
-        best = Some((key, ident, rel));
+        best = Some(top.clone());
+        beam = round;
     }
-    let (_, ident, rel) =
+    let (set, (_, ident, rel)) =
         best.ok_or_else(|| DesignError::Machine("a bar the candidate cuts can reach".into()))?;
+    let mut chosen: Vec<Cut> = set.iter().map(|&k| pool[k]).collect();
     chosen.sort_by(|a, b| a.index().total_cmp(&b.index()));
-    Ok(finish(chosen, ident, rel, o, tool, evaluated))
+    let notes = lever_notes(&chosen, o, model, tool, params);
+    let mut d = finish(chosen, ident, rel, o, tool, evaluated);
+    d.notes = notes;
+    Ok(d)
 }
+
+/// The weakest determined direction's singular value a design keeps growing towards: 2.5
+/// times the threshold of determination, so that a real scan, which measures a face less
+/// well than its expected uncertainties (correlated noise, points lost at edges), still
+/// determines it.
+const ROBUST_SINGULAR_VALUE: Real = 2.5 / crate::calibrate::DETERMINED_FRACTION;
+
+/// The smallest singular value of the determined subspace (0 when nothing is determined).
+fn weakest(i: &Identifiability) -> Real {
+    i.rank
+        .checked_sub(1)
+        .and_then(|k| i.singular_values.get(k))
+        .copied()
+        .unwrap_or(0.0)
+}
+
+/// Designs kept per round of the beam search: enough to carry the alternatives a greedy
+/// choice would drop, few enough that the nine deviations design in well under a second.
+const BEAM_WIDTH: usize = 6;
 
 /// A cut that determines nothing new is added only if it raises the information score (the
 /// sum of the logs of the capped singular values) by at least this: ln 2, a doubling of the
@@ -463,19 +582,95 @@ fn key_of(ident: &Identifiability, np: usize) -> Key {
     (np - ident.rank, np - ident.identified.len(), score)
 }
 
-fn better(a: &Key, b: &Key) -> bool {
-    (a.0, a.1) < (b.0, b.1) || ((a.0, a.1) == (b.0, b.1) && a.2 > b.2)
+/// Ranking: fewer undetermined directions, then fewer parameters not identified alone, then
+/// the higher information score.
+fn order(a: &Key, b: &Key) -> std::cmp::Ordering {
+    (a.0, a.1).cmp(&(b.0, b.1)).then(b.2.total_cmp(&a.2))
 }
 
-/// Whether two cuts touch each other's faces.
+/// Whether two cuts touch each other's faces: their removed cross-sections, grown by the
+/// face margin, overlap (X-shoulders stop short of the end, so an X- and a Y-shoulder never
+/// meet).
 fn conflicts(a: &Cut, b: &Cut, o: &DesignOptions) -> bool {
     match (a, b) {
-        (Cut::XShoulder { .. }, Cut::XShoulder { .. }) => a.corner(o) == b.corner(o),
-        (Cut::YShoulder { index: i, depth: d }, Cut::YShoulder { index: j, depth: e }) => {
-            i == j || d + e > 2.0 * o.half_section_mm - 2.0 * o.margin_mm
+        (Cut::XShoulder { .. }, Cut::XShoulder { .. })
+        | (Cut::YShoulder { .. }, Cut::YShoulder { .. }) => {
+            let ((alo, ahi), (blo, bhi)) = (a.section(o), b.section(o));
+            let m = o.margin_mm;
+            (0..2).all(|k| alo[k] < bhi[k] + m && blo[k] < ahi[k] + m)
         }
         _ => false,
     }
+}
+
+/// The pairs of deviations that only the spread of programmed tip heights separates, with
+/// the faces that carry the lever: (first, second, `true` for faces across X (Y-shoulder
+/// walls), `false` for faces across Y (X-shoulder walls)). See [`tip_height_lever`].
+const LEVER_PAIRS: [(&str, &str, bool); 2] = [
+    ("beta_XZ", "beta_ZS", true),
+    ("alpha_YX", "alpha_ZS", false),
+];
+
+/// For the requested lever pairs: the tip-height spread of the faces that see them and the
+/// expected standard uncertainty along their difference's unit direction `(p₁ − p₂)/√2`
+/// (the quantity the identifiability threshold applies to).
+fn lever_notes(
+    cuts: &[Cut],
+    o: &DesignOptions,
+    model: &Chain,
+    tool: &Tool,
+    params: &[DeviationId],
+) -> Vec<String> {
+    let names: Vec<String> = params.iter().map(|id| model.deviation_name(*id)).collect();
+    let cov = features_of(cuts, o, model, tool).and_then(|feats| {
+        let m = Model {
+            chain: model,
+            ids: params,
+            tool,
+            features: &feats,
+            registration: Registration::Estimate,
+        };
+        let j = m.jacobian(&m.start())?;
+        (j.transpose() * &j).pseudo_inverse(1e-12).ok()
+    });
+    let mut out = Vec::new();
+    for (a, b, across_x) in LEVER_PAIRS {
+        let (Some(i), Some(k)) = (
+            names.iter().position(|n| n == a),
+            names.iter().position(|n| n == b),
+        ) else {
+            continue;
+        };
+        let h = o.half_section_mm;
+        let tips: Vec<Real> = cuts
+            .iter()
+            .filter(|c| matches!(c, Cut::YShoulder { .. }) == across_x)
+            .map(|c| h - depth_of(c))
+            .collect();
+        let lo = tips.iter().copied().fold(Real::INFINITY, Real::min);
+        let hi = tips.iter().copied().fold(Real::NEG_INFINITY, Real::max);
+        let spread = if tips.is_empty() { 0.0 } else { hi - lo };
+        let sigma = cov.as_ref().map(|c| {
+            ((c[(i, i)] + c[(k, k)] - 2.0 * c[(i, k)]) / 2.0)
+                .max(0.0)
+                .sqrt()
+        });
+        let faces = if across_x { "across X" } else { "across Y" };
+        let mut note = format!(
+            "{a} − {b}: seen only through the spread of programmed tip heights of the faces \
+             {faces} (here {spread:.1} mm)"
+        );
+        if let Some(s) = sigma {
+            note.push_str(&format!(
+                "; expected σ of ({a} − {b})/√2 {s:.2e} rad = {:.0} % of \
+                 {ANGLE_MAGNITUDE_RAD:e} rad (determined below {:.0} %)",
+                100.0 * s / ANGLE_MAGNITUDE_RAD,
+                100.0 * crate::calibrate::DETERMINED_FRACTION
+            ));
+        }
+        out.push(note);
+    }
+    out
 }
 
 fn finish(
@@ -554,6 +749,7 @@ fn finish(
         identifiability,
         relative_sigma,
         evaluated,
+        notes: Vec::new(),
     }
 }
 
@@ -561,4 +757,196 @@ fn fmt(v: Real) -> String {
     let s = format!("{v:.4}");
     let s = s.trim_end_matches('0').trim_end_matches('.').to_string();
     if s == "-0" { "0".into() } else { s }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const NINE: [&str; 9] = [
+        "dy_AY", "dz_AY", "beta_AY", "gamma_AY", "alpha_YX", "gamma_YX", "beta_XZ", "alpha_ZS",
+        "beta_ZS",
+    ];
+
+    fn nine(c: &Chain) -> Vec<DeviationId> {
+        NINE.iter()
+            .map(|n| c.deviation_id(n).expect("known"))
+            .collect()
+    }
+
+    fn tool() -> Tool {
+        Tool::try_new(ToolKind::Flat, 6.0, 25.0).expect("valid")
+    }
+
+    fn sharp() -> DesignOptions {
+        DesignOptions {
+            noise_sigma_mm: 0.01,
+            pitch_mm: 0.3,
+            ..DesignOptions::standard()
+        }
+    }
+
+    #[test]
+    fn the_nine_deviations_are_all_determined_by_the_designed_cuts() {
+        let c = crate::kinematics::mdx50_for_tests();
+        let d = design(&c, &tool(), &nine(&c), &sharp()).expect("a design");
+        let i = &d.identifiability;
+        assert_eq!(i.rank, 9, "undetermined: {:?}", i.undetermined_combinations);
+        assert_eq!(i.identified.len(), 9);
+        assert!(i.undetermined_combinations.is_empty());
+        assert!(i.condition_number.is_finite());
+        // Each weakest direction is known to better than a tenth of its realistic size.
+        let weakest = i
+            .singular_values
+            .iter()
+            .copied()
+            .fold(Real::INFINITY, Real::min);
+        assert!(weakest >= 1.0 / crate::calibrate::DETERMINED_FRACTION);
+        // The lever: faces across X and across Y at more than one tip height.
+        for (across_x, what) in [(true, "Y-shoulders"), (false, "X-shoulders")] {
+            let tips: Vec<Real> = d
+                .cuts
+                .iter()
+                .filter(|k| k.name.contains("-end-") == across_x)
+                .map(|k| k.cut.start.get(AxisLetter::Z))
+                .collect();
+            let spread = tips.iter().copied().fold(Real::NEG_INFINITY, Real::max)
+                - tips.iter().copied().fold(Real::INFINITY, Real::min);
+            assert!(spread >= 5.0, "{what} tips {tips:?}");
+        }
+        assert_eq!(d.notes.len(), 2);
+    }
+
+    #[test]
+    fn designed_cuts_never_meet() {
+        let c = crate::kinematics::mdx50_for_tests();
+        let o = DesignOptions::standard();
+        let d = design(&c, &tool(), &nine(&c), &o).expect("a design");
+        let pool = candidates(&o, &tool());
+        let cuts: Vec<Cut> = d
+            .cuts
+            .iter()
+            .map(|k| {
+                *pool
+                    .iter()
+                    .find(|p| p.name() == k.name)
+                    .expect("from the pool")
+            })
+            .collect();
+        for (i, a) in cuts.iter().enumerate() {
+            for b in &cuts[..i] {
+                assert!(!conflicts(a, b, &o), "{} meets {}", a.name(), b.name());
+            }
+            // Within the tool's reach.
+            assert!(depth_of(a) <= tool().length() - o.margin_mm);
+        }
+    }
+
+    /// The derivation in the module docs, checked on the model's own Jacobian: at any pose,
+    /// a Z-squareness turn and the same spindle-tilt turn the other way move every face like
+    /// a slide of the tool by the tip height times the angle (along X for beta, along −Y
+    /// for alpha), whatever the rotary index, the position and the cut direction.
+    #[test]
+    fn z_squareness_and_spindle_tilt_differ_only_by_the_tip_height_lever() {
+        use crate::calibrate::{FaceKind, Model, Registration, synthetic_plane_feature};
+        use crate::identify::{FaceRegion, FaceSpec};
+        use crate::nc::{AxisValues, Move, MoveKind};
+        let c = crate::kinematics::mdx50_for_tests();
+        let ids: Vec<DeviationId> = [
+            "beta_XZ", "beta_ZS", "dx_AY", "alpha_YX", "alpha_ZS", "dy_AY",
+        ]
+        .iter()
+        .map(|n| c.deviation_id(n).expect("known"))
+        .collect();
+        let rng = crate::math::CounterRng::new(9);
+        let stock = Aabb {
+            min: Point3::new(-200.0, -200.0, -200.0),
+            max: Point3::new(200.0, 200.0, 200.0),
+        };
+        for k in 0..200u64 {
+            let u = |j| 2.0 * rng.uniform(k, j) - 1.0;
+            let (a, x, y, z) = (180.0 * u(0), 60.0 * u(1), 60.0 * u(2), 40.0 * u(3));
+            let along_x = u(4) > 0.0;
+            let q = |s: Real| {
+                let (dx, dy) = if along_x { (s, 0.0) } else { (0.0, s) };
+                AxisValues::default()
+                    .with(AxisLetter::A, a)
+                    .with(AxisLetter::X, x + dx)
+                    .with(AxisLetter::Y, y + dy)
+                    .with(AxisLetter::Z, z)
+            };
+            let mv = Move {
+                kind: MoveKind::Linear,
+                start: q(-20.0),
+                end: q(20.0),
+                feed_mm_per_min: Some(600.0),
+                line: 1,
+            };
+            let feats: Vec<Feature> = [FaceKind::Flank, FaceKind::Floor]
+                .iter()
+                .map(|&kind| {
+                    let spec = FaceSpec {
+                        name: "f".into(),
+                        line: 1,
+                        region: FaceRegion::Auto,
+                        kind,
+                    };
+                    Feature::Plane(
+                        synthetic_plane_feature(
+                            &spec,
+                            &mv,
+                            &c,
+                            &c,
+                            &tool(),
+                            &stock,
+                            1e-3,
+                            [1e-4, 1e-4],
+                            (-1.0, 1.0),
+                        )
+                        .expect("a face"),
+                    )
+                })
+                .collect();
+            let m = Model {
+                chain: &c,
+                ids: &ids,
+                tool: &tool(),
+                features: &feats,
+                registration: Registration::Workpiece,
+            };
+            let j = m.jacobian(&m.start()).expect("defined");
+            let scale = j.amax();
+            let beta = j.column(0) - j.column(1) - j.column(2) * z;
+            let alpha = j.column(3) - j.column(4) + j.column(5) * z;
+            // Exact at the nominal chain (the two turns' generators differ by a pure
+            // translation): only rounding of ~1e4-sized whitened entries remains.
+            assert!(
+                beta.amax() <= 1e-9 * scale,
+                "pose {k}: beta {}",
+                beta.amax()
+            );
+            assert!(
+                alpha.amax() <= 1e-9 * scale,
+                "pose {k}: alpha {}",
+                alpha.amax()
+            );
+        }
+    }
+
+    #[test]
+    fn cuts_at_one_tip_height_leave_the_lever_pairs_unseen() {
+        // Every cut at the same depth: the two differences fall into the registration's
+        // slide along X and dy_AY (the test above), so they are not determined.
+        let c = crate::kinematics::mdx50_for_tests();
+        let o = DesignOptions {
+            depths_mm: [3.0; 5],
+            ..sharp()
+        };
+        let d = design(&c, &tool(), &nine(&c), &o).expect("a design");
+        let i = &d.identifiability;
+        assert!(i.rank <= 7, "rank {}", i.rank);
+        for p in ["beta_XZ", "beta_ZS", "alpha_ZS"] {
+            assert!(!i.identified.contains(&p.to_string()), "{p} identified");
+        }
+    }
 }

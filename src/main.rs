@@ -677,7 +677,7 @@ fn main() -> ExitCode {
             if let Err(e) = files {
                 return fail(e);
             }
-            print_out(
+            let code = print_out(
                 || {
                     format!(
                         "{}  wrote         {}/{{identify.json, cloud.ply}}\n",
@@ -686,7 +686,24 @@ fn main() -> ExitCode {
                     )
                 },
                 json.then(|| serde_json::to_string_pretty(&outcome.report)),
-            )
+            );
+            if code == ExitCode::SUCCESS && !outcome.report.converged {
+                // Written and reported, but the twin does not reproduce the measured faces.
+                let worst = outcome
+                    .report
+                    .rounds
+                    .last()
+                    .map_or(f64::NAN, |r| r.worst_face_mm);
+                let _ = writeln!(
+                    std::io::stderr(),
+                    "twinmill: the model-correction loop did not converge: after {} rounds the \
+                     twin's faces still differ from the measured ones by up to {worst:.4} mm \
+                     (deviations outside the identified set, or the wrong faces)",
+                    outcome.report.rounds.len()
+                );
+                return ExitCode::from(2);
+            }
+            code
         }
         Command::Design {
             args:
@@ -748,6 +765,7 @@ fn main() -> ExitCode {
                     .collect(),
                 relative_sigma: d.relative_sigma.clone(),
                 evaluated: d.evaluated,
+                notes: d.notes.clone(),
             };
             let dir = out.join(&name);
             let files = json_bytes(&report, &dir.join("design.json"))

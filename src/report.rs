@@ -1047,6 +1047,9 @@ pub struct DesignReport {
     pub relative_sigma: Vec<(String, f64)>,
     /// Candidate evaluations made.
     pub evaluated: usize,
+    /// Why the weak directions are weak (the tip-height lever of the Z-squareness and
+    /// spindle-tilt pairs).
+    pub notes: Vec<String>,
 }
 
 impl DesignReport {
@@ -1072,6 +1075,9 @@ impl DesignReport {
             let _ = writeln!(s, "  not determined {c}");
         }
         let _ = writeln!(s, "  condition     {:.3e}", self.condition_number);
+        for n in &self.notes {
+            let _ = writeln!(s, "  lever         {n}");
+        }
         s
     }
 }
