@@ -13,9 +13,9 @@
 //! leaves an elliptic cylinder along `u` whose depth below the plane through the tip line
 //! (containing `u` and the cross-feed direction `e₂ ⟂ u, v`) is exactly `|t|·√(R² − x₂²)`
 //! at cross-feed coordinate `x₂`. The predicted floor is the least-squares plane of that
-//! surface over the cross-feed range the measured points cover (uniform in `x₂`): offset
-//! `|t|·F₀` and tilt `|t|·F₂` about `u`, with `F₀, F₂` the mean and regression slope of
-//! `√(R² − x₂²)` there. The along-feed tilt enters a floor only through `|t|` (second order
+//! surface over the cross-feed range the measured points cover (uniform in `x₂`): depth
+//! `|t|·F₀` at the tip line and tilt `|t|·F₂` about `u`, with `F₀, F₂` the intercept at
+//! `x₂ = 0` and the slope of the least-squares line of `√(R² − x₂²)` there. The along-feed tilt enters a floor only through `|t|` (second order
 //! and sign-blind); floors therefore inform the across-feed tilt and the path's slope.
 //!
 //! **Residuals.** Per plane: the predicted plane's signed distance at the measured centroid
@@ -447,7 +447,8 @@ impl PlaneFeature {
     }
 }
 
-/// Mean and least-squares slope of `√(R² − x²)` over `x` uniform in `[a, b]` (Simpson).
+/// The least-squares line of `√(R² − x²)` over `x` uniform in `[a, b]` (Simpson): its value
+/// at `x = 0` (the tool's tip line) and its slope.
 fn envelope_moments(r: Real, (a, b): (Real, Real)) -> (Real, Real) {
     const N: usize = 64;
     if b <= a {
@@ -472,7 +473,9 @@ fn envelope_moments(r: Real, (a, b): (Real, Real)) -> (Real, Real) {
     }
     let (mf, mx) = (s0 / w, s1 / w);
     let var = (b - a).powi(2) / 12.0;
-    (mf, (s2 / w - mx * mf) / var)
+    let slope = (s2 / w - mx * mf) / var;
+    // The least-squares line passes through (mean x, mean f): its value at x = 0.
+    (mf - slope * mx, slope)
 }
 
 /// The predicted plane (workpiece frame) of a plane feature: unit normal into the material
@@ -1494,6 +1497,68 @@ mod tests {
             )
         })
         .collect()
+    }
+
+    #[test]
+    fn tilted_floor_is_the_least_squares_line_of_the_elliptic_envelope() {
+        // A spindle tilted along the feed leaves a floor of depth |t|·√(R² − x₂²) below the
+        // tip line. Over an off-centre cross range the predicted plane must be that
+        // surface's least-squares line, placed where the points are (not at the tip line).
+        let mut truth = mdx50();
+        truth.set_deviation(truth.deviation_id("beta_ZS").expect("known"), 0.05);
+        let mv = cut(3, 0.0, -10.0, 8.0);
+        let tool = tool();
+        let range = (-0.5, 2.8);
+        let f = synthetic_plane_feature(
+            &spec("floor", FaceKind::Floor),
+            &mv,
+            &truth,
+            &truth,
+            &tool,
+            &stock(),
+            1e-3,
+            [1e-4, 1e-4],
+            range,
+        )
+        .expect("a floor");
+        let plane = predicted_plane(&truth, &tool, &f).expect("defined");
+        // The envelope's frame, from the poses (independent of the prediction code).
+        let (p0, p1) = (truth.w_from_t(&mv.start), truth.w_from_t(&mv.end));
+        let tip = p0 * Point3::origin();
+        let u = (p1 * Point3::origin() - tip).normalize();
+        let v = p0.rotation * Vector3::z();
+        let t = u.dot(&v);
+        assert!(
+            t.abs() > 0.04,
+            "the test needs a real tilt along the feed, t = {t}"
+        );
+        let e2 = v.cross(&u).normalize();
+        let m = (u * t - v).normalize();
+        // Discrete least squares of h(x) = |t|·√(R² − x²) over uniform x in the range.
+        let n = 100_001;
+        let r = tool.radius();
+        let xs: Vec<Real> = (0..n)
+            .map(|i| range.0 + (range.1 - range.0) * i as Real / (n - 1) as Real)
+            .collect();
+        let hs: Vec<Real> = xs
+            .iter()
+            .map(|x| t.abs() * (r * r - x * x).sqrt())
+            .collect();
+        let mx = xs.iter().sum::<Real>() / n as Real;
+        let mh = hs.iter().sum::<Real>() / n as Real;
+        let sxy: Real = xs.iter().zip(&hs).map(|(x, h)| (x - mx) * (h - mh)).sum();
+        let sxx: Real = xs.iter().map(|x| (x - mx).powi(2)).sum();
+        let slope = sxy / sxx;
+        for x in [range.0, mx, range.1] {
+            let want = mh + slope * (x - mx);
+            // The predicted plane's depth along m at cross-feed x.
+            let n_ = plane.normal.into_inner();
+            let got = (plane.offset - n_.dot(&(tip.coords + e2 * x))) / n_.dot(&m);
+            assert!(
+                (got.abs() - want).abs() < 1e-6,
+                "x₂ = {x}: predicted depth {got}, least squares {want}"
+            );
+        }
     }
 
     #[test]
