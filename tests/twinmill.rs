@@ -522,6 +522,167 @@ fn rotary_move_surface_agrees_with_brute_force() {
 }
 
 // ---------------------------------------------------------------------------------------
+// P3, indexed 3+1: faces milled on a round bar at A = 0, 90, 180, 270° and at 60° steps
+// (a hexagon); planes fitted to the faces' dexel crossings against the exact planes of the
+// deviated chain (the independent 4 × 4 derivation above).
+
+/// Bar radius, face distance from the A axis and tool of the P3 cuts (mm).
+const BAR_R: Real = 10.0;
+const FACE_D: Real = 8.0;
+
+/// The indexed program: per angle, turn A at a safe height, plunge beside the bar, side-mill
+/// along X with the tool's +y flank at machine y = −FACE_D, retract. Returns the moves and the
+/// line of each face cut.
+fn indexed_program(angles: &[Real], r: Real) -> (Vec<Move>, Vec<usize>) {
+    let y = -(FACE_D + r);
+    let safe = 60.0;
+    let mut moves = Vec::new();
+    let mut cuts = Vec::new();
+    let mut at = AxisValues::default()
+        .with(AxisLetter::X, -30.0)
+        .with(AxisLetter::Y, y)
+        .with(AxisLetter::Z, safe);
+    let mut line = 1;
+    let mut go = |to: AxisValues, moves: &mut Vec<Move>, line: &mut usize| {
+        moves.push(Move {
+            kind: MoveKind::Linear,
+            start: at,
+            end: to,
+            feed_mm_per_min: Some(600.0),
+            line: *line,
+        });
+        at = to;
+        *line += 1;
+    };
+    for &a in angles {
+        let p = at;
+        go(p.with(AxisLetter::A, a), &mut moves, &mut line);
+        let p = p.with(AxisLetter::A, a);
+        go(p.with(AxisLetter::Z, -12.0), &mut moves, &mut line);
+        cuts.push(line);
+        go(
+            p.with(AxisLetter::Z, -12.0).with(AxisLetter::X, 30.0),
+            &mut moves,
+            &mut line,
+        );
+        go(p.with(AxisLetter::X, 30.0), &mut moves, &mut line);
+        go(p, &mut moves, &mut line);
+    }
+    (moves, cuts)
+}
+
+/// The exact flank plane of the cut at `a_deg`: unit normal into the material (towards the
+/// A axis) and offset, from the tool tip's path and axis through the independent chain.
+fn exact_index_face(dev: &[[Real; 6]; 4], a_deg: Real, r: Real) -> (Vector3, Real) {
+    let y = -(FACE_D + r);
+    let m0 = mdx50_w_from_t(dev, -30.0, y, -12.0, a_deg);
+    let m1 = mdx50_w_from_t(dev, 30.0, y, -12.0, a_deg);
+    let p0 = (m0 * Vector4::new(0.0, 0.0, 0.0, 1.0)).xyz();
+    let p1 = (m1 * Vector4::new(0.0, 0.0, 0.0, 1.0)).xyz();
+    let axis = (m0 * Vector4::new(0.0, 0.0, 1.0, 0.0)).xyz();
+    let mut n = (p1 - p0).cross(&axis).normalize();
+    // Nominally the material lies towards RotX(a)·(+y) from the tool.
+    let toward = (rot(0, a_deg.to_radians()) * Vector4::new(0.0, 1.0, 0.0, 0.0)).xyz();
+    if n.dot(&toward) < 0.0 {
+        n = -n;
+    }
+    (n, n.dot(&p0) + r)
+}
+
+/// Orthogonal least-squares plane of points: (unit normal, offset), normal along `hint`.
+fn fit_plane(points: &[Vector3], hint: &Vector3) -> (Vector3, Real) {
+    let c = points.iter().sum::<Vector3>() / points.len() as Real;
+    let mut m = nalgebra::Matrix3::zeros();
+    for p in points {
+        let d = p - c;
+        m += d * d.transpose();
+    }
+    let eig = m.symmetric_eigen();
+    let k = eig.eigenvalues.imin();
+    let mut n: Vector3 = eig.eigenvectors.column(k).into_owned();
+    if n.dot(hint) < 0.0 {
+        n = -n;
+    }
+    (n, n.dot(&c))
+}
+
+/// Largest offset (mm) and normal (rad) error of the fitted against the exact planes, and
+/// the largest distance of a single crossing from its exact plane.
+fn indexed_face_errors(angles: &[Real], devs: &[(&str, Real)]) -> (Real, Real, Real) {
+    let mut s = scene();
+    for (name, v) in devs {
+        set_deviation(&mut s, name, *v);
+    }
+    let dev = mdx50_deviations(&s);
+    let r = s.tool.radius();
+    let (moves, cuts) = indexed_program(angles, r);
+    let bar =
+        twinmill::shape::Cylinder::try_new(Point3::new(-20.0, 0.0, 0.0), Vector3::x(), BAR_R, 40.0)
+            .expect("valid");
+    let bounds = Aabb {
+        min: Point3::new(-20.0, -BAR_R - 0.5, -BAR_R - 0.5),
+        max: Point3::new(20.0, BAR_R + 0.5, BAR_R + 0.5),
+    };
+    let mut stock = TriDexel::from_solid(bounds, 0.2, 4e9, &bar).expect("fits");
+    sweep_program(&mut stock, &s.chain, &s.tool, &moves, &s.sweep, &NoProgress).expect("sweeps");
+    let (mut off, mut ang, mut worst) = (0.0 as Real, 0.0 as Real, 0.0 as Real);
+    for (&a, &line) in angles.iter().zip(&cuts) {
+        let (n, d) = exact_index_face(&dev, a, r);
+        let mut pts = Vec::new();
+        for g in stock.grids() {
+            g.for_each_crossing(|p, c| {
+                if c.line as usize == line {
+                    pts.push(p.coords);
+                    worst = worst.max((n.dot(&p.coords) - d).abs());
+                }
+            });
+        }
+        // The face is 40 mm long and 2·sqrt(R² − d²) wide, less what the neighbours take.
+        assert!(pts.len() > 2000, "A{a}: only {} crossings", pts.len());
+        let (nf, df) = fit_plane(&pts, &n);
+        // Offsets compared at the face's centroid (the planes' distance there).
+        let c = pts.iter().sum::<Vector3>() / pts.len() as Real;
+        off = off.max(((d - n.dot(&c)) - (df - nf.dot(&c))).abs());
+        ang = ang.max((nf - n).norm());
+    }
+    (off, ang, worst)
+}
+
+/// The nine deviations of seed 002 Fig. 3 at realistic sizes (±0.5 mm, ±5e-4 rad).
+const NINE_REALISTIC: [(&str, Real); 9] = [
+    ("dy_AY", -0.5),
+    ("dz_AY", 0.35),
+    ("beta_AY", 4e-4),
+    ("gamma_AY", -5e-4),
+    ("alpha_YX", 3e-4),
+    ("gamma_YX", 2.5e-4),
+    ("beta_XZ", -4.5e-4),
+    ("alpha_ZS", 5e-4),
+    ("beta_ZS", -3.5e-4),
+];
+
+#[test]
+fn indexed_faces_at_90_degree_steps_fit_the_exact_planes() {
+    for devs in [&[("dy_AY", 0.0)][..], &NINE_REALISTIC[..]] {
+        let (off, ang, worst) = indexed_face_errors(&[0.0, 90.0, 180.0, 270.0], devs);
+        assert!(off <= 1e-4, "offset error {off} mm");
+        assert!(ang <= 1e-6, "normal error {ang} rad");
+        assert!(worst <= 1e-4, "a crossing {worst} mm off its exact plane");
+    }
+}
+
+#[test]
+fn hexagon_faces_at_60_degree_steps_fit_the_exact_planes() {
+    let angles: Vec<Real> = (0..6).map(|k| 60.0 * k as Real).collect();
+    for devs in [&[("dy_AY", 0.0)][..], &NINE_REALISTIC[..]] {
+        let (off, ang, worst) = indexed_face_errors(&angles, devs);
+        assert!(off <= 1e-4, "offset error {off} mm");
+        assert!(ang <= 1e-6, "normal error {ang} rad");
+        assert!(worst <= 1e-4, "a crossing {worst} mm off its exact plane");
+    }
+}
+
+// ---------------------------------------------------------------------------------------
 // Determinism.
 
 #[test]
@@ -946,6 +1107,7 @@ fn module_dependencies_point_down_the_pipeline() {
         "shape",
         "stock",
         "cutter",
+        "envelope",
         "sweep",
         "collide",
         "mesh",
