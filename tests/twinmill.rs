@@ -536,39 +536,38 @@ const FACE_D: Real = 8.0;
 fn indexed_program(angles: &[Real], r: Real) -> (Vec<Move>, Vec<usize>) {
     let y = -(FACE_D + r);
     let safe = 60.0;
-    let mut moves = Vec::new();
-    let mut cuts = Vec::new();
-    let mut at = AxisValues::default()
+    let home = AxisValues::default()
         .with(AxisLetter::X, -30.0)
         .with(AxisLetter::Y, y)
         .with(AxisLetter::Z, safe);
-    let mut line = 1;
-    let mut go = |to: AxisValues, moves: &mut Vec<Move>, line: &mut usize| {
-        moves.push(Move {
-            kind: MoveKind::Linear,
-            start: at,
-            end: to,
-            feed_mm_per_min: Some(600.0),
-            line: *line,
-        });
-        at = to;
-        *line += 1;
-    };
+    let mut points = vec![home];
+    let mut cuts = Vec::new();
     for &a in angles {
-        let p = at;
-        go(p.with(AxisLetter::A, a), &mut moves, &mut line);
-        let p = p.with(AxisLetter::A, a);
-        go(p.with(AxisLetter::Z, -12.0), &mut moves, &mut line);
-        cuts.push(line);
-        go(
-            p.with(AxisLetter::Z, -12.0).with(AxisLetter::X, 30.0),
-            &mut moves,
-            &mut line,
-        );
-        go(p.with(AxisLetter::X, 30.0), &mut moves, &mut line);
-        go(p, &mut moves, &mut line);
+        let p = home.with(AxisLetter::A, a);
+        points.push(p);
+        points.push(p.with(AxisLetter::Z, -12.0));
+        // The move ending at the next point is the face cut; lines count from 1.
+        cuts.push(points.len());
+        points.push(p.with(AxisLetter::Z, -12.0).with(AxisLetter::X, 30.0));
+        points.push(p.with(AxisLetter::X, 30.0));
+        points.push(p);
     }
-    (moves, cuts)
+    (polyline_moves(&points), cuts)
+}
+
+/// Feed moves through `points`, the k-th move on line k (from 1).
+fn polyline_moves(points: &[AxisValues]) -> Vec<Move> {
+    points
+        .windows(2)
+        .enumerate()
+        .map(|(k, w)| Move {
+            kind: MoveKind::Linear,
+            start: w[0],
+            end: w[1],
+            feed_mm_per_min: Some(600.0),
+            line: k + 1,
+        })
+        .collect()
 }
 
 /// The exact flank plane of the cut at `a_deg`: unit normal into the material (towards the
