@@ -783,7 +783,11 @@ fn helix_volume_independent() -> Real {
     // Angular width of the ball at (r, x) about its centre's meridian.
     let dth = |r: Real, x: Real| {
         let c = (r * r + rc * rc + x * x - rb * rb) / (2.0 * r * rc);
-        if c >= 1.0 { 0.0 } else { 2.0 * c.max(-1.0).acos() }
+        if c >= 1.0 {
+            0.0
+        } else {
+            2.0 * c.max(-1.0).acos()
+        }
     };
     // r = r_lo + u², which makes the square-root ends smooth; midpoint rule in u and x.
     let n = 400;
@@ -814,11 +818,22 @@ fn helical_groove_removes_the_screw_volume() {
     let opts = SweepOptions {
         rotary_step_bound_mm: 1e-4,
     };
-    let rep = sweep_program(&mut stock, &chain, &helix_tool(), &helix_moves(), &opts, &NoProgress)
-        .expect("sweeps");
+    let rep = sweep_program(
+        &mut stock,
+        &chain,
+        &helix_tool(),
+        &helix_moves(),
+        &opts,
+        &NoProgress,
+    )
+    .expect("sweeps");
     assert_eq!(rep.rotary_moves, HELIX_STEPS);
     assert_eq!(rep.sweeps, HELIX_STEPS, "one envelope per move");
-    assert!(rep.rotary_error_bound_mm <= 1e-7, "{}", rep.rotary_error_bound_mm);
+    assert!(
+        rep.rotary_error_bound_mm <= 1e-7,
+        "{}",
+        rep.rotary_error_bound_mm
+    );
     let got = before - stock.volume();
     let want = helix_volume_independent();
     // The dexel measure integrates across rays by the midpoint rule: its error, not the
@@ -869,8 +884,15 @@ fn helical_groove_crossings_lie_on_the_true_swept_surface() {
     let dev = mdx50_deviations(&s);
     let moves = helix_moves();
     let mut stock = helix_stock(0.2);
-    sweep_program(&mut stock, &s.chain, &helix_tool(), &moves, &s.sweep, &NoProgress)
-        .expect("sweeps");
+    sweep_program(
+        &mut stock,
+        &s.chain,
+        &helix_tool(),
+        &moves,
+        &s.sweep,
+        &NoProgress,
+    )
+    .expect("sweeps");
     let mut pts = Vec::new();
     for g in stock.grids() {
         g.for_each_crossing(|p, c| {
@@ -890,7 +912,10 @@ fn helical_groove_crossings_lie_on_the_true_swept_surface() {
             .fold(Real::INFINITY, Real::min);
         worst = worst.max(d.abs());
     }
-    assert!(worst <= 2e-7, "a groove crossing lies {worst} mm from the swept surface");
+    assert!(
+        worst <= 2e-7,
+        "a groove crossing lies {worst} mm from the swept surface"
+    );
 }
 
 // ---------------------------------------------------------------------------------------
