@@ -17,6 +17,7 @@ pub mod correct;
 pub mod cutter;
 pub mod design;
 pub mod deviation;
+pub mod envelope;
 pub mod fit;
 pub mod identify;
 pub mod kinematics;

@@ -175,7 +175,7 @@ impl SimulationReport {
     /// A short text summary.
     pub fn summary(&self) -> String {
         let mut s = format!(
-            "scene         {}\nprogram       {}\nmoves         {} ({} cutting, {} rotary)\nremoved       {:.4} mm³ of {:.4} mm³\nsweep bound   {:.2e} mm (rotary sub-steps and arc chords)\nmesh          {} triangles, {} vertices, Euler characteristic {}\n",
+            "scene         {}\nprogram       {}\nmoves         {} ({} cutting, {} rotary)\nremoved       {:.4} mm³ of {:.4} mm³\nsweep bound   {:.2e} mm (rotary envelope or sub-steps, and arc chords)\nmesh          {} triangles, {} vertices, Euler characteristic {}\n",
             self.scene,
             self.program,
             self.sweep.moves,

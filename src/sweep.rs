@@ -11,7 +11,12 @@
 //! convex set lie on one of a handful of candidate points (the quadric's own extremes, line
 //! ∩ quadric, line ∩ line), each computed by a quadratic formula.
 //!
-//! **Moves that turn a rotary axis** are split into `N` sub-steps, each swept as a
+//! **Moves that turn a rotary axis** with a flat or ball end mill are cut by the exact
+//! per-ray envelope of [`crate::envelope`] (interval ends within
+//! [`crate::envelope::ENVELOPE_TOL`] = 0.1 µm of the true swept surface, the bound
+//! reported). Other tools, or a bound asked tighter than that, fall back to sub-steps:
+//!
+//! such a move is split into `N` sub-steps, each swept as a
 //! translation with the mid-step orientation, its mid-height point `c` moving straight
 //! between its exact positions at the sub-step's ends. The distance between any tool point
 //! on the true and on the approximate motion is at most
@@ -25,6 +30,7 @@
 //! **Invariant:** the sweep reads moves and poses; it never parses text or touches files.
 
 use crate::cutter::{Line, Quadric, SweptTool, t_extremes};
+use crate::envelope::{ENVELOPE_TOL, RotaryEnvelope};
 use crate::kinematics::{AxisKind, Chain};
 use crate::math::{Aabb, Isometry3, Point3, Real, UnitVector3, Vector3, tol};
 use crate::nc::{AxisLetter, AxisValues, Move, MoveKind};
@@ -90,10 +96,11 @@ pub struct SweepReport {
     pub cutting_moves: usize,
     /// Moves that turned a rotary axis.
     pub rotary_moves: usize,
-    /// Translation sweeps evaluated (1 per run of joined straight moves, N per rotary move,
-    /// pruned ones excluded).
+    /// Sweeps evaluated (1 per run of joined straight moves, 1 per rotary move cut by the
+    /// envelope, N per rotary move cut in sub-steps, pruned ones excluded).
     pub sweeps: usize,
-    /// Largest bound on the rotary sub-step approximation over all rotary moves (mm); 0 if none.
+    /// Largest bound on the error of rotary moves (envelope tolerance or sub-step bound) over
+    /// all rotary moves (mm); 0 if none.
     pub rotary_error_bound_mm: Real,
 }
 
@@ -764,6 +771,20 @@ pub fn sweep_program(
             flush(run.take(), stock, tool, &mut report);
             let mut cut = false;
             report.rotary_moves += 1;
+            // Flat and ball end mills: the exact per-ray envelope, unless a bound tighter
+            // than its tolerance is asked for.
+            let envelope = (bound >= ENVELOPE_TOL)
+                .then(|| RotaryEnvelope::new(chain, tool, &mv.start, &mv.end).ok())
+                .flatten();
+            if let Some(env) = envelope {
+                report.rotary_error_bound_mm = report.rotary_error_bound_mm.max(ENVELOPE_TOL);
+                report.sweeps += 1;
+                if stock.remove(&env, line) {
+                    report.cutting_moves += 1;
+                }
+                progress.advance(1);
+                continue;
+            }
             let rb = RotaryBound::of(chain, tool, mv);
             let n = rb.steps_for(bound, mv.line)?;
             report.rotary_error_bound_mm = report.rotary_error_bound_mm.max(rb.at(n));

@@ -1,0 +1,123 @@
+//! Rotary-axis cutting benches (`cargo bench --bench rotary`):
+//!
+//! - **P3, indexed 3+1**: six faces of a hexagon side-milled on a Ø20 mm round bar at A = 0,
+//!   60, …, 300° (flat Ø6 end mill, the scene's deviated MDX-50), faces per second (each
+//!   face: the A turn in the air, plunge beside the bar, the cut along X, retract).
+//! - **P4, simultaneous XA**: one turn of a helical groove 1 mm deep on a Ø16 mm bar, ball
+//!   Ø4 mm, A and X together in 60 moves of 6°, every move cut by the per-ray envelope;
+//!   moves per second, at tri-dexel pitches 0.2 and 0.1 mm.
+
+use criterion::criterion_main;
+
+mod group {
+    use criterion::{Criterion, Throughput, criterion_group};
+    use std::path::Path;
+    use twinmill::math::{Aabb, Point3, Real, Vector3};
+    use twinmill::nc::{AxisLetter, AxisValues, Move, MoveKind};
+    use twinmill::progress::NoProgress;
+    use twinmill::scene::Scene;
+    use twinmill::shape::Cylinder;
+    use twinmill::stock::TriDexel;
+    use twinmill::sweep::{SweepOptions, sweep_program};
+    use twinmill::tool::{Tool, ToolKind};
+
+    const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/mdx50-step.toml");
+
+    fn polyline(points: &[AxisValues]) -> Vec<Move> {
+        points
+            .windows(2)
+            .enumerate()
+            .map(|(k, w)| Move {
+                kind: MoveKind::Linear,
+                start: w[0],
+                end: w[1],
+                feed_mm_per_min: Some(600.0),
+                line: k + 1,
+            })
+            .collect()
+    }
+
+    fn bar(radius: Real, x0: Real, len: Real, pitch: Real) -> TriDexel {
+        let c =
+            Cylinder::try_new(Point3::new(x0, 0.0, 0.0), Vector3::x(), radius, len).expect("valid");
+        let b = radius + 0.5;
+        let bounds = Aabb {
+            min: Point3::new(x0, -b, -b),
+            max: Point3::new(x0 + len, b, b),
+        };
+        TriDexel::from_solid(bounds, pitch, 8e9, &c).expect("fits")
+    }
+
+    fn hexagon(r: Real) -> Vec<Move> {
+        let home = AxisValues::default()
+            .with(AxisLetter::X, -30.0)
+            .with(AxisLetter::Y, -(8.0 + r))
+            .with(AxisLetter::Z, 60.0);
+        let mut points = vec![home];
+        for k in 0..6 {
+            let p = home.with(AxisLetter::A, 60.0 * k as Real);
+            points.push(p);
+            points.push(p.with(AxisLetter::Z, -12.0));
+            points.push(p.with(AxisLetter::Z, -12.0).with(AxisLetter::X, 30.0));
+            points.push(p.with(AxisLetter::X, 30.0));
+            points.push(p);
+        }
+        polyline(&points)
+    }
+
+    fn helix() -> Vec<Move> {
+        let points: Vec<AxisValues> = (0..=60)
+            .map(|k| {
+                let f = k as Real / 60.0;
+                AxisValues::default()
+                    .with(AxisLetter::X, -5.0 + 10.0 * f)
+                    .with(AxisLetter::Z, 7.0)
+                    .with(AxisLetter::A, 360.0 * f)
+            })
+            .collect();
+        polyline(&points)
+    }
+
+    fn benches(c: &mut Criterion) {
+        let scene = Scene::load(Path::new(SCENE)).expect("scene");
+        let opts = SweepOptions {
+            rotary_step_bound_mm: 1e-4,
+        };
+        let mut g = c.benchmark_group("rotary");
+        g.sample_size(10);
+
+        let moves = hexagon(scene.tool.radius());
+        g.throughput(Throughput::Elements(6));
+        g.bench_function("P3 hexagon on a round bar, 0.1 mm (faces)", |b| {
+            b.iter(|| {
+                let mut stock = bar(10.0, -20.0, 40.0, 0.1);
+                sweep_program(
+                    &mut stock,
+                    &scene.chain,
+                    &scene.tool,
+                    &moves,
+                    &opts,
+                    &NoProgress,
+                )
+                .expect("sweeps")
+            })
+        });
+
+        let ball = Tool::try_new(ToolKind::Ball, 4.0, 12.0).expect("valid");
+        let moves = helix();
+        g.throughput(Throughput::Elements(moves.len() as u64));
+        for pitch in [0.2, 0.1] {
+            g.bench_function(format!("P4 helical groove, {pitch} mm (moves)"), |b| {
+                b.iter(|| {
+                    let mut stock = bar(8.0, -10.0, 20.0, pitch);
+                    sweep_program(&mut stock, &scene.chain, &ball, &moves, &opts, &NoProgress)
+                        .expect("sweeps")
+                })
+            });
+        }
+        g.finish();
+    }
+
+    criterion_group!(rotary, benches);
+}
+criterion_main!(group::rotary);
