@@ -346,6 +346,10 @@ pub struct PlaneFeature {
     /// Floors: the cross-feed range (mm, relative to the tool's tip line) the measured
     /// points cover, over which the envelope's least-squares plane is predicted.
     pub cross_range_mm: (Real, Real),
+    /// Floors from a scan: the least-squares line of `√(R² − x₂²)` over the cross-feed
+    /// coordinates of the points actually fitted (value at the tip line, slope), so the
+    /// prediction weighs the envelope as the fit did. `None`: uniform over `cross_range_mm`.
+    pub cross_moments: Option<(Real, Real)>,
     /// Points used in the fit.
     pub points: usize,
     /// RMS residual of the fit (mm).
@@ -410,6 +414,7 @@ impl PlaneFeature {
                 1.0 / slope_sigma_rad[1],
             ),
             cross_range_mm,
+            cross_moments: None,
             points: 0,
             rms_mm: 0.0,
         }
@@ -441,10 +446,29 @@ impl PlaneFeature {
             offset_sigma_mm: design.sigma_mm / (design.n.max(1) as Real).sqrt(),
             slope_whitening: l.transpose() / design.sigma_mm,
             cross_range_mm,
+            cross_moments: None,
             points: design.n,
             rms_mm: fit.rms_mm,
         }
     }
+}
+
+/// The least-squares line of `√(R² − x²)` over the samples `xs`: its value at `x = 0` and
+/// its slope; `None` for fewer than two distinct samples.
+fn sampled_envelope_line(r: Real, xs: &[Real]) -> Option<(Real, Real)> {
+    let n = xs.len() as Real;
+    let f = |x: Real| (r * r - x * x).max(0.0).sqrt();
+    let mx = xs.iter().sum::<Real>() / n;
+    let mf = xs.iter().map(|&x| f(x)).sum::<Real>() / n;
+    let (mut sxx, mut sxf) = (0.0, 0.0);
+    for &x in xs {
+        sxx += (x - mx) * (x - mx);
+        sxf += (x - mx) * (f(x) - mf);
+    }
+    (xs.len() >= 2 && sxx > 0.0).then(|| {
+        let slope = sxf / sxx;
+        (mf - slope * mx, slope)
+    })
 }
 
 /// The least-squares line of `√(R² − x²)` over `x` uniform in `[a, b]` (Simpson): its value
@@ -514,7 +538,9 @@ fn predict_plane<T: Scalar>(
             let t = dot(u, v);
             let m = normalize(vsub(vscale(u, t), v));
             let e2 = normalize(cross(v, u));
-            let (f0, f2) = envelope_moments(tool.radius(), f.cross_range_mm);
+            let (f0, f2) = f
+                .cross_moments
+                .unwrap_or_else(|| envelope_moments(tool.radius(), f.cross_range_mm));
             let (c0, c2) = (t.abs() * T::c(f0), t.abs() * T::c(f2));
             let mut n = normalize(vsub(m, vscale(e2, c2)));
             let at = vadd(tip, vscale(m, c0));
@@ -1344,7 +1370,8 @@ pub fn extract_plane_feature(
                     (a.min(x), b.max(x))
                 });
             let design = face_design(&used, &fit, [u, e2]);
-            Ok(PlaneFeature::from_design(
+            let xs: Vec<Real> = used.iter().map(|p| e2.dot(&(p - fl.tip))).collect();
+            let mut f = PlaneFeature::from_design(
                 &spec.name,
                 *mv,
                 FaceKind::Floor,
@@ -1352,7 +1379,9 @@ pub fn extract_plane_feature(
                 &fit,
                 &design,
                 cross,
-            ))
+            );
+            f.cross_moments = sampled_envelope_line(r, &xs);
+            Ok(f)
         }
     }
 }

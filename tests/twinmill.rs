@@ -1713,7 +1713,8 @@ fn cli_correct_writes_program_and_report_or_nothing() {
 /// The designed test for the nine deviations on the MDX-50 scene, as a scene with coarse
 /// CI settings: tri-dexel 0.2 mm, scanner pitch 0.3 mm, range noise 0.007 mm. (At 0.01 mm
 /// the real scans determine the Z-squareness and spindle-tilt pairs in only 84 of 100
-/// trials; at 0.005 mm the floors' sub-µm model bias exceeds 3σ of `dz_AY` in 7 of 100.)
+/// trials. With the noise nearly off, `dz_AY` still comes back 20–70 nm off: a model bias,
+/// cause not yet found, that at 0.005 mm would exceed its 3σ more often.)
 fn designed_scene(tag: &str) -> Scene {
     use twinmill::design::{DesignOptions, design};
     let base = scene();
