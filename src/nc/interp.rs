@@ -1549,6 +1549,13 @@ impl Interpreter {
                 ));
             }
         }
+        // E belongs to G76 and M66-M68 only: `X1e5` is X1 followed by a stray E word.
+        if b.word(b'e').is_some()
+            && g.motion != Some(760)
+            && !b.m[..b.nm].iter().any(|(m, _)| matches!(m, 66..=68))
+        {
+            return Err(self.err_word(b, b'e', "E word with no G76, M66, M67 or M68 to use it"));
+        }
         if matches!(motion_now, Some(810..=890 | 730 | 740)) && (g.motion.is_some() || axis_given) {
             for (c, name) in [(b'a', "a"), (b'b', "b"), (b'c', "c")] {
                 if b.word(c).is_some() {

@@ -113,6 +113,16 @@ fn errors_name_line_column_and_word() {
 }
 
 #[test]
+fn exponent_notation_is_a_stray_e_word() {
+    // RS274/NGC numbers have no exponent: `X1e999` is X1 and an E word nothing uses.
+    let err = run("G21 G90\nG1 X1e999 F600\nM2\n").unwrap_err();
+    let d = &err.diagnostics[0];
+    assert_eq!((d.line, d.column), (2, 6), "{err}");
+    assert!(d.word.to_ascii_uppercase().starts_with('E'), "{err}");
+    assert!(d.message.contains("E word with no G76"), "{}", d.message);
+}
+
+#[test]
 fn all_syntax_errors_after_the_stop_are_reported() {
     let err = run("G0 X1\nG0 X[1\nG0 Q$\nG1 X1 X2\nM2\n").unwrap_err();
     let lines: Vec<usize> = err.diagnostics.iter().map(|d| d.line).collect();
