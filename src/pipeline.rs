@@ -1193,32 +1193,63 @@ fn scene_ids(scene: &Scene) -> Result<Vec<DeviationId>, PipelineError> {
         .collect())
 }
 
-/// Largest distance (mm) between a feature's predicted plane on `twin` (mapped by the
-/// registration) and its measured centroid, beyond the larger of `tol` and three times the
-/// face's own offset uncertainty.
-fn worst_face(
+/// How far the twin's faces are from the measured ones: for each plane feature, the largest
+/// distance (mm) between its predicted plane on `twin` (mapped by the registration) and the
+/// measured plane, taken at the centroid and at the four corners of the face's extent (so a
+/// tilt mismatch counts, not only an offset), minus what the scan's noise allows there.
+/// Returns the worst distance and whether every face is within `tolerance_mm` or its noise.
+///
+/// The extent comes from the fit's design: the in-plane second moments are
+/// `σ_off² · WᵀW` (`W` the slope whitening, `σ_off` the offset uncertainty), and a uniform
+/// face of half-width `a` has variance `a²/3`. At a corner the measured plane's uncertainty
+/// is `σ_off·√7` (offset plus the two slopes, each `3σ_off²` there), so a face is matched
+/// when it agrees within `max(tolerance_mm, 3·√7·σ_off)`.
+fn face_match(
     twin: &Chain,
     tool: &crate::tool::Tool,
     features: &[Feature],
     reg: &[Real; 6],
-) -> Real {
+    tolerance_mm: Real,
+) -> (Real, bool) {
     let s_from_w = crate::kinematics::Deviation { values: *reg }.transform();
-    features
-        .iter()
-        .map(|f| match f {
-            Feature::Plane(p) => predicted_plane(twin, tool, p).map_or(Real::INFINITY, |pl| {
-                let n = s_from_w.rotation * pl.normal.into_inner();
-                let d = pl.offset + n.dot(&s_from_w.translation.vector);
-                (n.dot(&p.centroid.coords) - d).abs()
-            }),
-        })
-        .fold(0.0, Real::max)
+    let mut worst: Real = 0.0;
+    let mut all = true;
+    for f in features {
+        let Feature::Plane(p) = f;
+        let Some(pl) = predicted_plane(twin, tool, p) else {
+            return (Real::INFINITY, false);
+        };
+        let n = s_from_w.rotation * pl.normal.into_inner();
+        let d = pl.offset + n.dot(&s_from_w.translation.vector);
+        let moments = p.slope_whitening.transpose()
+            * p.slope_whitening
+            * (p.offset_sigma_mm * p.offset_sigma_mm);
+        let half = [0, 1].map(|i| (3.0 * moments[(i, i)]).max(0.0).sqrt());
+        let mut far: Real = 0.0;
+        for (su, sv) in [
+            (0.0, 0.0),
+            (1.0, 1.0),
+            (1.0, -1.0),
+            (-1.0, 1.0),
+            (-1.0, -1.0),
+        ] {
+            let q = p.centroid
+                + p.basis[0].into_inner() * (su * half[0])
+                + p.basis[1].into_inner() * (sv * half[1]);
+            let q = p.plane.project(&q);
+            far = far.max((n.dot(&q.coords) - d).abs());
+        }
+        worst = worst.max(far);
+        all &= far <= tolerance_mm.max(3.0 * 7.0_f64.sqrt() * p.offset_sigma_mm);
+    }
+    (worst, all)
 }
 
 /// The model-correction loop on measured features: identify → update the twin → compare
-/// its predicted faces with the measured ones → repeat until they agree within
-/// `tolerance_mm` (or within three standard uncertainties of the noisiest face's offset,
-/// whichever is larger: a twin cannot match noise better than the noise).
+/// its predicted faces with the measured ones over each face's extent ([`face_match`]) →
+/// repeat, re-identifying from the updated twin, until every face agrees within
+/// `tolerance_mm` or what its scan noise allows (a twin cannot match noise better than the
+/// noise).
 pub fn correction_loop(
     model: &Chain,
     ids: &[DeviationId],
@@ -1227,13 +1258,6 @@ pub fn correction_loop(
     registration: Registration,
     tolerance_mm: Real,
 ) -> Result<(Identification, Chain, Vec<LoopRound>, bool), CalibrateError> {
-    let noise = features
-        .iter()
-        .map(|f| match f {
-            Feature::Plane(p) => 3.0 * p.offset_sigma_mm,
-        })
-        .fold(0.0, Real::max);
-    let tol = tolerance_mm.max(noise);
     let mut twin = model.clone();
     let mut rounds = Vec::new();
     let mut last = None;
@@ -1250,14 +1274,14 @@ pub fn correction_loop(
         for (id, v) in ids.iter().zip(&ident.solution) {
             twin.set_deviation(*id, *v);
         }
-        let worst = worst_face(&twin, tool, features, &ident.registration);
+        let (worst, matched) = face_match(&twin, tool, features, &ident.registration, tolerance_mm);
         rounds.push(LoopRound {
             round,
             worst_face_mm: worst,
             chi2: ident.solver.chi2,
         });
         last = Some(ident);
-        if worst <= tol {
+        if matched {
             converged = true;
             break;
         }
@@ -1437,4 +1461,82 @@ pub fn identify_scene(
         identification: ident,
         twin,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calibrate::synthetic_plane_feature;
+    use crate::identify::{FaceKind, FaceRegion, FaceSpec};
+    use crate::math::UnitVector3;
+    use crate::nc::{AxisLetter, AxisValues, Move, MoveKind};
+    use crate::tool::{Tool, ToolKind};
+
+    #[test]
+    fn a_face_tilted_about_its_centroid_is_not_matched() {
+        // A measured flank turned by θ about its centroid agrees with the twin at the
+        // centroid and differs by h·sinθ·cosθ at the corners, h = √3·σ_off/σ_slope the
+        // half-width the fit's design implies.
+        let chain = crate::kinematics::mdx50_for_tests();
+        let tool = Tool::try_new(ToolKind::Flat, 6.0, 25.0).expect("valid");
+        let q = |x| {
+            AxisValues::default()
+                .with(AxisLetter::X, x)
+                .with(AxisLetter::Y, -3.0)
+                .with(AxisLetter::Z, 5.0)
+        };
+        let mv = Move {
+            kind: MoveKind::Linear,
+            start: q(-30.0),
+            end: q(30.0),
+            feed_mm_per_min: Some(600.0),
+            line: 7,
+        };
+        let spec = FaceSpec {
+            name: "flank".into(),
+            line: 7,
+            region: FaceRegion::Auto,
+            kind: FaceKind::Flank,
+        };
+        let stock = Aabb {
+            min: Point3::new(-20.0, -24.0, -10.0),
+            max: Point3::new(20.0, 8.0, 10.0),
+        };
+        let (sigma_off, sigma_slope) = (1e-5, 1e-6);
+        let mut f = synthetic_plane_feature(
+            &spec,
+            &mv,
+            &chain,
+            &chain,
+            &tool,
+            &stock,
+            sigma_off,
+            [sigma_slope; 2],
+            (0.0, 0.0),
+        )
+        .expect("a flank");
+        let features = |f: &PlaneFeature| vec![Feature::Plane(f.clone())];
+        let (worst, matched) = face_match(&chain, &tool, &features(&f), &[0.0; 6], 1e-4);
+        assert!(matched && worst < 1e-12, "the exact face: {worst}");
+        let theta: Real = 1e-4;
+        let (n, b0, b1) = (
+            f.plane.normal.into_inner(),
+            f.basis[0].into_inner(),
+            f.basis[1].into_inner(),
+        );
+        let turned = n * theta.cos() + b1.cross(&n) * theta.sin();
+        assert!(
+            (b0.dot(&turned)).abs() > 0.9 * theta.sin(),
+            "turned along b0"
+        );
+        f.plane = Plane::through(&f.centroid, UnitVector3::new_normalize(turned));
+        let (worst, matched) = face_match(&chain, &tool, &features(&f), &[0.0; 6], 1e-4);
+        let h = 3.0_f64.sqrt() * sigma_off / sigma_slope;
+        let want = h * theta.sin() * theta.cos();
+        assert!(
+            (worst - want).abs() < 1e-9,
+            "corner distance {worst}, expected {want}"
+        );
+        assert!(!matched, "a {want} mm corner mismatch is beyond 0.1 µm");
+    }
 }

@@ -880,8 +880,8 @@ pub struct EstimateReport {
 pub struct LoopRound {
     /// Round number from 1.
     pub round: usize,
-    /// Largest distance between a predicted and a measured face at its centroid (mm),
-    /// after updating the twin in this round.
+    /// Largest distance between a predicted and a measured face over the face's extent
+    /// (centroid and corners, mm), after updating the twin in this round.
     pub worst_face_mm: f64,
     /// Weighted sum of squared residuals.
     pub chi2: f64,
