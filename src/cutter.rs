@@ -323,7 +323,7 @@ impl SweptTool {
         let mid = match chord_mid {
             Some(t) => t,
             None => {
-                let (t, f) = brent_min(a, b, |t| phi(t).0, true);
+                let (t, f) = brent_min(a, b, |t| phi(t).0, NUMERIC_S_TOL, true);
                 if f > 0.0 {
                     // No interior point: a miss, or a grazing touch thinner than the tolerances.
                     return None;
@@ -353,7 +353,7 @@ impl SweptTool {
         if self.d.norm() <= tol::LENGTH_EPS {
             (f(0.0), 0.0)
         } else {
-            let (s, fs) = brent_min(0.0, 1.0, f, false);
+            let (s, fs) = brent_min(0.0, 1.0, f, NUMERIC_S_TOL, false);
             (fs, s)
         }
     }
@@ -496,15 +496,17 @@ fn piece_gauge(piece: &ConvexPiece, p: &Vector3, v: &Vector3) -> Real {
     side.max(h0 - h).max(h - h1)
 }
 
-/// Minimum of a convex `f` on [lo, hi]: (argument, value). Brent's method (parabolic steps
-/// where `f` is smooth, golden-section steps where it is not; R. P. Brent, *Algorithms for
-/// Minimization without Derivatives*, 1973, ch. 5) until the bracket is below
-/// [`NUMERIC_S_TOL`] relative to (|x| + hi − lo), then compared with both ends (a minimum at
-/// an end is exact). With `stop_at_nonpositive` it returns at the first value ≤ 0.
-fn brent_min(
+/// Minimum of `f` on [lo, hi]: (argument, value). Brent's method (parabolic steps where `f`
+/// is smooth and finite, golden-section steps otherwise, so `+∞` may stand for "undefined";
+/// R. P. Brent, *Algorithms for Minimization without Derivatives*, 1973, ch. 5) until the
+/// bracket is below `rel_tol` relative to (|x| + hi − lo), then compared with both ends (a
+/// minimum at an end is exact). With `stop_at_nonpositive` it returns at the first value ≤ 0.
+/// Exact for convex `f`; for others a local minimum.
+pub(crate) fn brent_min(
     lo: Real,
     hi: Real,
     f: impl Fn(Real) -> Real,
+    rel_tol: Real,
     stop_at_nonpositive: bool,
 ) -> (Real, Real) {
     const C: Real = 0.381_966_011_250_105_1; // (3 − √5)/2
@@ -520,13 +522,13 @@ fn brent_min(
         if stop_at_nonpositive && fx <= 0.0 {
             return (x, fx);
         }
-        let tol1 = NUMERIC_S_TOL * (x.abs() + scale);
+        let tol1 = rel_tol * (x.abs() + scale);
         let tol2 = 2.0 * tol1;
         if (x - m).abs() <= tol2 - 0.5 * (b - a) {
             break;
         }
         let mut golden = true;
-        if e.abs() > tol1 {
+        if e.abs() > tol1 && fx.is_finite() && fw.is_finite() && fv.is_finite() {
             let r = (x - w) * (fx - fv);
             let mut q = (x - v) * (fx - fw);
             let mut p = (x - v) * q - (x - w) * r;

@@ -43,6 +43,7 @@
 //! **Invariant:** the envelope knows only the tool's shape, the chain's poses and one move;
 //! it never reads programs, stock or files.
 
+use crate::cutter::brent_min;
 use crate::kinematics::{Axis, AxisKind, Chain};
 use crate::math::{Aabb, Isometry3, Matrix3, Point3, Real, Vector3, tol};
 use crate::nc::AxisValues;
@@ -374,7 +375,7 @@ impl RotaryEnvelope {
             }
             let (a, b) = (self.lambda_of(2 * j), self.lambda_of(2 * j + 2));
             let f = |l: Real| self.at_lambda(l, o, e).map_or(Real::INFINITY, |c| c.0);
-            let (l, t) = brent_min(a, b, f);
+            let (l, t) = brent_min(a, b, f, LAMBDA_TOL, false);
             if t.is_finite()
                 && let Some((t0, f0, t1, f1)) = self.at_lambda(l, o, e)
             {
@@ -388,7 +389,7 @@ impl RotaryEnvelope {
             }
             let (a, b) = (self.lambda_of(2 * j), self.lambda_of(2 * j + 2));
             let f = |l: Real| self.at_lambda(l, o, e).map_or(Real::INFINITY, |c| -c.2);
-            let (l, t) = brent_min(a, b, f);
+            let (l, t) = brent_min(a, b, f, LAMBDA_TOL, false);
             if t.is_finite()
                 && let Some((t0, f0, t1, f1)) = self.at_lambda(l, o, e)
             {
@@ -565,85 +566,6 @@ fn tool_interval(
         }
         (a, b) => a.or(b),
     }
-}
-
-/// Minimum of `f` on [lo, hi] (`+∞` allowed where undefined): Brent's method (parabolic
-/// steps where `f` is smooth and finite, golden-section steps otherwise) to a bracket of
-/// [`LAMBDA_TOL`] relative to (|x| + hi − lo), then compared with both ends.
-fn brent_min(lo: Real, hi: Real, f: impl Fn(Real) -> Real) -> (Real, Real) {
-    const C: Real = 0.381_966_011_250_105_1; // (3 − √5)/2
-    let (mut a, mut b) = (lo, hi);
-    let scale = hi - lo;
-    let mut x = a + C * (b - a);
-    let (mut w, mut v) = (x, x);
-    let mut fx = f(x);
-    let (mut fw, mut fv) = (fx, fx);
-    let (mut d, mut e): (Real, Real) = (0.0, 0.0);
-    for _ in 0..200 {
-        let m = 0.5 * (a + b);
-        let tol1 = LAMBDA_TOL * (x.abs() + scale);
-        let tol2 = 2.0 * tol1;
-        if (x - m).abs() <= tol2 - 0.5 * (b - a) {
-            break;
-        }
-        let mut golden = true;
-        if e.abs() > tol1 && fx.is_finite() && fw.is_finite() && fv.is_finite() {
-            let r = (x - w) * (fx - fv);
-            let mut q = (x - v) * (fx - fw);
-            let mut p = (x - v) * q - (x - w) * r;
-            q = 2.0 * (q - r);
-            if q > 0.0 {
-                p = -p;
-            } else {
-                q = -q;
-            }
-            let e_old = e;
-            e = d;
-            if p.abs() < (0.5 * q * e_old).abs() && p > q * (a - x) && p < q * (b - x) {
-                d = p / q;
-                let u = x + d;
-                if u - a < tol2 || b - u < tol2 {
-                    d = if x < m { tol1 } else { -tol1 };
-                }
-                golden = false;
-            }
-        }
-        if golden {
-            e = if x < m { b - x } else { a - x };
-            d = C * e;
-        }
-        let u = if d.abs() >= tol1 {
-            x + d
-        } else if d > 0.0 {
-            x + tol1
-        } else {
-            x - tol1
-        };
-        let fu = f(u);
-        if fu <= fx {
-            if u < x {
-                b = x;
-            } else {
-                a = x;
-            }
-            (v, fv, w, fw, x, fx) = (w, fw, x, fx, u, fu);
-        } else {
-            if u < x {
-                a = u;
-            } else {
-                b = u;
-            }
-            if fu <= fw || w == x {
-                (v, fv, w, fw) = (w, fw, u, fu);
-            } else if fu <= fv || v == x || v == w {
-                (v, fv) = (u, fu);
-            }
-        }
-    }
-    [(lo, f(lo)), (hi, f(hi)), (x, fx)]
-        .into_iter()
-        .min_by(|p, q| p.1.total_cmp(&q.1))
-        .unwrap_or((x, fx))
 }
 
 impl Cutter for RotaryEnvelope {
