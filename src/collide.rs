@@ -580,13 +580,8 @@ pub fn sweep_with_checks(
     let fixture_bounds: Vec<Aabb> = fixtures.iter().map(|f| f.mesh.bounds()).collect();
     let mut report = CollisionReport::default();
     // Arcs are swept as chords within the rotary step bound, as the sweep does.
-    let chords: Vec<Move>;
-    let moves: &[Move] = if moves.iter().any(|m| matches!(m.kind, MoveKind::Arc(_))) {
-        chords = moves.iter().flat_map(|m| m.chords(bound)).collect();
-        &chords
-    } else {
-        moves
-    };
+    let moves = crate::sweep::as_chords(moves, bound);
+    let moves: &[Move] = &moves;
     progress.start("collisions", moves.len() as u64);
     for mv in moves {
         if let Some(missing) = AxisLetter::ALL

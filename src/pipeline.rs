@@ -228,13 +228,7 @@ pub fn machine_part(
         &scene.sweep,
         progress,
     )
-    .map_err(|source| {
-        let location = match source.line() {
-            Some(line) => format!("{}:{line}", program.path.display()),
-            None => format!("{spath}: [sweep]"),
-        };
-        PipelineError::Sweep { location, source }
-    })?;
+    .map_err(sweep_failed(program, &spath))?;
     let timings = vec![
         ("stock".to_string(), t_stock),
         ("sweep".to_string(), clock.elapsed().as_secs_f64()),
@@ -736,13 +730,7 @@ pub fn simulate(
         &scene.sweep,
         progress,
     )
-    .map_err(|source| {
-        let location = match source.line() {
-            Some(line) => format!("{}:{line}", program.path.display()),
-            None => format!("{path}: [sweep]"),
-        };
-        PipelineError::Sweep { location, source }
-    })?;
+    .map_err(sweep_failed(program, &path))?;
     timings.insert("sweep".into(), clock.elapsed().as_secs_f64());
     let clock = Instant::now();
     let (mesh, mesh_report) = mesh_stock(&stock).map_err(|source| PipelineError::Mesh {
@@ -1176,6 +1164,20 @@ pub fn extract_features(
             })
         })
         .collect()
+}
+
+/// A sweep error located at the program line it names, or at the scene's `[sweep]`.
+fn sweep_failed<'a>(
+    program: &'a Program,
+    scene_path: &'a str,
+) -> impl Fn(SweepError) -> PipelineError + 'a {
+    move |source| {
+        let location = match source.line() {
+            Some(line) => format!("{}:{line}", program.path.display()),
+            None => format!("{scene_path}: [sweep]"),
+        };
+        PipelineError::Sweep { location, source }
+    }
 }
 
 fn scene_ids(scene: &Scene) -> Result<Vec<DeviationId>, PipelineError> {

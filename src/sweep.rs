@@ -714,6 +714,16 @@ fn pose_at(chain: &Chain, mv: &Move, lambda: Real) -> Isometry3 {
     chain.w_from_t(&q)
 }
 
+/// The moves with every arc replaced by chords within `bound` (mm) of it: borrowed as they
+/// are when there is no arc.
+pub fn as_chords(moves: &[Move], bound: Real) -> std::borrow::Cow<'_, [Move]> {
+    if moves.iter().any(|m| matches!(m.kind, MoveKind::Arc(_))) {
+        std::borrow::Cow::Owned(moves.iter().flat_map(|m| m.chords(bound)).collect())
+    } else {
+        std::borrow::Cow::Borrowed(moves)
+    }
+}
+
 /// Sweeps the tool through `moves` on `chain`, removing material from `stock`.
 pub fn sweep_program(
     stock: &mut TriDexel,
@@ -727,14 +737,8 @@ pub fn sweep_program(
     if !(bound > 0.0 && bound <= 1.0) {
         return Err(SweepError::BadBound(bound));
     }
-    // Arcs are swept as chords within the rotary step bound.
-    let chords: Vec<Move>;
-    let moves: &[Move] = if moves.iter().any(|m| matches!(m.kind, MoveKind::Arc(_))) {
-        chords = moves.iter().flat_map(|m| m.chords(bound)).collect();
-        &chords
-    } else {
-        moves
-    };
+    let moves = as_chords(moves, bound);
+    let moves: &[Move] = &moves;
     let mut report = SweepReport::default();
     progress.start("sweep", moves.len() as u64);
     let joinable = TranslatedTool::has_closed_form(tool);
