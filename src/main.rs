@@ -526,17 +526,7 @@ fn main() -> ExitCode {
                 study: cases,
             };
             let dir = out.join(format!("{}-scan", scene.name));
-            let files = json_bytes(&report, &dir.join("scan.json"))
-                .and_then(|j| {
-                    Ok(vec![
-                        ("scan.json", j),
-                        (
-                            "cloud.ply",
-                            ply_bytes(&scanned.cloud, &dir.join("cloud.ply"))?,
-                        ),
-                    ])
-                })
-                .and_then(|files| write_files(&dir, &files));
+            let files = write_report_and_cloud(&dir, "scan.json", &report, &scanned.cloud);
             if let Err(e) = files {
                 return fail(e);
             }
@@ -663,17 +653,8 @@ fn main() -> ExitCode {
                 Err(e) => return fail(e),
             };
             let dir = out.join(format!("{}-identify", scene.name));
-            let files = json_bytes(&outcome.report, &dir.join("identify.json"))
-                .and_then(|j| {
-                    Ok(vec![
-                        ("identify.json", j),
-                        (
-                            "cloud.ply",
-                            ply_bytes(&outcome.cloud, &dir.join("cloud.ply"))?,
-                        ),
-                    ])
-                })
-                .and_then(|files| write_files(&dir, &files));
+            let files =
+                write_report_and_cloud(&dir, "identify.json", &outcome.report, &outcome.cloud);
             if let Err(e) = files {
                 return fail(e);
             }
@@ -888,4 +869,18 @@ fn bars(json: bool) -> Bars {
         bar: Mutex::new(None),
         enabled: !json && std::io::stderr().is_terminal(),
     }
+}
+
+/// Writes a JSON report and the point cloud (`cloud.ply`) into `dir`, all or nothing.
+fn write_report_and_cloud(
+    dir: &Path,
+    report_name: &str,
+    report: &impl serde::Serialize,
+    cloud: &twinmill::cloud::PointCloud,
+) -> Result<PathBuf, twinmill::output::OutputError> {
+    let files = vec![
+        (report_name, json_bytes(report, &dir.join(report_name))?),
+        ("cloud.ply", ply_bytes(cloud, &dir.join("cloud.ply"))?),
+    ];
+    write_files(dir, &files)
 }

@@ -82,6 +82,16 @@ pub struct Aabb {
 }
 
 impl Aabb {
+    /// Whether this is a usable solid box: finite corners and a positive extent on every axis.
+    pub fn is_proper_box(&self) -> bool {
+        self.min
+            .coords
+            .iter()
+            .chain(self.max.coords.iter())
+            .all(|c| c.is_finite())
+            && (0..3).all(|k| self.max[k] > self.min[k])
+    }
+
     /// The empty box (contains nothing; any `grow` makes it the grown point).
     pub fn empty() -> Self {
         Self {

@@ -608,13 +608,7 @@ pub struct TriDexel {
 impl TriDexel {
     /// A box stock at `pitch` (mm), refusing if the estimate exceeds `budget_bytes`.
     pub fn new_box(bounds: Aabb, pitch: Real, budget_bytes: Real) -> Result<Self, StockError> {
-        let finite = bounds
-            .min
-            .coords
-            .iter()
-            .chain(bounds.max.coords.iter())
-            .all(|c| c.is_finite());
-        if !finite || (0..3).any(|k| bounds.max[k] <= bounds.min[k]) {
+        if !bounds.is_proper_box() {
             return Err(StockError::BadBox);
         }
         if !(pitch.is_finite() && pitch > 0.0) {

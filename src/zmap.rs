@@ -217,13 +217,7 @@ impl ZMap {
     /// layout equals the tri-dexel's z grid: `round(size/pitch)` cells per side (at least 1),
     /// spacing `size/cells`, centres half a spacing in from the box.
     pub fn new_box(bounds: Aabb, pitch: Real, budget_bytes: Real) -> Result<Self, ZMapError> {
-        let finite = bounds
-            .min
-            .coords
-            .iter()
-            .chain(bounds.max.coords.iter())
-            .all(|c| c.is_finite());
-        if !finite || (0..3).any(|k| bounds.max[k] <= bounds.min[k]) {
+        if !bounds.is_proper_box() {
             return Err(ZMapError::BadBox);
         }
         if !(pitch.is_finite() && pitch > 0.0) {
