@@ -130,6 +130,21 @@ pub trait Cutter: Sync {
         self.ray_cuts(origin, axis, out);
         lines.resize(lines.len() + out.len() - before, [line, line]);
     }
+    /// Like [`Cutter::ray_cuts_lined`] for a caller that only keeps what lies in `span`
+    /// along the ray (the material's extent): an interval end outside `span` may be anywhere
+    /// outside it, and an interval wholly outside may be left out. The default is exact.
+    fn ray_cuts_in_span(
+        &self,
+        origin: &Point3,
+        axis: usize,
+        span: (Real, Real),
+        line: u32,
+        out: &mut Vec<RayCut>,
+        lines: &mut Vec<[u32; 2]>,
+    ) {
+        let _ = span;
+        self.ray_cuts_lined(origin, axis, line, out, lines);
+    }
 }
 
 #[derive(Clone, Debug, Default)]
@@ -430,16 +445,18 @@ impl CutContext<'_> {
                 let local = (iv % BLOCK) * BLOCK + iu % BLOCK;
                 let segs = block.ray(local, &self.fill);
                 // A ray with no material inside the cutter's extent along it cannot change.
-                if !segs.iter().any(|s| s.hi.t > lo_a && s.lo.t < hi_a) {
+                let mut inside = segs.iter().filter(|s| s.hi.t > lo_a && s.lo.t < hi_a);
+                let Some(first) = inside.next() else {
                     continue;
-                }
+                };
+                let span = (first.lo.t, inside.next_back().unwrap_or(first).hi.t);
                 let mut o = Point3::origin();
                 o[self.u] = self.u0 + iu as Real * self.du;
                 o[self.v] = self.v0 + iv as Real * self.dv;
                 cuts.clear();
                 lines.clear();
                 self.cutter
-                    .ray_cuts_lined(&o, self.axis, self.line, &mut cuts, &mut lines);
+                    .ray_cuts_in_span(&o, self.axis, span, self.line, &mut cuts, &mut lines);
                 let start = new.len();
                 let changed = match cuts.as_slice() {
                     [] => false,
