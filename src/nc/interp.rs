@@ -178,6 +178,8 @@ pub struct Interpreter {
     files: Vec<Source>,
     cur: usize,
     lexer: Lexer,
+    /// A second block for [`Interpreter::exec_lexed`].
+    spare_block: Option<Box<Block>>,
     buf: Vec<u8>,
     params: Params,
     out: VecDeque<Record>,
@@ -311,6 +313,7 @@ impl Interpreter {
             files: vec![src],
             cur: 0,
             lexer: Lexer::default(),
+            spare_block: None,
             buf: Vec::with_capacity(256),
             params: Params {
                 numbered,
@@ -749,7 +752,11 @@ impl Interpreter {
         if self.skip.is_some() {
             return self.skip_line();
         }
-        if self.buf.contains(&b'#') {
+        let reads_params = match self.lexer.prepare(&self.buf) {
+            Ok(h) => h,
+            Err(e) => return Err(self.lex_error(e)),
+        };
+        if reads_params {
             self.params.snap_line = self.line_no as Real;
             let p = self.prog();
             for (i, v) in p.iter().enumerate() {
@@ -758,23 +765,25 @@ impl Interpreter {
             self.params.metric = self.u == 1.0;
             self.params.incremental = self.incremental;
         }
-        let buf = std::mem::take(&mut self.buf);
-        let r = self.lexer.read(&buf, &self.params);
-        self.buf = buf;
-        if let Err(e) = r {
+        if let Err(e) = self.lexer.parse(&self.buf, &self.params) {
             return Err(self.lex_error(e));
         }
-        let block = std::mem::take(&mut self.lexer.block);
+        self.exec_lexed()
+    }
+
+    /// Executes the block the lexer has just read (moved out by swapping boxes, so the
+    /// interpreter can be borrowed mutably while the block is read).
+    fn exec_lexed(&mut self) -> LR<()> {
+        let spare = self.spare_block.take().unwrap_or_default();
+        let block = std::mem::replace(&mut self.lexer.block, spare);
         let r = self.exec_block(&block);
-        self.lexer.block = block;
+        self.spare_block = Some(std::mem::replace(&mut self.lexer.block, block));
         r
     }
 
     /// A line read while skipping to an O-word target.
     fn skip_line(&mut self) -> LR<()> {
-        let buf = std::mem::take(&mut self.buf);
-        let r = self.lexer.read(&buf, &NoParams);
-        self.buf = buf;
+        let r = self.lexer.read(&self.buf, &NoParams);
         if r.is_err() {
             return Ok(());
         }
@@ -844,16 +853,10 @@ impl Interpreter {
             self.skip = None;
             if then == SkipThen::Exec {
                 // re-read with real parameters and execute
-                let buf = std::mem::take(&mut self.buf);
-                let r = self.lexer.read(&buf, &self.params);
-                self.buf = buf;
-                if let Err(e) = r {
+                if let Err(e) = self.lexer.read(&self.buf, &self.params) {
                     return Err(self.lex_error(e));
                 }
-                let block = std::mem::take(&mut self.lexer.block);
-                let r = self.exec_block(&block);
-                self.lexer.block = block;
-                return r;
+                return self.exec_lexed();
             }
             if let Some(o) = &self.lexer.block.o {
                 let key = (self.frames.len(), o.label.clone());

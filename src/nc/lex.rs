@@ -1,8 +1,10 @@
 //! Byte-level reading of one RS274/NGC line into a [`Block`].
 //!
 //! A line is first normalised into a reusable buffer (spaces and tabs outside comments
-//! dropped, letters lower-cased, the source byte offset of every kept byte remembered), then
-//! read word by word. Values (`X[1+#2]`, `X#<a>`, `Xsin[30]`) are evaluated while reading, as
+//! dropped, letters lower-cased; where bytes were dropped is remembered, which gives the
+//! source byte offset of every kept byte), then read word by word. Plain numbers of up to
+//! 15 digits are converted exactly by one division of an integer mantissa by a power of
+//! ten; longer ones go through the standard library's parser. Values (`X[1+#2]`, `X#<a>`, `Xsin[30]`) are evaluated while reading, as
 //! LinuxCNC does: parameter reads see the values from before the line, and parameter
 //! assignments on the line are collected in [`Block::assigns`] to be applied after the whole
 //! line has been read. Words live in fixed arrays, so reading a plain motion block does not
@@ -136,8 +138,10 @@ pub(crate) struct Block {
     /// `/` at the start.
     pub block_delete: bool,
     /// Letter words a..z (not g, m, n, o), then the polar words `@` (26) and `^` (27),
-    /// value in program units.
-    pub words: [Option<Real>; 28],
+    /// value in program units; only meaningful where [`Block::present`] has the bit.
+    words: [Real; 28],
+    /// Bit `k` set: word slot `k` was given on the line.
+    present: u32,
     /// Byte offset of each word in the original line.
     pub word_pos: [u32; 28],
     /// G codes ×10 (`G38.2` = 382) with their byte offsets.
@@ -165,7 +169,7 @@ pub(crate) struct Block {
 impl Block {
     fn clear(&mut self) {
         self.block_delete = false;
-        self.words = [None; 28];
+        self.present = 0;
         self.ng = 0;
         self.nm = 0;
         self.n = None;
@@ -177,7 +181,12 @@ impl Block {
 
     /// Value of word `c` (lower-case letter, `@` or `^`).
     pub fn word(&self, c: u8) -> Option<Real> {
-        self.words[slot(c)]
+        let k = slot(c);
+        if self.present & (1 << k) != 0 {
+            Some(self.words[k])
+        } else {
+            None
+        }
     }
 
     /// Byte offset of word `c`.
@@ -208,17 +217,22 @@ fn slot(c: u8) -> usize {
 /// Reusable reader of lines.
 #[derive(Default)]
 pub(crate) struct Lexer {
+    /// The normalised line in `norm[..len]` (the buffers only grow).
     norm: Vec<u8>,
-    cols: Vec<u32>,
-    /// The block of the last line read.
-    pub block: Block,
+    /// Where bytes were dropped: `(k, d)` means the normalised byte `k` and those after it
+    /// (up to the next entry) come from original offset `k + d`.
+    gaps: Vec<(u32, u32)>,
+    /// Length of the normalised line.
+    len: usize,
+    /// The block of the last line read (boxed, so the interpreter can swap it out cheaply).
+    pub block: Box<Block>,
 }
 
 /// Reading position inside the normalised line.
 struct Cursor<'a, P: ParamRead + ?Sized> {
     depth: usize,
     s: &'a [u8],
-    cols: &'a [u32],
+    gaps: &'a [(u32, u32)],
     orig_len: usize,
     i: usize,
     params: &'a P,
@@ -234,7 +248,16 @@ impl<P: ParamRead + ?Sized> Cursor<'_, P> {
         self.s.get(self.i + k).copied()
     }
     fn orig(&self, i: usize) -> usize {
-        self.cols.get(i).map_or(self.orig_len, |&c| c as usize)
+        if i >= self.s.len() {
+            return self.orig_len;
+        }
+        let dropped = self
+            .gaps
+            .iter()
+            .rev()
+            .find(|g| g.0 as usize <= i)
+            .map_or(0, |g| g.1 as usize);
+        i + dropped
     }
     fn err(&self, start: usize, message: impl Into<String>) -> LexError {
         let end = self.orig(self.i.max(start + 1).min(self.s.len()));
@@ -248,8 +271,56 @@ impl<P: ParamRead + ?Sized> Cursor<'_, P> {
     }
 
     /// A plain number: optional sign, digits, optional point and digits.
+    #[inline]
     fn number(&mut self) -> LResult<Real> {
+        let s = self.s;
         let start = self.i;
+        let mut i = start;
+        let mut neg = false;
+        if let Some(&c @ (b'+' | b'-')) = s.get(i) {
+            neg = c == b'-';
+            i += 1;
+        }
+        let mut mant: u64 = 0;
+        let mut digits = 0;
+        for &c in s.get(i..).unwrap_or(&[]) {
+            let d = c.wrapping_sub(b'0');
+            if d > 9 {
+                break;
+            }
+            mant = mant.wrapping_mul(10).wrapping_add(d as u64);
+            digits += 1;
+        }
+        i += digits;
+        let mut frac = 0;
+        if s.get(i) == Some(&b'.') {
+            i += 1;
+            for &c in s.get(i..).unwrap_or(&[]) {
+                let d = c.wrapping_sub(b'0');
+                if d > 9 {
+                    break;
+                }
+                mant = mant.wrapping_mul(10).wrapping_add(d as u64);
+                frac += 1;
+            }
+            i += frac;
+            digits += frac;
+        }
+        if digits == 0 || digits > FAST_DIGITS {
+            return self.number_general(start);
+        }
+        self.i = i;
+        // mantissa (< 10^15 < 2^53) and power of ten are both exact: one division rounds
+        // correctly
+        let v = mant as Real / POW10[frac];
+        Ok(if neg { -v } else { v })
+    }
+
+    /// [`Cursor::number`] for any number of digits, and its errors.
+    #[cold]
+    #[inline(never)]
+    fn number_general(&mut self, start: usize) -> LResult<Real> {
+        self.i = start;
         let mut neg = false;
         if let Some(c @ (b'+' | b'-')) = self.peek() {
             neg = c == b'-';
@@ -263,7 +334,7 @@ impl<P: ParamRead + ?Sized> Cursor<'_, P> {
         let num_start = self.i;
         while let Some(c) = self.peek() {
             if c.is_ascii_digit() {
-                if mant < (1u64 << 53) / 10 {
+                if mant < MANT_LIMIT {
                     mant = mant * 10 + (c - b'0') as u64;
                     if seen_point {
                         frac += 1;
@@ -297,6 +368,15 @@ impl<P: ParamRead + ?Sized> Cursor<'_, P> {
             return Err(self.err(start, "Number out of range"));
         }
         Ok(if neg { -v } else { v })
+    }
+
+    /// The value of a word: a plain unsigned number read directly, anything else through
+    /// [`Cursor::real_value`] (the same result; the common case skips the dispatch).
+    fn value(&mut self) -> LResult<Real> {
+        match self.peek() {
+            Some(b'0'..=b'9' | b'.') => self.number(),
+            _ => self.real_value(),
+        }
     }
 
     /// A real value: number, `[expr]`, `#param`, unary function, or signed value.
@@ -553,6 +633,43 @@ impl<P: ParamRead + ?Sized> Cursor<'_, P> {
     }
 }
 
+/// [`Lexer::normalise`]'s table: the lower-cased byte, or 0 for the bytes it treats
+/// specially (blanks, `#`, `(`, `;`, and NUL itself).
+const NORMAL: [u8; 256] = {
+    let mut t = [0u8; 256];
+    let mut c = 1;
+    while c < 256 {
+        t[c] = (c as u8).to_ascii_lowercase();
+        c += 1;
+    }
+    t[b' ' as usize] = 0;
+    t[b'\t' as usize] = 0;
+    t[b'\r' as usize] = 0;
+    t[b'#' as usize] = 0;
+    t[b'(' as usize] = 0;
+    t[b';' as usize] = 0;
+    t
+};
+
+/// Numbers with at most this many digits take the fast path of [`Cursor::number`]: their
+/// mantissa stays below 10^15 < 2^53, exact in f64.
+const FAST_DIGITS: usize = 15;
+
+/// A decimal mantissa below this times ten stays below 2^53 (exact in f64).
+const MANT_LIMIT: u64 = (1u64 << 53) / 10;
+
+/// Letters that make a word of [`Block::words`] (not g, m, n, o).
+const WORD_LETTER: [bool; 256] = {
+    let mut t = [false; 256];
+    let letters = b"abcdefhijklpqrstuvwxyz@^";
+    let mut k = 0;
+    while k < letters.len() {
+        t[letters[k] as usize] = true;
+        k += 1;
+    }
+    t
+};
+
 /// Powers of ten exactly representable in f64.
 const POW10: [Real; 23] = [
     1e0, 1e1, 1e2, 1e3, 1e4, 1e5, 1e6, 1e7, 1e8, 1e9, 1e10, 1e11, 1e12, 1e13, 1e14, 1e15, 1e16,
@@ -578,21 +695,43 @@ const O_KEYWORDS: [(&[u8], OKeyword); 15] = [
 ];
 
 impl Lexer {
-    /// Normalises `line` (without its newline) into the internal buffer; returns the
-    /// comment text for `(MSG,` / `(DEBUG,` detection handled by [`Lexer::read`].
-    fn normalise(&mut self, line: &[u8]) -> LResult<()> {
-        self.norm.clear();
-        self.cols.clear();
+    /// Normalises `line` (without its newline) into the internal buffer (spaces, tabs and
+    /// carriage returns outside comments dropped, letters lower-cased, comments kept
+    /// verbatim; `gaps` records where bytes were dropped). Returns whether a `#` occurs
+    /// outside comments.
+    fn normalise(&mut self, line: &[u8]) -> LResult<bool> {
+        let n = line.len();
+        // the normalised line is never longer than the line: grow once, write in place
+        if self.norm.len() < n {
+            self.norm.resize(n, 0);
+        }
+        self.gaps.clear();
+        let norm = &mut self.norm[..n];
+        let mut k = 0;
+        let mut hash = false;
         let mut i = 0;
-        while i < line.len() {
+        while i < n {
             let c = line[i];
+            let lower = NORMAL[c as usize];
+            if lower != 0 {
+                norm[k] = lower;
+                k += 1;
+                i += 1;
+                continue;
+            }
             match c {
-                b' ' | b'\t' | b'\r' => {}
+                b' ' | b'\t' | b'\r' => {
+                    while i < n && matches!(line[i], b' ' | b'\t' | b'\r') {
+                        i += 1;
+                    }
+                    self.gaps.push((k as u32, (i - k) as u32));
+                }
                 b'(' => {
                     let start = i;
                     let mut j = i + 1;
-                    while j < line.len() && line[j] != b')' {
+                    while j < n && line[j] != b')' {
                         if line[j] == b'(' {
+                            self.len = 0;
                             return Err(LexError {
                                 start: j,
                                 end: j + 1,
@@ -601,47 +740,58 @@ impl Lexer {
                         }
                         j += 1;
                     }
-                    if j >= line.len() {
+                    if j >= n {
+                        self.len = 0;
                         return Err(LexError {
                             start,
-                            end: line.len(),
+                            end: n,
                             message: "Unclosed comment found".into(),
                         });
                     }
                     // keep the comment verbatim, marked by '(' and ')'
-                    for (k, &b) in line[start..=j].iter().enumerate() {
-                        self.norm.push(b);
-                        self.cols.push((start + k) as u32);
-                    }
-                    i = j;
+                    let len = j + 1 - start;
+                    norm[k..k + len].copy_from_slice(&line[start..=j]);
+                    k += len;
+                    i = j + 1;
                 }
                 b';' => {
-                    for (k, &b) in line[i..].iter().enumerate() {
-                        self.norm.push(b);
-                        self.cols.push((i + k) as u32);
-                    }
+                    // the rest of the line is a comment, kept verbatim
+                    norm[k..k + n - i].copy_from_slice(&line[i..]);
+                    k += n - i;
                     break;
                 }
                 _ => {
-                    self.norm.push(c.to_ascii_lowercase());
-                    self.cols.push(i as u32);
+                    // '#' (the line reads parameters) or a NUL byte, kept
+                    hash |= c == b'#';
+                    norm[k] = c;
+                    k += 1;
+                    i += 1;
                 }
             }
-            i += 1;
         }
-        Ok(())
+        self.len = k;
+        Ok(hash)
+    }
+
+    /// First half of [`Lexer::read`]: clears the block and normalises `line`. Returns
+    /// whether the line reads parameters (a `#` outside comments), so the caller can
+    /// update what parameter reads see before [`Lexer::parse`].
+    pub fn prepare(&mut self, line: &[u8]) -> LResult<bool> {
+        self.block.clear();
+        self.normalise(line)
+    }
+
+    /// Second half of [`Lexer::read`]: reads the line given to [`Lexer::prepare`] into
+    /// [`Lexer::block`].
+    pub fn parse<P: ParamRead + ?Sized>(&mut self, line: &[u8], params: &P) -> LResult<()> {
+        let k = self.len;
+        read_block(&self.norm[..k], &self.gaps, line, params, &mut self.block)
     }
 
     /// Reads `line` into [`Lexer::block`].
     pub fn read<P: ParamRead + ?Sized>(&mut self, line: &[u8], params: &P) -> LResult<()> {
-        self.block.clear();
-        self.normalise(line)?;
-        let norm = std::mem::take(&mut self.norm);
-        let cols = std::mem::take(&mut self.cols);
-        let r = read_block(&norm, &cols, line, params, &mut self.block);
-        self.norm = norm;
-        self.cols = cols;
-        r
+        self.prepare(line)?;
+        self.parse(line, params)
     }
 }
 
@@ -665,7 +815,7 @@ fn comment_message(text: &[u8]) -> Option<Message> {
 
 fn read_block<P: ParamRead + ?Sized>(
     s: &[u8],
-    cols: &[u32],
+    gaps: &[(u32, u32)],
     line: &[u8],
     params: &P,
     b: &mut Block,
@@ -673,7 +823,7 @@ fn read_block<P: ParamRead + ?Sized>(
     let mut c = Cursor {
         depth: 0,
         s,
-        cols,
+        gaps,
         orig_len: line.len(),
         i: 0,
         params,
@@ -727,7 +877,7 @@ fn read_block<P: ParamRead + ?Sized>(
             b'g' | b'm' => {
                 b.has_words = true;
                 c.i += 1;
-                let v = c.real_value()?;
+                let v = c.value()?;
                 let code = (v * 10.0).round();
                 if (v * 10.0 - code).abs() > PARAM_INDEX_TOL || code.abs() > 1e6 {
                     let what = if ch == b'g' { "G code" } else { "M code" };
@@ -752,20 +902,21 @@ fn read_block<P: ParamRead + ?Sized>(
                 }
             }
             b'a'..=b'z' | b'@' | b'^' if !matches!(ch, b'g' | b'm' | b'n' | b'o') => {
-                if !b"abcdefhijklpqrstuvwxyz@^".contains(&ch) {
+                if !WORD_LETTER[ch as usize] {
                     return Err(c.err(start, format!("Bad character '{}' used", ch as char)));
                 }
                 b.has_words = true;
                 c.i += 1;
                 let k = slot(ch);
-                if b.words[k].is_some() {
+                if b.present & (1 << k) != 0 {
                     return Err(c.err(start, format!("Multiple {} words on one line", ch as char)));
                 }
-                let v = c.real_value()?;
+                let v = c.value()?;
                 if !v.is_finite() {
                     return Err(c.err(start, "Number out of range"));
                 }
-                b.words[k] = Some(v);
+                b.words[k] = v;
+                b.present |= 1 << k;
                 b.word_pos[k] = c.orig(start) as u32;
             }
             b'%' if start == 0 => {
