@@ -33,8 +33,8 @@
 //!
 //! **Rotary moves** are checked (not cut) in translations: the sub-steps of
 //! [`crate::sweep::rotary_substeps`], as many as make every point of the whole assembly
-//! (not only the flutes) stay within [`ROTARY_CHECK_BOUND`] (or the sweep's tighter bound)
-//! of its true path; the achieved bound is [`CollisionReport::check_error_bound_mm`], so a
+//! (not only the flutes) stay within [`ROTARY_CHECK_BOUND`] (or the sweep's bound, if
+//! coarser) of its true path; the achieved bound is [`CollisionReport::check_error_bound_mm`], so a
 //! contact deeper than it is not missed (within the dexel spacing across rays). Sub-steps
 //! whose whole assembly stays clear of the stock's box and every fixture's box are skipped,
 //! screened first in coarse groups.
@@ -62,8 +62,8 @@ use parry3d_f64::shape::{Ball, Cylinder as PCylinder, Shape};
 pub const CONTACT_RESOLUTION: Real = 1e-3;
 
 /// Largest distance (mm) between the true and the checked position of any point of the
-/// tool assembly on a move that turns a rotary axis (unless the sweep's own bound is
-/// tighter): the contact resolution along a move, since a check cannot locate a contact
+/// tool assembly on a move that turns a rotary axis (or the sweep's own bound, when that is
+/// coarser): the contact resolution along a move, since a check cannot locate a contact
 /// better than that anyway.
 pub const ROTARY_CHECK_BOUND: Real = CONTACT_RESOLUTION;
 
@@ -993,7 +993,7 @@ pub fn sweep_with_checks(
             parts: parry_parts(tool, holder),
             envelope,
             fixture_bounds: fixtures.iter().map(|f| f.mesh.bounds()).collect(),
-            bound: opts.rotary_step_bound_mm.min(ROTARY_CHECK_BOUND),
+            bound: opts.rotary_step_bound_mm.max(ROTARY_CHECK_BOUND),
         },
         log: Log::default(),
     };

@@ -512,11 +512,14 @@ pub fn interpret_program(text: &str, path: &Path, opts: InterpOptions) -> Result
                 let mut push = |kind: MoveKind, s: AxisValues, e: AxisValues, feed| {
                     let full = matches!(kind, MoveKind::Arc(_));
                     if s != e || full {
-                        for (c, (a, b)) in changed
+                        // An arc moves X, Y and Z even when it ends where it started (a full
+                        // circle); the other axes only if their values change.
+                        for (k, (c, (a, b))) in changed
                             .iter_mut()
                             .zip(s.to_array().iter().zip(e.to_array().iter()))
+                            .enumerate()
                         {
-                            *c |= a != b || full;
+                            *c |= a != b || (full && k < 3);
                         }
                         moves.push(Move {
                             kind,
