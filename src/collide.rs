@@ -1007,3 +1007,74 @@ pub fn sweep_with_checks(
         check_error_bound_mm: log.check_error,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::shape::read_obj;
+
+    /// A closed box mesh [min, max] as a fixture.
+    fn box_fixture(min: [Real; 3], max: [Real; 3]) -> Fixture {
+        let mut text = String::new();
+        for k in 0..8 {
+            let c = |i: usize| if k & (1 << i) == 0 { min[i] } else { max[i] };
+            text.push_str(&format!("v {:?} {:?} {:?}\n", c(0), c(1), c(2)));
+        }
+        // Outward faces of the cube with corner index bits (x, y, z).
+        for f in [
+            [1, 3, 4, 2],
+            [5, 6, 8, 7],
+            [1, 2, 6, 5],
+            [3, 7, 8, 4],
+            [1, 5, 7, 3],
+            [2, 4, 8, 6],
+        ] {
+            text.push_str(&format!(
+                "f {} {} {}\nf {} {} {}\n",
+                f[0], f[1], f[2], f[0], f[2], f[3]
+            ));
+        }
+        let mesh = read_obj(&text, std::path::Path::new("box.obj")).expect("closed box");
+        Fixture::try_new("box", mesh).expect("fixture")
+    }
+
+    /// A cone-shaped holder section (radius 2 at its bottom, 10 at its top, 10 long) moving
+    /// along +x meets a plate that reaches only 1 mm above its bottom where its radius is
+    /// 2.8: first contact after 5 − 2.8 = 2.2 mm of the 10 mm travel, where its enclosing
+    /// cylinder (radius 10) would start inside the plate.
+    #[test]
+    fn frustum_section_meets_a_fixture_at_its_true_radius() {
+        let plate = box_fixture([5.0, -20.0, -5.0], [30.0, 20.0, 1.0]);
+        let cone = Frustum {
+            r0: 2.0,
+            r1: 10.0,
+            h: 10.0,
+        };
+        let (toi, p) = fixture_contact(
+            &cone,
+            &Isometry3::identity(),
+            &Vector3::new(10.0, 0.0, 0.0),
+            &plate,
+        )
+        .expect("contact");
+        assert!((toi - 0.22).abs() < 1e-6, "toi {toi}");
+        assert!(
+            (p.x - 5.0).abs() < 1e-6 && (p.z - 1.0).abs() < 1e-6,
+            "{p:?}"
+        );
+        // Upside down (wide end first) it touches at once: radius 10 at the plate's height.
+        let flipped = Frustum {
+            r0: 10.0,
+            r1: 2.0,
+            h: 10.0,
+        };
+        let (toi, _) = fixture_contact(
+            &flipped,
+            &Isometry3::identity(),
+            &Vector3::new(10.0, 0.0, 0.0),
+            &plate,
+        )
+        .expect("contact");
+        assert!(toi < 1e-9, "toi {toi}");
+    }
+}

@@ -27,7 +27,14 @@
 //! (`|c''| ≤ ω²ρ_axis + 2ωv`). `N` is the smallest that meets the bound asked for, and the
 //! achieved bound is reported.
 //!
-//! **Invariant:** the sweep reads moves and poses; it never parses text or touches files.
+//! **One driver.** [`sweep_observed`] runs a program: arcs become chords (their exact
+//! sagitta reported), consecutive collinear straight moves are joined into one sweep (a
+//! rapid always starts a new run), rotary moves go to the envelope or to sub-steps. The plain
+//! sweep ([`sweep_program`]) and the collision checks ([`crate::collide`], through the
+//! [`SweepObserver`] trait) both use it, so they remove the same material bit for bit.
+//!
+//! **Invariant:** the sweep reads moves and poses; it never parses text or touches files; an
+//! observer only reads the stock.
 
 use crate::cutter::{Line, Quadric, SweptTool, t_extremes};
 use crate::envelope::{ENVELOPE_TOL, RotaryEnvelope};
