@@ -577,6 +577,25 @@ fn first_stock_contact(
     })
 }
 
+/// The overlap of `piece` swept from `tip` by `d` with the stock: located by bisection
+/// ([`first_stock_contact`]) unless the move already has its first contact of this kind
+/// (`seen`: a later sub-step only adds depth and volume).
+fn contact(
+    stock: &TriDexel,
+    seen: bool,
+    piece: &Tool,
+    offset: Real,
+    tip: Point3,
+    d: Vector3,
+    v: UnitVector3,
+) -> Option<Overlap> {
+    if seen {
+        overlap(stock, &swept(piece, offset, tip, d, v))
+    } else {
+        first_stock_contact(stock, piece, offset, tip, d, v)
+    }
+}
+
 /// The axis values a fraction `f` along `mv` (rotary and linear axes of `chain` linearly
 /// interpolated, as the chain and the envelope move them).
 fn axes_at(chain: &Chain, mv: &Move, f: Real) -> AxisValues {
@@ -777,13 +796,9 @@ impl Scene<'_> {
                     self.tool.length() + h.shank.length(),
                 ),
             ] {
-                if let Some(o) = first_stock_contact(stock, piece, offset, tip, d, v) {
-                    log.note(
-                        EventKind::NonCuttingInStock(part),
-                        o.point,
-                        o.depth_mm,
-                        Some(o.volume_mm3),
-                    );
+                let kind = EventKind::NonCuttingInStock(part);
+                if let Some(o) = contact(stock, log.has(&kind), piece, offset, tip, d, v) {
+                    log.note(kind, o.point, o.depth_mm, Some(o.volume_mm3));
                 }
             }
         }
@@ -881,6 +896,11 @@ impl Log {
         }
     }
 
+    /// Whether the move being checked already has an event of this kind.
+    fn has(&self, kind: &EventKind) -> bool {
+        self.pending.iter().any(|e| &e.kind == kind)
+    }
+
     fn note(&mut self, kind: EventKind, point: Point3, depth: Real, volume: Option<Real>) {
         let line = self.current.map_or(0, |c| c.1);
         if let Some(e) = self.pending.iter_mut().find(|e| e.kind == kind) {
@@ -920,7 +940,8 @@ impl SweepObserver for Checks<'_> {
                 let near = swept(tool, 0.0, tip, d, v)
                     .bounds()
                     .intersects(stock.bounds());
-                near.then(|| first_stock_contact(stock, tool, 0.0, tip, d, v))
+                let seen = self.log.has(&EventKind::RapidThroughMaterial);
+                near.then(|| contact(stock, seen, tool, 0.0, tip, d, v))
                     .flatten()
             }
             Piece::Rotary { .. } => first_envelope_contact(stock, self.scene.chain, tool, mv),
