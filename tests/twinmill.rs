@@ -3573,12 +3573,12 @@ fn checked_sweep_removes_exactly_what_the_sweep_removes() {
         10.0,
         &[
             HolderSection {
-                length: 8.0,
+                length: 3.0,
                 radius_bottom: 8.0,
                 radius_top: 12.0,
             },
             HolderSection {
-                length: 20.0,
+                length: 5.0,
                 radius_bottom: 15.0,
                 radius_top: 15.0,
             },
@@ -3594,7 +3594,7 @@ fn checked_sweep_removes_exactly_what_the_sweep_removes() {
         ),
     ] {
         let sb = Sandbox::new(&format!("one-driver-{tag}"));
-        let mut s = mdx50_with(&sb, program, "0.4", tool);
+        let mut s = mdx50_with(&sb, program, "0.6", tool);
         s.sweep.rotary_step_bound_mm = bound;
         let prog = s.load_program().expect("program");
         assert!(
