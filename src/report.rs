@@ -183,7 +183,7 @@ impl SimulationReport {
             self.sweep.rotary_moves,
             self.stock.removed_mm3,
             self.stock.volume_mm3 + self.stock.removed_mm3,
-            self.sweep.rotary_error_bound_mm,
+            self.sweep.error_bound_mm,
             self.mesh.triangles,
             self.mesh.vertices,
             self.mesh.euler_characteristic,

@@ -8,7 +8,7 @@
 //! **Invariant:** this module and [`crate::output`] are the only ones that touch files.
 
 use crate::calibrate::Registration;
-use crate::collide::{Fixture, Holder};
+use crate::collide::{Fixture, Holder, HolderSection};
 use crate::deviation::DesignModel;
 use crate::fit::RobustRule;
 use crate::identify::{FaceKind, FaceOptions, FaceRegion, FaceSpec};
@@ -166,6 +166,16 @@ struct ToolFile {
     shank_length_mm: Option<Spanned<Real>>,
     holder_diameter_mm: Option<Spanned<Real>>,
     holder_length_mm: Option<Spanned<Real>>,
+    /// The holder as stacked frusta, lowest first (instead of the holder cylinder).
+    holder_sections: Option<Spanned<Vec<SectionFile>>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SectionFile {
+    length_mm: Spanned<Real>,
+    radius_bottom_mm: Spanned<Real>,
+    radius_top_mm: Spanned<Real>,
 }
 
 #[derive(Deserialize)]
@@ -714,24 +724,66 @@ impl Scene {
             (&t.holder_diameter_mm, "holder_diameter_mm"),
             (&t.holder_length_mm, "holder_length_mm"),
         ];
-        let holder = match holder_keys.iter().find(|(v, _)| v.is_some()) {
-            None => None,
-            Some((given, _)) => {
-                let span = given.as_ref().map_or(0..0, |v| v.span());
-                let mut v = [0.0; 4];
-                for (k, (field, key)) in holder_keys.iter().enumerate() {
-                    let f = field.as_ref().ok_or_else(|| {
-                        ctx.err(
-                            span.clone(),
-                            format!("tool.{key} is missing: a holder needs shank_diameter_mm, shank_length_mm, holder_diameter_mm and holder_length_mm"),
-                        )
-                    })?;
-                    v[k] = ctx.positive(f, &format!("tool.{key}"))?;
+        let holder = if let Some(secs) = &t.holder_sections {
+            // The holder as sections: with the shank, without the holder cylinder's keys.
+            for (given, key) in &holder_keys[2..] {
+                if let Some(g) = given {
+                    return Err(ctx.err(
+                        g.span(),
+                        format!("tool.{key} and tool.holder_sections both describe the holder: give one of them"),
+                    ));
                 }
-                Some(
-                    Holder::try_new(v[0] / 2.0, v[1], v[2] / 2.0, v[3])
-                        .map_err(|e| ctx.err(span, format!("tool: {e}")))?,
-                )
+            }
+            let mut shank = [0.0; 2];
+            for (k, (field, key)) in holder_keys[..2].iter().enumerate() {
+                let f = field.as_ref().ok_or_else(|| {
+                    ctx.err(
+                        secs.span(),
+                        format!("tool.{key} is missing: holder_sections need shank_diameter_mm and shank_length_mm"),
+                    )
+                })?;
+                shank[k] = ctx.positive(f, &format!("tool.{key}"))?;
+            }
+            if secs.get_ref().is_empty() {
+                return Err(ctx.err(
+                    secs.span(),
+                    "tool.holder_sections is empty: give at least one { length_mm, radius_bottom_mm, radius_top_mm }".to_string(),
+                ));
+            }
+            let mut sections = Vec::new();
+            for (i, sec) in secs.get_ref().iter().enumerate() {
+                let key = |f: &str| format!("tool.holder_sections[{i}].{f}");
+                sections.push(HolderSection {
+                    length: ctx.positive(&sec.length_mm, &key("length_mm"))?,
+                    radius_bottom: ctx.positive(&sec.radius_bottom_mm, &key("radius_bottom_mm"))?,
+                    radius_top: ctx.positive(&sec.radius_top_mm, &key("radius_top_mm"))?,
+                });
+            }
+            let span = holder_keys[0].0.as_ref().map_or(secs.span(), |v| v.span());
+            Some(
+                Holder::try_sections(shank[0] / 2.0, shank[1], &sections)
+                    .map_err(|e| ctx.err(span, format!("tool: {e}")))?,
+            )
+        } else {
+            match holder_keys.iter().find(|(v, _)| v.is_some()) {
+                None => None,
+                Some((given, _)) => {
+                    let span = given.as_ref().map_or(0..0, |v| v.span());
+                    let mut v = [0.0; 4];
+                    for (k, (field, key)) in holder_keys.iter().enumerate() {
+                        let f = field.as_ref().ok_or_else(|| {
+                            ctx.err(
+                                span.clone(),
+                                format!("tool.{key} is missing: a holder needs shank_diameter_mm, shank_length_mm, holder_diameter_mm and holder_length_mm"),
+                            )
+                        })?;
+                        v[k] = ctx.positive(f, &format!("tool.{key}"))?;
+                    }
+                    Some(
+                        Holder::try_new(v[0] / 2.0, v[1], v[2] / 2.0, v[3])
+                            .map_err(|e| ctx.err(span, format!("tool: {e}")))?,
+                    )
+                }
             }
         };
         // Stock.

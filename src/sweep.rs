@@ -27,12 +27,19 @@
 //! (`|c''| ≤ ω²ρ_axis + 2ωv`). `N` is the smallest that meets the bound asked for, and the
 //! achieved bound is reported.
 //!
-//! **Invariant:** the sweep reads moves and poses; it never parses text or touches files.
+//! **One driver.** [`sweep_observed`] runs a program: arcs become chords (their exact
+//! sagitta reported), consecutive collinear straight moves are joined into one sweep (a
+//! rapid always starts a new run), rotary moves go to the envelope or to sub-steps. The plain
+//! sweep ([`sweep_program`]) and the collision checks ([`crate::collide`], through the
+//! [`SweepObserver`] trait) both use it, so they remove the same material bit for bit.
+//!
+//! **Invariant:** the sweep reads moves and poses; it never parses text or touches files; an
+//! observer only reads the stock.
 
 use crate::cutter::{Line, Quadric, SweptTool, t_extremes};
 use crate::envelope::{ENVELOPE_TOL, RotaryEnvelope};
 use crate::kinematics::{AxisKind, Chain};
-use crate::math::{Aabb, Isometry3, Point3, Real, UnitVector3, Vector3, tol};
+use crate::math::{Aabb, Isometry3, Point3, Real, Rotation3, UnitVector3, Vector3, tol};
 use crate::nc::{AxisLetter, AxisValues, Move, MoveKind};
 use crate::progress::Progress;
 use crate::stock::{Cutter, RayCut, TriDexel};
@@ -102,6 +109,12 @@ pub struct SweepReport {
     /// Largest bound on the error of rotary moves (envelope tolerance or sub-step bound) over
     /// all rotary moves (mm); 0 if none.
     pub rotary_error_bound_mm: Real,
+    /// Largest distance of the chords that replace arcs from their arcs (mm): the exact
+    /// sagitta `r·(1 − cos(θ/2))` of the widest chord; 0 if no arcs.
+    pub chord_error_bound_mm: Real,
+    /// Largest distance between the true and the simulated tool motion over all moves (mm):
+    /// per move its chord sagitta plus its rotary bound, the largest over the moves.
+    pub error_bound_mm: Real,
 }
 
 /// Largest number of sub-steps for one rotary move.
@@ -209,7 +222,7 @@ fn tool_bounds(tool: &Tool, tip: &Point3, v: &UnitVector3) -> Aabb {
 
 /// One convex piece of the tool (a cylinder part or the ball) swept along `d`.
 #[derive(Clone, Copy)]
-struct Piece {
+struct ConvexSweep {
     quad: Quadric,
     lines: [Line; 4],
     n_lines: usize,
@@ -228,7 +241,7 @@ enum Radial {
 impl TranslatedTool {
     /// The convex pieces of the tool's sweep as 2-D problems for this ray: the cylinder, and
     /// for a ball end mill the swept ball. Returned in a fixed array (no allocation per ray).
-    fn pieces(&self, origin: &Point3, e: &Vector3) -> ([Option<Piece>; 2], usize) {
+    fn pieces(&self, origin: &Point3, e: &Vector3) -> ([Option<ConvexSweep>; 2], usize) {
         let mut out = [None, None];
         let mut count = 0;
         let v = self.v.into_inner();
@@ -290,7 +303,7 @@ impl TranslatedTool {
                     normal: Some(v),
                 },
             ];
-            out[count] = Some(Piece {
+            out[count] = Some(ConvexSweep {
                 quad,
                 lines,
                 n_lines: 4,
@@ -312,7 +325,7 @@ impl TranslatedTool {
                 tol: tol_q,
             };
             let lines = [s_lines[0], s_lines[1], s_lines[0], s_lines[0]];
-            out[count] = Some(Piece {
+            out[count] = Some(ConvexSweep {
                 quad,
                 lines,
                 n_lines: 2,
@@ -327,7 +340,7 @@ impl TranslatedTool {
     /// or along (exit) the ray.
     fn normal_at(
         &self,
-        piece: &Piece,
+        piece: &ConvexSweep,
         origin: &Point3,
         e: &Vector3,
         t: Real,
@@ -695,16 +708,6 @@ fn mid_point(tool: &Tool) -> Point3 {
     Point3::new(0.0, 0.0, tool.length() / 2.0)
 }
 
-/// A sub-step: the tool with axis `v` whose mid point moves from `a` to `b`.
-fn substep(tool: &Tool, a: Point3, b: Point3, v: UnitVector3) -> TranslatedTool {
-    TranslatedTool::new(
-        tool.clone(),
-        a - v.into_inner() * (tool.length() / 2.0),
-        b - a,
-        v,
-    )
-}
-
 fn pose_at(chain: &Chain, mv: &Move, lambda: Real) -> Isometry3 {
     let mut q = mv.start;
     for axis in chain.axes() {
@@ -724,7 +727,152 @@ pub fn as_chords(moves: &[Move], bound: Real) -> std::borrow::Cow<'_, [Move]> {
     }
 }
 
-/// Sweeps the tool through `moves` on `chain`, removing material from `stock`.
+/// One piece of a move as the driver cuts it, shown to a [`SweepObserver`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Piece {
+    /// A pure translation of the tool: its tip moves from `tip` by `d` with the tool axis
+    /// `axis` (W). A straight move at fixed rotary values, or one sub-step of a move that
+    /// turns a rotary axis (see [`rotary_substeps`]), whose rotation is `rotation`.
+    Translation {
+        /// The tip at the start (W, mm).
+        tip: Point3,
+        /// The tip's travel (W, mm).
+        d: Vector3,
+        /// The tool's orientation (T to W); its +z is the tool axis.
+        rotation: Rotation3,
+    },
+    /// A whole move that turns a rotary axis. `envelope`: cut at once by the exact
+    /// [`RotaryEnvelope`] of the tool; else cut in sub-steps (each shown to
+    /// [`SweepObserver::before_rapid`] as a [`Piece::Translation`]).
+    Rotary {
+        /// Whether the move was cut by the envelope.
+        envelope: bool,
+    },
+}
+
+impl Piece {
+    /// The tool axis of a translation (W).
+    pub fn axis(rotation: &Rotation3) -> UnitVector3 {
+        UnitVector3::new_normalize(rotation * Vector3::z())
+    }
+}
+
+/// What the sweep driver shows of each move to code that checks it (collision checks):
+/// the stock just before a rapid removes material, and just after each move's material is
+/// removed. An observer only reads the stock, so the material removed is the same with any
+/// observer.
+pub trait SweepObserver {
+    /// Before `piece` of the rapid (G0) `mv` is removed from `stock`. `k` is the move's index
+    /// among the moves with arcs as chords. A rapid never joins the moves before it
+    /// (see [`sweep_observed`]), so `stock` is the stock the rapid meets (for sub-steps: as
+    /// the earlier sub-steps of the rapid left it).
+    fn before_rapid(
+        &mut self,
+        stock: &TriDexel,
+        k: usize,
+        mv: &Move,
+        piece: &Piece,
+    ) -> Result<(), SweepError>;
+
+    /// After the material of move `k` was removed: `piece` is the move's translation for a
+    /// straight move, [`Piece::Rotary`] for one that turns a rotary axis. For a run of
+    /// joined moves, called for each move of the run in program order once the whole run
+    /// is removed.
+    fn after_move(
+        &mut self,
+        stock: &TriDexel,
+        k: usize,
+        mv: &Move,
+        piece: &Piece,
+    ) -> Result<(), SweepError>;
+}
+
+/// The observer of the plain sweep: looks at nothing.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoObserver;
+
+impl SweepObserver for NoObserver {
+    fn before_rapid(
+        &mut self,
+        _: &TriDexel,
+        _: usize,
+        _: &Move,
+        _: &Piece,
+    ) -> Result<(), SweepError> {
+        Ok(())
+    }
+
+    fn after_move(
+        &mut self,
+        _: &TriDexel,
+        _: usize,
+        _: &Move,
+        _: &Piece,
+    ) -> Result<(), SweepError> {
+        Ok(())
+    }
+}
+
+/// The sub-steps of a move that turns a rotary axis: `n` translations (`n` a multiple of
+/// 64, see [`RotaryBound::steps_for`]), in each of which the tool's mid-height point moves
+/// straight between its true positions at the sub-step's ends, the tool held at the
+/// mid-step orientation (the error bound of [`RotaryBound`]). The sub-steps come in 64
+/// groups; `keep_group` sees each group as one coarse translation (tip, travel, rotation)
+/// and skips the whole group when it says no; `each` gets every sub-step of a kept group
+/// as (tip, travel, rotation), in order.
+pub fn rotary_substeps<E>(
+    chain: &Chain,
+    tool: &Tool,
+    mv: &Move,
+    n: usize,
+    mut keep_group: impl FnMut(Point3, Vector3, Rotation3) -> bool,
+    mut each: impl FnMut(Point3, Vector3, Rotation3) -> Result<(), E>,
+) -> Result<(), E> {
+    let mid = mid_point(tool);
+    let half = tool.length() / 2.0;
+    let translation = |a: Point3, b: Point3, rotation: Rotation3| {
+        let v = rotation * Vector3::z();
+        (a - v * half, b - a, rotation)
+    };
+    let per = n / COARSE;
+    for j in 0..COARSE {
+        let (l0, l1) = (j as Real / COARSE as Real, (j + 1) as Real / COARSE as Real);
+        let (a0, a1) = (pose_at(chain, mv, l0) * mid, pose_at(chain, mv, l1) * mid);
+        let (tip, d, rot) = translation(a0, a1, pose_at(chain, mv, (l0 + l1) / 2.0).rotation);
+        if !keep_group(tip, d, rot) {
+            continue;
+        }
+        let mut prev = a0;
+        for k in 0..per {
+            let i = j * per + k;
+            let (la, lb) = (i as Real / n as Real, (i + 1) as Real / n as Real);
+            let next = pose_at(chain, mv, lb) * mid;
+            let (tip, d, rot) =
+                translation(prev, next, pose_at(chain, mv, (la + lb) / 2.0).rotation);
+            each(tip, d, rot)?;
+            prev = next;
+        }
+    }
+    Ok(())
+}
+
+/// The largest distance (mm) of the chords replacing the arc `mv` ([`Move::chords`] with
+/// sagitta at most `bound`) from the arc: `r·(1 − cos(θ/2))` for chords spanning the angle
+/// `θ` of an arc of radius `r` (the larger of its start and end radii for a spiral); 0 for
+/// a straight move.
+pub fn chord_sagitta(mv: &Move, bound: Real) -> Real {
+    match &mv.kind {
+        MoveKind::Arc(a) => {
+            let r = a.radius.max(a.radius_end);
+            let theta = a.sweep_deg.to_radians().abs() / mv.chord_count(bound) as Real;
+            r * (1.0 - (theta / 2.0).cos())
+        }
+        _ => 0.0,
+    }
+}
+
+/// Sweeps the tool through `moves` on `chain`, removing material from `stock` (the plain
+/// sweep: [`sweep_observed`] with [`NoObserver`]).
 pub fn sweep_program(
     stock: &mut TriDexel,
     chain: &Chain,
@@ -733,101 +881,156 @@ pub fn sweep_program(
     opts: &SweepOptions,
     progress: &dyn Progress,
 ) -> Result<SweepReport, SweepError> {
+    sweep_observed(stock, chain, tool, moves, opts, progress, &mut NoObserver)
+}
+
+/// The sweep driver: sweeps the tool through `moves` on `chain`, removing material from
+/// `stock`, and shows `observer` the stock before each rapid's pieces and after each move.
+/// Arcs become chords ([`as_chords`]); consecutive collinear straight moves are joined into
+/// one sweep, except that a rapid always starts a new run (so that its check sees the stock
+/// before it); moves that turn a rotary axis are cut by the envelope or in sub-steps. The
+/// stock comes out the same, bit for bit, whatever the observer.
+pub fn sweep_observed(
+    stock: &mut TriDexel,
+    chain: &Chain,
+    tool: &Tool,
+    moves: &[Move],
+    opts: &SweepOptions,
+    progress: &dyn Progress,
+    observer: &mut dyn SweepObserver,
+) -> Result<SweepReport, SweepError> {
     let bound = opts.rotary_step_bound_mm;
     if !(bound > 0.0 && bound <= 1.0) {
         return Err(SweepError::BadBound(bound));
     }
+    // Each chord's sagitta, in the order of the chords (empty without arcs).
+    let sagittas: Vec<Real> = if moves.iter().any(|m| matches!(m.kind, MoveKind::Arc(_))) {
+        moves
+            .iter()
+            .flat_map(|m| std::iter::repeat_n(chord_sagitta(m, bound), m.chord_count(bound)))
+            .collect()
+    } else {
+        Vec::new()
+    };
     let moves = as_chords(moves, bound);
     let moves: &[Move] = &moves;
+    debug_assert!(sagittas.is_empty() || sagittas.len() == moves.len());
     let mut report = SweepReport::default();
     progress.start("sweep", moves.len() as u64);
     let joinable = TranslatedTool::has_closed_form(tool);
     let mut run: Option<Run> = None;
-    for mv in moves {
+    for (k, mv) in moves.iter().enumerate() {
         if let Some(missing) = AxisLetter::ALL
             .into_iter()
             .find(|&l| !chain.has_axis(l) && mv.start.get(l) != mv.end.get(l))
         {
-            flush(run.take(), stock, tool, &mut report);
+            flush(run.take(), stock, tool, moves, &mut report, observer)?;
             return Err(SweepError::MissingAxis {
                 line: mv.line,
                 axis: missing.as_char(),
             });
         }
-        let line = mv.line as u32;
         report.moves += 1;
+        let sagitta = sagittas.get(k).copied().unwrap_or(0.0);
+        report.chord_error_bound_mm = report.chord_error_bound_mm.max(sagitta);
+        report.error_bound_mm = report.error_bound_mm.max(sagitta);
         let (omega, _) = rotation_and_travel(chain, &mv.start, &mv.end);
         if omega == 0.0 {
             let p0 = chain.w_from_t(&mv.start);
             let tip0 = p0 * Point3::origin();
             let tip1 = chain.w_from_t(&mv.end) * Point3::origin();
-            let axis = UnitVector3::new_normalize(p0.rotation * Vector3::z());
             if let Some(r) = &mut run
                 && joinable
-                && r.extend(mv, &tip1, &axis)
+                && mv.kind != MoveKind::Rapid
+                && r.extend(k, mv, &tip1, &p0.rotation)
             {
                 progress.advance(1);
                 continue;
             }
-            flush(run.take(), stock, tool, &mut report);
-            run = Some(Run::new(mv, tip0, tip1, axis));
+            flush(run.take(), stock, tool, moves, &mut report, observer)?;
+            run = Some(Run::new(k, mv, tip0, tip1, p0.rotation));
         } else {
-            flush(run.take(), stock, tool, &mut report);
-            let mut cut = false;
-            report.rotary_moves += 1;
-            // Flat and ball end mills: the exact per-ray envelope, unless a bound tighter
-            // than its tolerance is asked for.
-            let envelope = (bound >= ENVELOPE_TOL)
-                .then(|| RotaryEnvelope::new(chain, tool, &mv.start, &mv.end).ok())
-                .flatten();
-            if let Some(env) = envelope {
-                report.rotary_error_bound_mm = report.rotary_error_bound_mm.max(ENVELOPE_TOL);
-                report.sweeps += 1;
-                if stock.remove(&env, line) {
-                    report.cutting_moves += 1;
-                }
-                progress.advance(1);
-                continue;
-            }
-            let rb = RotaryBound::of(chain, tool, mv);
-            let n = rb.steps_for(bound, mv.line)?;
-            report.rotary_error_bound_mm = report.rotary_error_bound_mm.max(rb.at(n));
-            let per = n / COARSE;
-            // A coarse sub-step's box, grown by its own bound, holds every fine sub-step in it.
-            let eps_c = rb.at(COARSE) + tol::SLIVER;
-            let mid = mid_point(tool);
-            for j in 0..COARSE {
-                let (l0, l1) = (j as Real / COARSE as Real, (j + 1) as Real / COARSE as Real);
-                let axis_at = |l: Real| {
-                    UnitVector3::new_normalize(pose_at(chain, mv, l).rotation * Vector3::z())
-                };
-                let (a0, a1) = (pose_at(chain, mv, l0) * mid, pose_at(chain, mv, l1) * mid);
-                let coarse = substep(tool, a0, a1, axis_at((l0 + l1) / 2.0))
-                    .bounds()
-                    .inflated(eps_c);
-                if !coarse.intersects(stock.bounds()) {
-                    continue;
-                }
-                let mut prev = a0;
-                for k in 0..per {
-                    let i = j * per + k;
-                    let (la, lb) = (i as Real / n as Real, (i + 1) as Real / n as Real);
-                    let next = pose_at(chain, mv, lb) * mid;
-                    let swept = substep(tool, prev, next, axis_at((la + lb) / 2.0));
-                    report.sweeps += 1;
-                    cut |= stock.remove(&swept, line);
-                    prev = next;
-                }
-            }
-            if cut {
-                report.cutting_moves += 1;
-            }
+            flush(run.take(), stock, tool, moves, &mut report, observer)?;
+            let e = sweep_rotary(stock, chain, tool, k, mv, bound, &mut report, observer)?;
+            report.rotary_error_bound_mm = report.rotary_error_bound_mm.max(e);
+            // A chord of an arc that also turns a rotary axis carries both errors.
+            report.error_bound_mm = report.error_bound_mm.max(e + sagitta);
         }
         progress.advance(1);
     }
-    flush(run.take(), stock, tool, &mut report);
+    flush(run.take(), stock, tool, moves, &mut report, observer)?;
     progress.finish();
     Ok(report)
+}
+
+/// Cuts move `k` that turns a rotary axis (the envelope, else sub-steps), counting it in
+/// `report`; returns its error bound (mm).
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the driver's state, passed down for one move"
+)]
+fn sweep_rotary(
+    stock: &mut TriDexel,
+    chain: &Chain,
+    tool: &Tool,
+    k: usize,
+    mv: &Move,
+    bound: Real,
+    report: &mut SweepReport,
+    observer: &mut dyn SweepObserver,
+) -> Result<Real, SweepError> {
+    let line = mv.line as u32;
+    let rapid = mv.kind == MoveKind::Rapid;
+    report.rotary_moves += 1;
+    // Flat and ball end mills: the exact per-ray envelope, unless a bound tighter than its
+    // tolerance is asked for.
+    let envelope = (bound >= ENVELOPE_TOL)
+        .then(|| RotaryEnvelope::new(chain, tool, &mv.start, &mv.end).ok())
+        .flatten();
+    if let Some(env) = envelope {
+        let piece = Piece::Rotary { envelope: true };
+        if rapid {
+            observer.before_rapid(stock, k, mv, &piece)?;
+        }
+        report.sweeps += 1;
+        if stock.remove(&env, line) {
+            report.cutting_moves += 1;
+        }
+        observer.after_move(stock, k, mv, &piece)?;
+        return Ok(ENVELOPE_TOL);
+    }
+    let rb = RotaryBound::of(chain, tool, mv);
+    let n = rb.steps_for(bound, mv.line)?;
+    // A coarse sub-step's box, grown by its own bound, holds every fine sub-step in it.
+    let eps_c = rb.at(COARSE) + tol::SLIVER;
+    let stock_box = *stock.bounds();
+    let mut cut = false;
+    rotary_substeps(
+        chain,
+        tool,
+        mv,
+        n,
+        |tip, d, rot| {
+            TranslatedTool::new(tool.clone(), tip, d, Piece::axis(&rot))
+                .bounds()
+                .inflated(eps_c)
+                .intersects(&stock_box)
+        },
+        |tip, d, rotation| {
+            if rapid {
+                observer.before_rapid(stock, k, mv, &Piece::Translation { tip, d, rotation })?;
+            }
+            let swept = TranslatedTool::new(tool.clone(), tip, d, Piece::axis(&rotation));
+            report.sweeps += 1;
+            cut |= stock.remove(&swept, line);
+            Ok::<(), SweepError>(())
+        },
+    )?;
+    if cut {
+        report.cutting_moves += 1;
+    }
+    observer.after_move(stock, k, mv, &Piece::Rotary { envelope: false })?;
+    Ok(rb.at(n))
 }
 
 /// Largest distance (mm) of a move's end from the line of the run it joins. Far below any
@@ -842,32 +1045,37 @@ struct Run {
     /// Tip positions (W) at the run's start and current end.
     tip0: Point3,
     tip1: Point3,
-    /// Tool axis (W), the same for every move (same rotary values).
-    axis: UnitVector3,
+    /// Tool orientation (T to W), the same for every move (same rotary values).
+    rotation: Rotation3,
     /// The direction of travel, once a move of non-zero length fixed it.
     dir: Option<UnitVector3>,
     /// Axis values at the current end.
     end: AxisValues,
+    /// Index of the run's first move.
+    first: usize,
     /// Each move's end tip (W) and NC line.
     parts: Vec<(Point3, u32)>,
 }
 
 impl Run {
-    fn new(mv: &Move, tip0: Point3, tip1: Point3, axis: UnitVector3) -> Self {
+    fn new(k: usize, mv: &Move, tip0: Point3, tip1: Point3, rotation: Rotation3) -> Self {
         let d = tip1 - tip0;
         Self {
             tip0,
             tip1,
-            axis,
+            rotation,
             dir: (d.norm() > JOIN_TOL).then(|| UnitVector3::new_normalize(d)),
             end: mv.end,
+            first: k,
             parts: vec![(tip1, mv.line as u32)],
         }
     }
 
-    /// Appends `mv` (tip ending at `tip1`, tool axis `axis`) if it continues the run.
-    fn extend(&mut self, mv: &Move, tip1: &Point3, axis: &UnitVector3) -> bool {
-        if mv.start != self.end || axis != &self.axis {
+    /// Appends move `k` (tip ending at `tip1`, tool orientation `rotation`) if it continues
+    /// the run.
+    fn extend(&mut self, k: usize, mv: &Move, tip1: &Point3, rotation: &Rotation3) -> bool {
+        if mv.start != self.end || rotation != &self.rotation || k != self.first + self.parts.len()
+        {
             return false;
         }
         let d = tip1 - self.tip1;
@@ -893,15 +1101,35 @@ impl Run {
 }
 
 /// Sweeps a run of joined moves; counts the moves that removed material (for a run, the
-/// moves a cut that removed material names at one of its ends).
-fn flush(run: Option<Run>, stock: &mut TriDexel, tool: &Tool, report: &mut SweepReport) {
+/// moves a cut that removed material names at one of its ends). A run starting with a rapid
+/// shows it to the observer first; after the removal, each of the run's moves.
+fn flush(
+    run: Option<Run>,
+    stock: &mut TriDexel,
+    tool: &Tool,
+    moves: &[Move],
+    report: &mut SweepReport,
+    observer: &mut dyn SweepObserver,
+) -> Result<(), SweepError> {
     let Some(run) = run else {
-        return;
+        return Ok(());
     };
+    let piece = |j: usize| {
+        let start = if j == 0 { run.tip0 } else { run.parts[j - 1].0 };
+        Piece::Translation {
+            tip: start,
+            d: run.parts[j].0 - start,
+            rotation: run.rotation,
+        }
+    };
+    let axis = Piece::axis(&run.rotation);
+    if moves[run.first].kind == MoveKind::Rapid {
+        observer.before_rapid(stock, run.first, &moves[run.first], &piece(0))?;
+    }
     let d = run.tip1 - run.tip0;
     let first = run.parts[0].1;
     let swept = if run.parts.len() == 1 {
-        TranslatedTool::new(tool.clone(), run.tip0, d, run.axis)
+        TranslatedTool::new(tool.clone(), run.tip0, d, axis)
     } else {
         let dd = d.norm_squared();
         let last = run.parts.len() - 1;
@@ -918,7 +1146,7 @@ fn flush(run: Option<Run>, stock: &mut TriDexel, tool: &Tool, report: &mut Sweep
                 (s, *line)
             })
             .collect();
-        TranslatedTool::joined(tool.clone(), run.tip0, d, run.axis, parts)
+        TranslatedTool::joined(tool.clone(), run.tip0, d, axis, parts)
     };
     report.sweeps += 1;
     let used = stock.remove_lines(&swept, first);
@@ -927,6 +1155,11 @@ fn flush(run: Option<Run>, stock: &mut TriDexel, tool: &Tool, report: &mut Sweep
         .iter()
         .filter(|(_, l)| used.binary_search(l).is_ok())
         .count();
+    for j in 0..run.parts.len() {
+        let k = run.first + j;
+        observer.after_move(stock, k, &moves[k], &piece(j))?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]

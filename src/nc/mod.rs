@@ -426,11 +426,10 @@ impl Move {
 }
 
 impl Move {
-    /// The move as straight pieces: itself for a straight move; for an arc, chords whose
-    /// sagitta (largest distance from the arc in its plane) is at most `sagitta_mm`
-    /// (> 0), each a [`MoveKind::Linear`] move with the arc's feed and line.
-    pub fn chords(&self, sagitta_mm: Real) -> impl Iterator<Item = Move> + '_ {
-        let n = match &self.kind {
+    /// How many pieces [`Move::chords`] gives: 1 for a straight move; for an arc, the
+    /// fewest equal chords whose sagitta is at most `sagitta_mm`.
+    pub fn chord_count(&self, sagitta_mm: Real) -> usize {
+        match &self.kind {
             MoveKind::Arc(a) => {
                 let r = a.radius.max(a.radius_end);
                 let step = if r > sagitta_mm {
@@ -446,7 +445,14 @@ impl Move {
                 }
             }
             _ => 1,
-        };
+        }
+    }
+
+    /// The move as straight pieces: itself for a straight move; for an arc, chords whose
+    /// sagitta (largest distance from the arc in its plane) is at most `sagitta_mm`
+    /// (> 0), each a [`MoveKind::Linear`] move with the arc's feed and line.
+    pub fn chords(&self, sagitta_mm: Real) -> impl Iterator<Item = Move> + '_ {
+        let n = self.chord_count(sagitta_mm);
         let arc = matches!(self.kind, MoveKind::Arc(_));
         (0..n).map(move |i| {
             if !arc {
@@ -506,11 +512,14 @@ pub fn interpret_program(text: &str, path: &Path, opts: InterpOptions) -> Result
                 let mut push = |kind: MoveKind, s: AxisValues, e: AxisValues, feed| {
                     let full = matches!(kind, MoveKind::Arc(_));
                     if s != e || full {
-                        for (c, (a, b)) in changed
+                        // An arc moves X, Y and Z even when it ends where it started (a full
+                        // circle); the other axes only if their values change.
+                        for (k, (c, (a, b))) in changed
                             .iter_mut()
                             .zip(s.to_array().iter().zip(e.to_array().iter()))
+                            .enumerate()
                         {
-                            *c |= a != b || full;
+                            *c |= a != b || (full && k < 3);
                         }
                         moves.push(Move {
                             kind,
