@@ -302,6 +302,8 @@ struct Probe {
     /// The ray's origin and direction in the tool frame.
     p: Vector3,
     u: Vector3,
+    /// The pose's rotation (`w_from_t`).
+    rot: Matrix3,
 }
 
 /// A ray `o + t·e` with `e` a unit vector, and the span of `t` where the answer matters.
@@ -340,6 +342,8 @@ pub struct RotaryEnvelope {
     part_speed: [Real; PARTS],
     /// Poses at λ = k/(2N), k = 0..=2N: cell ends at even k, middles at odd k.
     samples: Vec<Sample>,
+    /// Box of each cell's grown tool.
+    cell_boxes: Vec<Aabb>,
     bounds: Aabb,
 }
 
@@ -389,6 +393,9 @@ impl RotaryEnvelope {
             bounds.grow(&b.min);
             bounds.grow(&b.max);
         }
+        let cell_boxes = (0..cells)
+            .map(|j| frame_box(&samples[2 * j + 1], shape, r, l, delta))
+            .collect();
         Ok(Self {
             shape,
             r,
@@ -400,6 +407,7 @@ impl RotaryEnvelope {
             part_z,
             part_speed,
             samples,
+            cell_boxes,
             bounds,
         })
     }
@@ -433,7 +441,7 @@ impl RotaryEnvelope {
         let hit = tool_interval(self.shape, self.r, self.l, &p, &u, 0.0).map(|(t0, f0, t1, f1)| {
             let rate = |t: Real, face: Face| {
                 let q = p + u * t;
-                match self.normal_t(&q, face) {
+                match tool_normal(&q, face, self.r) {
                     Some(n) => n.dot(&(s.w_t.cross(&q) + s.v_t)) / n.dot(&u),
                     None => Real::NAN,
                 }
@@ -464,32 +472,12 @@ impl RotaryEnvelope {
             phi: [bottom, phi(self.l)],
             p,
             u,
+            rot: s.rot,
         }
     }
 
     fn probe_at(&self, lambda: Real, ray: &Ray) -> Probe {
         self.probe(&self.path.sample(lambda), lambda, ray)
-    }
-
-    /// The tool's outward normal (tool frame) on `face` at the tool-frame point `q`.
-    fn normal_t(&self, q: &Vector3, face: Face) -> Option<Vector3> {
-        match face {
-            Face::Side => Vector3::new(q.x, q.y, 0.0).try_normalize(0.0),
-            Face::Bottom => Some(-Vector3::z()),
-            Face::Top => Some(Vector3::z()),
-            Face::Sphere => (q - Vector3::new(0.0, 0.0, self.r)).try_normalize(0.0),
-            Face::None => None,
-        }
-    }
-
-    /// The material normal (into the cut) at the interval end `t` found at `lambda` on `face`.
-    fn material_normal(&self, lambda: Real, ray: &Ray, t: Real, face: Face) -> Vector3 {
-        let s = self.path.sample(lambda);
-        let q = s.rot.tr_mul(&(ray.o + ray.e * t - s.tip));
-        match self.normal_t(&q, face) {
-            Some(n) => -(s.rot * n),
-            None => *ray.e,
-        }
     }
 
     /// The sorted, disjoint intervals of the ray `o + t·e` (`e` unit) inside the swept volume,
@@ -515,9 +503,12 @@ impl RotaryEnvelope {
                 comps,
             } = scratch;
             grown.clear();
-            grown.extend(
-                (0..n).map(|j| self.meets_grown(&self.samples[2 * j + 1], &ray, self.delta)),
-            );
+            grown.extend((0..n).map(|j| {
+                self.cell_boxes[j]
+                    .ray_interval(o, e)
+                    .is_some_and(|(t0, t1)| t1 >= span.0 && t0 <= span.1)
+                    && self.meets_grown(&self.samples[2 * j + 1], &ray, self.delta)
+            }));
             if !grown.iter().any(|&g| g) {
                 return;
             }
@@ -550,7 +541,7 @@ impl RotaryEnvelope {
                     }
                 };
                 comp_of[k] = Some(id);
-                offer(&mut comps[id], &p);
+                offer(&mut comps[id], &p, self.r);
             }
             // Extremes between the samples, half-cell by half-cell.
             for k in (0..2 * n).filter(|k| grown[k / 2]) {
@@ -567,42 +558,31 @@ impl RotaryEnvelope {
                 }
             }
             let mut cuts: Vec<RawEnd> = comps.drain(..).flatten().collect();
-            self.merge_and_emit(&mut cuts, &ray, out);
+            Self::merge_and_emit(&mut cuts, out);
         });
     }
 
     /// Sorts the intervals, merges those that overlap and emits them with their normals.
-    fn merge_and_emit(&self, cuts: &mut [RawEnd], ray: &Ray, out: &mut Vec<RayCut>) {
+    fn merge_and_emit(cuts: &mut [RawEnd], out: &mut Vec<RayCut>) {
         cuts.sort_by(|a, b| a.t0.total_cmp(&b.t0));
         let mut merged: Option<RawEnd> = None;
         for &c in cuts.iter() {
             merged = Some(match merged {
                 Some(mut m) if c.t0 <= m.t1 + tol::SLIVER => {
                     if c.t1 > m.t1 {
-                        (m.t1, m.lambda1, m.face1) = (c.t1, c.lambda1, c.face1);
+                        (m.t1, m.n1) = (c.t1, c.n1);
                     }
                     m
                 }
                 Some(m) => {
-                    self.emit(&m, ray, out);
+                    emit(&m, out);
                     c
                 }
                 None => c,
             });
         }
         if let Some(m) = merged {
-            self.emit(&m, ray, out);
-        }
-    }
-
-    fn emit(&self, c: &RawEnd, ray: &Ray, out: &mut Vec<RayCut>) {
-        if c.t1 - c.t0 > tol::LENGTH_EPS {
-            out.push(RayCut {
-                t_in: c.t0,
-                t_out: c.t1,
-                n_in: self.material_normal(c.lambda0, ray, c.t0, c.face0),
-                n_out: self.material_normal(c.lambda1, ray, c.t1, c.face1),
-            });
+            emit(&m, out);
         }
     }
 
@@ -615,7 +595,7 @@ impl RotaryEnvelope {
         }
         let bisect = |acc: &mut Option<RawEnd>| {
             let m = self.probe_at(0.5 * (a.lambda + b.lambda), ray);
-            offer(acc, &m);
+            offer(acc, &m, self.r);
             self.refine(ray, a, &m, acc, depth + 1);
             self.refine(ray, &m, b, acc, depth + 1);
         };
@@ -636,7 +616,7 @@ impl RotaryEnvelope {
             let grow = self.speed * w / 2.0 - ENVELOPE_TOL;
             if grow > 0.0 && self.meets_grown(&s, ray, grow) {
                 let m = self.probe(&s, mid, ray);
-                offer(acc, &m);
+                offer(acc, &m, self.r);
                 self.refine(ray, a, &m, acc, depth + 1);
                 self.refine(ray, &m, b, acc, depth + 1);
             }
@@ -654,11 +634,11 @@ impl RotaryEnvelope {
             if !fa.is_nan() && !fb.is_nan() && (fa < 0.0) != (fb < 0.0) {
                 let phi = move |p: &Probe| Some(p.phi[edge]);
                 match self.solve(ray, a, b, phi, Stop::Crossing, acc) {
-                    Ok((lo, hi)) => {
+                    Some((lo, hi)) => {
                         self.refine(ray, a, &lo, acc, depth + 1);
                         self.refine(ray, &hi, b, acc, depth + 1);
                     }
-                    Err(_) => bisect(acc),
+                    None => bisect(acc),
                 }
                 return;
             }
@@ -672,13 +652,13 @@ impl RotaryEnvelope {
                 }
                 if !in_done && x.g_in < 0.0 && y.g_in > 0.0 {
                     let g = |p: &Probe| p.hit.map(|h| h.g_in);
-                    if self.solve(ray, a, b, g, Stop::Extreme, acc).is_err() {
+                    if self.solve(ray, a, b, g, Stop::Extreme, acc).is_none() {
                         return bisect(acc);
                     }
                 }
                 if !out_done && x.g_out > 0.0 && y.g_out < 0.0 {
                     let g = |p: &Probe| p.hit.map(|h| h.g_out);
-                    if self.solve(ray, a, b, g, Stop::Extreme, acc).is_err() {
+                    if self.solve(ray, a, b, g, Stop::Extreme, acc).is_none() {
                         bisect(acc);
                     }
                 }
@@ -697,7 +677,7 @@ impl RotaryEnvelope {
 
     /// Brackets the sign change of `f` between `a` and `b` by the Illinois variant of regula
     /// falsi (a bisection every third step that did not halve the bracket), offering every
-    /// pose it evaluates. `Err` with the probe where `f` is undefined (the ray missed).
+    /// pose it evaluates. `None` where `f` is undefined (the ray missed a pose).
     fn solve(
         &self,
         ray: &Ray,
@@ -706,10 +686,10 @@ impl RotaryEnvelope {
         f: impl Fn(&Probe) -> Option<Real>,
         stop: Stop,
         acc: &mut Option<RawEnd>,
-    ) -> Result<(Probe, Probe), Probe> {
+    ) -> Option<(Probe, Probe)> {
         let (mut lo, mut hi) = (*a, *b);
         let (Some(f_lo), Some(f_hi)) = (f(&lo), f(&hi)) else {
-            return Err(*a);
+            return None;
         };
         let neg_lo = f_lo < 0.0;
         // Secant weights (halved by Illinois) and the true values.
@@ -736,12 +716,10 @@ impl RotaryEnvelope {
                 }
             }
             let p = self.probe_at(m, ray);
-            offer(acc, &p);
-            let Some(fm) = f(&p) else {
-                return Err(p);
-            };
+            offer(acc, &p, self.r);
+            let fm = f(&p)?;
             if fm.is_nan() {
-                return Err(p);
+                return None;
             }
             if (fm < 0.0) == neg_lo {
                 (lo, flo, wlo) = (p, fm, fm);
@@ -757,7 +735,7 @@ impl RotaryEnvelope {
                 last_side = 1;
             }
         }
-        Ok((lo, hi))
+        Some((lo, hi))
     }
 }
 
@@ -789,6 +767,17 @@ impl Stop {
     }
 }
 
+fn emit(c: &RawEnd, out: &mut Vec<RayCut>) {
+    if c.t1 - c.t0 > tol::LENGTH_EPS {
+        out.push(RayCut {
+            t_in: c.t0,
+            t_out: c.t1,
+            n_in: c.n0,
+            n_out: c.n1,
+        });
+    }
+}
+
 /// Per-thread buffers of [`RotaryEnvelope::intervals_in`], reused from ray to ray.
 #[derive(Default)]
 struct Scratch {
@@ -806,31 +795,53 @@ thread_local! {
 #[derive(Clone, Copy, Debug)]
 struct RawEnd {
     t0: Real,
-    lambda0: Real,
-    face0: Face,
+    /// Material normal at `t0` (W).
+    n0: Vector3,
     t1: Real,
-    lambda1: Real,
-    face1: Face,
+    /// Material normal at `t1` (W).
+    n1: Vector3,
 }
 
-/// Widens `best` by the interval of the probe, if the ray meets the tool there.
-fn offer(best: &mut Option<RawEnd>, p: &Probe) {
+/// Widens `best` by the interval of the probe, if the ray meets the tool there (`r` the
+/// tool radius, for the normals).
+fn offer(best: &mut Option<RawEnd>, p: &Probe, r: Real) {
     let Some(h) = p.hit else {
         return;
     };
-    let c = best.get_or_insert(RawEnd {
-        t0: h.t_in,
-        lambda0: p.lambda,
-        face0: h.face_in,
-        t1: h.t_out,
-        lambda1: p.lambda,
-        face1: h.face_out,
-    });
-    if h.t_in < c.t0 {
-        (c.t0, c.lambda0, c.face0) = (h.t_in, p.lambda, h.face_in);
+    // The material normal: the tool's inward normal at the end (the ray where no face).
+    let normal = |t: Real, face: Face| match tool_normal(&(p.p + p.u * t), face, r) {
+        Some(n) => -(p.rot * n),
+        None => p.rot * p.u,
+    };
+    match best {
+        None => {
+            *best = Some(RawEnd {
+                t0: h.t_in,
+                n0: normal(h.t_in, h.face_in),
+                t1: h.t_out,
+                n1: normal(h.t_out, h.face_out),
+            })
+        }
+        Some(c) => {
+            if h.t_in < c.t0 {
+                (c.t0, c.n0) = (h.t_in, normal(h.t_in, h.face_in));
+            }
+            if h.t_out > c.t1 {
+                (c.t1, c.n1) = (h.t_out, normal(h.t_out, h.face_out));
+            }
+        }
     }
-    if h.t_out > c.t1 {
-        (c.t1, c.lambda1, c.face1) = (h.t_out, p.lambda, h.face_out);
+}
+
+/// The tool's outward normal (tool frame) on `face` at the tool-frame point `q` (`r` the
+/// tool radius).
+fn tool_normal(q: &Vector3, face: Face, r: Real) -> Option<Vector3> {
+    match face {
+        Face::Side => Vector3::new(q.x, q.y, 0.0).try_normalize(0.0),
+        Face::Bottom => Some(-Vector3::z()),
+        Face::Top => Some(Vector3::z()),
+        Face::Sphere => (q - Vector3::new(0.0, 0.0, r)).try_normalize(0.0),
+        Face::None => None,
     }
 }
 
@@ -1010,6 +1021,10 @@ impl Cutter for RotaryEnvelope {
         let mut e = Vector3::zeros();
         e[axis] = 1.0;
         self.intervals(origin, &e, out);
+    }
+
+    fn costly_rays(&self) -> bool {
+        true
     }
 
     fn ray_cuts_in_span(

@@ -130,6 +130,11 @@ pub trait Cutter: Sync {
         self.ray_cuts(origin, axis, out);
         lines.resize(lines.len() + out.len() - before, [line, line]);
     }
+    /// Whether each ray costs much more than the bookkeeping around it (the stock then
+    /// shares the work out ray row by ray row rather than block by block). Default: no.
+    fn costly_rays(&self) -> bool {
+        false
+    }
     /// Like [`Cutter::ray_cuts_lined`] for a caller that only keeps what lies in `span`
     /// along the ray (the material's extent): an interval end outside `span` may be anywhere
     /// outside it, and an interval wholly outside may be left out. The default is exact.
@@ -343,27 +348,29 @@ impl DexelGrid {
         Some((a as usize, (b as usize).min(n - 1)))
     }
 
-    /// Removes what `cutter` occupies within `bounds`; appends to `used` the NC lines of
-    /// the cuts that changed a ray (in a fixed order, with repeats).
-    fn remove(&mut self, cutter: &dyn Cutter, bounds: &Aabb, line: u32, used: &mut Vec<u32>) {
-        let Some((iu0, iu1)) = Self::index_range(
+    /// The work of removing what `cutter` occupies within `bounds`: the shared context and
+    /// the blocks in the index range, in a fixed order (none if the range is empty).
+    #[allow(clippy::type_complexity)]
+    fn cut_tasks<'a>(
+        &'a mut self,
+        cutter: &'a dyn Cutter,
+        bounds: &Aabb,
+        line: u32,
+    ) -> Option<(CutContext<'a>, Vec<(usize, &'a mut Block)>)> {
+        let (iu0, iu1) = Self::index_range(
             bounds.min[self.u],
             bounds.max[self.u],
             self.u0,
             self.du,
             self.nu,
-        ) else {
-            return;
-        };
-        let Some((iv0, iv1)) = Self::index_range(
+        )?;
+        let (iv0, iv1) = Self::index_range(
             bounds.min[self.v],
             bounds.max[self.v],
             self.v0,
             self.dv,
             self.nv,
-        ) else {
-            return;
-        };
+        )?;
         let ctx = CutContext {
             cutter,
             line,
@@ -380,6 +387,7 @@ impl DexelGrid {
             fill: self.fill,
             nu: self.nu,
             nv: self.nv,
+            nbu_blocks: self.nbu,
         };
         let (nbu, bu0, bu1) = (self.nbu, iu0 / BLOCK, iu1 / BLOCK);
         let (bv0, bv1) = (iv0 / BLOCK, iv1 / BLOCK);
@@ -397,13 +405,7 @@ impl DexelGrid {
                     .map(move |(k, b)| (bv * nbu + bu0 + k, b))
             })
             .collect();
-        let lines: Vec<Vec<u32>> = touched
-            .into_par_iter()
-            .map(|(b, block)| ctx.cut_block(b % nbu, b / nbu, block))
-            .collect();
-        for l in lines {
-            used.extend(l);
-        }
+        Some((ctx, touched))
     }
 }
 
@@ -426,19 +428,44 @@ struct CutContext<'a> {
     fill: [Segment; 1],
     nu: usize,
     nv: usize,
+    /// Blocks per row of the grid.
+    nbu_blocks: usize,
 }
 
 impl CutContext<'_> {
+    /// The rows of block row `bv` in the cut's range.
+    fn rows_of(&self, bv: usize) -> std::ops::RangeInclusive<usize> {
+        self.iv.0.max(bv * BLOCK)..=self.iv.1.min(bv * BLOCK + BLOCK - 1)
+    }
+
     /// Cuts the rays of block `(bu, bv)` in range; returns the NC lines of the cuts that
     /// changed a ray (consecutive repeats dropped).
     fn cut_block(&self, bu: usize, bv: usize, block: &mut Block) -> Vec<u32> {
+        let cut = self.cut_rows(bu, block, self.rows_of(bv));
+        self.apply(bu, bv, block, cut)
+    }
+
+    /// Writes what cutting the block's rays produced into it; returns the NC lines used.
+    fn apply(&self, bu: usize, bv: usize, block: &mut Block, cut: RowsCut) -> Vec<u32> {
+        if cut.changes.is_empty() {
+            return cut.used;
+        }
+        let in_grid = |local: usize| {
+            bu * BLOCK + local % BLOCK < self.nu && bv * BLOCK + local / BLOCK < self.nv
+        };
+        apply_changes(block, &cut.new, &cut.changes, &self.fill, in_grid);
+        cut.used
+    }
+
+    /// Cuts the rays of rows `rows` of block `(bu, bv)` in range, reading the block only.
+    fn cut_rows(&self, bu: usize, block: &Block, rows: std::ops::RangeInclusive<usize>) -> RowsCut {
         let mut used = Vec::new();
         let (mut cuts, mut lines) = (Vec::new(), Vec::new());
         let (mut scratch, mut next) = (Vec::new(), Vec::new());
         let mut new: Vec<Segment> = Vec::new();
         let mut changes: Vec<RayChange> = Vec::new();
         let (lo_a, hi_a) = self.along;
-        let iv_range = self.iv.0.max(bv * BLOCK)..=self.iv.1.min(bv * BLOCK + BLOCK - 1);
+        let iv_range = rows;
         let iu_range = self.iu.0.max(bu * BLOCK)..=self.iu.1.min(bu * BLOCK + BLOCK - 1);
         for iv in iv_range {
             for iu in iu_range.clone() {
@@ -486,14 +513,31 @@ impl CutContext<'_> {
                 }
             }
         }
-        if changes.is_empty() {
-            return used;
-        }
-        let in_grid = |local: usize| {
-            bu * BLOCK + local % BLOCK < self.nu && bv * BLOCK + local / BLOCK < self.nv
-        };
-        apply_changes(block, &new, &changes, &self.fill, in_grid);
-        used
+        RowsCut { new, changes, used }
+    }
+}
+
+/// What cutting some rays of a block produced: their new segments, which rays changed (in
+/// ray order, ranges into `new`) and the NC lines used.
+#[derive(Default)]
+struct RowsCut {
+    new: Vec<Segment>,
+    changes: Vec<RayChange>,
+    used: Vec<u32>,
+}
+
+impl RowsCut {
+    /// Appends `other` (later rays of the same block).
+    fn append(&mut self, other: RowsCut) {
+        let base = self.new.len();
+        self.new.extend(other.new);
+        self.changes
+            .extend(other.changes.into_iter().map(|c| RayChange {
+                local: c.local,
+                start: c.start + base,
+                end: c.end + base,
+            }));
+        self.used.extend(other.used);
     }
 }
 
@@ -748,8 +792,57 @@ impl TriDexel {
         if !b.intersects(&self.bounds) {
             return used;
         }
+        // The blocks of all three grids as one pool of tasks, so the threads share the
+        // uneven work; results are gathered in grid and block order.
+        let (mut contexts, mut tasks) = (Vec::new(), Vec::new());
         for g in &mut self.grids {
-            g.remove(cutter, &b, line, &mut used);
+            if let Some((ctx, blocks)) = g.cut_tasks(cutter, &b, line) {
+                let nbu = ctx.nbu_blocks;
+                tasks.extend(
+                    blocks
+                        .into_iter()
+                        .map(|(k, block)| (contexts.len(), k, nbu, block)),
+                );
+                contexts.push(ctx);
+            }
+        }
+        let lines: Vec<Vec<u32>> = if cutter.costly_rays() {
+            // Each ray costs much: rows of all blocks are the tasks, then each block is
+            // written from its rows in order.
+            let jobs: Vec<(usize, usize)> = tasks
+                .iter()
+                .enumerate()
+                .flat_map(|(t, (c, k, nbu, _))| {
+                    contexts[*c].rows_of(k / nbu).map(move |iv| (t, iv))
+                })
+                .collect();
+            let rows: Vec<RowsCut> = jobs
+                .par_iter()
+                .map(|&(t, iv)| {
+                    let (c, k, nbu, block) = &tasks[t];
+                    contexts[*c].cut_rows(k % nbu, block, iv..=iv)
+                })
+                .collect();
+            let mut rows = jobs.iter().map(|&(t, _)| t).zip(rows).peekable();
+            tasks
+                .into_iter()
+                .enumerate()
+                .map(|(t, (c, k, nbu, block))| {
+                    let mut cut = RowsCut::default();
+                    while let Some((_, r)) = rows.next_if(|(owner, _)| *owner == t) {
+                        cut.append(r);
+                    }
+                    contexts[c].apply(k % nbu, k / nbu, block, cut)
+                })
+                .collect()
+        } else {
+            tasks
+                .into_par_iter()
+                .map(|(c, k, nbu, block)| contexts[c].cut_block(k % nbu, k / nbu, block))
+                .collect()
+        };
+        for l in lines {
+            used.extend(l);
         }
         used.sort_unstable();
         used.dedup();
