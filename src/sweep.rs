@@ -765,53 +765,39 @@ pub trait SweepObserver {
     /// Before `piece` of the rapid (G0) `mv` is removed from `stock`. `k` is the move's index
     /// among the moves with arcs as chords. A rapid never joins the moves before it
     /// (see [`sweep_observed`]), so `stock` is the stock the rapid meets (for sub-steps: as
-    /// the earlier sub-steps of the rapid left it).
+    /// the earlier sub-steps of the rapid left it). The default looks at nothing.
     fn before_rapid(
         &mut self,
         stock: &TriDexel,
         k: usize,
         mv: &Move,
         piece: &Piece,
-    ) -> Result<(), SweepError>;
+    ) -> Result<(), SweepError> {
+        let _ = (stock, k, mv, piece);
+        Ok(())
+    }
 
     /// After the material of move `k` was removed: `piece` is the move's translation for a
     /// straight move, [`Piece::Rotary`] for one that turns a rotary axis. For a run of
     /// joined moves, called for each move of the run in program order once the whole run
-    /// is removed.
+    /// is removed. The default looks at nothing.
     fn after_move(
         &mut self,
         stock: &TriDexel,
         k: usize,
         mv: &Move,
         piece: &Piece,
-    ) -> Result<(), SweepError>;
+    ) -> Result<(), SweepError> {
+        let _ = (stock, k, mv, piece);
+        Ok(())
+    }
 }
 
 /// The observer of the plain sweep: looks at nothing.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct NoObserver;
 
-impl SweepObserver for NoObserver {
-    fn before_rapid(
-        &mut self,
-        _: &TriDexel,
-        _: usize,
-        _: &Move,
-        _: &Piece,
-    ) -> Result<(), SweepError> {
-        Ok(())
-    }
-
-    fn after_move(
-        &mut self,
-        _: &TriDexel,
-        _: usize,
-        _: &Move,
-        _: &Piece,
-    ) -> Result<(), SweepError> {
-        Ok(())
-    }
-}
+impl SweepObserver for NoObserver {}
 
 /// The sub-steps of a move that turns a rotary axis: `n` translations (`n` a multiple of
 /// 64, see [`RotaryBound::steps_for`]), in each of which the tool's mid-height point moves
@@ -1527,12 +1513,20 @@ mod tests {
     }
 
     /// Benchmark P1-ball at 0.05 mm: the z rays' top crossings lie on the analytic surface
-    /// h(x, y) = min over the straight runs of z_tip + R − sqrt(R² − d²) (≤ 1 µm RMS), and the
+    /// h(x, y) = min over the straight runs of z_tip + R − sqrt(R² − d²) (≤ 1 µm RMS); the
+    /// scallop between rows 2 mm apart is R − sqrt(R² − 1) high (within 1 µm); and the
     /// tri-dexel holds at most 300 MB.
     #[test]
     fn p1_ball_surface_is_exact_in_bounded_memory() {
         let tool = Tool::try_new(ToolKind::Ball, p1::TOOL_DIAMETER, 30.0).expect("valid");
-        let mut s = TriDexel::new_box(p1::stock_box(), 0.05, 1e9).expect("fits");
+        // The box grown by half a pitch puts z rays on multiples of 0.05 mm, so on the crest
+        // lines y = 11, 13, … between the rows.
+        let mut bx = p1::stock_box();
+        bx.min.x -= 0.025;
+        bx.min.y -= 0.025;
+        bx.max.x += 0.025;
+        bx.max.y += 0.025;
+        let mut s = TriDexel::new_box(bx, 0.05, 1e9).expect("fits");
         sweep_program(
             &mut s,
             &xyz_chain(),
@@ -1557,6 +1551,7 @@ mod tests {
         let g = &s.grids()[2];
         let (nu, nv) = g.dims();
         let (mut sum2, mut n) = (0.0, 0usize);
+        let mut crest: Real = 0.0;
         for iv in 0..nv {
             for iu in 0..nu {
                 let o = g.ray_origin(iu, iv);
@@ -1570,6 +1565,10 @@ mod tests {
                         .t;
                     sum2 += (top - h) * (top - h);
                     n += 1;
+                    // Between rows, away from the step-overs.
+                    if (20.0..=80.0).contains(&o.x) && (11.0..=89.0).contains(&o.y) {
+                        crest = crest.max(top - p1::Z_CUT);
+                    }
                 }
             }
         }
@@ -1580,6 +1579,11 @@ mod tests {
             s.memory_bytes() <= 300_000_000,
             "{} bytes",
             s.memory_bytes()
+        );
+        let scallop = r - (r * r - 1.0).sqrt();
+        assert!(
+            (crest - scallop).abs() <= 1e-3,
+            "scallop {crest} mm, formula {scallop} mm"
         );
     }
 }
