@@ -874,7 +874,7 @@ fn speed_bound(
     let mut rho: Real = 0.0;
     for q in [start, end] {
         let c = chain.w_from_t(q) * mid;
-        for (p, d) in rotary_lines_in_w(chain, q) {
+        for (p, d) in chain.rotary_lines_in_w(q) {
             let r = c - p;
             rho = rho.max((r - d * r.dot(&d)).norm());
         }
@@ -884,22 +884,6 @@ fn speed_bound(
         rho *= 1.0 + omega;
     }
     omega * rho + travel
-}
-
-/// Each rotary axis of `chain` at `q` as a line in W: a point and the unit direction.
-fn rotary_lines_in_w(chain: &Chain, q: &AxisValues) -> Vec<(Point3, Vector3)> {
-    let mut pose = Isometry3::identity();
-    let mut out = Vec::new();
-    for (axis, dev) in chain.axes().iter().zip(chain.deviations()) {
-        if axis.kind == AxisKind::Rotary {
-            out.push((
-                pose * axis.origin,
-                pose.rotation * axis.direction.into_inner(),
-            ));
-        }
-        pose = pose * axis.motion(q.get(axis.letter)) * dev.transform();
-    }
-    out
 }
 
 /// Box of the tool (grown by `margin`) at a pose.

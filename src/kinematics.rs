@@ -281,14 +281,17 @@ impl Chain {
         pose
     }
 
-    /// Points on the rotary axis lines, in the workpiece frame, for axis values `q`
-    /// (used to bound the curvature of rotary moves).
-    pub fn rotary_points_in_w(&self, q: &AxisValues) -> Vec<Point3> {
+    /// The rotary axes as lines in the workpiece frame for axis values `q`: a point on each
+    /// and its unit direction (used to bound the speed and curvature of rotary moves).
+    pub fn rotary_lines_in_w(&self, q: &AxisValues) -> Vec<(Point3, Vector3)> {
         let mut pose = Isometry3::identity();
         let mut out = Vec::new();
         for (axis, dev) in self.axes.iter().zip(&self.deviations) {
             if axis.kind == AxisKind::Rotary {
-                out.push(pose * axis.origin);
+                out.push((
+                    pose * axis.origin,
+                    pose.rotation * axis.direction.into_inner(),
+                ));
             }
             pose = pose * axis.motion(q.get(axis.letter)) * dev.transform();
         }

@@ -667,7 +667,7 @@ impl RotaryBound {
             [chain.w_from_t(&mv.start), chain.w_from_t(&mv.end)].map(|p| p * mid_point(tool));
         let mut rho = 0.0;
         for (q, c) in [&mv.start, &mv.end].iter().zip(&mids) {
-            for axis_point in chain.rotary_points_in_w(q) {
+            for (axis_point, _) in chain.rotary_lines_in_w(q) {
                 rho = Real::max(rho, (c - axis_point).norm());
             }
         }
