@@ -1,7 +1,8 @@
 //! Conformance of the NC interpreter with LinuxCNC's standalone interpreter (`rs274`).
 //!
-//! Every program of the peer corpus (`../shared/peer-corpus` relative to the crate root) is
-//! run through twinmill's interpreter with the options LinuxCNC was run with (tool table,
+//! Every program of the conformance corpus (`tests/corpus`: LinuxCNC's own interpreter tests
+//! and the project's samples, with LinuxCNC 2.9's recorded output; see its README) is run
+//! through twinmill's interpreter with the options LinuxCNC was run with (tool table,
 //! INI, external unit inch as standalone `rs274`) and compared move by move with LinuxCNC's
 //! recorded, normalised output (`*.jsonl`): same move kinds, end and start positions within
 //! 1e-4 mm (mm programs) or 3e-3 mm (inch programs), same arc centres, directions and
@@ -29,8 +30,12 @@ const NOT_MATCHED: &[(&str, &str)] = &[(
      the R plane 0.5); we use the actual position; not reproduced yet",
 )];
 
+/// Programs in the corpus (LinuxCNC's 132 and the project's 27 samples): the test runs every
+/// one, so a program that goes missing fails it.
+const PROGRAMS: usize = 159;
+
 fn corpus_root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/peer-corpus")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus")
 }
 
 struct Case {
@@ -274,15 +279,15 @@ fn corpus_matches_linuxcnc_move_for_move() {
     let root = corpus_root();
     assert!(
         root.is_dir(),
-        "the peer corpus is missing: expected LinuxCNC's recorded outputs at {} \
-         (the project's shared folder next to the crate)",
+        "the conformance corpus is missing: expected LinuxCNC's recorded outputs at {}",
         root.display()
     );
     let cases = cases(&root);
-    assert!(
-        cases.len() > 100,
-        "only {} corpus programs found",
-        cases.len()
+    assert_eq!(
+        cases.len(),
+        PROGRAMS,
+        "corpus programs with a recording under {}",
+        root.display()
     );
     let listed: BTreeMap<&str, &str> = NOT_MATCHED.iter().copied().collect();
     let mut matched = 0;
