@@ -57,7 +57,13 @@ fn benches(c: &mut Criterion) {
     let program = scene.load_program().expect("program");
     let part = machine_part(&scene, &program, &NoProgress).expect("part");
     let cloud = Surface::new(&part.stock)
-        .scan(&scene.scanner, &NoProgress)
+        .scan(
+            scene
+                .scanner
+                .as_ref()
+                .expect("the built-in scene has a [scanner]"),
+            &NoProgress,
+        )
         .expect("scan")
         .cloud;
     let _ = std::fs::remove_dir_all(&dir);

@@ -43,11 +43,15 @@ fn benches(c: &mut Criterion) {
     g.bench_function("stock + sweep (moves)", |b| b.iter(swept));
 
     let stock = swept();
-    let rays = (scene.scanner.fov_mm.0 / scene.scanner.pitch_mm).round()
-        * (scene.scanner.fov_mm.1 / scene.scanner.pitch_mm).round();
+    let scanner = scene
+        .scanner
+        .as_ref()
+        .expect("the built-in scene has a [scanner]");
+    let rays = (scanner.fov_mm.0 / scanner.pitch_mm).round()
+        * (scanner.fov_mm.1 / scanner.pitch_mm).round();
     g.throughput(Throughput::Elements(rays as u64));
     g.bench_function("scan (camera rays)", |b| {
-        b.iter(|| scan(black_box(&stock), &scene.scanner, &NoProgress).expect("scans"))
+        b.iter(|| scan(black_box(&stock), scanner, &NoProgress).expect("scans"))
     });
     g.finish();
 }

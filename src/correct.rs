@@ -1046,9 +1046,10 @@ pub struct FaceCheck {
 }
 
 impl FaceCheck {
-    /// The largest distance of any crossing from its nominal face (mm).
-    pub fn max_abs_mm(&self) -> Real {
-        self.faces.iter().map(|f| f.max_abs_mm).fold(0.0, Real::max)
+    /// The largest distance of any crossing from its nominal face (mm); `None` when no face
+    /// was measured (the scene names none).
+    pub fn max_abs_mm(&self) -> Option<Real> {
+        self.faces.iter().map(|f| f.max_abs_mm).reduce(Real::max)
     }
 }
 

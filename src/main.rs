@@ -24,7 +24,7 @@ use twinmill::report::DesignReport;
 use twinmill::report::{ScanFileReport, ScanReport};
 use twinmill::scan::Surface;
 use twinmill::scene::design_scene_toml;
-use twinmill::scene::{Scene, SceneError};
+use twinmill::scene::{Need, Scene, SceneError};
 use twinmill::segment::{PlaneSegmentOptions, RansacOptions};
 
 /// twinmill: a digital twin of machine-tool accuracy.
@@ -251,11 +251,14 @@ enum Command {
     },
 }
 
-/// Sets the thread count, loads the scene and its program.
+/// Sets the thread count, loads the scene, checks that it has what `command` needs, and
+/// loads its program.
 fn prepare(
     scene: &Path,
     threads: Option<usize>,
     verbose: bool,
+    command: &str,
+    needs: &[Need],
 ) -> Result<(Scene, Program), ExitCode> {
     if let Some(n) = threads
         && let Err(e) = rayon::ThreadPoolBuilder::new()
@@ -265,6 +268,7 @@ fn prepare(
         return Err(fail(e));
     }
     let scene = Scene::load(scene).map_err(fail)?;
+    scene.require(command, needs).map_err(fail)?;
     let program = match scene.load_program() {
         Ok(p) => p,
         Err(SceneError::Program(e)) if verbose => {
@@ -409,7 +413,13 @@ fn main() -> ExitCode {
                     verbose,
                 },
         } => {
-            let (scene, program) = match prepare(&scene, threads, verbose) {
+            let (scene, program) = match prepare(
+                &scene,
+                threads,
+                verbose,
+                "run",
+                &[Need::Scanner, Need::StepFaces],
+            ) {
                 Ok(x) => x,
                 Err(code) => return code,
             };
@@ -444,7 +454,7 @@ fn main() -> ExitCode {
                 },
             mesh,
         } => {
-            let (scene, program) = match prepare(&scene, threads, verbose) {
+            let (scene, program) = match prepare(&scene, threads, verbose, "simulate", &[]) {
                 Ok(x) => x,
                 Err(code) => return code,
             };
@@ -492,7 +502,12 @@ fn main() -> ExitCode {
                 },
             study,
         } => {
-            let (scene, program) = match prepare(&scene, threads, verbose) {
+            let (scan_command, scan_needs): (&str, &[Need]) = match study {
+                Some(_) => ("scan --study", &[Need::Scanner, Need::StepFaces]),
+                None => ("scan", &[Need::Scanner]),
+            };
+            let (scene, program) = match prepare(&scene, threads, verbose, scan_command, scan_needs)
+            {
                 Ok(x) => x,
                 Err(code) => return code,
             };
@@ -503,7 +518,11 @@ fn main() -> ExitCode {
             };
             // One surface index for the scan and every scan of the study.
             let surface = Surface::new(&part.stock);
-            let scanned = match surface.scan(&scene.scanner, &bars) {
+            let scanner = match scene.scanner_for(scan_command) {
+                Ok(s) => s,
+                Err(e) => return fail(e),
+            };
+            let scanned = match surface.scan(scanner, &bars) {
                 Ok(s) => s,
                 Err(e) => return fail(format!("{}: [scanner]: {e}", scene.path.display())),
             };
@@ -522,7 +541,7 @@ fn main() -> ExitCode {
             };
             let report = ScanFileReport {
                 scene: scene.name.clone(),
-                scan: ScanReport::of(&scanned, &scene.scanner),
+                scan: ScanReport::of(&scanned, scanner),
                 study: cases,
             };
             let dir = out.join(format!("{}-scan", scene.name));
@@ -555,10 +574,18 @@ fn main() -> ExitCode {
                     "--accuracy-mm must be a positive number of mm, got {accuracy_mm}"
                 ));
             }
-            let (scene, program) = match prepare(&scene, threads, verbose) {
-                Ok(x) => x,
-                Err(code) => return code,
+            let (correct_command, correct_needs): (&str, &[Need]) = match model {
+                ModelSource::Injected => ("correct", &[]),
+                ModelSource::Identified => (
+                    "correct --model identified",
+                    &[Need::Scanner, Need::StepFaces],
+                ),
             };
+            let (scene, program) =
+                match prepare(&scene, threads, verbose, correct_command, correct_needs) {
+                    Ok(x) => x,
+                    Err(code) => return code,
+                };
             let bars = bars(json);
             let chain = match model {
                 ModelSource::Injected => scene.chain.clone(),
@@ -630,10 +657,16 @@ fn main() -> ExitCode {
             cloud,
             monte_carlo,
         } => {
-            let (scene, program) = match prepare(&scene, threads, verbose) {
-                Ok(x) => x,
-                Err(code) => return code,
+            // A simulated scan needs the scanner; a given cloud does not.
+            let identify_needs: &[Need] = match cloud {
+                Some(_) => &[Need::Parameters],
+                None => &[Need::Parameters, Need::Scanner],
             };
+            let (scene, program) =
+                match prepare(&scene, threads, verbose, "identify", identify_needs) {
+                    Ok(x) => x,
+                    Err(code) => return code,
+                };
             let given = match &cloud {
                 Some(path) => match read_cloud_file(path) {
                     Ok(c) => Some((c, path.display().to_string())),
@@ -697,7 +730,7 @@ fn main() -> ExitCode {
                 },
             params,
         } => {
-            let (scene, _) = match prepare(&scene, threads, verbose) {
+            let (scene, _) = match prepare(&scene, threads, verbose, "design", &[Need::Scanner]) {
                 Ok(x) => x,
                 Err(code) => return code,
             };
@@ -708,15 +741,22 @@ fn main() -> ExitCode {
                     Err(e) => return fail(format!("--params: {e}")),
                 }
             }
+            let scanner = match scene.scanner_for("design") {
+                Ok(s) => s,
+                Err(e) => return fail(e),
+            };
             let mut opts = DesignOptions::standard();
-            opts.noise_sigma_mm = scene.scanner.noise_sigma_mm;
-            opts.pitch_mm = scene.scanner.pitch_mm;
+            opts.noise_sigma_mm = scanner.noise_sigma_mm;
+            opts.pitch_mm = scanner.pitch_mm;
             let d = match design(&scene.model, &scene.tool, &ids, &opts) {
                 Ok(d) => d,
                 Err(e) => return fail(e),
             };
             let name = format!("{}-design", scene.name);
-            let toml = design_scene_toml(&scene, &d, &opts, &params, &name, "design.ngc");
+            let toml = match design_scene_toml(&scene, &d, &opts, &params, &name, "design.ngc") {
+                Ok(t) => t,
+                Err(e) => return fail(e),
+            };
             let i = &d.identifiability;
             let report = DesignReport {
                 scene: scene.name.clone(),

@@ -43,7 +43,7 @@ use crate::report::{
     EstimateReport, FeatureReport, IdentifyReport, IdentifySolverReport, LoopRound,
 };
 use crate::scan::{Misregistration, ScanError, StudyOptions, Surface, scan};
-use crate::scene::{Scene, StockShape};
+use crate::scene::{Need, Scene, SceneError, StockShape};
 use crate::segment::{
     PlaneSegmentOptions, RansacOptions, estimate_normals, ransac_cylinder, ransac_sphere,
     segment_planes, select_box, select_region_from_seed,
@@ -128,6 +128,9 @@ pub enum PipelineError {
         /// Why.
         source: DeviationError,
     },
+    /// The scene lacks a section the command needs.
+    #[error("{0}")]
+    Scene(#[from] SceneError),
     /// The heat map could not be drawn.
     #[error("{path}: heat map: {source}")]
     Render {
@@ -251,12 +254,7 @@ pub fn extract_faces(
         path: scene.path.display().to_string(),
         source,
     };
-    if scene.faces.len() != 2 {
-        return Err(id_err(IdentifyError::NotAStepPair(format!(
-            "the scene lists {} faces; `run` measures two, use `twinmill identify` for more",
-            scene.faces.len()
-        ))));
-    }
+    scene.require("run", &[Need::StepFaces])?;
     let face = |k: usize| {
         identify::extract_face(
             points,
@@ -278,6 +276,8 @@ pub fn run(
     program: &Program,
     progress: &dyn Progress,
 ) -> Result<Outcome, PipelineError> {
+    scene.require("run", &[Need::Scanner, Need::StepFaces])?;
+    let scanner = scene.scanner_for("run")?;
     let spath = scene.path.display().to_string();
     let mut timings = Vec::new();
     let mut clock = Instant::now();
@@ -291,7 +291,7 @@ pub fn run(
     let (stock, sweep) = (part.stock, part.sweep);
     timings.extend(part.timings);
 
-    let scanned = scan(&stock, &scene.scanner, progress).map_err(|source| PipelineError::Scan {
+    let scanned = scan(&stock, scanner, progress).map_err(|source| PipelineError::Scan {
         path: spath.clone(),
         source,
     })?;
@@ -331,7 +331,7 @@ pub fn run(
     // across it (whose edge strips also fall in the band).
     let band = scene.face_options.band_mm;
     let (v0, v1) = identify::extent(&scene.stock_box, &nominal.tip, &nominal.v);
-    let edge = 2.0 * scene.scanner.pitch_mm;
+    let edge = 2.0 * scanner.pitch_mm;
     let face_points: Vec<_> = points
         .iter()
         .filter(|p| {
@@ -354,7 +354,7 @@ pub fn run(
             width_px: 800,
             // Seen obliquely, points on a face lie further apart than the nominal pitch:
             // dots 1.5 pitches wide close the gaps.
-            point_pitch_mm: 1.5 * scene.scanner.pitch_mm,
+            point_pitch_mm: 1.5 * scanner.pitch_mm,
             range_um: Some(colour_range_um(&face_points, &nominal.plane)),
         },
     )
@@ -402,7 +402,7 @@ pub fn run(
         },
         stock: StockReport::of(&stock, volume0),
         sweep,
-        scan: ScanReport::of(&scanned, &scene.scanner),
+        scan: ScanReport::of(&scanned, scanner),
         timings_s: timings,
     };
     Ok(Outcome {
@@ -424,8 +424,9 @@ pub fn scanner_study(
     surface: &Surface,
     opts: &StudyOptions,
 ) -> Result<Vec<StudyCase>, PipelineError> {
+    scene.require("scan --study", &[Need::Scanner, Need::StepFaces])?;
+    let base = scene.scanner_for("scan --study")?;
     let spath = scene.path.display().to_string();
-    let base = &scene.scanner;
     let sigma = base.noise_sigma_mm;
     let variant = |noise: Real, corr: Real, t: Real, r: Real| {
         let mut c = base.clone();
@@ -947,7 +948,7 @@ pub fn correct(
                 faces: Vec::new(),
                 step_mm: None,
             },
-            predicted_error_mm: Real::NAN,
+            predicted_error_mm: None,
             sweep: SweepReport::default(),
         },
         Err(e) => return Err(e),
@@ -970,7 +971,8 @@ pub fn correct(
         let residual = cp.summary.residual_max_mm;
         // The same path on the model corrected for: what the correction itself leaves.
         let on_model = path_error(model, &scene.tool, program, &cp).max_mm - residual;
-        let faces_ok = it.predicted_error_mm <= accuracy_mm;
+        let it_has_faces = it.predicted_error_mm.is_some();
+        let faces_ok = it.predicted_error_mm.is_none_or(|e| e <= accuracy_mm);
         let path_ok = it.path.max_mm <= accuracy_mm;
         // Path error beyond what no command can remove: subdivision, rounding, the model.
         let correctable = it.path.max_mm - residual;
@@ -978,12 +980,22 @@ pub fn correct(
         last = Some(cp);
         if faces_ok && path_ok {
             met = true;
-            status = format!("met in {pass} pass(es): faces and path within {accuracy_mm} mm");
+            let what = if it_has_faces {
+                "faces and path"
+            } else {
+                "path (no faces named)"
+            };
+            status = format!("met in {pass} pass(es): {what} within {accuracy_mm} mm");
             break;
         }
         if correctable <= accuracy_mm && faces_ok {
+            let faces = if it_has_faces {
+                format!("faces within {accuracy_mm} mm; ")
+            } else {
+                String::new()
+            };
             status = format!(
-                "faces within {accuracy_mm} mm; the path is off by up to {residual:.6} mm at the flute's ends \
+                "{faces}the path is off by up to {residual:.6} mm at the flute's ends \
                  because of deviations these axes cannot correct (see uncorrectable)"
             );
             break;
@@ -995,7 +1007,8 @@ pub fn correct(
                  axes cannot correct reach the faces (see uncorrectable)",
                 iterations
                     .last()
-                    .map_or(Real::NAN, |i| i.predicted_error_mm)
+                    .and_then(|i| i.predicted_error_mm)
+                    .unwrap_or(Real::NAN)
             );
             break;
         }
@@ -1061,9 +1074,13 @@ pub fn correct(
         ),
     ];
     if let Some(f) = &fin {
+        let faces = match f.predicted_error_mm {
+            Some(e) => format!("faces within {e:.6} mm, "),
+            None => String::new(),
+        };
         header.push(format!(
-            "predicted on the twin: faces within {:.6} mm, path within {:.6} mm, accuracy asked {} mm",
-            f.predicted_error_mm, f.path.max_mm, accuracy_mm
+            "predicted on the twin: {faces}path within {:.6} mm, accuracy asked {} mm",
+            f.path.max_mm, accuracy_mm
         ));
     }
     header.push("each block names its source line, subdivided moves also their part k/n".into());
@@ -1329,6 +1346,11 @@ pub fn identify_scene(
         path: spath.clone(),
         source,
     };
+    // A simulated scan (and Monte Carlo over its noise) needs the scanner; a cloud does not.
+    match cloud {
+        Some(_) => scene.require("identify", &[Need::Parameters])?,
+        None => scene.require("identify", &[Need::Parameters, Need::Scanner])?,
+    }
     let ids = scene_ids(scene)?;
     let mut timings = Vec::new();
     let mut clock = Instant::now();
@@ -1339,11 +1361,12 @@ pub fn identify_scene(
     let (cloud, source, surface) = match cloud {
         Some((c, src)) => (c.clone(), src.to_string(), None),
         None => {
+            let scanner = scene.scanner_for("identify")?;
             let part = machine_part(scene, program, progress)?;
             let surface = Surface::new(&part.stock);
             let scanned =
                 surface
-                    .scan(&scene.scanner, progress)
+                    .scan(scanner, progress)
                     .map_err(|source| PipelineError::Scan {
                         path: spath.clone(),
                         source,
@@ -1368,9 +1391,9 @@ pub fn identify_scene(
     let trials = monte_carlo.unwrap_or(scene.monte_carlo_trials);
     let mut samples: BTreeMap<String, Vec<Real>> = BTreeMap::new();
     let mut mc_trials = 0;
-    if let Some(surface) = &surface {
+    if let (Some(surface), Some(scanner)) = (&surface, &scene.scanner) {
         for k in 0..trials {
-            let mut cfg = scene.scanner.clone();
+            let mut cfg = scanner.clone();
             cfg.seed = scene.monte_carlo_seed.wrapping_add(k as u64);
             let scanned = surface
                 .scan(&cfg, &crate::progress::NoProgress)

@@ -721,8 +721,9 @@ pub struct CorrectIteration {
     /// on the nominal machine), ray by ray.
     pub part: crate::correct::PartError,
     /// The predicted machining error: the largest distance of a milled-face crossing from
-    /// its nominal face (mm).
-    pub predicted_error_mm: f64,
+    /// its nominal face (mm); `None` (null) when no face was measured — the scene names no
+    /// faces (`[identify]`), or they are too far off to find.
+    pub predicted_error_mm: Option<f64>,
     /// What the sweep did.
     pub sweep: SweepReport,
 }
@@ -793,10 +794,13 @@ impl CorrectReport {
                 .faces
                 .step_mm
                 .map_or(String::new(), |x| format!(", step {:+.4} µm", x * 1e3));
+            let faces = match it.predicted_error_mm {
+                Some(e) => format!("faces max {:.4} µm{step}", e * 1e3),
+                None => "faces not measured".to_string(),
+            };
             let _ = writeln!(
                 s,
-                "  {label} faces max {:.4} µm{step}; path max {:.4} µm, rms {:.4} µm; whole part max {:.4} µm ({} blocks)",
-                it.predicted_error_mm * 1e3,
+                "  {label} {faces}; path max {:.4} µm, rms {:.4} µm; whole part max {:.4} µm ({} blocks)",
                 it.path.max_mm * 1e3,
                 it.path.rms_mm * 1e3,
                 it.part.max_mm * 1e3,

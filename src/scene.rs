@@ -54,12 +54,35 @@ pub enum SceneError {
     /// The NC program has errors.
     #[error("{0}")]
     Program(NcError),
+    /// A command needs a section the scene does not have (or has in another form).
+    #[error("{path}: {command} needs {what}")]
+    Missing {
+        /// The scene file.
+        path: PathBuf,
+        /// The command (`run`, `scan`, …).
+        command: String,
+        /// The sections it needs, and what they hold.
+        what: String,
+    },
+}
+
+/// A part of a scene that a command needs beyond `[machine]`, `[tool]`, `[stock]` and the
+/// program (which every command needs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Need {
+    /// `[scanner]`: the virtual scanner that measures the cut part.
+    Scanner,
+    /// `[identify] faces`: the two faces of the 0°/180° experiment.
+    StepFaces,
+    /// `[identify] parameters` and the faces to identify them from.
+    Parameters,
 }
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct SceneFile {
-    name: Spanned<String>,
+    #[serde(default)]
+    name: Option<Spanned<String>>,
     program: Spanned<String>,
     machine: MachineFile,
     #[serde(default)]
@@ -68,8 +91,10 @@ struct SceneFile {
     stock: StockFile,
     #[serde(default)]
     sweep: SweepFile,
-    scanner: ScannerFile,
-    identify: IdentifyFile,
+    #[serde(default)]
+    scanner: Option<ScannerFile>,
+    #[serde(default)]
+    identify: Option<IdentifyFile>,
     #[serde(default)]
     study: Option<StudyFile>,
     #[serde(default)]
@@ -302,6 +327,12 @@ struct BoxFile {
 /// tested to.
 pub const DEFAULT_LOOP_TOLERANCE_MM: Real = 5e-4;
 
+/// Default `[identify] margin_mm`: points kept this far inside a face's edges (mm).
+const DEFAULT_MARGIN_MM: Real = 1.0;
+
+/// Default `[identify] band_mm`: points kept within this of the expected plane (mm).
+const DEFAULT_BAND_MM: Real = 2.0;
+
 /// Files that set up the interpreter for a scene's program (`[nc]`).
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct NcFiles {
@@ -374,10 +405,11 @@ pub struct Scene {
     pub memory_budget_bytes: Real,
     /// Sweep options.
     pub sweep: SweepOptions,
-    /// Scanner.
-    pub scanner: ScannerConfig,
-    /// The faces to measure: the two of the 0/180 experiment (`run`), or any number for
-    /// general identification (`identify`, when `parameters` is given).
+    /// The virtual scanner (`[scanner]`), for the commands that scan.
+    pub scanner: Option<ScannerConfig>,
+    /// The faces to measure (`[identify] faces`): the two of the 0/180 experiment (`run`), or
+    /// any number for general identification (`identify`, when `parameters` is given); empty
+    /// when the scene has no `[identify]`.
     pub faces: Vec<FaceSpec>,
     /// Deviations to identify (`[identify] parameters`), by name; empty: the 0/180
     /// experiment's two.
@@ -421,6 +453,16 @@ impl Ctx<'_> {
         } else {
             Err(self.err(v.span(), format!("{what} must be a finite number, got {x}")))
         }
+    }
+
+    /// An optional finite number, or `default`.
+    fn opt(
+        &self,
+        v: &Option<Spanned<Real>>,
+        what: &str,
+        default: Real,
+    ) -> Result<Real, SceneError> {
+        v.as_ref().map_or(Ok(default), |v| self.finite(v, what))
     }
 
     fn positive(&self, v: &Spanned<Real>, what: &str) -> Result<Real, SceneError> {
@@ -518,6 +560,276 @@ impl Ctx<'_> {
     }
 }
 
+/// `[identify]`: the faces and how they are measured and identified.
+fn identify_setup(ctx: &Ctx, chain: &Chain, f: &IdentifyFile) -> Result<IdentifySetup, SceneError> {
+    let faces = f.faces.get_ref();
+    let general = f.parameters.is_some();
+    if general && faces.is_empty() {
+        return Err(ctx.err(f.faces.span(), "identify.faces is empty"));
+    }
+    if !general && faces.len() != 2 {
+        return Err(ctx.err(
+            f.faces.span(),
+            format!(
+                "identify.faces must list exactly two faces (cut at A = 0° and 180°), got {}",
+                faces.len()
+            ),
+        ));
+    }
+    let spec = |face: &FaceFile| -> Result<FaceSpec, SceneError> {
+        let region = match (&face.bbox, &face.seed) {
+            (Some(_), Some(s)) => {
+                return Err(ctx.err(s.span(), "a face takes a box or a seed, not both"));
+            }
+            (Some(b), None) => {
+                let (mn, mx) = (ctx.vec3(&b.min, "box.min")?, ctx.vec3(&b.max, "box.max")?);
+                if (0..3).any(|k| mx[k] <= mn[k]) {
+                    return Err(ctx.err(b.max.span(), "box.max must exceed box.min on every axis"));
+                }
+                FaceRegion::Box(Aabb {
+                    min: mn.into(),
+                    max: mx.into(),
+                })
+            }
+            (None, Some(s)) => FaceRegion::Seed(ctx.vec3(s, "seed")?.into()),
+            (None, None) => FaceRegion::Auto,
+        };
+        let kind = match face.kind.as_ref().map(|k| (k.get_ref().as_str(), k.span())) {
+            None | Some(("flank", _)) => FaceKind::Flank,
+            Some(("floor", _)) => FaceKind::Floor,
+            Some((other, span)) => {
+                return Err(ctx.err(
+                    span,
+                    format!("face kind must be 'flank' or 'floor', got '{other}'"),
+                ));
+            }
+        };
+        Ok(FaceSpec {
+            kind,
+            name: face.name.clone(),
+            line: *face.line.get_ref(),
+            region,
+        })
+    };
+    let margin = ctx.opt(&f.margin_mm, "margin_mm", DEFAULT_MARGIN_MM)?;
+    let band = ctx.opt(&f.band_mm, "band_mm", DEFAULT_BAND_MM)?;
+    if margin < 0.0 {
+        return Err(ctx.err(
+            f.margin_mm.as_ref().map_or(0..0, |m| m.span()),
+            "margin_mm must not be negative",
+        ));
+    }
+    if band <= 0.0 {
+        return Err(ctx.err(
+            f.band_mm.as_ref().map_or(0..0, |m| m.span()),
+            "band_mm must be positive",
+        ));
+    }
+    let mut parameters = Vec::new();
+    if let Some(ps) = &f.parameters {
+        for p in ps.get_ref() {
+            chain
+                .deviation_id(p.get_ref())
+                .map_err(|e| ctx.err(p.span(), e.to_string()))?;
+            if parameters.contains(p.get_ref()) {
+                return Err(ctx.err(p.span(), format!("parameter '{}' given twice", p.get_ref())));
+            }
+            parameters.push(p.get_ref().clone());
+        }
+        if parameters.is_empty() {
+            return Err(ctx.err(ps.span(), "identify.parameters is empty"));
+        }
+    }
+    let registration = match f
+        .registration
+        .as_ref()
+        .map(|r| (r.get_ref().as_str(), r.span()))
+    {
+        None | Some(("estimate", _)) => Registration::Estimate,
+        Some(("workpiece", _)) => Registration::Workpiece,
+        Some((other, span)) => {
+            return Err(ctx.err(
+                span,
+                format!("registration must be 'estimate' or 'workpiece', got '{other}'"),
+            ));
+        }
+    };
+    let (monte_carlo_trials, monte_carlo_seed) = match &f.monte_carlo {
+        Some(m) if *m.trials.get_ref() > 10_000 => {
+            return Err(ctx.err(m.trials.span(), "monte_carlo.trials must be at most 10000"));
+        }
+        Some(m) => (*m.trials.get_ref(), m.seed.unwrap_or(1)),
+        None => (0, 1),
+    };
+    let loop_tolerance_mm = match &f.loop_tolerance_mm {
+        Some(v) => ctx.positive(v, "loop_tolerance_mm")?,
+        None => DEFAULT_LOOP_TOLERANCE_MM,
+    };
+    Ok(IdentifySetup {
+        faces: faces.iter().map(spec).collect::<Result<_, _>>()?,
+        parameters,
+        registration,
+        monte_carlo_trials,
+        monte_carlo_seed,
+        loop_tolerance_mm,
+        face_options: FaceOptions {
+            margin_mm: margin,
+            band_mm: band,
+            robust: RobustRule::default(),
+        },
+    })
+}
+
+/// What `[identify]` sets, or its defaults when the scene has none (no faces).
+struct IdentifySetup {
+    faces: Vec<FaceSpec>,
+    parameters: Vec<String>,
+    registration: Registration,
+    monte_carlo_trials: usize,
+    monte_carlo_seed: u64,
+    loop_tolerance_mm: Real,
+    face_options: FaceOptions,
+}
+
+impl IdentifySetup {
+    fn none() -> Self {
+        IdentifySetup {
+            faces: Vec::new(),
+            parameters: Vec::new(),
+            registration: Registration::Estimate,
+            monte_carlo_trials: 0,
+            monte_carlo_seed: 1,
+            loop_tolerance_mm: DEFAULT_LOOP_TOLERANCE_MM,
+            face_options: FaceOptions {
+                margin_mm: DEFAULT_MARGIN_MM,
+                band_mm: DEFAULT_BAND_MM,
+                robust: RobustRule::default(),
+            },
+        }
+    }
+}
+
+/// The scene's name (`name`, or the file's stem): it names the output folder.
+fn scene_name(ctx: &Ctx, name: Option<&Spanned<String>>) -> Result<String, SceneError> {
+    let (text, span) = match name {
+        Some(n) => (n.get_ref().trim().to_string(), n.span()),
+        None => (
+            ctx.path
+                .file_stem()
+                .map(|s| s.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            0..0,
+        ),
+    };
+    if text.is_empty()
+        || !text
+            .chars()
+            .all(|c| c.is_ascii_alphanumeric() || "-_.".contains(c))
+        || text.starts_with('.')
+    {
+        let what = if name.is_some() {
+            "name".to_string()
+        } else {
+            format!("the file name '{text}' (used when the scene has no name)")
+        };
+        return Err(ctx.err(
+            span,
+            format!("{what} must be non-empty and use only letters, digits, '-', '_', '.'"),
+        ));
+    }
+    Ok(text)
+}
+
+/// `[scanner]`: the virtual scanner, with the defaults of an EinScan-SP class instrument.
+fn scanner_config(ctx: &Ctx, s: &ScannerFile) -> Result<ScannerConfig, SceneError> {
+    let fov = match &s.fov_mm {
+        Some(f) => (f.get_ref()[0], f.get_ref()[1]),
+        None => (200.0, 150.0),
+    };
+    let scanner = ScannerConfig {
+        position: ctx.vec3(&s.position, "position")?.into(),
+        target: ctx.vec3(&s.target, "target")?.into(),
+        up: ctx.vec3(&s.up, "up")?,
+        baseline_mm: ctx.opt(&s.baseline_mm, "baseline_mm", 100.0)?,
+        fov_mm: fov,
+        pitch_mm: ctx.opt(&s.pitch_mm, "pitch_mm", 0.185)?,
+        noise_sigma_mm: ctx.opt(&s.noise_sigma_mm, "noise_sigma_mm", 0.025)?,
+        noise_correlation_mm: ctx.opt(&s.noise_correlation_mm, "noise_correlation_mm", 0.0)?,
+        working_range_mm: match &s.working_range_mm {
+            Some(r) => (r.get_ref()[0], r.get_ref()[1]),
+            None => (290.0, 480.0),
+        },
+        grazing_limit_deg: ctx.opt(&s.grazing_limit_deg, "grazing_limit_deg", 80.0)?,
+        misregistration: match &s.misregistration {
+            Some(m) => Misregistration {
+                translation_sigma_mm: ctx.opt(
+                    &m.translation_sigma_mm,
+                    "translation_sigma_mm",
+                    0.0,
+                )?,
+                rotation_sigma_rad: ctx.opt(&m.rotation_sigma_rad, "rotation_sigma_rad", 0.0)?,
+            },
+            None => Misregistration::default(),
+        },
+        turntable: match &s.turntable {
+            Some(t) => Some(Turntable {
+                axis_point: ctx.vec3(&t.axis_point, "axis_point")?.into(),
+                axis: UnitVector3::try_new(ctx.vec3(&t.axis, "axis")?, tol::LENGTH_EPS)
+                    .ok_or_else(|| ctx.err(t.axis.span(), "turntable axis must not be zero"))?,
+                angles_deg: t.angles_deg.get_ref().clone(),
+            }),
+            None => None,
+        },
+        seed: s.seed.unwrap_or(1),
+    };
+    scanner.validate().map_err(|e| {
+        let span = match &e {
+            ScanError::BadConfig { field, .. } => match *field {
+                "position" => s.position.span(),
+                "target" => s.target.span(),
+                "up" => s.up.span(),
+                "pitch_mm" => s.pitch_mm.as_ref().map_or(s.position.span(), |v| v.span()),
+                "fov_mm" => s.fov_mm.as_ref().map_or(s.position.span(), |v| v.span()),
+                "noise_sigma_mm" => s
+                    .noise_sigma_mm
+                    .as_ref()
+                    .map_or(s.position.span(), |v| v.span()),
+                "noise_correlation_mm" => s
+                    .noise_correlation_mm
+                    .as_ref()
+                    .map_or(s.position.span(), |v| v.span()),
+                "working_range_mm" => s
+                    .working_range_mm
+                    .as_ref()
+                    .map_or(s.position.span(), |v| v.span()),
+                "grazing_limit_deg" => s
+                    .grazing_limit_deg
+                    .as_ref()
+                    .map_or(s.position.span(), |v| v.span()),
+                "turntable" => s
+                    .turntable
+                    .as_ref()
+                    .map_or(s.position.span(), |t| t.angles_deg.span()),
+                "misregistration" => s
+                    .misregistration
+                    .as_ref()
+                    .and_then(|m| {
+                        m.translation_sigma_mm
+                            .as_ref()
+                            .or(m.rotation_sigma_rad.as_ref())
+                    })
+                    .map_or(s.position.span(), |v| v.span()),
+                _ => s.position.span(),
+            },
+            ScanError::TooManyRays { .. } => {
+                s.pitch_mm.as_ref().map_or(s.position.span(), |v| v.span())
+            }
+        };
+        ctx.err(span, e.to_string())
+    })?;
+    Ok(scanner)
+}
+
 /// 1-based line and column (in characters) of byte offset `at`.
 fn line_col(text: &str, at: usize) -> (usize, usize) {
     let at = at.min(text.len());
@@ -576,6 +888,56 @@ pub fn memory_budget_bytes() -> Real {
 }
 
 impl Scene {
+    /// Checks that the scene has what `command` needs: one error naming every missing part.
+    pub fn require(&self, command: &str, needs: &[Need]) -> Result<(), SceneError> {
+        let mut missing = Vec::new();
+        for need in needs {
+            match need {
+                Need::Scanner if self.scanner.is_none() => missing.push(
+                    "[scanner] (the virtual scanner that measures the cut part: position, target, up)"
+                        .to_string(),
+                ),
+                Need::StepFaces if self.faces.is_empty() => missing.push(
+                    "[identify] faces (the two faces cut 180° apart, each named by the NC line \
+                     of its cut: faces = [{ name, line }, { name, line }])"
+                        .to_string(),
+                ),
+                Need::StepFaces if self.faces.len() != 2 || !self.parameters.is_empty() => {
+                    missing.push(format!(
+                        "[identify] with exactly two faces cut 180° apart and no parameters (this \
+                         scene lists {} faces and {} parameters for `twinmill identify`)",
+                        self.faces.len(),
+                        self.parameters.len()
+                    ))
+                }
+                Need::Parameters if self.parameters.is_empty() => missing.push(
+                    "[identify] parameters (the deviations to solve for, e.g. parameters = \
+                     [\"dy_AY\"]) and faces (the cuts to measure, each by its NC line)"
+                        .to_string(),
+                ),
+                _ => {}
+            }
+        }
+        if missing.is_empty() {
+            return Ok(());
+        }
+        Err(SceneError::Missing {
+            path: self.path.clone(),
+            command: command.to_string(),
+            what: missing.join(" and "),
+        })
+    }
+
+    /// The scanner, or the error saying that `command` needs one.
+    pub fn scanner_for(&self, command: &str) -> Result<&ScannerConfig, SceneError> {
+        self.require(command, &[Need::Scanner])?;
+        self.scanner.as_ref().ok_or_else(|| SceneError::Missing {
+            path: self.path.clone(),
+            command: command.to_string(),
+            what: "[scanner]".into(),
+        })
+    }
+
     /// Loads and validates a scene file.
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
         let text = read_text(path)?;
@@ -589,18 +951,7 @@ impl Scene {
             let span = e.span().unwrap_or(0..0);
             ctx.err(span, e.message().trim().to_string())
         })?;
-        let name = file.name.get_ref().trim().to_string();
-        if name.is_empty()
-            || !name
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || "-_.".contains(c))
-            || name.starts_with('.')
-        {
-            return Err(ctx.err(
-                file.name.span(),
-                "name must be non-empty and use only letters, digits, '-', '_', '.'",
-            ));
-        }
+        let name = scene_name(&ctx, file.name.as_ref())?;
         // Machine.
         let mut axes = Vec::new();
         for a in file.machine.axes.get_ref() {
@@ -674,7 +1025,10 @@ impl Scene {
         let model_nominal = chain.nominal();
         let injected = deviation_map(&ctx, &mut chain, &file.deviations)?;
         let mut model = model_nominal;
-        let known = deviation_map(&ctx, &mut model, &file.identify.known)?;
+        let known = match &file.identify {
+            Some(id) => deviation_map(&ctx, &mut model, &id.known)?,
+            None => BTreeMap::new(),
+        };
         // Tool.
         let diameter = ctx.positive(&file.tool.diameter_mm, "diameter_mm")?;
         let length = ctx.positive(&file.tool.length_mm, "length_mm")?;
@@ -974,162 +1328,10 @@ impl Scene {
             }
             None => tol::ROTARY_STEP_BOUND,
         };
-        // Scanner.
-        let s = &file.scanner;
-        let opt = |v: &Option<Spanned<Real>>, what: &str, default: Real| {
-            v.as_ref().map_or(Ok(default), |v| ctx.finite(v, what))
+        let scanner = match &file.scanner {
+            Some(s) => Some(scanner_config(&ctx, s)?),
+            None => None,
         };
-        let fov = match &s.fov_mm {
-            Some(f) => (f.get_ref()[0], f.get_ref()[1]),
-            None => (200.0, 150.0),
-        };
-        let scanner = ScannerConfig {
-            position: ctx.vec3(&s.position, "position")?.into(),
-            target: ctx.vec3(&s.target, "target")?.into(),
-            up: ctx.vec3(&s.up, "up")?,
-            baseline_mm: opt(&s.baseline_mm, "baseline_mm", 100.0)?,
-            fov_mm: fov,
-            pitch_mm: opt(&s.pitch_mm, "pitch_mm", 0.185)?,
-            noise_sigma_mm: opt(&s.noise_sigma_mm, "noise_sigma_mm", 0.025)?,
-            noise_correlation_mm: opt(&s.noise_correlation_mm, "noise_correlation_mm", 0.0)?,
-            working_range_mm: match &s.working_range_mm {
-                Some(r) => (r.get_ref()[0], r.get_ref()[1]),
-                None => (290.0, 480.0),
-            },
-            grazing_limit_deg: opt(&s.grazing_limit_deg, "grazing_limit_deg", 80.0)?,
-            misregistration: match &s.misregistration {
-                Some(m) => Misregistration {
-                    translation_sigma_mm: opt(
-                        &m.translation_sigma_mm,
-                        "translation_sigma_mm",
-                        0.0,
-                    )?,
-                    rotation_sigma_rad: opt(&m.rotation_sigma_rad, "rotation_sigma_rad", 0.0)?,
-                },
-                None => Misregistration::default(),
-            },
-            turntable: match &s.turntable {
-                Some(t) => Some(Turntable {
-                    axis_point: ctx.vec3(&t.axis_point, "axis_point")?.into(),
-                    axis: UnitVector3::try_new(ctx.vec3(&t.axis, "axis")?, tol::LENGTH_EPS)
-                        .ok_or_else(|| ctx.err(t.axis.span(), "turntable axis must not be zero"))?,
-                    angles_deg: t.angles_deg.get_ref().clone(),
-                }),
-                None => None,
-            },
-            seed: s.seed.unwrap_or(1),
-        };
-        scanner.validate().map_err(|e| {
-            let span = match &e {
-                ScanError::BadConfig { field, .. } => match *field {
-                    "position" => s.position.span(),
-                    "target" => s.target.span(),
-                    "up" => s.up.span(),
-                    "pitch_mm" => s.pitch_mm.as_ref().map_or(s.position.span(), |v| v.span()),
-                    "fov_mm" => s.fov_mm.as_ref().map_or(s.position.span(), |v| v.span()),
-                    "noise_sigma_mm" => s
-                        .noise_sigma_mm
-                        .as_ref()
-                        .map_or(s.position.span(), |v| v.span()),
-                    "noise_correlation_mm" => s
-                        .noise_correlation_mm
-                        .as_ref()
-                        .map_or(s.position.span(), |v| v.span()),
-                    "working_range_mm" => s
-                        .working_range_mm
-                        .as_ref()
-                        .map_or(s.position.span(), |v| v.span()),
-                    "grazing_limit_deg" => s
-                        .grazing_limit_deg
-                        .as_ref()
-                        .map_or(s.position.span(), |v| v.span()),
-                    "turntable" => s
-                        .turntable
-                        .as_ref()
-                        .map_or(s.position.span(), |t| t.angles_deg.span()),
-                    "misregistration" => s
-                        .misregistration
-                        .as_ref()
-                        .and_then(|m| {
-                            m.translation_sigma_mm
-                                .as_ref()
-                                .or(m.rotation_sigma_rad.as_ref())
-                        })
-                        .map_or(s.position.span(), |v| v.span()),
-                    _ => s.position.span(),
-                },
-                ScanError::TooManyRays { .. } => {
-                    s.pitch_mm.as_ref().map_or(s.position.span(), |v| v.span())
-                }
-            };
-            ctx.err(span, e.to_string())
-        })?;
-        // Faces.
-        let faces = file.identify.faces.get_ref();
-        let general = file.identify.parameters.is_some();
-        if general && faces.is_empty() {
-            return Err(ctx.err(file.identify.faces.span(), "identify.faces is empty"));
-        }
-        if !general && faces.len() != 2 {
-            return Err(ctx.err(
-                file.identify.faces.span(),
-                format!(
-                    "identify.faces must list exactly two faces (cut at A = 0° and 180°), got {}",
-                    faces.len()
-                ),
-            ));
-        }
-        let spec = |f: &FaceFile| -> Result<FaceSpec, SceneError> {
-            let region = match (&f.bbox, &f.seed) {
-                (Some(_), Some(s)) => {
-                    return Err(ctx.err(s.span(), "a face takes a box or a seed, not both"));
-                }
-                (Some(b), None) => {
-                    let (mn, mx) = (ctx.vec3(&b.min, "box.min")?, ctx.vec3(&b.max, "box.max")?);
-                    if (0..3).any(|k| mx[k] <= mn[k]) {
-                        return Err(
-                            ctx.err(b.max.span(), "box.max must exceed box.min on every axis")
-                        );
-                    }
-                    FaceRegion::Box(Aabb {
-                        min: mn.into(),
-                        max: mx.into(),
-                    })
-                }
-                (None, Some(s)) => FaceRegion::Seed(ctx.vec3(s, "seed")?.into()),
-                (None, None) => FaceRegion::Auto,
-            };
-            let kind = match f.kind.as_ref().map(|k| (k.get_ref().as_str(), k.span())) {
-                None | Some(("flank", _)) => FaceKind::Flank,
-                Some(("floor", _)) => FaceKind::Floor,
-                Some((other, span)) => {
-                    return Err(ctx.err(
-                        span,
-                        format!("face kind must be 'flank' or 'floor', got '{other}'"),
-                    ));
-                }
-            };
-            Ok(FaceSpec {
-                kind,
-                name: f.name.clone(),
-                line: *f.line.get_ref(),
-                region,
-            })
-        };
-        let margin = opt(&file.identify.margin_mm, "margin_mm", 1.0)?;
-        let band = opt(&file.identify.band_mm, "band_mm", 2.0)?;
-        if margin < 0.0 {
-            return Err(ctx.err(
-                file.identify.margin_mm.as_ref().map_or(0..0, |m| m.span()),
-                "margin_mm must not be negative",
-            ));
-        }
-        if band <= 0.0 {
-            return Err(ctx.err(
-                file.identify.band_mm.as_ref().map_or(0..0, |m| m.span()),
-                "band_mm must be positive",
-            ));
-        }
         let study = {
             let f = file.study.as_ref();
             let pick = |v: Option<&Spanned<Real>>,
@@ -1173,48 +1375,9 @@ impl Scene {
                 )?,
             }
         };
-        let mut parameters = Vec::new();
-        if let Some(ps) = &file.identify.parameters {
-            for p in ps.get_ref() {
-                chain
-                    .deviation_id(p.get_ref())
-                    .map_err(|e| ctx.err(p.span(), e.to_string()))?;
-                if parameters.contains(p.get_ref()) {
-                    return Err(
-                        ctx.err(p.span(), format!("parameter '{}' given twice", p.get_ref()))
-                    );
-                }
-                parameters.push(p.get_ref().clone());
-            }
-            if parameters.is_empty() {
-                return Err(ctx.err(ps.span(), "identify.parameters is empty"));
-            }
-        }
-        let registration = match file
-            .identify
-            .registration
-            .as_ref()
-            .map(|r| (r.get_ref().as_str(), r.span()))
-        {
-            None | Some(("estimate", _)) => Registration::Estimate,
-            Some(("workpiece", _)) => Registration::Workpiece,
-            Some((other, span)) => {
-                return Err(ctx.err(
-                    span,
-                    format!("registration must be 'estimate' or 'workpiece', got '{other}'"),
-                ));
-            }
-        };
-        let (monte_carlo_trials, monte_carlo_seed) = match &file.identify.monte_carlo {
-            Some(m) if *m.trials.get_ref() > 10_000 => {
-                return Err(ctx.err(m.trials.span(), "monte_carlo.trials must be at most 10000"));
-            }
-            Some(m) => (*m.trials.get_ref(), m.seed.unwrap_or(1)),
-            None => (0, 1),
-        };
-        let loop_tolerance_mm = match &file.identify.loop_tolerance_mm {
-            Some(v) => ctx.positive(v, "loop_tolerance_mm")?,
-            None => DEFAULT_LOOP_TOLERANCE_MM,
+        let identify = match &file.identify {
+            Some(f) => identify_setup(&ctx, &chain, f)?,
+            None => IdentifySetup::none(),
         };
         let program_path = dir.join(file.program.get_ref());
         let mut nc_files = NcFiles::default();
@@ -1259,18 +1422,14 @@ impl Scene {
                 rotary_step_bound_mm: bound,
             },
             scanner,
-            faces: faces.iter().map(spec).collect::<Result<_, _>>()?,
-            parameters,
-            registration,
-            monte_carlo_trials,
-            monte_carlo_seed,
-            loop_tolerance_mm,
+            faces: identify.faces,
+            parameters: identify.parameters,
+            registration: identify.registration,
+            monte_carlo_trials: identify.monte_carlo_trials,
+            monte_carlo_seed: identify.monte_carlo_seed,
+            loop_tolerance_mm: identify.loop_tolerance_mm,
             study,
-            face_options: FaceOptions {
-                margin_mm: margin,
-                band_mm: band,
-                robust: RobustRule::default(),
-            },
+            face_options: identify.face_options,
         })
     }
 
@@ -1332,8 +1491,9 @@ pub fn design_scene_toml(
     parameters: &[String],
     name: &str,
     program_file: &str,
-) -> String {
+) -> Result<String, SceneError> {
     use std::fmt::Write as _;
+    let sc = scene.scanner_for("design")?;
     let mut s = String::new();
     let v = |p: &Vector3| format!("[{}, {}, {}]", p.x, p.y, p.z);
     let _ = writeln!(
@@ -1414,7 +1574,6 @@ pub fn design_scene_toml(
         "[sweep]\nrotary_step_bound_mm = {}\n",
         scene.sweep.rotary_step_bound_mm
     );
-    let sc = &scene.scanner;
     let dist = 0.5 * (sc.working_range_mm.0 + sc.working_range_mm.1);
     let (sn, cs) = SCANNER_TILT_DEG.to_radians().sin_cos();
     let _ = writeln!(
@@ -1463,7 +1622,7 @@ pub fn design_scene_toml(
         scene.face_options.band_mm
     );
     let _ = writeln!(s, "known = {{}}");
-    s
+    Ok(s)
 }
 
 /// How far the designed scene's camera leans from the rotary axis's normal towards +x

@@ -9,6 +9,7 @@ use twinmill::math::{Aabb, Point3, Real, Vector3};
 use twinmill::nc::{AxisLetter, AxisValues, Move, MoveKind};
 use twinmill::pipeline::{Outcome, run};
 use twinmill::progress::NoProgress;
+use twinmill::scan::ScannerConfig;
 use twinmill::scene::Scene;
 use twinmill::stock::TriDexel;
 use twinmill::sweep::{SweepOptions, sweep_program};
@@ -22,6 +23,14 @@ fn scene() -> Scene {
 fn run_scene(scene: &Scene) -> Outcome {
     let program = scene.load_program().expect("the built-in program parses");
     run(scene, &program, &NoProgress).expect("the pipeline runs")
+}
+
+/// The scene's scanner, to change its settings.
+fn scanner(scene: &mut Scene) -> &mut ScannerConfig {
+    scene
+        .scanner
+        .as_mut()
+        .expect("the built-in scenes have a [scanner]")
 }
 
 fn set_deviation(scene: &mut Scene, name: &str, value: Real) {
@@ -95,7 +104,7 @@ fn mdx50_deviations(scene: &Scene) -> [[Real; 6]; 4] {
 #[test]
 fn noise_off_step_and_identification_are_exact() {
     let mut s = scene();
-    s.scanner.noise_sigma_mm = 0.0;
+    scanner(&mut s).noise_sigma_mm = 0.0;
     let out = run_scene(&s);
     let r = &out.report;
     assert!((r.step_mm - 1.0).abs() < 0.5e-3, "step {}", r.step_mm);
@@ -109,9 +118,9 @@ fn noise_off_step_and_identification_are_exact() {
 
 #[test]
 fn noise_on_identifies_dy_ay_within_2_um() {
-    let s = scene();
-    assert_eq!(s.scanner.noise_sigma_mm, 0.025);
-    assert_eq!(s.scanner.pitch_mm, 0.185);
+    let mut s = scene();
+    assert_eq!(scanner(&mut s).noise_sigma_mm, 0.025);
+    assert_eq!(scanner(&mut s).pitch_mm, 0.185);
     let r = run_scene(&s).report;
     let dy = r.identified["dy_AY"];
     assert!((dy + 0.5).abs() < 2e-3, "dy_AY {dy}");
@@ -127,7 +136,7 @@ fn noise_on_identifies_dy_ay_within_2_um() {
 fn zero_deviations_leave_no_step() {
     let mut s = scene();
     set_deviation(&mut s, "dy_AY", 0.0);
-    s.scanner.noise_sigma_mm = 0.0;
+    scanner(&mut s).noise_sigma_mm = 0.0;
     let r = run_scene(&s).report;
     assert!(r.step_mm.abs() < 0.1e-3, "step {}", r.step_mm);
 }
@@ -142,7 +151,7 @@ fn faces_selected_in_the_scene_by_box_or_seed_identify_the_same() {
         .replace("{ name = \"A180\", line = 14 },", "{ name = \"A180\", line = 14, seed = [0.0, -21.5, -5.0] },");
     assert!(text.contains("box =") && text.contains("seed ="));
     let mut s = Scene::parse(&text, Path::new(SCENE)).expect("parses");
-    s.scanner.noise_sigma_mm = 0.0;
+    scanner(&mut s).noise_sigma_mm = 0.0;
     let r = run_scene(&s).report;
     assert!((r.step_mm - 1.0).abs() < 0.5e-3, "step {}", r.step_mm);
     assert!((r.identified["dy_AY"] + 0.5).abs() < 0.5e-3);
@@ -158,7 +167,7 @@ fn faces_selected_in_the_scene_by_box_or_seed_identify_the_same() {
 fn gamma_sum_is_identified_from_the_tilt() {
     // gamma_AY + gamma_YX tilts the two faces oppositely (eq. 6, 7).
     let mut s = scene();
-    s.scanner.noise_sigma_mm = 0.0;
+    scanner(&mut s).noise_sigma_mm = 0.0;
     set_deviation(&mut s, "gamma_AY", 3e-4);
     set_deviation(&mut s, "gamma_YX", -1e-4);
     let r = run_scene(&s).report;
@@ -178,9 +187,12 @@ fn realistic_scene() -> Scene {
 fn realistic_scanner_still_gives_dy_ay_within_2_um() {
     // Correlated noise (ℓ 0.3 mm), three turntable views with registration errors, grazing
     // drop-out, working range.
-    let s = realistic_scene();
+    let mut s = realistic_scene();
     assert_eq!(
-        s.scanner.turntable.as_ref().map(|t| t.angles_deg.len()),
+        scanner(&mut s)
+            .turntable
+            .as_ref()
+            .map(|t| t.angles_deg.len()),
         Some(3)
     );
     let r = run_scene(&s).report;
@@ -245,7 +257,7 @@ fn another_chain_needs_only_a_scene_file() {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/vmc-4th-axis-step.toml");
     let mut s = Scene::load(&path).expect("loads");
     assert_eq!(s.chain.joint_name(0), "AX");
-    s.scanner.noise_sigma_mm = 0.0;
+    scanner(&mut s).noise_sigma_mm = 0.0;
     let r = run_scene(&s).report;
     assert!(
         (r.identified["dy_AX"] - 0.12).abs() < 0.5e-3,
@@ -264,7 +276,7 @@ fn ball_end_mill_cuts_the_same_step() {
     let mut s = scene();
     s.tool =
         twinmill::tool::Tool::try_new(twinmill::tool::ToolKind::Ball, 6.0, 25.0).expect("valid");
-    s.scanner.noise_sigma_mm = 0.0;
+    scanner(&mut s).noise_sigma_mm = 0.0;
     let text = builtin("mdx50-step.ngc").replace("G0 Z0", "G0 Z-3");
     let program =
         twinmill::nc::parse_program(&text, Path::new("ball.ngc"), s.home).expect("parses");
@@ -315,7 +327,7 @@ fn exact_step_and_tilt(dev: &[[Real; 6]; 4], r: Real, at: Vector3) -> (Real, Rea
 fn predicted_steps_match_the_chain_for_mixed_deviations() {
     for (i, row) in deviation_table().iter().enumerate() {
         let mut s = scene();
-        s.scanner.noise_sigma_mm = 0.0;
+        scanner(&mut s).noise_sigma_mm = 0.0;
         for (name, v) in NINE.iter().zip(row) {
             set_deviation(&mut s, name, *v);
         }
@@ -382,7 +394,7 @@ fn check_faces_exact(s: &Scene) -> Result<(), TestCaseError> {
             "A{a}: dexel crossing {worst} mm off the exact plane"
         );
         // And the noise-free scan of the face.
-        let mut sc = s.scanner.clone();
+        let mut sc = s.scanner.clone().expect("the scene has a [scanner]");
         sc.noise_sigma_mm = 0.0;
         let scanned = twinmill::scan::scan(&stock, &sc, &NoProgress).expect("scans");
         let mut count = 0;
@@ -1324,7 +1336,7 @@ proptest! {
         if let Ok(scene) = Scene::parse(&text, &path) {
             // A scene that still parses must still be fully valid.
             prop_assert!(scene.pitch_mm > 0.0 && scene.pitch_mm.is_finite());
-            prop_assert!(scene.scanner.validate().is_ok());
+            prop_assert!(scene.scanner.as_ref().is_none_or(|s| s.validate().is_ok()));
         }
     }
 }
@@ -1729,10 +1741,11 @@ fn designed_scene(tag: &str) -> Scene {
     let params: Vec<String> = NINE.iter().map(|s| s.to_string()).collect();
     let mut s = base.clone();
     s.pitch_mm = 0.2;
-    s.scanner.noise_sigma_mm = 0.007;
-    s.scanner.pitch_mm = 0.3;
+    scanner(&mut s).noise_sigma_mm = 0.007;
+    scanner(&mut s).pitch_mm = 0.3;
     let toml =
-        twinmill::scene::design_scene_toml(&s, &d, &opts, &params, "designed", "designed.ngc");
+        twinmill::scene::design_scene_toml(&s, &d, &opts, &params, "designed", "designed.ngc")
+            .expect("the scene has a [scanner]");
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("designed-{tag}"));
     std::fs::create_dir_all(&dir).expect("temp dir");
     std::fs::write(dir.join("designed.ngc"), &d.program).expect("write program");
@@ -1761,7 +1774,7 @@ fn designed_cuts_round_trip_over_100_seeded_trials() {
     let mut failed = Vec::new();
     for t in 0..trials {
         let mut s = base.clone();
-        s.scanner.seed = 1000 + t as u64;
+        scanner(&mut s).seed = 1000 + t as u64;
         for (k, name) in NINE.iter().enumerate() {
             // Offsets within ±0.5 mm, angles within ±5e-4 rad.
             let v = next() * if k < 2 { 0.5 } else { 5e-4 };
@@ -2810,8 +2823,7 @@ mod solids_collisions_deviation {
 // `simulate` on scenes with cylinder and mesh stock, fixtures, holders and a design model.
 
 /// A three-axis scene (X, Y, Z; the tool tip at W = (x, y, z)) with `tool`, `stock` and
-/// `extra` TOML; the program is `p.ngc`. Scanner and faces are there only because a scene
-/// needs them.
+/// `extra` TOML; the program is `p.ngc`. No scanner and no faces: `simulate` needs neither.
 fn xyz_scene(tool: &str, stock: &str, extra: &str) -> String {
     format!(
         r#"name = "t"
@@ -2832,14 +2844,6 @@ home = {{ X = -20, Y = 0, Z = 60 }}
 {stock}
 
 {extra}
-
-[scanner]
-position = [0.0, -330.0, 80.0]
-target = [0.0, 0.0, 0.0]
-up = [0.0, 0.0, 1.0]
-
-[identify]
-faces = [{{ name = "a", line = 1 }}, {{ name = "b", line = 2 }}]
 "#
     )
 }
@@ -2899,6 +2903,133 @@ fn simulate_in(
 fn convex_shell_bound(s: Real, diam: Real, h: Real) -> Real {
     let r = h / 2f64.sqrt();
     s * r + 2.0 * std::f64::consts::PI * diam * r * r + 4.0 * std::f64::consts::PI / 3.0 * r * r * r
+}
+
+/// Distance from (x, y) to the rectangle [x0, x1] × [y0, y1] (0 inside).
+fn rect_distance(x: Real, y: Real, [x0, x1, y0, y1]: [Real; 4]) -> Real {
+    let dx = (x0 - x).max(x - x1).max(0.0);
+    let dy = (y0 - y).max(y - y1).max(0.0);
+    dx.hypot(dy)
+}
+
+#[test]
+fn a_three_axis_scene_of_machine_tool_stock_and_program_is_complete_for_simulate() {
+    // The built-in pocket scene has nothing but the program, [machine], [tool] and [stock].
+    let text = builtin("xyz-pocket.toml");
+    let table: toml::Table = toml::from_str(&text).expect("TOML");
+    let keys: Vec<&str> = table.keys().map(String::as_str).collect();
+    assert_eq!(keys, ["machine", "program", "stock", "tool"], "{keys:?}");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/xyz-pocket.toml");
+    let scene = Scene::load(&path).expect("scene");
+    assert_eq!(
+        scene.name, "xyz-pocket",
+        "the name defaults to the file's stem"
+    );
+    assert!(scene.scanner.is_none() && scene.faces.is_empty());
+
+    // The tool centre covers R = [15, 45] × [12, 28] at z = 15 (rows 4 mm apart and the
+    // contour of R, Ø6): the pocket is R grown by 3 mm, 5 mm deep in the 20 mm block. Every
+    // z ray strictly inside it ends at the floor, every ray outside at the top — exactly,
+    // since dexels store exact crossings.
+    let program = scene.load_program().expect("program");
+    let part = twinmill::pipeline::machine_part(&scene, &program, &NoProgress).expect("cut");
+    let r_path = [15.0, 45.0, 12.0, 28.0];
+    let (floor, top, radius) = (15.0, 20.0, 3.0);
+    let grid = &part.stock.grids()[2];
+    assert_eq!(grid.axis(), 2);
+    let (nu, nv) = grid.dims();
+    let (mut inside, mut outside) = (0, 0);
+    for iu in 0..nu {
+        for iv in 0..nv {
+            let o = grid.ray_origin(iu, iv);
+            let d = rect_distance(o.x, o.y, r_path) - radius;
+            let ray = grid.ray(iu, iv);
+            let highest = ray
+                .iter()
+                .map(|s| s.hi.t)
+                .fold(Real::NEG_INFINITY, Real::max);
+            if d < -1e-6 {
+                inside += 1;
+                assert!((highest - floor).abs() < 1e-9, "ray at {o}: top {highest}");
+            } else if d > 1e-6 {
+                outside += 1;
+                assert!((highest - top).abs() < 1e-9, "ray at {o}: top {highest}");
+            }
+        }
+    }
+    assert!(
+        inside > 70_000 && outside > 100_000,
+        "{inside} in, {outside} out"
+    );
+
+    // Through the CLI: `simulate` works, removing the pocket's volume within the dexel
+    // bound of a convex body; `run`, `scan`, `identify` and `design` each fail with one line
+    // naming what they need, and write nothing.
+    let sb = Sandbox::new("xyz-pocket");
+    sb.write("pocket.toml", text.as_bytes());
+    sb.write("xyz-pocket.ngc", builtin("xyz-pocket.ngc").as_bytes());
+    let (code, stdout, stderr) = sb.run(&["simulate", "pocket.toml", "--json"]);
+    assert_eq!(code, 0, "{stderr}");
+    let report: serde_json::Value = serde_json::from_str(&stdout).expect("report");
+    let (w, h) = (r_path[1] - r_path[0], r_path[3] - r_path[2]);
+    let area =
+        (w + 2.0 * radius) * (h + 2.0 * radius) - (4.0 - std::f64::consts::PI) * radius * radius;
+    let depth = top - floor;
+    let exact = area * depth;
+    let perimeter = 2.0 * (w + h) + 2.0 * std::f64::consts::PI * radius;
+    let diam = ((w + 2.0 * radius).powi(2) + (h + 2.0 * radius).powi(2) + depth * depth).sqrt();
+    let bound = convex_shell_bound(2.0 * area + perimeter * depth, diam, scene.pitch_mm);
+    let removed = report["stock"]["removed_mm3"].as_f64().expect("number");
+    assert!(
+        (removed - exact).abs() < bound,
+        "removed {removed}, exact {exact}, bound {bound}"
+    );
+    assert_eq!(report["collisions"].as_array().map(Vec::len), Some(0));
+    for (args, needs) in [
+        (
+            &["run", "pocket.toml"][..],
+            &["run needs [scanner]", "[identify] faces"][..],
+        ),
+        (&["scan", "pocket.toml"][..], &["scan needs [scanner]"][..]),
+        (
+            &["identify", "pocket.toml"][..],
+            &["identify needs [identify] parameters", "[scanner]"][..],
+        ),
+        (
+            &["design", "pocket.toml", "--params", "dy_XY"][..],
+            &["design needs [scanner]"][..],
+        ),
+    ] {
+        let listing = || {
+            let mut f = files_in(&sb.dir.join("out"));
+            f.sort();
+            f
+        };
+        let before = listing();
+        let (code, stdout, stderr) = sb.run(args);
+        assert_ne!(code, 0, "{args:?} should fail");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{args:?}: {stderr}");
+        assert!(stderr.contains("pocket.toml: "), "{args:?}: {stderr}");
+        for n in needs {
+            assert!(stderr.contains(n), "{args:?}: '{n}' not in {stderr}");
+        }
+        assert!(stdout.is_empty(), "{args:?}: {stdout}");
+        assert_eq!(listing(), before, "{args:?} wrote files");
+    }
+    // `correct` needs no faces: it measures the path and the whole part, and says that no
+    // face was measured instead of giving a number.
+    let (code, stdout, stderr) = sb.run(&["correct", "pocket.toml", "--json"]);
+    assert_eq!(code, 0, "{stderr}");
+    let report: serde_json::Value = serde_json::from_str(&stdout).expect("report");
+    let last = report["iterations"]
+        .as_array()
+        .and_then(|i| i.last())
+        .expect("a pass");
+    assert!(last["predicted_error_mm"].is_null(), "{last}");
+    assert!(
+        last["path"]["max_mm"].as_f64().is_some_and(|m| m < 1e-9),
+        "{last}"
+    );
 }
 
 #[test]
