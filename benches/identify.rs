@@ -48,7 +48,8 @@ fn benches(c: &mut Criterion) {
     let opts = DesignOptions::standard();
     let d = design(&base.model, &base.tool, &ids, &opts).expect("design");
     let params: Vec<String> = NINE.iter().map(|(n, _)| n.to_string()).collect();
-    let toml = design_scene_toml(&base, &d, &opts, &params, "bench-design", "bench.ngc");
+    let toml = design_scene_toml(&base, &d, &opts, &params, "bench-design", "bench.ngc")
+        .expect("the scene has a [scanner]");
     let dir = std::env::temp_dir().join(format!("twinmill-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     std::fs::write(dir.join("bench.ngc"), &d.program).expect("program");
