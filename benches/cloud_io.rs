@@ -7,8 +7,10 @@
 use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::path::PathBuf;
-use twinmill::cloud::{Frame, PointCloud, read_ply, read_ply_file, write_ply, write_ply_file};
 use twinmill::math::{CounterRng, Point3};
+use twinmill::metrology::cloud::{
+    Frame, PointCloud, read_ply, read_ply_file, write_ply, write_ply_file,
+};
 
 /// Points in the benchmark cloud (a dense scan of a milled part).
 const POINTS: usize = 1_266_606;

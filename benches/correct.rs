@@ -7,7 +7,7 @@
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::path::{Path, PathBuf};
-use twinmill::correct::{CorrectOptions, correct_program};
+use twinmill::calibration::correct::{CorrectOptions, correct_program};
 use twinmill::math::{CounterRng, Real};
 use twinmill::nc::{AxisLetter, Move, MoveKind, Program};
 use twinmill::scene::Scene;

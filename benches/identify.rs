@@ -15,10 +15,10 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::path::Path;
-use twinmill::design::{DesignOptions, design};
+use twinmill::calibration::design::{DesignOptions, design};
+use twinmill::metrology::scan::Surface;
 use twinmill::pipeline::{correction_loop, extract_features, machine_part};
 use twinmill::progress::NoProgress;
-use twinmill::scan::Surface;
 use twinmill::scene::{Scene, design_scene_toml};
 
 const NINE: [(&str, f64); 9] = [

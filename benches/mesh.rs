@@ -5,14 +5,14 @@
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
-use twinmill::kinematics::{Axis, AxisKind, Chain};
+use twinmill::cutting::mesh::mesh_stock;
+use twinmill::cutting::stock::TriDexel;
+use twinmill::cutting::sweep::{SweepOptions, sweep_program};
+use twinmill::cutting::tool::{Tool, ToolKind};
+use twinmill::machine::chain::{Axis, AxisKind, Chain};
 use twinmill::math::{Point3, UnitVector3, Vector3};
-use twinmill::mesh::mesh_stock;
 use twinmill::nc::AxisLetter;
 use twinmill::progress::NoProgress;
-use twinmill::stock::TriDexel;
-use twinmill::sweep::{SweepOptions, sweep_program};
-use twinmill::tool::{Tool, ToolKind};
 use twinmill::{math, nc};
 
 #[path = "support/p1.rs"]

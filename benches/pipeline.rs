@@ -5,12 +5,12 @@
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::path::Path;
+use twinmill::cutting::stock::TriDexel;
+use twinmill::cutting::sweep::sweep_program;
+use twinmill::metrology::scan::scan;
 use twinmill::pipeline::run;
 use twinmill::progress::NoProgress;
-use twinmill::scan::scan;
 use twinmill::scene::Scene;
-use twinmill::stock::TriDexel;
-use twinmill::sweep::sweep_program;
 
 const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/mdx50-step.toml");
 

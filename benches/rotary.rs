@@ -12,14 +12,14 @@ use criterion::criterion_main;
 mod group {
     use criterion::{BatchSize, Criterion, Throughput, criterion_group};
     use std::path::Path;
+    use twinmill::cutting::shape::Cylinder;
+    use twinmill::cutting::stock::TriDexel;
+    use twinmill::cutting::sweep::{SweepOptions, sweep_program};
+    use twinmill::cutting::tool::{Tool, ToolKind};
     use twinmill::math::{Aabb, Point3, Real, Vector3};
     use twinmill::nc::{AxisLetter, AxisValues, Move, MoveKind};
     use twinmill::progress::NoProgress;
     use twinmill::scene::Scene;
-    use twinmill::shape::Cylinder;
-    use twinmill::stock::TriDexel;
-    use twinmill::sweep::{SweepOptions, sweep_program};
-    use twinmill::tool::{Tool, ToolKind};
 
     const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/mdx50-step.toml");
 

@@ -17,7 +17,7 @@
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
 use twinmill::math::{CounterRng, Point3, Real, Vector3};
-use twinmill::segment::{PlaneSegmentOptions, segment_planes};
+use twinmill::metrology::segment::{PlaneSegmentOptions, segment_planes};
 
 /// Points in the cloud.
 const N: usize = 1_266_606;

@@ -8,11 +8,11 @@ use criterion::criterion_main;
 mod bench {
     use criterion::{BenchmarkId, Criterion, Throughput};
     use std::hint::black_box;
-    use twinmill::cutter::{PieceMethod, SweptTool};
+    use twinmill::cutting::cutter::{PieceMethod, SweptTool};
+    use twinmill::cutting::stock::{Cutter, RayCut};
+    use twinmill::cutting::sweep::TranslatedTool;
+    use twinmill::cutting::tool::{ProfileStep, Tool, ToolKind};
     use twinmill::math::{Point3, Real, UnitVector3, Vector3};
-    use twinmill::stock::{Cutter, RayCut};
-    use twinmill::sweep::TranslatedTool;
-    use twinmill::tool::{ProfileStep, Tool, ToolKind};
 
     fn form_cutter() -> Tool {
         Tool::try_profile(&[

@@ -6,13 +6,13 @@
 #![allow(clippy::print_stdout, reason = "an example reports on the terminal")]
 
 use std::time::Instant;
-use twinmill::kinematics::{Axis, AxisKind, Chain};
+use twinmill::cutting::stock::TriDexel;
+use twinmill::cutting::sweep::{SweepOptions, sweep_program};
+use twinmill::cutting::tool::{Tool, ToolKind};
+use twinmill::machine::chain::{Axis, AxisKind, Chain};
 use twinmill::math::{Point3, UnitVector3, Vector3};
 use twinmill::nc::AxisLetter;
 use twinmill::progress::NoProgress;
-use twinmill::stock::TriDexel;
-use twinmill::sweep::{SweepOptions, sweep_program};
-use twinmill::tool::{Tool, ToolKind};
 use twinmill::{math, nc};
 
 #[path = "../benches/support/p1.rs"]

@@ -7,10 +7,12 @@ use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
-use twinmill::cloud::read_cloud_file;
-use twinmill::correct::write_gcode;
-use twinmill::design::{DesignOptions, design, kind_name};
+use twinmill::calibration::correct::write_gcode;
+use twinmill::calibration::design::{DesignOptions, design, kind_name};
 use twinmill::math::{Aabb, Point3};
+use twinmill::metrology::cloud::read_cloud_file;
+use twinmill::metrology::scan::Surface;
+use twinmill::metrology::segment::{PlaneSegmentOptions, RansacOptions};
 use twinmill::nc::{Interpreter, LengthUnit, Program, write_jsonl};
 use twinmill::output::{
     MeshFormat, json_bytes, ply_bytes, write_files, write_outcome, write_simulation, write_streamed,
@@ -22,10 +24,8 @@ use twinmill::pipeline::{
 use twinmill::progress::Progress;
 use twinmill::report::DesignReport;
 use twinmill::report::{ScanFileReport, ScanReport};
-use twinmill::scan::Surface;
 use twinmill::scene::design_scene_toml;
 use twinmill::scene::{Need, Scene, SceneError};
-use twinmill::segment::{PlaneSegmentOptions, RansacOptions};
 
 /// twinmill: a digital twin of machine-tool accuracy.
 #[derive(Parser)]
@@ -916,7 +916,7 @@ fn write_report_and_cloud(
     dir: &Path,
     report_name: &str,
     report: &impl serde::Serialize,
-    cloud: &twinmill::cloud::PointCloud,
+    cloud: &twinmill::metrology::cloud::PointCloud,
 ) -> Result<PathBuf, twinmill::output::OutputError> {
     let files = vec![
         (report_name, json_bytes(report, &dir.join(report_name))?),

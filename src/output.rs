@@ -11,8 +11,8 @@
 //!
 //! **Invariant:** with [`crate::scene`], the only module that touches files.
 
-use crate::cloud::{PointCloud, write_ply};
-use crate::mesh::MeshError;
+use crate::cutting::mesh::MeshError;
+use crate::metrology::cloud::{PointCloud, write_ply};
 use crate::pipeline::{Outcome, Simulation};
 use std::io::Write;
 use std::path::{Path, PathBuf};

@@ -4,33 +4,40 @@
 //! **Invariant:** `run` has no side effects beyond the progress calls; the same scene and
 //! program give the same outcome (except the timings) for any thread count.
 
-use crate::calibrate::{
+use crate::calibration::calibrate::{
     CalibrateError, Feature, Identification, Model, PlaneFeature, Registration,
     extract_plane_feature, predicted_plane,
 };
-use crate::cloud::PointCloud;
-use crate::collide::sweep_with_checks;
-use crate::correct::{
+use crate::calibration::correct::{
     CorrectError, CorrectOptions, CorrectedProgram, correct_program, face_errors, part_error,
     path_error, uncorrected,
 };
-use crate::design::kind_name;
-use crate::deviation::{
-    DeviationError, DeviationImageOptions, deviation_map, render_deviation_map,
-};
-use crate::fit::Plane;
-use crate::fit::{
+use crate::calibration::design::kind_name;
+use crate::calibration::identify::{self, Face, IdentifyError};
+use crate::cutting::collide::sweep_with_checks;
+use crate::cutting::mesh::{MeshError, TriMesh, mesh_stock};
+use crate::cutting::stock::{StockError, TriDexel};
+use crate::cutting::sweep::{SweepError, SweepOptions, SweepReport, sweep_program};
+use crate::machine::chain::{Chain, DeviationId};
+use crate::math::Aabb;
+use crate::math::{Point3, Real};
+use crate::metrology::cloud::PointCloud;
+use crate::metrology::fit::Plane;
+use crate::metrology::fit::{
     RobustRule, fit_circle, fit_circle_robust, fit_cylinder, fit_cylinder_robust, fit_plane,
     fit_plane_robust, fit_sphere, fit_sphere_robust, plane_distance_and_angle,
 };
-use crate::identify::{self, Face, IdentifyError};
-use crate::kinematics::{Chain, DeviationId};
-use crate::math::Aabb;
-use crate::math::{Point3, Real};
-use crate::mesh::{MeshError, TriMesh, mesh_stock};
+use crate::metrology::scan::{Misregistration, ScanError, StudyOptions, Surface, scan};
+use crate::metrology::segment::{
+    PlaneSegmentOptions, RansacOptions, estimate_normals, ransac_cylinder, ransac_sphere,
+    segment_planes, select_box, select_region_from_seed,
+};
 use crate::nc::Program;
 use crate::progress::Progress;
-use crate::render::{
+use crate::report::deviation_map::{
+    DeviationError, DeviationImageOptions, deviation_map, render_deviation_map,
+};
+use crate::report::render::{
     HeatMapOptions, RenderError, encode_png, nice_ceil, render_heat_map, render_top_view,
 };
 use crate::report::{
@@ -42,14 +49,7 @@ use crate::report::{CollisionEvent, DeviationSummary};
 use crate::report::{
     EstimateReport, FeatureReport, IdentifyReport, IdentifySolverReport, LoopRound,
 };
-use crate::scan::{Misregistration, ScanError, StudyOptions, Surface, scan};
 use crate::scene::{Need, Scene, SceneError, StockShape};
-use crate::segment::{
-    PlaneSegmentOptions, RansacOptions, estimate_normals, ransac_cylinder, ransac_sphere,
-    segment_planes, select_box, select_region_from_seed,
-};
-use crate::stock::{StockError, TriDexel};
-use crate::sweep::{SweepError, SweepOptions, SweepReport, sweep_program};
 use std::collections::BTreeMap;
 use std::time::Instant;
 
@@ -618,7 +618,7 @@ pub fn fit_cloud(
         circle: None,
     };
     // RANSAC first on an unselected cloud: the shape is somewhere in it.
-    let candidates = |found: Result<Vec<u32>, crate::segment::SegmentError>| -> Result<Vec<Point3>, PipelineError> {
+    let candidates = |found: Result<Vec<u32>, crate::metrology::segment::SegmentError>| -> Result<Vec<Point3>, PipelineError> {
         let idx = found.map_err(|e| err(e.to_string()))?;
         Ok(idx.iter().map(|&i| selected[i as usize]).collect())
     };
@@ -943,8 +943,8 @@ pub fn correct(
             path_tolerance_mm: None,
             blocks: given.blocks.len(),
             path: path_error(&scene.chain, &scene.tool, program, &given),
-            part: crate::correct::PartError::default(),
-            faces: crate::correct::FaceCheck {
+            part: crate::calibration::correct::PartError::default(),
+            faces: crate::calibration::correct::FaceCheck {
                 faces: Vec::new(),
                 step_mm: None,
             },
@@ -1225,12 +1225,12 @@ fn scene_ids(scene: &Scene) -> Result<Vec<DeviationId>, PipelineError> {
 /// when it agrees within `max(tolerance_mm, 3·√7·σ_off)`.
 fn face_match(
     twin: &Chain,
-    tool: &crate::tool::Tool,
+    tool: &crate::cutting::tool::Tool,
     features: &[Feature],
     reg: &[Real; 6],
     tolerance_mm: Real,
 ) -> (Real, bool) {
-    let s_from_w = crate::kinematics::Deviation { values: *reg }.transform();
+    let s_from_w = crate::machine::chain::Deviation { values: *reg }.transform();
     let mut worst: Real = 0.0;
     let mut all = true;
     for f in features {
@@ -1272,7 +1272,7 @@ fn face_match(
 pub fn correction_loop(
     model: &Chain,
     ids: &[DeviationId],
-    tool: &crate::tool::Tool,
+    tool: &crate::cutting::tool::Tool,
     features: &[Feature],
     registration: Registration,
     tolerance_mm: Real,
@@ -1289,7 +1289,7 @@ pub fn correction_loop(
             features,
             registration,
         };
-        let ident = crate::calibrate::identify(&m)?;
+        let ident = crate::calibration::calibrate::identify(&m)?;
         for (id, v) in ids.iter().zip(&ident.solution) {
             twin.set_deviation(*id, *v);
         }
@@ -1409,7 +1409,7 @@ pub fn identify_scene(
                 features: &f,
                 registration: scene.registration,
             };
-            let r = crate::calibrate::identify(&m).map_err(cal)?;
+            let r = crate::calibration::calibrate::identify(&m).map_err(cal)?;
             // Values of the main run's quantities (same coefficients) in this trial.
             for e in ident.parameters.iter().chain(&ident.combinations) {
                 let v: Real = e
@@ -1426,7 +1426,7 @@ pub fn identify_scene(
     }
     let truth: Vec<Real> = ids.iter().map(|id| scene.chain.deviation(*id)).collect();
     let simulated = surface.is_some();
-    let estimate = |e: &crate::calibrate::Estimate| EstimateReport {
+    let estimate = |e: &crate::calibration::calibrate::Estimate| EstimateReport {
         name: e.name.clone(),
         value: e.value,
         sigma: e.sigma,
@@ -1491,18 +1491,18 @@ pub fn identify_scene(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::calibrate::synthetic_plane_feature;
-    use crate::identify::{FaceKind, FaceRegion, FaceSpec};
+    use crate::calibration::calibrate::synthetic_plane_feature;
+    use crate::calibration::identify::{FaceKind, FaceRegion, FaceSpec};
+    use crate::cutting::tool::{Tool, ToolKind};
     use crate::math::UnitVector3;
     use crate::nc::{AxisLetter, AxisValues, Move, MoveKind};
-    use crate::tool::{Tool, ToolKind};
 
     #[test]
     fn a_face_tilted_about_its_centroid_is_not_matched() {
         // A measured flank turned by θ about its centroid agrees with the twin at the
         // centroid and differs by h·sinθ·cosθ at the corners, h = √3·σ_off/σ_slope the
         // half-width the fit's design implies.
-        let chain = crate::kinematics::mdx50_for_tests();
+        let chain = crate::machine::chain::mdx50_for_tests();
         let tool = Tool::try_new(ToolKind::Flat, 6.0, 25.0).expect("valid");
         let q = |x| {
             AxisValues::default()

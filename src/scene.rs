@@ -7,21 +7,21 @@
 //!
 //! **Invariant:** this module and [`crate::output`] are the only ones that touch files.
 
-use crate::calibrate::Registration;
-use crate::collide::{Fixture, Holder, HolderSection};
-use crate::deviation::DesignModel;
-use crate::fit::RobustRule;
-use crate::identify::{FaceKind, FaceOptions, FaceRegion, FaceSpec};
-use crate::kinematics::{Axis, AxisKind, Chain};
+use crate::calibration::calibrate::Registration;
+use crate::calibration::identify::{FaceKind, FaceOptions, FaceRegion, FaceSpec};
+use crate::cutting::collide::{Fixture, Holder, HolderSection};
+use crate::cutting::shape::{ClosedMesh, Cylinder, Solid, read_obj, read_stl};
+use crate::cutting::sweep::SweepOptions;
+use crate::cutting::tool::{Tool, ToolKind};
+use crate::machine::chain::{Axis, AxisKind, Chain};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
+use crate::metrology::fit::RobustRule;
+use crate::metrology::scan::{Misregistration, ScanError, ScannerConfig, StudyOptions, Turntable};
 use crate::nc::{
     AxisLetter, AxisValues, InterpOptions, LengthUnit, NcError, Program, interpret_program,
     options_from_files,
 };
-use crate::scan::{Misregistration, ScanError, ScannerConfig, StudyOptions, Turntable};
-use crate::shape::{ClosedMesh, Cylinder, Solid, read_obj, read_stl};
-use crate::sweep::SweepOptions;
-use crate::tool::{Tool, ToolKind};
+use crate::report::deviation_map::DesignModel;
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::ops::Range;
@@ -1273,7 +1273,7 @@ impl Scene {
         };
         let pitch_mm = ctx.positive(&file.stock.pitch_mm, "pitch_mm")?;
         let memory_budget = memory_budget_bytes();
-        crate::stock::check_memory(&stock_box, pitch_mm, memory_budget).map_err(|e| {
+        crate::cutting::stock::check_memory(&stock_box, pitch_mm, memory_budget).map_err(|e| {
             ctx.err(
                 file.stock.pitch_mm.span(),
                 format!("stock.pitch_mm = {pitch_mm}: {e}"),
@@ -1486,8 +1486,8 @@ impl Scene {
 /// across the bar's +x end are seen too), the design's faces and the parameters.
 pub fn design_scene_toml(
     scene: &Scene,
-    design: &crate::design::Design,
-    opts: &crate::design::DesignOptions,
+    design: &crate::calibration::design::Design,
+    opts: &crate::calibration::design::DesignOptions,
     parameters: &[String],
     name: &str,
     program_file: &str,
@@ -1523,11 +1523,11 @@ pub fn design_scene_toml(
     for (k, val) in &scene.injected {
         let _ = writeln!(s, "{k} = {val:e}");
     }
-    use crate::tool::ToolSizes;
+    use crate::cutting::tool::ToolSizes;
     let tool_fields = match scene.tool.sizes() {
         ToolSizes::Plain { diameter } => format!(
             "kind = \"{}\"\ndiameter_mm = {diameter}",
-            if scene.tool.kind() == crate::tool::ToolKind::Ball {
+            if scene.tool.kind() == crate::cutting::tool::ToolKind::Ball {
                 "ball"
             } else {
                 "flat"
@@ -1607,7 +1607,7 @@ pub fn design_scene_toml(
             "  {{ name = \"{}\", line = {}, kind = \"{}\" }},",
             f.name,
             f.line,
-            crate::design::kind_name(f.kind)
+            crate::calibration::design::kind_name(f.kind)
         );
     }
     let _ = writeln!(

@@ -4,15 +4,15 @@ use nalgebra::{Matrix4, Vector4};
 use proptest::prelude::*;
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use twinmill::kinematics::Chain;
+use twinmill::cutting::stock::TriDexel;
+use twinmill::cutting::sweep::{SweepOptions, sweep_program};
+use twinmill::machine::chain::Chain;
 use twinmill::math::{Aabb, Point3, Real, Vector3};
+use twinmill::metrology::scan::ScannerConfig;
 use twinmill::nc::{AxisLetter, AxisValues, Move, MoveKind};
 use twinmill::pipeline::{Outcome, run};
 use twinmill::progress::NoProgress;
-use twinmill::scan::ScannerConfig;
 use twinmill::scene::Scene;
-use twinmill::stock::TriDexel;
-use twinmill::sweep::{SweepOptions, sweep_program};
 
 const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/mdx50-step.toml");
 
@@ -209,7 +209,7 @@ fn scanner_study_separates_the_effects_and_reports_honest_uncertainties() {
     let program = s.load_program().expect("parses");
     let cases = {
         let part = twinmill::pipeline::machine_part(&s, &program, &NoProgress).expect("machines");
-        let surface = twinmill::scan::Surface::new(&part.stock);
+        let surface = twinmill::metrology::scan::Surface::new(&part.stock);
         twinmill::pipeline::scanner_study(&s, &program, &surface, &s.study).expect("runs")
     };
     assert_eq!(cases.len(), 6);
@@ -275,7 +275,8 @@ fn ball_end_mill_cuts_the_same_step() {
     // flanks start at Z_W = 0 as the flat mill's do.
     let mut s = scene();
     s.tool =
-        twinmill::tool::Tool::try_new(twinmill::tool::ToolKind::Ball, 6.0, 25.0).expect("valid");
+        twinmill::cutting::tool::Tool::try_new(twinmill::cutting::tool::ToolKind::Ball, 6.0, 25.0)
+            .expect("valid");
     scanner(&mut s).noise_sigma_mm = 0.0;
     let text = builtin("mdx50-step.ngc").replace("G0 Z0", "G0 Z-3");
     let program =
@@ -396,7 +397,7 @@ fn check_faces_exact(s: &Scene) -> Result<(), TestCaseError> {
         // And the noise-free scan of the face.
         let mut sc = s.scanner.clone().expect("the scene has a [scanner]");
         sc.noise_sigma_mm = 0.0;
-        let scanned = twinmill::scan::scan(&stock, &sc, &NoProgress).expect("scans");
+        let scanned = twinmill::metrology::scan::scan(&stock, &sc, &NoProgress).expect("scans");
         let mut count = 0;
         let mut worst: Real = 0.0;
         for p in &scanned.cloud.points {
@@ -480,7 +481,8 @@ fn nominal_mdx50() -> Chain {
 fn rotary_move_surface_agrees_with_brute_force() {
     let chain = nominal_mdx50();
     let tool =
-        twinmill::tool::Tool::try_new(twinmill::tool::ToolKind::Flat, 6.0, 10.0).expect("valid");
+        twinmill::cutting::tool::Tool::try_new(twinmill::cutting::tool::ToolKind::Flat, 6.0, 10.0)
+            .expect("valid");
     let start = AxisValues::default().with(AxisLetter::Z, 6.0);
     let mv = Move {
         kind: MoveKind::Linear,
@@ -627,9 +629,13 @@ fn indexed_face_errors(angles: &[Real], devs: &[(&str, Real)]) -> (Real, Real, R
     let dev = mdx50_deviations(&s);
     let r = s.tool.radius();
     let (moves, cuts) = indexed_program(angles, r);
-    let bar =
-        twinmill::shape::Cylinder::try_new(Point3::new(-20.0, 0.0, 0.0), Vector3::x(), BAR_R, 40.0)
-            .expect("valid");
+    let bar = twinmill::cutting::shape::Cylinder::try_new(
+        Point3::new(-20.0, 0.0, 0.0),
+        Vector3::x(),
+        BAR_R,
+        40.0,
+    )
+    .expect("valid");
     let bounds = Aabb {
         min: Point3::new(-20.0, -BAR_R - 0.5, -BAR_R - 0.5),
         max: Point3::new(20.0, BAR_R + 0.5, BAR_R + 0.5),
@@ -706,9 +712,13 @@ const HELIX_BALL_R: Real = 2.0;
 const HELIX_LEAD: Real = 10.0;
 const HELIX_STEPS: usize = 60;
 
-fn helix_tool() -> twinmill::tool::Tool {
-    twinmill::tool::Tool::try_new(twinmill::tool::ToolKind::Ball, 2.0 * HELIX_BALL_R, 12.0)
-        .expect("valid")
+fn helix_tool() -> twinmill::cutting::tool::Tool {
+    twinmill::cutting::tool::Tool::try_new(
+        twinmill::cutting::tool::ToolKind::Ball,
+        2.0 * HELIX_BALL_R,
+        12.0,
+    )
+    .expect("valid")
 }
 
 /// One turn of the helix: the tool already at depth at A = 0, X = −LEAD/2.
@@ -727,7 +737,7 @@ fn helix_moves() -> Vec<Move> {
 }
 
 fn helix_stock(pitch: Real) -> TriDexel {
-    let bar = twinmill::shape::Cylinder::try_new(
+    let bar = twinmill::cutting::shape::Cylinder::try_new(
         Point3::new(-10.0, 0.0, 0.0),
         Vector3::x(),
         HELIX_BAR_R,
@@ -1024,7 +1034,8 @@ fn cli_run_writes_report_cloud_and_picture() {
             .expect("json");
     assert_eq!(written["step_mm"], report["step_mm"]);
     let ply = std::fs::read(dir.join("cloud.ply")).expect("cloud.ply");
-    let cloud = twinmill::cloud::read_ply(&ply, &dir.join("cloud.ply")).expect("readable PLY");
+    let cloud =
+        twinmill::metrology::cloud::read_ply(&ply, &dir.join("cloud.ply")).expect("readable PLY");
     assert_eq!(
         Some(cloud.points.len() as u64),
         report["scan"]["points"].as_u64()
@@ -1165,7 +1176,8 @@ fn clouds_written_by_cloudcompare_read_exactly() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("tests/data")
             .join(name);
-        let cloud = twinmill::cloud::read_cloud_file(&path).expect("CloudCompare's PLY reads");
+        let cloud =
+            twinmill::metrology::cloud::read_cloud_file(&path).expect("CloudCompare's PLY reads");
         assert_eq!(cloud.points.len(), 5, "{name}");
         for (p, e) in cloud.points.iter().zip(expect) {
             assert_eq!([p.x, p.y, p.z], e, "{name}");
@@ -1342,95 +1354,255 @@ proptest! {
 }
 
 // ---------------------------------------------------------------------------------------
-// Architecture: modules depend only on modules before them in the pipeline.
+// Architecture: folders and the modules in them depend only on what comes before them in
+// the pipeline, and docs/architecture.md maps exactly this layout.
+
+/// The library's layout in pipeline order: each top-level module or folder of `src/`, and
+/// for a folder its modules in order. A module may use only modules of earlier folders and
+/// earlier modules of its own folder (a folder's `mod.rs` is its shared vocabulary).
+const LAYOUT: &[(&str, &[&str])] = &[
+    ("math", &[]),
+    ("progress", &[]),
+    (
+        "nc",
+        &[
+            "source",
+            "lex",
+            "tooltable",
+            "output",
+            "comp",
+            "interp",
+            "synthetic",
+        ],
+    ),
+    ("machine", &["chain"]),
+    (
+        "cutting",
+        &[
+            "tool", "shape", "stock", "cutter", "envelope", "sweep", "collide", "mesh", "zmap",
+        ],
+    ),
+    ("metrology", &["cloud", "scan", "fit", "segment"]),
+    (
+        "calibration",
+        &["identify", "calibrate", "design", "correct"],
+    ),
+    ("report", &["render", "deviation_map", "reports"]),
+    ("scene", &[]),
+    ("pipeline", &[]),
+    ("output", &[]),
+];
+
+/// Every `.rs` file at or below `path` (a file or a folder), sorted.
+fn rust_files(path: &Path) -> Vec<PathBuf> {
+    if path.is_file() {
+        return vec![path.to_path_buf()];
+    }
+    let mut out = Vec::new();
+    let mut entries: Vec<PathBuf> = std::fs::read_dir(path)
+        .map(|d| d.flatten().map(|e| e.path()).collect())
+        .unwrap_or_default();
+    entries.sort();
+    for e in entries {
+        if e.is_dir() {
+            out.extend(rust_files(&e));
+        } else if e.extension().is_some_and(|x| x == "rs") {
+            out.push(e);
+        }
+    }
+    out
+}
+
+/// The source of a module (a file, or a folder of files) without its comment lines.
+fn module_code(path: &Path) -> String {
+    rust_files(path)
+        .iter()
+        .map(|p| std::fs::read_to_string(p).expect("source"))
+        .collect::<Vec<_>>()
+        .join("\n")
+        .lines()
+        .filter(|l| !l.trim_start().starts_with("//"))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
+/// The names that follow each occurrence of `prefix` in `code` (`crate::a::b` → ["a", "b"]).
+fn paths_after(code: &str, prefix: &str) -> Vec<Vec<String>> {
+    code.match_indices(prefix)
+        .filter(|(i, _)| {
+            // `crate::` itself, not the tail of a longer identifier.
+            code[..*i]
+                .chars()
+                .next_back()
+                .is_none_or(|c| !(c.is_ascii_alphanumeric() || c == '_'))
+        })
+        .map(|(i, _)| {
+            code[i + prefix.len()..]
+                .split("::")
+                .map(|seg| {
+                    seg.chars()
+                        .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                        .collect::<String>()
+                })
+                .take_while(|seg| !seg.is_empty())
+                .take(2)
+                .collect()
+        })
+        .collect()
+}
+
+/// The place of a module in the layout: (folder rank, rank within the folder).
+fn place(folder: &str, module: Option<&str>) -> Option<(usize, Option<usize>)> {
+    let f = LAYOUT.iter().position(|(name, _)| *name == folder)?;
+    match module {
+        None => Some((f, None)),
+        Some(m) => Some((f, Some(LAYOUT[f].1.iter().position(|x| *x == m)?))),
+    }
+}
 
 #[test]
 fn module_dependencies_point_down_the_pipeline() {
-    let order = [
-        "math",
-        "progress",
-        "nc",
-        "kinematics",
-        "tool",
-        "shape",
-        "stock",
-        "cutter",
-        "envelope",
-        "sweep",
-        "collide",
-        "mesh",
-        "zmap",
-        "cloud",
-        "scan",
-        "fit",
-        "segment",
-        "identify",
-        "calibrate",
-        "design",
-        "correct",
-        "render",
-        "deviation",
-        "report",
-        "scene",
-        "pipeline",
-        "output",
-    ];
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut seen = 0;
-    for entry in std::fs::read_dir(&src).expect("src") {
-        let path = entry.expect("entry").path();
-        let stem = path
-            .file_stem()
-            .and_then(|s| s.to_str())
-            .unwrap_or_default()
-            .to_string();
-        if stem == "lib" || stem == "main" {
-            continue;
-        }
-        let rank = order
-            .iter()
-            .position(|m| *m == stem)
-            .unwrap_or_else(|| panic!("module {stem} is not placed in the architecture order"));
-        // a module is a file or a folder of files (mod.rs and submodules)
-        let text = if path.is_dir() {
-            let mut files: Vec<_> = std::fs::read_dir(&path)
-                .expect("module folder")
-                .map(|e| e.expect("entry").path())
-                .filter(|p| p.extension().is_some_and(|e| e == "rs"))
+    // Every file and folder of src/ is in the layout, and every module of a folder too.
+    let mut found: Vec<String> = std::fs::read_dir(&src)
+        .expect("src")
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.is_dir() || p.extension().is_some_and(|x| x == "rs"))
+        .map(|p| {
+            p.file_stem()
+                .and_then(|s| s.to_str())
+                .unwrap_or("")
+                .to_string()
+        })
+        .filter(|s| s != "lib" && s != "main")
+        .collect();
+    found.sort();
+    let mut listed: Vec<String> = LAYOUT.iter().map(|(n, _)| n.to_string()).collect();
+    listed.sort();
+    assert_eq!(found, listed, "src/ against the layout");
+    let mut checked = 0;
+    for (folder, modules) in LAYOUT {
+        let dir = src.join(folder);
+        // (module name or None for a top-level file or a folder's mod.rs, its path)
+        let mut units: Vec<(Option<&str>, PathBuf)> = Vec::new();
+        if dir.is_dir() {
+            let mut inside: Vec<String> = std::fs::read_dir(&dir)
+                .expect("folder")
+                .flatten()
+                .map(|e| e.path())
+                .filter(|p| p.is_dir() || p.extension().is_some_and(|x| x == "rs"))
+                .map(|p| {
+                    p.file_stem()
+                        .and_then(|s| s.to_str())
+                        .unwrap_or("")
+                        .to_string()
+                })
+                .filter(|s| s != "mod" && s != "tests")
                 .collect();
-            files.sort();
-            files
-                .iter()
-                .map(|p| std::fs::read_to_string(p).expect("source"))
-                .collect::<Vec<_>>()
-                .join("\n")
-        } else {
-            std::fs::read_to_string(&path).expect("source")
-        };
-        let code: String = text
-            .lines()
-            .filter(|l| !l.trim_start().starts_with("//"))
-            .collect::<Vec<_>>()
-            .join("\n");
-        for (i, _) in code.match_indices("crate::") {
-            let used: String = code[i + 7..]
-                .chars()
-                .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
-                .collect();
-            if let Some(r) = order.iter().position(|m| *m == used) {
-                assert!(
-                    r < rank,
-                    "{stem} (rank {rank}) uses crate::{used} (rank {r}): dependencies must point down the pipeline"
-                );
+            inside.sort();
+            inside.dedup();
+            let mut expected: Vec<String> = modules.iter().map(|m| m.to_string()).collect();
+            expected.sort();
+            assert_eq!(
+                inside, expected,
+                "modules of src/{folder}/ against the layout"
+            );
+            let head = std::fs::read_to_string(dir.join("mod.rs")).expect("mod.rs");
+            assert!(
+                head.starts_with("//! **"),
+                "src/{folder}/mod.rs must open with a paragraph on what the folder owns and may use"
+            );
+            units.push((None, dir.join("mod.rs")));
+            for m in *modules {
+                let file = dir.join(format!("{m}.rs"));
+                let sub = dir.join(m);
+                if file.is_file() {
+                    units.push((Some(m), file));
+                }
+                if sub.is_dir() {
+                    units.push((Some(m), sub));
+                }
             }
+        } else {
+            units.push((None, src.join(format!("{folder}.rs"))));
         }
-        // The library never prints.
-        for bad in ["println!", "eprintln!", "print!(", "dbg!("] {
-            assert!(!text.contains(bad), "{stem} contains {bad}");
+        for (module, path) in units {
+            let name = match module {
+                Some(m) => format!("{folder}::{m}"),
+                None => folder.to_string(),
+            };
+            let (rank, inner) = place(folder, module).expect("placed");
+            let code = module_code(&path);
+            for used in paths_after(&code, "crate::") {
+                let Some(top) = used.first() else { continue };
+                let Some((r, _)) = place(top, None) else {
+                    continue;
+                };
+                assert!(
+                    r <= rank,
+                    "{name} uses crate::{top}, a later stage: dependencies must point down the pipeline"
+                );
+                // Within its own folder, a module uses only the modules before it.
+                if r == rank
+                    && let (Some(me), Some(other)) = (inner, used.get(1))
+                    && let Some((_, Some(o))) = place(top, Some(other))
+                {
+                    assert!(
+                        o <= me,
+                        "{name} uses crate::{top}::{other}, a later module of its folder"
+                    );
+                }
+            }
+            // The same through `super::` from a folder's module to its siblings.
+            if let Some(me) = inner {
+                for used in paths_after(&code, "super::") {
+                    if let Some((_, Some(o))) = used.first().and_then(|s| place(folder, Some(s))) {
+                        assert!(
+                            o <= me,
+                            "{name} uses super::{}, a later module of its folder",
+                            used[0]
+                        );
+                    }
+                }
+            }
+            // The library never prints.
+            for bad in ["println!", "eprintln!", "print!(", "dbg!("] {
+                assert!(!code.contains(bad), "{name} contains {bad}");
+            }
+            checked += 1;
         }
-        seen += 1;
     }
-    assert_eq!(seen, order.len());
+    assert!(checked >= 30, "only {checked} modules checked");
+
+    // docs/architecture.md names every folder and module, in this order, as bold code.
+    let doc =
+        std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/architecture.md"))
+            .expect("docs/architecture.md");
+    let named: Vec<String> = doc
+        .match_indices("**`")
+        .filter_map(|(i, _)| {
+            let rest = &doc[i + 3..];
+            let end = rest.find("`**")?;
+            let n = &rest[..end];
+            n.chars()
+                .all(|c| c.is_ascii_lowercase() || c == '_' || c == '/')
+                .then(|| n.to_string())
+        })
+        .collect();
+    let mut expected = Vec::new();
+    for (folder, modules) in LAYOUT {
+        if src.join(folder).is_dir() {
+            expected.push(format!("{folder}/"));
+            expected.extend(modules.iter().map(|m| m.to_string()));
+        } else {
+            expected.push(folder.to_string());
+        }
+    }
+    assert_eq!(
+        named, expected,
+        "docs/architecture.md must name every folder and module of src/, in pipeline order, as **`name`** (folders as **`name/`**)"
+    );
 }
 
 // ---------------------------------------------------------------------------------------
@@ -1498,7 +1670,8 @@ fn corrected_program_leaves_no_step_on_the_paper_scene() {
 
     // The emitted program is the simulated one: read back, it gives the same moves.
     let mut text = Vec::new();
-    twinmill::correct::write_gcode(&out.corrected, &out.header, &mut text).expect("writes");
+    twinmill::calibration::correct::write_gcode(&out.corrected, &out.header, &mut text)
+        .expect("writes");
     let text = String::from_utf8(text).expect("utf-8");
     assert!(text.contains("G21 G90 G94") && text.contains("(src line 9)"));
     assert!(text.contains("(src line 14)") && text.contains("F600"));
@@ -1728,7 +1901,7 @@ fn cli_correct_writes_program_and_report_or_nothing() {
 /// trials. With the noise nearly off, `dz_AY` still comes back 20–70 nm off: a model bias,
 /// cause not yet found, that at 0.005 mm would exceed its 3σ more often.)
 fn designed_scene(tag: &str) -> Scene {
-    use twinmill::design::{DesignOptions, design};
+    use twinmill::calibration::design::{DesignOptions, design};
     let base = scene();
     let ids: Vec<_> = NINE
         .iter()
@@ -1959,14 +2132,14 @@ fn fan(n: usize) -> Vec<[usize; 3]> {
 
 mod tool_shapes {
     use super::*;
-    use twinmill::cutter::SweptTool;
-    use twinmill::kinematics::{Axis, AxisKind, Chain};
+    use twinmill::cutting::cutter::SweptTool;
+    use twinmill::cutting::stock::{Cutter, TriDexel};
+    use twinmill::cutting::sweep::{SweepOptions, TranslatedTool, sweep_program};
+    use twinmill::cutting::tool::{Tool, ToolKind};
+    use twinmill::machine::chain::{Axis, AxisKind, Chain};
     use twinmill::math::{CounterRng, UnitVector3};
     use twinmill::nc::{AxisLetter, AxisValues, Move, MoveKind};
     use twinmill::progress::NoProgress;
-    use twinmill::stock::{Cutter, TriDexel};
-    use twinmill::sweep::{SweepOptions, TranslatedTool, sweep_program};
-    use twinmill::tool::{Tool, ToolKind};
     /// The sweep module's closed form (flat, ball) and the cutter's piecewise closed form
     /// agree to rounding on random moves and axis rays, with the tool at least 2R long (the
     /// sweep module's ball is a whole sphere).
@@ -2005,7 +2178,7 @@ mod tool_shapes {
                     (None, None) => {}
                     // A grazing ray: one side may see a sliver the other does not.
                     (p, q) => {
-                        let len = |c: Option<twinmill::stock::RayCut>| {
+                        let len = |c: Option<twinmill::cutting::stock::RayCut>| {
                             c.map_or(0.0, |c| c.t_out - c.t_in)
                         };
                         assert!(len(p).max(len(q)) < 1e-6, "{p:?} vs {q:?}");
@@ -2164,20 +2337,20 @@ mod tool_shapes {
 mod solids_collisions_deviation {
     use super::*;
     use std::f64::consts::PI;
-    use twinmill::collide::{EventKind, Fixture, Holder, Part, sweep_with_checks};
-    use twinmill::deviation::{
-        DesignModel, DeviationImageOptions, deviation_map, render_deviation_map,
-    };
-    use twinmill::kinematics::{Axis, AxisKind, Chain};
+    use twinmill::cutting::collide::{EventKind, Fixture, Holder, Part, sweep_with_checks};
+    use twinmill::cutting::shape::Solid;
+    use twinmill::cutting::shape::{ClosedMesh, Cylinder, read_obj};
+    use twinmill::cutting::stock::TriDexel;
+    use twinmill::cutting::sweep::SweepOptions;
+    use twinmill::cutting::tool::{Tool, ToolKind};
+    use twinmill::machine::chain::{Axis, AxisKind, Chain};
     use twinmill::math::{Point3, Real, UnitVector3, Vector3};
     use twinmill::nc::{AxisLetter, AxisValues, Move, MoveKind};
     use twinmill::progress::NoProgress;
-    use twinmill::render::encode_png;
-    use twinmill::shape::Solid;
-    use twinmill::shape::{ClosedMesh, Cylinder, read_obj};
-    use twinmill::stock::TriDexel;
-    use twinmill::sweep::SweepOptions;
-    use twinmill::tool::{Tool, ToolKind};
+    use twinmill::report::deviation_map::{
+        DesignModel, DeviationImageOptions, deviation_map, render_deviation_map,
+    };
+    use twinmill::report::render::encode_png;
     /// Upper bound on |V_dexel − V| for a convex solid of area `a` and integral mean curvature
     /// `m`: every point where the dexel prisms and the solid disagree lies within half a cell
     /// diagonal ρ = h/√2 of the surface, so the error is at most the outer parallel shell
@@ -3665,7 +3838,7 @@ fn cli_design_writes_a_program_and_scene_that_identify_all_nine() {
 // One sweep driver: the checked sweep of `simulate` removes exactly what the sweep removes.
 
 /// Every crossing of a stock (point, then its stored data), in grid order.
-fn all_crossings(s: &TriDexel) -> Vec<(Point3, twinmill::stock::Crossing)> {
+fn all_crossings(s: &TriDexel) -> Vec<(Point3, twinmill::cutting::stock::Crossing)> {
     let mut out = Vec::new();
     for g in s.grids() {
         g.for_each_crossing(|p, c| out.push((p, *c)));
@@ -3693,7 +3866,7 @@ fn mdx50_with(sb: &Sandbox, program: &str, pitch: &str, tool: Option<&str>) -> S
 /// one or two threads give the same events and stock.
 #[test]
 fn checked_sweep_removes_exactly_what_the_sweep_removes() {
-    use twinmill::collide::{Holder, HolderSection, sweep_with_checks};
+    use twinmill::cutting::collide::{Holder, HolderSection, sweep_with_checks};
     let program = "G21 G90 G17\nG0 Z60 A0\nG0 X-30 Y-25\nG0 Z5\n\
         G1 X-10 F600\nG1 X0\nG1 X10\n\
         G3 X20 Y-15 I0 J10\nG3 X10 Y-5 I-10 J0\n\
@@ -3779,7 +3952,7 @@ fn checked_sweep_removes_exactly_what_the_sweep_removes() {
         assert!(
             r.events
                 .iter()
-                .any(|e| e.kind == twinmill::collide::EventKind::RapidThroughMaterial),
+                .any(|e| e.kind == twinmill::cutting::collide::EventKind::RapidThroughMaterial),
             "{tag}: {:?}",
             r.events
         );

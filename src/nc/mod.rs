@@ -1,3 +1,9 @@
+//! **NC**: the program becomes motion. Owns the RS274/NGC language in LinuxCNC's dialect —
+//! reading, modal state, offsets, subroutines, canned cycles, cutter compensation, tool
+//! tables — and the motion records it produces. May use [`crate::math`] only: it knows
+//! nothing about machines, tools or stock, reads only the files it is given and never
+//! writes.
+//!
 //! RS274/NGC interpreter for a milling machine, in LinuxCNC's dialect, matching LinuxCNC's
 //! standalone interpreter (`rs274`) move for move.
 //!

@@ -1,12 +1,12 @@
 //! Collisions along a program: rapids through material, the shank or holder touching the
 //! stock, and any part of the tool, shank or holder touching a fixture. The checks ride on
-//! the one sweep driver ([`crate::sweep::sweep_observed`]) as its observer, so the material
-//! is removed exactly as [`crate::sweep::sweep_program`] removes it (same arcs as chords,
+//! the one sweep driver ([`crate::cutting::sweep::sweep_observed`]) as its observer, so the material
+//! is removed exactly as [`crate::cutting::sweep::sweep_program`] removes it (same arcs as chords,
 //! joined collinear runs, rotary envelope or sub-steps) and each move is checked against the
 //! stock as it is then.
 //!
 //! **Stock.** A part's swept volume over a move (exact for straight moves at fixed rotary
-//! values: a translation, see [`crate::sweep`]) is intersected with the dexels ray by ray,
+//! values: a translation, see [`crate::cutting::sweep`]) is intersected with the dexels ray by ray,
 //! removing nothing: the overlap lengths times the ray cell areas, averaged over the three
 //! grids, estimate the overlapping volume; per grid the longest overlap along one ray,
 //! smallest over the grids, is the depth estimate.
@@ -32,7 +32,7 @@
 //! event per kind, part and fixture per move (arcs: per chord).
 //!
 //! **Rotary moves** are checked (not cut) in translations: the sub-steps of
-//! [`crate::sweep::rotary_substeps`], as many as make every point of the whole assembly
+//! [`crate::cutting::sweep::rotary_substeps`], as many as make every point of the whole assembly
 //! (not only the flutes) stay within [`ROTARY_CHECK_BOUND`] (or the sweep's bound, if
 //! coarser) of its true path; the achieved bound is [`CollisionReport::check_error_bound_mm`], so a
 //! contact deeper than it is not missed (within the dexel spacing across rays). Sub-steps
@@ -40,20 +40,20 @@
 //! screened first in coarse groups.
 //!
 //! **Invariant:** collision checks only read the stock and the fixtures (the stock comes out
-//! bit-identical to [`crate::sweep::sweep_program`]'s); they never parse text or touch files.
+//! bit-identical to [`crate::cutting::sweep::sweep_program`]'s); they never parse text or touch files.
 
-use crate::envelope::RotaryEnvelope;
-use crate::kinematics::{AxisKind, Chain};
-use crate::math::{Aabb, Isometry3, Point3, Real, Rotation3, UnitVector3, Vector3, tol};
-use crate::nc::{AxisValues, Move};
-use crate::progress::Progress;
-use crate::shape::{ClosedMesh, Solid};
-use crate::stock::{Cutter, TriDexel};
-use crate::sweep::{
+use crate::cutting::envelope::RotaryEnvelope;
+use crate::cutting::shape::{ClosedMesh, Solid};
+use crate::cutting::stock::{Cutter, TriDexel};
+use crate::cutting::sweep::{
     Piece, RotaryBound, SweepError, SweepObserver, SweepOptions, SweepReport, TranslatedTool,
     rotary_substeps, sweep_observed,
 };
-use crate::tool::{ProfileStep, Tool, ToolKind};
+use crate::cutting::tool::{ProfileStep, Tool, ToolKind};
+use crate::machine::chain::{AxisKind, Chain};
+use crate::math::{Aabb, Isometry3, Point3, Real, Rotation3, UnitVector3, Vector3, tol};
+use crate::nc::{AxisValues, Move};
+use crate::progress::Progress;
 use parry3d_f64::query::{ShapeCastOptions, cast_shapes};
 use parry3d_f64::shape::{Ball, Cylinder as PCylinder, Shape};
 
@@ -443,7 +443,7 @@ pub struct CollisionReport {
     pub events: Vec<Event>,
     /// Moves processed (arcs counted once per chord).
     pub moves: usize,
-    /// What the sweep did (exactly as [`crate::sweep::sweep_program`] reports it).
+    /// What the sweep did (exactly as [`crate::cutting::sweep::sweep_program`] reports it).
     pub sweep: SweepReport,
     /// Largest distance (mm) between the true and the checked position of any point of the
     /// tool assembly on the moves that turn a rotary axis (sub-stepped checks); 0 if none.
@@ -983,7 +983,7 @@ impl SweepObserver for Checks<'_> {
 }
 
 /// Runs `moves` through the sweep driver (removing material from `stock` exactly as
-/// [`crate::sweep::sweep_program`] does) and reports the collisions described in the module
+/// [`crate::cutting::sweep::sweep_program`] does) and reports the collisions described in the module
 /// docs.
 #[expect(
     clippy::too_many_arguments,
@@ -1036,7 +1036,7 @@ pub fn sweep_with_checks(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::shape::read_obj;
+    use crate::cutting::shape::read_obj;
 
     /// A closed box mesh [min, max] as a fixture.
     fn box_fixture(min: [Real; 3], max: [Real; 3]) -> Fixture {

@@ -25,12 +25,12 @@
 //! **Invariant:** the scanner reads the stock and never changes it; it knows nothing about
 //! the machine or the program (a point's source NC line is read off the crossing).
 
-use crate::cloud::{Frame, PointCloud};
+use crate::cutting::stock::TriDexel;
 use crate::math::{
     Aabb, CounterRng, Isometry3, Point3, Real, Rotation3, UnitVector3, Vector3, tol,
 };
+use crate::metrology::cloud::{Frame, PointCloud};
 use crate::progress::Progress;
-use crate::stock::TriDexel;
 use rayon::prelude::*;
 
 /// Scanner pose and characteristics. All lengths in mm, frame W.

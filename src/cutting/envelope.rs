@@ -24,7 +24,7 @@
 //! **Cells.** No tool point moves faster than `M = ω·ρ + v` per unit `λ` (`ω` the total
 //! rotation in rad, `ρ` a bound on the distance of any tool point from the rotary axes during
 //! the move, `v` the linear travel; with several rotary axes `ρ` is widened like the sub-step
-//! bound of [`crate::sweep`]). The move is split into `N` cells of width `h` with
+//! bound of [`crate::cutting::sweep`]). The move is split into `N` cells of width `h` with
 //! `δ = M·h/2 ≤ R/8`: the tool anywhere in a cell lies inside the tool at the cell's middle
 //! grown by `δ`. A ray that misses the grown tool misses the cell. The ray is evaluated
 //! exactly at the ends and middle of every cell it may meet; in each half-cell (the tool
@@ -61,11 +61,11 @@
 //! **Invariant:** the envelope knows only the tool's shape, the chain's poses and one move;
 //! it never reads programs, stock or files.
 
-use crate::kinematics::{AxisKind, Chain};
+use crate::cutting::stock::{Cutter, RayCut};
+use crate::cutting::tool::{Tool, ToolKind};
+use crate::machine::chain::{AxisKind, Chain};
 use crate::math::{Aabb, Isometry3, Matrix3, Point3, Real, Vector3, tol};
 use crate::nc::AxisValues;
-use crate::stock::{Cutter, RayCut};
-use crate::tool::{Tool, ToolKind};
 
 /// Bound (mm) on the distance of the envelope's interval ends from the true swept surface
 /// along a ray: 0.1 µm, the µm-metrology budget with a factor ten to spare; the solver
@@ -1031,12 +1031,12 @@ impl Cutter for RotaryEnvelope {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cutter::SweptTool;
+    use crate::cutting::cutter::SweptTool;
     use crate::nc::AxisLetter;
     use proptest::prelude::*;
 
     fn deviated() -> Chain {
-        let mut c = crate::kinematics::mdx50_for_tests();
+        let mut c = crate::machine::chain::mdx50_for_tests();
         for (name, v) in [
             ("dy_AY", -0.3),
             ("dz_AY", 0.2),
@@ -1244,7 +1244,7 @@ mod tests {
         // Nominal chain, tool tip 5 mm from the A axis pointing away from it, A turning
         // 0 → 180°: a z ray at y = 0, x = 0 meets the tool at A = 0 (z ∈ [5, 15]) and at
         // A = 180° (z ∈ [−15, −5]); in between the tool swings through the y side.
-        let c = crate::kinematics::mdx50_for_tests();
+        let c = crate::machine::chain::mdx50_for_tests();
         let tool = Tool::try_new(ToolKind::Flat, 2.0, 10.0).expect("valid");
         let (a, b) = (q(0.0, 0.0, 5.0, 0.0), q(0.0, 0.0, 5.0, 180.0));
         let env = RotaryEnvelope::new(&c, &tool, &a, &b).expect("supported");

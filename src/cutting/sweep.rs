@@ -12,8 +12,8 @@
 //! ∩ quadric, line ∩ line), each computed by a quadratic formula.
 //!
 //! **Moves that turn a rotary axis** with a flat or ball end mill are cut by the exact
-//! per-ray envelope of [`crate::envelope`] (interval ends within
-//! [`crate::envelope::ENVELOPE_TOL`] = 0.1 µm of the true swept surface, the bound
+//! per-ray envelope of [`crate::cutting::envelope`] (interval ends within
+//! [`crate::cutting::envelope::ENVELOPE_TOL`] = 0.1 µm of the true swept surface, the bound
 //! reported). Other tools, or a bound asked tighter than that, fall back to sub-steps:
 //!
 //! such a move is split into `N` sub-steps, each swept as a
@@ -30,20 +30,20 @@
 //! **One driver.** [`sweep_observed`] runs a program: arcs become chords (their exact
 //! sagitta reported), consecutive collinear straight moves are joined into one sweep (a
 //! rapid always starts a new run), rotary moves go to the envelope or to sub-steps. The plain
-//! sweep ([`sweep_program`]) and the collision checks ([`crate::collide`], through the
+//! sweep ([`sweep_program`]) and the collision checks ([`crate::cutting::collide`], through the
 //! [`SweepObserver`] trait) both use it, so they remove the same material bit for bit.
 //!
 //! **Invariant:** the sweep reads moves and poses; it never parses text or touches files; an
 //! observer only reads the stock.
 
-use crate::cutter::{Line, Quadric, SweptTool, t_extremes};
-use crate::envelope::{ENVELOPE_TOL, RotaryEnvelope};
-use crate::kinematics::{AxisKind, Chain};
+use crate::cutting::cutter::{Line, Quadric, SweptTool, t_extremes};
+use crate::cutting::envelope::{ENVELOPE_TOL, RotaryEnvelope};
+use crate::cutting::stock::{Cutter, RayCut, TriDexel};
+use crate::cutting::tool::{Tool, ToolKind};
+use crate::machine::chain::{AxisKind, Chain};
 use crate::math::{Aabb, Isometry3, Point3, Real, Rotation3, UnitVector3, Vector3, tol};
 use crate::nc::{AxisLetter, AxisValues, Move, MoveKind};
 use crate::progress::Progress;
-use crate::stock::{Cutter, RayCut, TriDexel};
-use crate::tool::{Tool, ToolKind};
 
 /// Options of the sweep.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -124,7 +124,7 @@ const COARSE: usize = 64;
 
 /// The tool translated from `start` (tip position) by `d`, with constant axis `v`.
 /// Flat and ball end mills use the closed form below; every other shape the piecewise
-/// exact sweep of [`crate::cutter`].
+/// exact sweep of [`crate::cutting::cutter`].
 #[derive(Clone, Debug)]
 pub struct TranslatedTool {
     tool: Tool,
@@ -1149,7 +1149,7 @@ fn flush(
 }
 
 #[cfg(test)]
-#[path = "../benches/support/p1.rs"]
+#[path = "../../benches/support/p1.rs"]
 #[allow(
     clippy::duplicate_mod,
     reason = "benchmark P1's program is shared by the unit tests of sweep and zmap"
@@ -1159,8 +1159,8 @@ mod p1;
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cutting::stock::Crossing;
     use crate::progress::NoProgress;
-    use crate::stock::Crossing;
     use proptest::prelude::*;
 
     fn flat(d: Real, l: Real) -> Tool {
@@ -1251,7 +1251,7 @@ mod tests {
 
     /// The nominal 3-axis machine of benchmark P1 (Y table, X carriage, Z spindle).
     fn xyz_chain() -> Chain {
-        let ax = |letter, d: Vector3| crate::kinematics::Axis {
+        let ax = |letter, d: Vector3| crate::machine::chain::Axis {
             letter,
             kind: AxisKind::Linear,
             direction: UnitVector3::new_normalize(d),
@@ -1348,7 +1348,7 @@ mod tests {
             points in proptest::collection::vec((-4.0..4.0f64, -4.0..4.0f64, -2.0..3.0f64), 2..5),
             splits in proptest::collection::vec(1usize..4, 4),
         ) {
-            let chain = crate::kinematics::mdx50_for_tests();
+            let chain = crate::machine::chain::mdx50_for_tests();
             let kind = if ball { ToolKind::Ball } else { ToolKind::Flat };
             let (r, l) = (radius, 10.0);
             let tool = Tool::try_new(kind, 2.0 * r, l).expect("valid");
@@ -1452,7 +1452,7 @@ mod tests {
     /// bit-identical stocks (every crossing's t, normal and line).
     #[test]
     fn sweep_is_bit_identical_for_one_and_two_threads() {
-        let chain = crate::kinematics::mdx50_for_tests();
+        let chain = crate::machine::chain::mdx50_for_tests();
         let tool = Tool::try_new(ToolKind::Ball, 3.0, 10.0).expect("valid");
         let at =
             |x: Real, y: Real, z: Real, a: Real| AxisValues::from_array([x, y, z, a, 0.0, 0.0]);

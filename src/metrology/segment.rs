@@ -52,8 +52,8 @@
 //! (seed, iteration). No input makes a function here panic: bad points or options are a
 //! [`SegmentError`].
 
-use crate::fit::{CHUNK, Plane, PlaneFit, RobustRule, fit_plane, fit_plane_robust};
 use crate::math::{Aabb, CounterRng, Matrix3, Point3, Real, UnitVector3, Vector3, tol};
+use crate::metrology::fit::{CHUNK, Plane, PlaneFit, RobustRule, fit_plane, fit_plane_robust};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use rayon::prelude::*;
 use std::num::NonZeroUsize;
@@ -386,7 +386,7 @@ fn closed_form_eigen(m: &[Real; 6]) -> Option<([Real; 3], Vector3)> {
 }
 
 /// `n` flipped if needed so that its largest-magnitude component (the first on a tie) is
-/// positive: the orientation rule of [`crate::fit::PlaneFit`].
+/// positive: the orientation rule of [`crate::metrology::fit::PlaneFit`].
 fn canonical(n: Vector3) -> Vector3 {
     let mut k_big = 0;
     for k in 1..3 {
@@ -1764,7 +1764,10 @@ fn fit_region(
 }
 
 /// The fit, with `n_rejected` counted against all `total` assigned points.
-fn finish(fit: Result<PlaneFit, crate::fit::FitError>, total: usize) -> Option<PlaneFit> {
+fn finish(
+    fit: Result<PlaneFit, crate::metrology::fit::FitError>,
+    total: usize,
+) -> Option<PlaneFit> {
     let mut fit = fit.ok()?;
     fit.n_rejected = total - fit.n_used;
     Some(fit)

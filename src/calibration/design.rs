@@ -17,7 +17,7 @@
 //!
 //! **Choice.** A candidate set is evaluated on the model chain: synthetic plane features with
 //! the uncertainties the scanner would give (points on the face from its area and the scan
-//! pitch, range noise σ), the identifiability analysis of [`crate::calibrate`] with the
+//! pitch, range noise σ), the identifiability analysis of [`crate::calibration::calibrate`] with the
 //! registration estimated. Ranking: fewest undetermined directions, then fewest parameters
 //! not identified alone, then the largest information (sum of the logs of the capped
 //! singular values). A beam search keeps the best few sets each round and extends each by
@@ -54,15 +54,15 @@
 //!
 //! **Invariant:** plans and writes text; runs no sweep or scan and touches no files.
 
-use crate::calibrate::{
+use crate::calibration::calibrate::{
     ANGLE_MAGNITUDE_RAD, CalibrateError, Feature, Identifiability, Model, Registration,
     identifiability, magnitude, synthetic_plane_feature,
 };
-use crate::identify::{FaceKind, FaceRegion, FaceSpec};
-use crate::kinematics::{AxisKind, Chain, DeviationId};
+use crate::calibration::identify::{FaceKind, FaceRegion, FaceSpec};
+use crate::cutting::tool::{Tool, ToolKind};
+use crate::machine::chain::{AxisKind, Chain, DeviationId};
 use crate::math::{Aabb, Point3, Real, Vector3};
 use crate::nc::{AxisLetter, AxisValues, Move, MoveKind};
-use crate::tool::{Tool, ToolKind};
 use rayon::prelude::*;
 use std::fmt::Write as _;
 
@@ -548,7 +548,7 @@ pub fn design(
 /// times the threshold of determination, so that a real scan, which measures a face less
 /// well than its expected uncertainties (correlated noise, points lost at edges), still
 /// determines it.
-const ROBUST_SINGULAR_VALUE: Real = 2.5 / crate::calibrate::DETERMINED_FRACTION;
+const ROBUST_SINGULAR_VALUE: Real = 2.5 / crate::calibration::calibrate::DETERMINED_FRACTION;
 
 /// The smallest singular value of the determined subspace (0 when nothing is determined).
 fn weakest(i: &Identifiability) -> Real {
@@ -665,7 +665,7 @@ fn lever_notes(
                 "; expected σ of ({a} − {b})/√2 {s:.2e} rad = {:.0} % of \
                  {ANGLE_MAGNITUDE_RAD:e} rad (determined below {:.0} %)",
                 100.0 * s / ANGLE_MAGNITUDE_RAD,
-                100.0 * crate::calibrate::DETERMINED_FRACTION
+                100.0 * crate::calibration::calibrate::DETERMINED_FRACTION
             ));
         }
         out.push(note);
@@ -788,7 +788,7 @@ mod tests {
 
     #[test]
     fn the_nine_deviations_are_all_determined_by_the_designed_cuts() {
-        let c = crate::kinematics::mdx50_for_tests();
+        let c = crate::machine::chain::mdx50_for_tests();
         let d = design(&c, &tool(), &nine(&c), &sharp()).expect("a design");
         let i = &d.identifiability;
         assert_eq!(i.rank, 9, "undetermined: {:?}", i.undetermined_combinations);
@@ -801,7 +801,7 @@ mod tests {
             .iter()
             .copied()
             .fold(Real::INFINITY, Real::min);
-        assert!(weakest >= 1.0 / crate::calibrate::DETERMINED_FRACTION);
+        assert!(weakest >= 1.0 / crate::calibration::calibrate::DETERMINED_FRACTION);
         // The lever: faces across X and across Y at more than one tip height.
         for (across_x, what) in [(true, "Y-shoulders"), (false, "X-shoulders")] {
             let tips: Vec<Real> = d
@@ -819,7 +819,7 @@ mod tests {
 
     #[test]
     fn designed_cuts_never_meet() {
-        let c = crate::kinematics::mdx50_for_tests();
+        let c = crate::machine::chain::mdx50_for_tests();
         let o = DesignOptions::standard();
         let d = design(&c, &tool(), &nine(&c), &o).expect("a design");
         let pool = candidates(&o, &tool());
@@ -848,10 +848,12 @@ mod tests {
     /// for alpha), whatever the rotary index, the position and the cut direction.
     #[test]
     fn z_squareness_and_spindle_tilt_differ_only_by_the_tip_height_lever() {
-        use crate::calibrate::{FaceKind, Model, Registration, synthetic_plane_feature};
-        use crate::identify::{FaceRegion, FaceSpec};
+        use crate::calibration::calibrate::{
+            FaceKind, Model, Registration, synthetic_plane_feature,
+        };
+        use crate::calibration::identify::{FaceRegion, FaceSpec};
         use crate::nc::{AxisValues, Move, MoveKind};
-        let c = crate::kinematics::mdx50_for_tests();
+        let c = crate::machine::chain::mdx50_for_tests();
         let ids: Vec<DeviationId> = [
             "beta_XZ", "beta_ZS", "dx_AY", "alpha_YX", "alpha_ZS", "dy_AY",
         ]
@@ -937,7 +939,7 @@ mod tests {
     fn cuts_at_one_tip_height_leave_the_lever_pairs_unseen() {
         // Every cut at the same depth: the two differences fall into the registration's
         // slide along X and dy_AY (the test above), so they are not determined.
-        let c = crate::kinematics::mdx50_for_tests();
+        let c = crate::machine::chain::mdx50_for_tests();
         let o = DesignOptions {
             depths_mm: [3.0; 5],
             ..sharp()

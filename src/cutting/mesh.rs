@@ -50,8 +50,8 @@
 //! **Invariant:** meshing reads the stock only; it knows nothing about tools, moves or
 //! machines. Writers take any `Write` and refuse non-finite coordinates before writing.
 
+use crate::cutting::stock::{Segment, TriDexel};
 use crate::math::{Point3, Real, Vector3};
-use crate::stock::{Segment, TriDexel};
 use rayon::prelude::*;
 use std::io::Write;
 
@@ -911,10 +911,10 @@ impl Qef {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::cutting::stock::TriDexel;
+    use crate::cutting::sweep::TranslatedTool;
+    use crate::cutting::tool::{Tool, ToolKind};
     use crate::math::{Aabb, CounterRng, UnitVector3};
-    use crate::stock::TriDexel;
-    use crate::sweep::TranslatedTool;
-    use crate::tool::{Tool, ToolKind};
 
     fn stock(size: [Real; 3], pitch: Real) -> TriDexel {
         let b = Aabb {

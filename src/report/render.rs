@@ -9,9 +9,9 @@
 //! Rendering is sequential and deterministic: points are drawn in input order and a pixel
 //! covered by several points shows the last one drawn.
 
-use crate::fit::Plane;
+use crate::cutting::stock::TriDexel;
 use crate::math::{Point3, Real, UnitVector3, Vector3, tol};
-use crate::stock::TriDexel;
+use crate::metrology::fit::Plane;
 use image::{Rgb, RgbImage};
 
 /// Options of a heat map. (Document units and ranges.)
@@ -718,8 +718,8 @@ mod tests {
 
     #[test]
     fn top_view_colours_a_pocket_by_depth() {
+        use crate::cutting::stock::{Cutter, RayCut, TriDexel};
         use crate::math::{Aabb, Vector3};
-        use crate::stock::{Cutter, RayCut, TriDexel};
         // A 4 × 4 mm square pocket 1 mm deep in the middle of a 10 × 10 × 5 box.
         struct Pocket;
         impl Cutter for Pocket {

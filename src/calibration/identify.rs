@@ -23,12 +23,12 @@
 //! **Invariant:** identification reads a cloud and the program's moves; it never runs the
 //! sweep or the scanner (it must work on clouds twinmill did not make).
 
-use crate::fit::{FitError, Plane, PlaneFit, RobustRule, fit_plane_robust};
-use crate::kinematics::{AxisKind, Chain, Component, DeviationId};
+use crate::cutting::tool::Tool;
+use crate::machine::chain::{AxisKind, Chain, Component, DeviationId};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
+use crate::metrology::fit::{FitError, Plane, PlaneFit, RobustRule, fit_plane_robust};
+use crate::metrology::segment::{PlaneSegmentOptions, select_box, select_region_from_seed};
 use crate::nc::{Move, MoveKind};
-use crate::segment::{PlaneSegmentOptions, select_box, select_region_from_seed};
-use crate::tool::Tool;
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{Matrix2, Owned, U2, Vector2};
 

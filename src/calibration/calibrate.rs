@@ -45,26 +45,26 @@
 //! touches files; never gives a value to a parameter or combination the features do not
 //! determine.
 
-use crate::fit::{Plane, fit_plane_robust};
-use crate::identify::{
+use crate::calibration::identify::{
     FaceDesign, FaceOptions, FaceSpec, extent, extract_face, face_design, flank, region_indices,
 };
-use crate::kinematics::{Chain, DeviationId};
+use crate::cutting::tool::{Tool, ToolKind};
+use crate::machine::chain::{Chain, DeviationId};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
+use crate::metrology::fit::{Plane, fit_plane_robust};
 use crate::nc::{AxisValues, Move};
-use crate::tool::{Tool, ToolKind};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Matrix2, Owned};
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
-pub use crate::identify::FaceKind;
+pub use crate::calibration::identify::FaceKind;
 
 /// Errors of general identification.
 #[derive(Debug, PartialEq, thiserror::Error)]
 pub enum CalibrateError {
     /// Face extraction failed.
     #[error("{0}")]
-    Face(#[from] crate::identify::IdentifyError),
+    Face(#[from] crate::calibration::identify::IdentifyError),
     /// A floor was asked of a tool without a flat bottom.
     #[error("face '{0}': a floor needs a flat end mill")]
     FloorNeedsFlatTool(String),
@@ -425,7 +425,7 @@ impl PlaneFeature {
         cut: Move,
         kind: FaceKind,
         expected_normal: UnitVector3,
-        fit: &crate::fit::PlaneFit,
+        fit: &crate::metrology::fit::PlaneFit,
         design: &FaceDesign,
         cross_range_mm: (Real, Real),
     ) -> Self {
@@ -1311,19 +1311,19 @@ pub fn extract_plane_feature(
                 return Err(CalibrateError::FloorNeedsFlatTool(spec.name.clone()));
             }
             let mv = moves.iter().find(|m| m.line == spec.line).ok_or_else(|| {
-                crate::identify::IdentifyError::NoMove {
+                crate::calibration::identify::IdentifyError::NoMove {
                     face: spec.name.clone(),
                     line: spec.line,
                 }
             })?;
             let empty = || {
-                CalibrateError::Face(crate::identify::IdentifyError::EmptyRegion {
+                CalibrateError::Face(crate::calibration::identify::IdentifyError::EmptyRegion {
                     face: spec.name.clone(),
                 })
             };
             // Reuse the flank for the cut's validity check and frame.
             let fl = flank(model, tool, mv, stock).ok_or_else(empty)?;
-            crate::identify::find_cut(moves, spec, model)?;
+            crate::calibration::identify::find_cut(moves, spec, model)?;
             let u = fl.u;
             let v = fl.v;
             let e2 = UnitVector3::try_new(v.cross(&u), tol::LENGTH_EPS).ok_or_else(empty)?;
@@ -1348,7 +1348,7 @@ pub fn extract_plane_feature(
             });
             let sel: Vec<Point3> = indices.iter().map(|&i| points[i]).collect();
             let mut fit = fit_plane_robust(&sel, &opts.robust).map_err(|source| {
-                CalibrateError::Face(crate::identify::IdentifyError::Fit {
+                CalibrateError::Face(crate::calibration::identify::IdentifyError::Fit {
                     face: spec.name.clone(),
                     points: sel.len(),
                     source,
@@ -1450,7 +1450,7 @@ mod tests {
     use crate::nc::{AxisLetter, MoveKind};
 
     fn mdx50() -> Chain {
-        crate::kinematics::mdx50_for_tests()
+        crate::machine::chain::mdx50_for_tests()
     }
 
     fn cut(line: usize, a: Real, y: Real, z: Real) -> Move {
@@ -1485,7 +1485,7 @@ mod tests {
         FaceSpec {
             name: name.into(),
             line: 0,
-            region: crate::identify::FaceRegion::Auto,
+            region: crate::calibration::identify::FaceRegion::Auto,
             kind,
         }
     }

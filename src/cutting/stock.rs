@@ -687,7 +687,7 @@ impl TriDexel {
         })
     }
 
-    /// A stock of any [`crate::shape::Solid`] (cylinder, closed mesh, …) on the grids of `bounds` at
+    /// A stock of any [`crate::cutting::shape::Solid`] (cylinder, closed mesh, …) on the grids of `bounds` at
     /// `pitch` (mm): each ray keeps the solid's exact intervals, clipped to `bounds`, with the
     /// solid's outward normals (line 0). Spans shorter than [`tol::SLIVER`] are dropped and
     /// gaps shorter than it closed. Refuses like [`TriDexel::new_box`] before allocating.
@@ -695,7 +695,7 @@ impl TriDexel {
         bounds: Aabb,
         pitch: Real,
         budget_bytes: Real,
-        solid: &dyn crate::shape::Solid,
+        solid: &dyn crate::cutting::shape::Solid,
     ) -> Result<Self, StockError> {
         let mut stock = Self::new_box(bounds, pitch, budget_bytes)?;
         for g in &mut stock.grids {

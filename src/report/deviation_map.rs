@@ -7,7 +7,7 @@
 //! ([`ClosedMesh::contains`]): **positive = the part point lies outside the design = material
 //! left; negative = inside = a gouge**. The report gives max, min, mean and RMS; the picture
 //! is a top view (x right, y up), each point a square one point spacing wide, each pixel
-//! showing the point of largest |distance| covering it (anywhere in that column of the part), in the diverging colours of [`crate::render`], with a colour bar labelled in µm
+//! showing the point of largest |distance| covering it (anywhere in that column of the part), in the diverging colours of [`crate::report::render`], with a colour bar labelled in µm
 //! (or mm when the range reaches 1 mm).
 //!
 //! Accuracy: crossings lie on the cut surface to rounding, and the design mesh is exact for
@@ -16,10 +16,10 @@
 //! **Invariant:** reads the stock and the design only; deterministic for any thread count
 //! (fixed chunks joined in order); never touches files.
 
+use crate::cutting::shape::ClosedMesh;
+use crate::cutting::stock::TriDexel;
 use crate::math::{Point3, Real, Vector3};
-use crate::render::{RenderError, diverging_colour, draw_text, nice_ceil};
-use crate::shape::ClosedMesh;
-use crate::stock::TriDexel;
+use crate::report::render::{RenderError, diverging_colour, draw_text, nice_ceil};
 use image::{Rgb, RgbImage};
 use parry3d_f64::query::PointQuery;
 use rayon::prelude::*;

@@ -72,13 +72,13 @@
 //! **Invariant:** correction reads moves and chains and writes G-code into a writer it is
 //! given; it never parses text, opens files or runs the scanner.
 
-use crate::fit::{Plane, fit_plane};
-use crate::identify::{FaceOptions, FaceSpec, StepFrame, extent, flank};
-use crate::kinematics::{AxisKind, Chain};
+use crate::calibration::identify::{FaceOptions, FaceSpec, StepFrame, extent, flank};
+use crate::cutting::stock::TriDexel;
+use crate::cutting::tool::Tool;
+use crate::machine::chain::{AxisKind, Chain};
 use crate::math::{Aabb, Isometry3, Point3, Real, Vector3};
+use crate::metrology::fit::{Plane, fit_plane};
 use crate::nc::{AxisLetter, AxisValues, Move, MoveKind, Program};
-use crate::stock::TriDexel;
-use crate::tool::Tool;
 use nalgebra::{SMatrix, SVector};
 use std::io::Write;
 
@@ -1177,7 +1177,7 @@ pub fn part_error(part: &TriDexel, nominal: &TriDexel) -> PartError {
         for iv in 0..nv {
             for iu in 0..nu {
                 let (a, b) = (g.ray(iu, iv), h.ray(iu, iv));
-                let cut = |segs: &[crate::stock::Segment]| {
+                let cut = |segs: &[crate::cutting::stock::Segment]| {
                     segs.iter().any(|s| s.lo.line != 0 || s.hi.line != 0)
                 };
                 if !cut(a) && !cut(b) {
@@ -1237,12 +1237,12 @@ pub fn axis_angle_error(machine: &Chain, commanded: &AxisValues, corrected: &Axi
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kinematics::Axis;
+    use crate::cutting::tool::ToolKind;
+    use crate::machine::chain::Axis;
     use crate::math::{CounterRng, UnitVector3};
-    use crate::tool::ToolKind;
 
     fn mdx50() -> Chain {
-        crate::kinematics::mdx50_for_tests()
+        crate::machine::chain::mdx50_for_tests()
     }
 
     fn tool() -> Tool {

@@ -31,10 +31,10 @@
 //! **Invariant:** the Z-map knows nothing about G-code text or files: it reads moves and
 //! poses from the chain, and tool geometry.
 
-use crate::kinematics::{AxisKind, Chain};
+use crate::cutting::tool::{Tool, ToolKind};
+use crate::machine::chain::{AxisKind, Chain};
 use crate::math::{Aabb, Point3, Real, Vector3, tol};
 use crate::nc::{AxisLetter, Move};
-use crate::tool::{Tool, ToolKind};
 use rayon::prelude::*;
 
 /// Largest tilt (rad) of the tool axis from +Z that still counts as parallel: over a 50 mm
@@ -681,18 +681,18 @@ fn cut_row(
 }
 
 #[cfg(test)]
-#[path = "../benches/support/p1.rs"]
+#[path = "../../benches/support/p1.rs"]
 mod p1;
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::kinematics::{Axis, AxisKind, Chain};
+    use crate::cutting::stock::TriDexel;
+    use crate::cutting::sweep::{SweepOptions, sweep_program};
+    use crate::machine::chain::{Axis, AxisKind, Chain};
     use crate::math::{CounterRng, UnitVector3};
     use crate::nc::{AxisValues, MoveKind};
     use crate::progress::NoProgress;
-    use crate::stock::TriDexel;
-    use crate::sweep::{SweepOptions, sweep_program};
 
     fn xyz_chain() -> Chain {
         let ax = |letter, d: Vector3| Axis {

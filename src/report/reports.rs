@@ -4,9 +4,9 @@
 //! **Invariant:** the report is plain data assembled by [`crate::pipeline`]; formatting it
 //! does no computation of the physics.
 
+use crate::cutting::sweep::SweepReport;
 use crate::math::Real;
-use crate::scan::ViewReport;
-use crate::sweep::SweepReport;
+use crate::metrology::scan::ViewReport;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -55,7 +55,7 @@ pub struct StockReport {
 
 impl StockReport {
     /// The figures of a cut `stock` whose volume before cutting was `volume0` (mm³).
-    pub fn of(stock: &crate::stock::TriDexel, volume0: f64) -> Self {
+    pub fn of(stock: &crate::cutting::stock::TriDexel, volume0: f64) -> Self {
         Self {
             pitch_mm: stock.pitch(),
             rays: stock.grids().iter().map(|g| g.dims().0 * g.dims().1).sum(),
@@ -105,7 +105,7 @@ pub struct SimulationReport {
     pub timings_s: BTreeMap<String, f64>,
 }
 
-/// A collision found while sweeping (see [`crate::collide`]).
+/// A collision found while sweeping (see [`crate::cutting::collide`]).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct CollisionEvent {
     /// `rapid_through_material`, `shank_in_stock`, `holder_in_stock` or `fixture_hit`.
@@ -126,8 +126,8 @@ pub struct CollisionEvent {
 
 impl CollisionEvent {
     /// The report of a collision event.
-    pub fn of(e: &crate::collide::Event) -> Self {
-        use crate::collide::{EventKind, Part};
+    pub fn of(e: &crate::cutting::collide::Event) -> Self {
+        use crate::cutting::collide::{EventKind, Part};
         let part_name = |p: &Part| match p {
             Part::Tool => "tool",
             Part::Shank => "shank",
@@ -168,7 +168,7 @@ pub struct DeviationSummary {
     pub design: String,
     /// Max, min, mean and RMS of the signed distances, and where the extremes are.
     #[serde(flatten)]
-    pub map: crate::deviation::DeviationReport,
+    pub map: crate::report::deviation_map::DeviationReport,
 }
 
 impl SimulationReport {
@@ -235,7 +235,10 @@ pub struct ScanReport {
 
 impl ScanReport {
     /// The figures of `scan`, made with `cfg`.
-    pub fn of(scan: &crate::scan::Scan, cfg: &crate::scan::ScannerConfig) -> Self {
+    pub fn of(
+        scan: &crate::metrology::scan::Scan,
+        cfg: &crate::metrology::scan::ScannerConfig,
+    ) -> Self {
         Self {
             rays: scan.rays,
             points: scan.cloud.points.len(),
@@ -488,7 +491,7 @@ pub struct PlaneReport {
 
 impl PlaneReport {
     /// From a fit.
-    pub fn of(f: &crate::fit::PlaneFit) -> Self {
+    pub fn of(f: &crate::metrology::fit::PlaneFit) -> Self {
         Self {
             normal: arr(&f.plane.normal),
             offset_mm: f.plane.offset,
@@ -532,7 +535,7 @@ pub struct SphereReport {
 
 impl SphereReport {
     /// From a fit.
-    pub fn of(f: &crate::fit::SphereFit) -> Self {
+    pub fn of(f: &crate::metrology::fit::SphereFit) -> Self {
         Self {
             centre_mm: arr(&f.centre.coords),
             centre_sigma_mm: f.centre_sigma_mm,
@@ -564,7 +567,7 @@ pub struct CylinderReport {
 
 impl CylinderReport {
     /// From a fit.
-    pub fn of(f: &crate::fit::CylinderFit) -> Self {
+    pub fn of(f: &crate::metrology::fit::CylinderFit) -> Self {
         Self {
             axis_point_mm: arr(&f.axis_point.coords),
             axis_point_sigma_mm: f.axis_point_sigma_mm,
@@ -596,7 +599,7 @@ pub struct CircleReport {
 
 impl CircleReport {
     /// From a fit.
-    pub fn of(f: &crate::fit::CircleFit) -> Self {
+    pub fn of(f: &crate::metrology::fit::CircleFit) -> Self {
         Self {
             centre_mm: arr(&f.centre.coords),
             centre_sigma_mm: f.centre_sigma_mm,
@@ -714,12 +717,12 @@ pub struct CorrectIteration {
     /// Blocks simulated.
     pub blocks: usize,
     /// Tool path on the simulated machine against the nominal path.
-    pub path: crate::correct::PathError,
+    pub path: crate::calibration::correct::PathError,
     /// The milled faces against the nominal faces.
-    pub faces: crate::correct::FaceCheck,
+    pub faces: crate::calibration::correct::FaceCheck,
     /// Every cut surface of the part against the nominal part (the program as given swept
     /// on the nominal machine), ray by ray.
-    pub part: crate::correct::PartError,
+    pub part: crate::calibration::correct::PartError,
     /// The predicted machining error: the largest distance of a milled-face crossing from
     /// its nominal face (mm); `None` (null) when no face was measured — the scene names no
     /// faces (`[identify]`), or they are too far off to find.
@@ -763,11 +766,11 @@ pub struct CorrectReport {
     /// Every pass, the program as given first.
     pub iterations: Vec<CorrectIteration>,
     /// The final correction's figures.
-    pub correction: crate::correct::CorrectionSummary,
+    pub correction: crate::calibration::correct::CorrectionSummary,
     /// Each non-zero deviation alone: the residual no axis command can remove.
     pub uncorrectable: Vec<UncorrectableReport>,
     /// Per source move of the final correction.
-    pub moves: Vec<crate::correct::MoveCorrection>,
+    pub moves: Vec<crate::calibration::correct::MoveCorrection>,
     /// Seconds per stage.
     pub timings_s: Vec<(String, f64)>,
 }

@@ -26,9 +26,9 @@
 //! **Invariant:** the cutter knows only tool geometry and straight moves; it never reads
 //! moves, machines or files.
 
+use crate::cutting::stock::{Cutter, RayCut};
+use crate::cutting::tool::{ConvexPiece, Tool};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
-use crate::stock::{Cutter, RayCut};
-use crate::tool::{ConvexPiece, Tool};
 use std::sync::Arc;
 
 /// Agreement (mm) between numeric and closed-form interval ends on the
@@ -831,7 +831,7 @@ pub(crate) fn t_extremes(q: &Quadric, lines: &[Line]) -> Option<(Real, Real, Rea
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::tool::ProfileStep;
+    use crate::cutting::tool::ProfileStep;
     use proptest::prelude::*;
 
     /// Spatial resolution (mm) of the brute-force check: points the intervals call inside
@@ -887,14 +887,16 @@ mod tests {
             0 => {
                 let r = 1.0 + 2.0 * a;
                 Case {
-                    tool: Tool::try_new(crate::tool::ToolKind::Flat, 2.0 * r, len).expect("valid"),
+                    tool: Tool::try_new(crate::cutting::tool::ToolKind::Flat, 2.0 * r, len)
+                        .expect("valid"),
                     r_of_h: Box::new(move |h| (0.0..=len).contains(&h).then_some(r)),
                 }
             }
             1 => {
                 let r = 1.0 + 2.0 * a;
                 Case {
-                    tool: Tool::try_new(crate::tool::ToolKind::Ball, 2.0 * r, len).expect("valid"),
+                    tool: Tool::try_new(crate::cutting::tool::ToolKind::Ball, 2.0 * r, len)
+                        .expect("valid"),
                     r_of_h: Box::new(move |h| {
                         (0.0..=len).contains(&h).then(|| {
                             if h < r {
@@ -1130,7 +1132,7 @@ mod tests {
         let hb = 1.8 - 0.39f64.sqrt();
         assert!((out[0].t_in - ha).abs() < 1e-9, "{out:?}");
         assert!(
-            (out[0].t_out - hb).abs() < 4.0 * crate::tool::CONCAVE_ARC_BOUND,
+            (out[0].t_out - hb).abs() < 4.0 * crate::cutting::tool::CONCAVE_ARC_BOUND,
             "{out:?}"
         );
         assert!((out[1].t_in - 3.0).abs() < 1e-9 && (out[1].t_out - 5.0).abs() < 1e-9);
@@ -1144,7 +1146,7 @@ mod tests {
     }
 
     fn slot_volume_at(tool: &Tool, depth: Real, len: Real, pitch: Real) -> Real {
-        let mut stock = crate::stock::TriDexel::new_box(
+        let mut stock = crate::cutting::stock::TriDexel::new_box(
             Aabb {
                 min: Point3::new(0.0, -6.0, 0.0),
                 max: Point3::new(20.0, 6.0, 10.0),
@@ -1255,7 +1257,7 @@ mod tests {
         // remains in the neck, so a z ray at r = 1.5 keeps a segment between the corner and
         // the step: from the neck's h_b to h = 3 above the tip.
         let tool = Tool::try_profile(&form_cutter_steps()).expect("valid");
-        let mut stock = crate::stock::TriDexel::new_box(
+        let mut stock = crate::cutting::stock::TriDexel::new_box(
             Aabb {
                 min: Point3::new(-5.0, -5.0, 0.0),
                 max: Point3::new(5.0, 5.0, 10.0),
@@ -1283,7 +1285,7 @@ mod tests {
         assert_eq!(segs.len(), 2, "{segs:?}");
         let hb = 1.8 - (0.64 - (2.0 - r).powi(2)).sqrt();
         assert!(
-            (segs[1].lo.t - (5.0 + hb)).abs() < 4.0 * crate::tool::CONCAVE_ARC_BOUND,
+            (segs[1].lo.t - (5.0 + hb)).abs() < 4.0 * crate::cutting::tool::CONCAVE_ARC_BOUND,
             "{segs:?}"
         );
         assert!((segs[1].hi.t - 8.0).abs() < 1e-9, "{segs:?}");

@@ -1,0 +1,14 @@
+//! **Calibration**: from measurements back to the machine, and from the machine to a
+//! corrected program. The 0°/180° step experiment ([`identify`]), general identification
+//! of any set of deviations with its identifiability report ([`calibrate`]), test-cut design
+//! ([`design`]) and NC-program correction with its verification ([`correct`]).
+//!
+//! May use everything below it: [`crate::math`], [`crate::nc`], [`crate::machine`],
+//! [`crate::cutting`] (the verification sweeps the corrected program) and
+//! [`crate::metrology`] (fits and face selection). Never values what the measurements do not
+//! determine; never opens files.
+
+pub mod identify;
+pub mod calibrate;
+pub mod design;
+pub mod correct;
