@@ -1,7 +1,9 @@
 //! **Reports**: what the commands tell the user. PNG heat maps with a colour bar
 //! ([`render`]), the deviation map of a cut part against its design model
 //! ([`deviation_map`]), and the serialisable report of every command with the summary text
-//! the CLI prints (re-exported here: [`Report`], [`SimulationReport`], [`CorrectReport`], …).
+//! the CLI prints: one private module per command (`simulate`, `scan`, `run`, `fit`,
+//! `correct`, `identify`, `design`), their types re-exported here ([`Report`],
+//! [`SimulationReport`], [`CorrectReport`], …).
 //!
 //! May use every stage folder below it (it reports their results). Plain data and
 //! pictures in memory: it computes no physics beyond the deviation map and writes no files
@@ -9,6 +11,20 @@
 
 pub mod render;
 pub mod deviation_map;
-mod reports;
+mod simulate;
+mod scan;
+mod run;
+mod fit;
+mod correct;
+mod identify;
+mod design;
 
-pub use reports::*;
+pub use correct::{CorrectIteration, CorrectReport, UncorrectableReport};
+pub use design::DesignReport;
+pub use fit::{CircleReport, CylinderReport, FitFileReport, PlanePair, PlaneReport, SphereReport};
+pub use identify::{
+    EstimateReport, FeatureReport, IdentifyReport, IdentifySolverReport, LoopRound,
+};
+pub use run::{FaceReport, Report, SolverReport};
+pub use scan::{ScanFileReport, ScanReport, StudyCase};
+pub use simulate::{CollisionEvent, DeviationSummary, MeshSummary, SimulationReport, StockReport};

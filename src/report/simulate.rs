@@ -1,0 +1,184 @@
+//! What `twinmill simulate` reports: the stock's figures (also part of `run`'s report), the
+//! surface mesh, the collisions found while cutting and the deviation map's summary.
+
+use crate::cutting::sweep::SweepReport;
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// Stock figures.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct StockReport {
+    /// Requested dexel pitch (mm).
+    pub pitch_mm: f64,
+    /// Rays in the three grids.
+    pub rays: usize,
+    /// Material segments after cutting.
+    pub segments: usize,
+    /// Material volume after cutting (mm³).
+    pub volume_mm3: f64,
+    /// Volume removed (mm³).
+    pub removed_mm3: f64,
+    /// Memory held by the tri-dexel (MiB).
+    pub memory_mib: f64,
+}
+
+impl StockReport {
+    /// The figures of a cut `stock` whose volume before cutting was `volume0` (mm³).
+    pub fn of(stock: &crate::cutting::stock::TriDexel, volume0: f64) -> Self {
+        Self {
+            pitch_mm: stock.pitch(),
+            rays: stock.grids().iter().map(|g| g.dims().0 * g.dims().1).sum(),
+            segments: stock.grids().iter().map(|g| g.segment_count()).sum(),
+            volume_mm3: stock.volume(),
+            removed_mm3: volume0 - stock.volume(),
+            memory_mib: stock.memory_bytes() as f64 / 1048576.0,
+        }
+    }
+}
+
+/// Surface-mesh figures.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MeshSummary {
+    /// Vertices.
+    pub vertices: usize,
+    /// Triangles.
+    pub triangles: usize,
+    /// Euler characteristic V − E + F (2 for a part with no through-holes).
+    pub euler_characteristic: i64,
+    /// Volume enclosed by the mesh (mm³).
+    pub volume_mm3: f64,
+    /// Surface area (mm²).
+    pub area_mm2: f64,
+    /// Vertices added at sharp edges and corners (the rest lie on exact dexel crossings).
+    pub feature_vertices: usize,
+}
+
+/// What `twinmill simulate` reports.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SimulationReport {
+    /// Scene name.
+    pub scene: String,
+    /// Program file.
+    pub program: String,
+    /// Stock figures (removed volume).
+    pub stock: StockReport,
+    /// What the sweep did, with its approximation bounds.
+    pub sweep: SweepReport,
+    /// The surface mesh.
+    pub mesh: MeshSummary,
+    /// Collisions in program order (empty: none).
+    pub collisions: Vec<CollisionEvent>,
+    /// The deviation from the scene's design model, if it has one.
+    pub deviation: Option<DeviationSummary>,
+    /// Stage timings (s).
+    pub timings_s: BTreeMap<String, f64>,
+}
+
+/// A collision found while sweeping (see [`crate::cutting::collide`]).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CollisionEvent {
+    /// `rapid_through_material`, `shank_in_stock`, `holder_in_stock` or `fixture_hit`.
+    pub kind: &'static str,
+    /// The part that collided: `tool`, `shank` or `holder`.
+    pub part: &'static str,
+    /// The fixture's name (`fixture_hit` only).
+    pub fixture: Option<String>,
+    /// NC line of the move.
+    pub line: usize,
+    /// First contact point (mm, workpiece frame W).
+    pub point_mm: [f64; 3],
+    /// Stock: penetration depth estimate; fixture: travel after first contact (mm).
+    pub depth_mm: f64,
+    /// Stock: estimated overlap volume (mm³); fixtures: `None`.
+    pub volume_mm3: Option<f64>,
+}
+
+impl CollisionEvent {
+    /// The report of a collision event.
+    pub fn of(e: &crate::cutting::collide::Event) -> Self {
+        use crate::cutting::collide::{EventKind, Part};
+        let part_name = |p: &Part| match p {
+            Part::Tool => "tool",
+            Part::Shank => "shank",
+            Part::Holder => "holder",
+        };
+        let (kind, part, fixture) = match &e.kind {
+            EventKind::RapidThroughMaterial => ("rapid_through_material", "tool", None),
+            EventKind::NonCuttingInStock(p) => (
+                if *p == Part::Holder {
+                    "holder_in_stock"
+                } else {
+                    "shank_in_stock"
+                },
+                part_name(p),
+                None,
+            ),
+            EventKind::FixtureHit { part, fixture } => {
+                ("fixture_hit", part_name(part), Some(fixture.clone()))
+            }
+        };
+        Self {
+            kind,
+            part,
+            fixture,
+            line: e.line,
+            point_mm: e.point,
+            depth_mm: e.depth_mm,
+            volume_mm3: e.volume_mm3,
+        }
+    }
+}
+
+/// The cut part's deviation from a design model (signed distances of the part's surface
+/// points: + material left, − gouge).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct DeviationSummary {
+    /// The design mesh file.
+    pub design: String,
+    /// Max, min, mean and RMS of the signed distances, and where the extremes are.
+    #[serde(flatten)]
+    pub map: crate::report::deviation_map::DeviationReport,
+}
+
+impl SimulationReport {
+    /// A short text summary.
+    pub fn summary(&self) -> String {
+        let mut s = format!(
+            "scene         {}\nprogram       {}\nmoves         {} ({} cutting, {} rotary)\nremoved       {:.4} mm³ of {:.4} mm³\nsweep bound   {:.2e} mm (rotary envelope or sub-steps, and arc chords)\nmesh          {} triangles, {} vertices, Euler characteristic {}\n",
+            self.scene,
+            self.program,
+            self.sweep.moves,
+            self.sweep.cutting_moves,
+            self.sweep.rotary_moves,
+            self.stock.removed_mm3,
+            self.stock.volume_mm3 + self.stock.removed_mm3,
+            self.sweep.error_bound_mm,
+            self.mesh.triangles,
+            self.mesh.vertices,
+            self.mesh.euler_characteristic,
+        );
+        s.push_str(&format!("collisions    {}\n", self.collisions.len()));
+        for e in &self.collisions {
+            s.push_str(&format!(
+                "  line {:<6} {} ({}{}) at [{:.3}, {:.3}, {:.3}] mm, depth {:.3} mm\n",
+                e.line,
+                e.kind,
+                e.part,
+                e.fixture
+                    .as_ref()
+                    .map_or_else(String::new, |f| format!(", fixture '{f}'")),
+                e.point_mm[0],
+                e.point_mm[1],
+                e.point_mm[2],
+                e.depth_mm
+            ));
+        }
+        if let Some(d) = &self.deviation {
+            s.push_str(&format!(
+                "deviation     max {:+.4} mm, min {:+.4} mm, RMS {:.4} mm over {} points from {}\n",
+                d.map.max_mm, d.map.min_mm, d.map.rms_mm, d.map.points, d.design
+            ));
+        }
+        s
+    }
+}
