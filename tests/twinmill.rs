@@ -1402,7 +1402,10 @@ const LAYOUT: &[(&str, &[&str])] = &[
         ],
     ),
     ("scene", &[]),
-    ("pipeline", &[]),
+    (
+        "pipeline",
+        &["simulate", "run", "fit", "correct", "identify"],
+    ),
     ("output", &[]),
 ];
 

@@ -1,0 +1,199 @@
+//! **The commands**, each a function with no side effects: it takes a loaded scene (and its
+//! program, or a cloud), returns everything it made — reports, clouds, pictures, meshes,
+//! corrected moves — and writes nothing ([`crate::output`] does). One module per command:
+//! [`simulate()`], [`run()`] (and [`scanner_study`]), [`fit_cloud`], [`correct()`],
+//! [`identify_scene`]; this file holds what they share: the stock, the sweep of the
+//! program through the deviated machine, and the errors.
+//!
+//! May use every stage folder and [`crate::scene`]. **Invariant:** the same scene and
+//! program give the same outcome (except the timings) for any thread count.
+
+mod simulate;
+mod run;
+mod fit;
+mod correct;
+mod identify;
+
+pub use correct::{CorrectOutcome, correct, identified_model};
+pub use fit::{FitRequest, Selection, Shape, fit_cloud};
+pub use identify::{IdentifyOutcome, correction_loop, extract_features, identify_scene};
+pub use run::{Outcome, extract_faces, run, scanner_study};
+pub use simulate::{Simulation, simulate};
+
+use crate::calibration::calibrate::CalibrateError;
+use crate::calibration::correct::CorrectError;
+use crate::calibration::identify::IdentifyError;
+use crate::cutting::mesh::MeshError;
+use crate::cutting::stock::{StockError, TriDexel};
+use crate::cutting::sweep::{SweepError, SweepReport, sweep_program};
+use crate::math::Real;
+use crate::metrology::scan::ScanError;
+use crate::nc::Program;
+use crate::progress::Progress;
+use crate::report::deviation_map::DeviationError;
+use crate::report::render::RenderError;
+use crate::scene::{Scene, SceneError, StockShape};
+use std::time::Instant;
+
+/// Errors of a run (the scene and program are already valid).
+#[derive(Debug, thiserror::Error)]
+pub enum PipelineError {
+    /// The stock could not be made.
+    #[error("{path}: [stock]: {source}")]
+    Stock {
+        /// Scene file.
+        path: String,
+        /// Why.
+        source: StockError,
+    },
+    /// The sweep failed.
+    #[error("{location}: {source}")]
+    Sweep {
+        /// Program file and line (`file:line`), or the scene file.
+        location: String,
+        /// Why.
+        source: SweepError,
+    },
+    /// The scan failed.
+    #[error("{path}: [scanner]: {source}")]
+    Scan {
+        /// Scene file.
+        path: String,
+        /// Why.
+        source: ScanError,
+    },
+    /// Faces could not be found or identified.
+    #[error("{path}: [identify]: {source}")]
+    Identify {
+        /// Scene file.
+        path: String,
+        /// Why.
+        source: IdentifyError,
+    },
+    /// A cloud could not be measured (no shape found, a fit failed).
+    #[error("{path}: {message}")]
+    Measure {
+        /// The cloud file.
+        path: String,
+        /// What went wrong.
+        message: String,
+    },
+    /// The cut stock could not be meshed.
+    #[error("{path}: surface mesh: {source}")]
+    Mesh {
+        /// Scene file.
+        path: String,
+        /// Why.
+        source: MeshError,
+    },
+    /// The program could not be corrected, or the corrected part not measured.
+    #[error("{location}: {source}")]
+    Correct {
+        /// Program file and line (`file:line`), or the scene file.
+        location: String,
+        /// Why.
+        source: CorrectError,
+    },
+    /// General identification failed (faces, data, solver).
+    #[error("{path}: [identify]: {source}")]
+    Calibrate {
+        /// Scene file.
+        path: String,
+        /// Why.
+        source: CalibrateError,
+    },
+    /// The deviation map against the design model failed.
+    #[error("{path}: [design]: {source}")]
+    Deviation {
+        /// Scene file.
+        path: String,
+        /// Why.
+        source: DeviationError,
+    },
+    /// The scene lacks a section the command needs.
+    #[error("{0}")]
+    Scene(#[from] SceneError),
+    /// The heat map could not be drawn.
+    #[error("{path}: heat map: {source}")]
+    Render {
+        /// Scene file.
+        path: String,
+        /// Why.
+        source: RenderError,
+    },
+}
+
+/// The part as the deviated machine cuts it.
+pub struct Part {
+    /// The cut stock.
+    pub stock: TriDexel,
+    /// Its volume before cutting (mm³).
+    pub volume0: Real,
+    /// What the sweep did.
+    pub sweep: SweepReport,
+    /// Seconds for "stock" and "sweep".
+    pub timings: Vec<(String, Real)>,
+}
+
+/// The scene's stock before cutting: its box, cylinder or mesh on the grids of
+/// [`Scene::stock_box`] at the scene's pitch (refused before allocating if over the memory
+/// budget).
+pub fn make_stock(scene: &Scene) -> Result<TriDexel, PipelineError> {
+    let (b, h, budget) = (scene.stock_box, scene.pitch_mm, scene.memory_budget_bytes);
+    match &scene.stock_shape {
+        StockShape::Box => TriDexel::new_box(b, h, budget),
+        StockShape::Cylinder(c) => TriDexel::from_solid(b, h, budget, c),
+        StockShape::Mesh { mesh, .. } => TriDexel::from_solid(b, h, budget, mesh.as_ref()),
+    }
+    .map_err(|source| PipelineError::Stock {
+        path: scene.path.display().to_string(),
+        source,
+    })
+}
+
+/// Makes the stock and sweeps the program through the scene's deviated chain.
+pub fn machine_part(
+    scene: &Scene,
+    program: &Program,
+    progress: &dyn Progress,
+) -> Result<Part, PipelineError> {
+    let spath = scene.path.display().to_string();
+    let clock = Instant::now();
+    let mut stock = make_stock(scene)?;
+    let volume0 = stock.volume();
+    let t_stock = clock.elapsed().as_secs_f64();
+    let clock = Instant::now();
+    let sweep = sweep_program(
+        &mut stock,
+        &scene.chain,
+        &scene.tool,
+        &program.moves,
+        &scene.sweep,
+        progress,
+    )
+    .map_err(sweep_failed(program, &spath))?;
+    let timings = vec![
+        ("stock".to_string(), t_stock),
+        ("sweep".to_string(), clock.elapsed().as_secs_f64()),
+    ];
+    Ok(Part {
+        stock,
+        volume0,
+        sweep,
+        timings,
+    })
+}
+
+/// A sweep error located at the program line it names, or at the scene's `[sweep]`.
+fn sweep_failed<'a>(
+    program: &'a Program,
+    scene_path: &'a str,
+) -> impl Fn(SweepError) -> PipelineError + 'a {
+    move |source| {
+        let location = match source.line() {
+            Some(line) => format!("{}:{line}", program.path.display()),
+            None => format!("{scene_path}: [sweep]"),
+        };
+        PipelineError::Sweep { location, source }
+    }
+}
