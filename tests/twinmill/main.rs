@@ -1,0 +1,217 @@
+//! Public behaviour of twinmill, through the library API and the `twinmill` binary. This
+//! root holds what several topics share (the built-in scene, the independent 4×4 derivation
+//! of the MDX-50 chain, the command-line sandbox, mesh text); each module checks one topic.
+
+mod step;
+mod rotary;
+mod cli;
+mod architecture;
+mod correct;
+mod identify;
+mod tool_shapes;
+mod solids_collisions_deviation;
+mod simulate;
+mod sweep;
+
+use nalgebra::{Matrix4, Vector4};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use twinmill::math::{Aabb, Point3, Real, Vector3};
+use twinmill::metrology::scan::ScannerConfig;
+use twinmill::pipeline::{Outcome, run};
+use twinmill::progress::NoProgress;
+use twinmill::scene::Scene;
+
+const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/mdx50-step.toml");
+
+fn scene() -> Scene {
+    Scene::load(Path::new(SCENE)).expect("the built-in scene loads")
+}
+
+fn run_scene(scene: &Scene) -> Outcome {
+    let program = scene.load_program().expect("the built-in program parses");
+    run(scene, &program, &NoProgress).expect("the pipeline runs")
+}
+
+/// The scene's scanner, to change its settings.
+fn scanner(scene: &mut Scene) -> &mut ScannerConfig {
+    scene
+        .scanner
+        .as_mut()
+        .expect("the built-in scenes have a [scanner]")
+}
+
+fn set_deviation(scene: &mut Scene, name: &str, value: Real) {
+    let id = scene.chain.deviation_id(name).expect("known name");
+    scene.chain.set_deviation(id, value);
+    scene.injected.insert(name.to_string(), value);
+}
+
+// ---------------------------------------------------------------------------------------
+// An independent derivation of the exact faces (BRIEF §4): homogeneous 4×4 matrices built
+// here from the chain's definition, not from the library's kinematics or sweep code.
+
+fn trans(x: Real, y: Real, z: Real) -> Matrix4<Real> {
+    let mut m = Matrix4::identity();
+    m[(0, 3)] = x;
+    m[(1, 3)] = y;
+    m[(2, 3)] = z;
+    m
+}
+
+fn rot(axis: usize, a: Real) -> Matrix4<Real> {
+    let (s, c) = a.sin_cos();
+    let (i, j) = ((axis + 1) % 3, (axis + 2) % 3);
+    let mut m = Matrix4::identity();
+    m[(i, i)] = c;
+    m[(i, j)] = -s;
+    m[(j, i)] = s;
+    m[(j, j)] = c;
+    m
+}
+
+/// E = Trans(dx,dy,dz)·Rx(alpha)·Ry(beta)·Rz(gamma)
+fn deviation(d: [Real; 6]) -> Matrix4<Real> {
+    trans(d[0], d[1], d[2]) * rot(0, d[3]) * rot(1, d[4]) * rot(2, d[5])
+}
+
+/// r_W = RotX(a)·E_AY·Ty·E_YX·Tx·E_XZ·Tz·E_ZS·r_T
+fn mdx50_w_from_t(dev: &[[Real; 6]; 4], x: Real, y: Real, z: Real, a_deg: Real) -> Matrix4<Real> {
+    rot(0, a_deg.to_radians())
+        * deviation(dev[0])
+        * trans(0.0, y, 0.0)
+        * deviation(dev[1])
+        * trans(x, 0.0, 0.0)
+        * deviation(dev[2])
+        * trans(0.0, 0.0, z)
+        * deviation(dev[3])
+}
+
+/// The flank plane (unit normal towards +Y_W, offset) of a straight cut along X of a
+/// cylinder of radius `r`: tangent to the cylinder, parallel to its axis and the path.
+fn exact_face(dev: &[[Real; 6]; 4], y: Real, a_deg: Real, r: Real) -> (Vector3, Real) {
+    let m0 = mdx50_w_from_t(dev, -30.0, y, 0.0, a_deg);
+    let m1 = mdx50_w_from_t(dev, 30.0, y, 0.0, a_deg);
+    let p0 = (m0 * Vector4::new(0.0, 0.0, 0.0, 1.0)).xyz();
+    let p1 = (m1 * Vector4::new(0.0, 0.0, 0.0, 1.0)).xyz();
+    let axis = (m0 * Vector4::new(0.0, 0.0, 1.0, 0.0)).xyz();
+    let mut n = (p1 - p0).cross(&axis).normalize();
+    if n.y < 0.0 {
+        n = -n;
+    }
+    (n, n.dot(&p0) + r)
+}
+
+fn mdx50_deviations(scene: &Scene) -> [[Real; 6]; 4] {
+    std::array::from_fn(|j| scene.chain.deviations()[j].values)
+}
+
+// ---------------------------------------------------------------------------------------
+// The nine deviations of the MDX-50 chain that the step experiment and the designed cuts
+// identify.
+
+const NINE: [&str; 9] = [
+    "dy_AY", "dz_AY", "beta_AY", "gamma_AY", "alpha_YX", "gamma_YX", "beta_XZ", "alpha_ZS",
+    "beta_ZS",
+];
+
+// ---------------------------------------------------------------------------------------
+// The command line: a sandbox directory to run the binary in, and the built-in files.
+
+struct Sandbox {
+    dir: PathBuf,
+}
+
+impl Sandbox {
+    fn new(name: &str) -> Self {
+        let dir = std::env::temp_dir().join(format!("twinmill-test-{}-{name}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        Self { dir }
+    }
+
+    fn write(&self, name: &str, bytes: &[u8]) -> PathBuf {
+        let p = self.dir.join(name);
+        std::fs::write(&p, bytes).expect("write");
+        p
+    }
+
+    fn run(&self, args: &[&str]) -> (i32, String, String) {
+        let out = Command::new(env!("CARGO_BIN_EXE_twinmill"))
+            .args(args)
+            .current_dir(&self.dir)
+            .output()
+            .expect("binary runs");
+        (
+            out.status.code().unwrap_or(-1),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    }
+}
+
+impl Drop for Sandbox {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+fn builtin(name: &str) -> String {
+    std::fs::read_to_string(
+        Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("scenes")
+            .join(name),
+    )
+    .expect("built-in file")
+}
+
+fn files_in(dir: &Path) -> Vec<PathBuf> {
+    std::fs::read_dir(dir)
+        .map(|d| d.flatten().map(|e| e.path()).collect())
+        .unwrap_or_default()
+}
+
+// ---------------------------------------------------------------------------------------
+// Mesh text shared by the solid, fixture and design tests.
+
+fn aabb(min: [Real; 3], max: [Real; 3]) -> Aabb {
+    Aabb {
+        min: Point3::from(min),
+        max: Point3::from(max),
+    }
+}
+
+/// OBJ text of a mesh given as vertices and 0-based triangles.
+fn obj(vertices: &[[Real; 3]], triangles: &[[usize; 3]]) -> String {
+    let mut s = String::new();
+    for v in vertices {
+        s.push_str(&format!("v {:?} {:?} {:?}\n", v[0], v[1], v[2]));
+    }
+    for t in triangles {
+        s.push_str(&format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1));
+    }
+    s
+}
+
+/// A prism over the counter-clockwise polygon `poly` (x, y) from z0 to z1, caps
+/// triangulated by `cap` (0-based triangles of the polygon, counter-clockwise).
+fn prism(poly: &[[Real; 2]], cap: &[[usize; 3]], z0: Real, z1: Real) -> String {
+    let n = poly.len();
+    let mut v: Vec<[Real; 3]> = poly.iter().map(|p| [p[0], p[1], z0]).collect();
+    v.extend(poly.iter().map(|p| [p[0], p[1], z1]));
+    let mut t = Vec::new();
+    for c in cap {
+        t.push([c[0], c[2], c[1]]);
+        t.push([c[0] + n, c[1] + n, c[2] + n]);
+    }
+    for i in 0..n {
+        let j = (i + 1) % n;
+        t.push([i, j, j + n]);
+        t.push([i, j + n, i + n]);
+    }
+    obj(&v, &t)
+}
+
+fn fan(n: usize) -> Vec<[usize; 3]> {
+    (1..n - 1).map(|k| [0, k, k + 1]).collect()
+}
