@@ -1,4 +1,4 @@
-//! Meshing the P1 pocket stock (bench/README.md: 100 × 100 × 20 box, Ø6 flat pocket
+//! Meshing the P1 pocket stock (docs/benchmarks.md: 100 × 100 × 20 box, Ø6 flat pocket
 //! 1.5 mm deep) at 0.1 mm pitch: throughput in triangles/s.
 //!
 //! `cargo bench --bench mesh`.

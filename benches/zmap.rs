@@ -1,4 +1,4 @@
-//! Benchmark P1 (bench/README.md) on the Z-map fast path, and on the tri-dexel sweep for
+//! Benchmark P1 (docs/benchmarks.md) on the Z-map fast path, and on the tri-dexel sweep for
 //! comparison: throughput in moves/s.
 //!
 //! `cargo bench --bench zmap`; goals: Z-map ≥ 15,000 moves/s at 0.05 mm (FreeCAD 0.20:

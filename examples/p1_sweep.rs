@@ -1,4 +1,4 @@
-//! Benchmark P1 (bench/README.md) on the tri-dexel sweep, once, for profiling and for
+//! Benchmark P1 (docs/benchmarks.md) on the tri-dexel sweep, once, for profiling and for
 //! measuring peak memory: `cargo run --release --example p1_sweep -- flat|ball [pitch]`.
 //!
 //! Prints the wall time, moves/s, removed volume and the bytes the tri-dexel holds.

@@ -1,4 +1,4 @@
-//! Benchmark P1 of `bench/README.md`: the 3-axis zig-zag pocket, as moves and as G-code.
+//! Benchmark P1 of `docs/benchmarks.md`: the 3-axis zig-zag pocket, as moves and as G-code.
 //!
 //! Box stock 100 × 100 × 20 mm; Ø6 mm tool plunged from z = 25 to z = 18.5 at (10, 10);
 //! 41 rows along x, 80 mm long, 2 mm apart in y, each row cut as 80 G1 moves of 1 mm;
@@ -85,7 +85,7 @@ pub fn runs() -> Vec<Run> {
 
 /// The G-code text of P1: a header on lines 1–3, the plunge on line 4, then one move a line.
 pub fn gcode() -> String {
-    let mut s = String::from("(P1 3-axis pocket, bench/README.md)\nG21 G90\n");
+    let mut s = String::from("(P1 3-axis pocket, docs/benchmarks.md)\nG21 G90\n");
     s.push_str(&format!("G0 X{START} Y{START} Z{Z_CLEAR}\n"));
     s.push_str(&format!("G1 Z{Z_CUT} F{FEED}\n"));
     for (x, y) in path_points().into_iter().skip(1) {

@@ -1491,7 +1491,7 @@ mod tests {
         assert_eq!(one, run(2));
     }
 
-    /// Benchmark P1-flat (bench/README.md) at 0.05 mm: the removed volume is 1.5 mm times
+    /// Benchmark P1-flat (docs/benchmarks.md) at 0.05 mm: the removed volume is 1.5 mm times
     /// the exact area of the 3 mm offset of the path, within 0.01 %.
     #[test]
     fn p1_flat_removes_the_offset_area_times_the_depth() {
