@@ -1,0 +1,425 @@
+//! The interpreter: executes blocks in LinuxCNC's order and streams [`Record`]s.
+//!
+//! This file holds the [`Interpreter`] type with its modal state, its construction, the
+//! iterator over records, the records it emits and the reading loop (a line at a time, lexed
+//! with the parameters as they are at that line). The rest is split by topic:
+//!
+//! * `params`: numbered, local and global named parameters, and the predefined ones;
+//! * `errors`: errors located on the current line, and the report of a stopping error;
+//! * `block`: one block's words, checked and executed in LinuxCNC's order;
+//! * `oword`: O-word control flow, subroutines and Fanuc-style subprograms (M98/M99);
+//! * `offsets`: coordinate systems, G92/G52, tool length offsets, G10, G28/G30 and the
+//!   conversion between program and machine coordinates;
+//! * `cutter_comp`: cutter radius compensation on and off, and the moves it releases;
+//! * `motion`: end points, feeds, straight moves, rigid tapping and probing;
+//! * `arc`: G2/G3 in the centre and radius formats, and their machine geometry;
+//! * `cycle`: the drilling, boring and tapping canned cycles.
+
+mod params;
+mod errors;
+mod block;
+mod oword;
+mod offsets;
+mod cutter_comp;
+mod motion;
+mod arc;
+mod cycle;
+
+use std::collections::{HashMap, VecDeque};
+use std::path::Path;
+use std::sync::Arc;
+
+use crate::math::Real;
+
+use super::comp::{Compensator, Plane as CompPlane};
+use super::lex::{Block, Lexer, NUM_PARAMS};
+use super::output::{Event, EventArg, Motion, Plane, Record, RecordBody};
+use super::source::{Pos, Source};
+use super::{AxisValues, Diagnostic, InterpOptions, LengthUnit, NcError};
+
+pub(crate) use params::Params;
+
+use cutter_comp::CompPayload;
+use errors::{LR, lerr};
+use oword::{Frame, LoopState, Skip};
+
+/// Millimetres per inch.
+const MM_PER_INCH: Real = 25.4;
+
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum FeedMode {
+    PerMinute,
+    InverseTime,
+    PerRev,
+}
+
+/// Why reading stopped.
+#[derive(Clone, Copy, PartialEq, Eq, Debug)]
+enum RunState {
+    Running,
+    Ended,
+    Failed,
+}
+
+/// The RS274/NGC interpreter, streaming records (see the module documentation).
+pub struct Interpreter {
+    opts: InterpOptions,
+    files: Vec<Source>,
+    cur: usize,
+    lexer: Lexer,
+    /// A second block for [`Interpreter::exec_lexed`].
+    spare_block: Option<Box<Block>>,
+    buf: Vec<u8>,
+    params: Params,
+    out: VecDeque<Record>,
+    state: RunState,
+    error: Option<NcError>,
+    // position of the line being executed
+    line_start: Pos,
+    line_no: usize,
+    line_n: Option<Real>,
+    // modal state
+    u: Real,
+    ext: Real,
+    plane: Plane,
+    incremental: bool,
+    arc_incremental: bool,
+    feed_mode: FeedMode,
+    feed: Real,
+    spindle_cw: Option<bool>,
+    motion: Option<i32>,
+    retract_r: bool,
+    cycle_z: Option<Real>,
+    cycle_r: Option<Real>,
+    cycle_q: Option<Real>,
+    coord: usize,
+    g5x: [Real; 6],
+    g92: [Real; 6],
+    rot: Real,
+    tool_off: [Real; 6],
+    tool: i32,
+    selected: i32,
+    mpos: [Real; 6],
+    /// Where the last emitted move ended when that differs from `mpos` (LinuxCNC's G84
+    /// in G18/G19): the start of the next record.
+    out_pos: Option<[Real; 6]>,
+    comp_on: bool,
+    /// Cutter radius compensation in effect (G41/G42 … G40).
+    comp: Option<Compensator<CompPayload>>,
+    /// The plane compensation works in.
+    comp_plane: CompPlane,
+    /// The programmed current point (program coordinates, mm) while compensation or its
+    /// exit move decides it (the machine is then elsewhere).
+    prog_override: Option<[Real; 6]>,
+    /// After G40: the next move is the exit move and must be straight.
+    exit_pending: bool,
+    // control flow
+    frames: Vec<Frame>,
+    loops: HashMap<(usize, String), LoopState>,
+    ifs: HashMap<(usize, String), bool>,
+    subs: HashMap<String, Pos>,
+    fanuc_subs: HashMap<String, Pos>,
+    skip: Option<Skip>,
+    percent_started: bool,
+    first_line: bool,
+    main_title: bool,
+    blocks: u64,
+}
+
+fn round4(v: Real) -> Real {
+    (v * 1e4).round() / 1e4
+}
+
+impl Interpreter {
+    /// An interpreter over a program held in memory.
+    pub fn from_text(text: &str, path: &Path, opts: InterpOptions) -> Interpreter {
+        let src = Source::from_bytes(Arc::from(text.as_bytes()), path);
+        Interpreter::with_source(src, opts)
+    }
+
+    /// An interpreter reading the program file at `path` as it goes (constant memory).
+    pub fn from_file(path: &Path, opts: InterpOptions) -> Result<Interpreter, NcError> {
+        let src = Source::open(path).map_err(|e| NcError {
+            diagnostics: vec![Diagnostic {
+                path: path.to_path_buf(),
+                line: 0,
+                column: 0,
+                word: String::new(),
+                message: format!("cannot read program: {e}"),
+            }],
+        })?;
+        Ok(Interpreter::with_source(src, opts))
+    }
+
+    fn with_source(src: Source, opts: InterpOptions) -> Interpreter {
+        let ext = match opts.external_unit {
+            LengthUnit::Mm => 1.0,
+            LengthUnit::Inch => MM_PER_INCH,
+        };
+        let mut numbered = vec![0.0; NUM_PARAMS];
+        for (n, v) in &opts.parameters {
+            if *n < NUM_PARAMS {
+                numbered[*n] = *v;
+            }
+        }
+        if numbered[5220] < 1.0 || numbered[5220] > 9.0 {
+            numbered[5220] = 1.0;
+        }
+        let coord = numbered[5220] as usize;
+        let mpos = opts.start.to_array();
+        let mut it = Interpreter {
+            files: vec![src],
+            cur: 0,
+            lexer: Lexer::default(),
+            spare_block: None,
+            buf: Vec::with_capacity(256),
+            params: Params {
+                numbered,
+                globals: HashMap::from([
+                    ("_value".to_string(), 0.0),
+                    ("_value_returned".to_string(), 0.0),
+                ]),
+                locals: vec![HashMap::new()],
+                snap_pos: [0.0; 6],
+                snap_line: 0.0,
+                metric: true,
+                incremental: false,
+            },
+            out: VecDeque::new(),
+            state: RunState::Running,
+            error: None,
+            line_start: Pos {
+                file: 0,
+                offset: 0,
+                line: 1,
+            },
+            line_no: 0,
+            line_n: None,
+            u: 1.0,
+            ext,
+            plane: Plane::Xy,
+            incremental: false,
+            arc_incremental: true,
+            feed_mode: FeedMode::PerMinute,
+            feed: 0.0,
+            spindle_cw: None,
+            motion: None,
+            retract_r: true,
+            cycle_z: None,
+            cycle_r: None,
+            cycle_q: None,
+            coord,
+            g5x: [0.0; 6],
+            g92: [0.0; 6],
+            rot: 0.0,
+            tool_off: [0.0; 6],
+            tool: 0,
+            selected: 0,
+            mpos,
+            out_pos: None,
+            comp_on: false,
+            comp: None,
+            comp_plane: CompPlane::Xy,
+            prog_override: None,
+            exit_pending: false,
+            frames: Vec::new(),
+            loops: HashMap::new(),
+            ifs: HashMap::new(),
+            subs: HashMap::new(),
+            fanuc_subs: HashMap::new(),
+            skip: None,
+            percent_started: false,
+            first_line: true,
+            main_title: false,
+            blocks: 0,
+            opts,
+        };
+        it.load_offsets();
+        it.event(
+            "USE_LENGTH_UNITS",
+            vec![EventArg::Text("CANON_UNITS_MM".into())],
+        );
+        it.announce_g5x();
+        it.announce_g92();
+        it
+    }
+
+    /// The next record, or the error that stopped the program (returned once), or `None`
+    /// when the program has ended.
+    pub fn next_record(&mut self) -> Option<Result<Record, NcError>> {
+        loop {
+            if let Some(r) = self.out.pop_front() {
+                return Some(Ok(r));
+            }
+            match self.state {
+                RunState::Running => self.step(),
+                RunState::Ended => return None,
+                RunState::Failed => return self.error.take().map(Err),
+            }
+        }
+    }
+
+    // ------------------------------------------------------------------ helpers
+
+    fn path(&self) -> Arc<Path> {
+        self.files[self.cur].path.clone()
+    }
+
+    fn event(&mut self, call: &'static str, args: Vec<EventArg>) {
+        if self.comp.is_some() {
+            let mut payload = self.payload(None, &[0.0; 6]);
+            payload.event = Some(Event { call, args });
+            if let Some(c) = self.comp.as_mut() {
+                c.push_event(payload);
+            }
+            return;
+        }
+        let rec = Record {
+            body: RecordBody::Event(Event { call, args }),
+            path: self.files[self.cur].path.clone(),
+            line: self.line_no,
+            n: self.line_n,
+        };
+        self.out.push_back(rec);
+    }
+
+    fn motion(&mut self, mut m: Motion) {
+        if let Some(p) = self.out_pos.take() {
+            m.start = AxisValues::from_array(p);
+        }
+        let rec = Record {
+            body: RecordBody::Motion(m),
+            path: self.files[self.cur].path.clone(),
+            line: self.line_no,
+            n: self.line_n,
+        };
+        self.out.push_back(rec);
+    }
+
+    fn pu(&self, mm: Real) -> EventArg {
+        EventArg::Num(round4(mm / self.u))
+    }
+
+    // ------------------------------------------------------------------ reading
+
+    fn seek(&mut self, pos: Pos) -> LR<()> {
+        self.cur = pos.file;
+        self.files[self.cur]
+            .seek(pos.offset, pos.line)
+            .map_err(|e| lerr(1, "", format!("cannot seek in program: {e}")))
+    }
+
+    fn tell(&self) -> Pos {
+        let (offset, line) = self.files[self.cur].tell();
+        Pos {
+            file: self.cur,
+            offset,
+            line,
+        }
+    }
+
+    /// Reads and executes one line.
+    fn step(&mut self) {
+        self.blocks += 1;
+        if self.blocks > self.opts.max_blocks {
+            let e = lerr(
+                1,
+                "",
+                format!(
+                    "more than {} blocks executed (endless loop?)",
+                    self.opts.max_blocks
+                ),
+            );
+            self.fail(e);
+            return;
+        }
+        self.line_start = self.tell();
+        let mut buf = std::mem::take(&mut self.buf);
+        let more = self.files[self.cur].read_line(&mut buf);
+        self.buf = buf;
+        self.line_no = self.line_start.line;
+        self.line_n = None;
+        match more {
+            Err(e) => {
+                let e = lerr(1, "", format!("cannot read program: {e}"));
+                self.fail(e);
+            }
+            Ok(false) => self.at_eof(),
+            Ok(true) => {
+                if let Err(e) = self.line() {
+                    self.fail(e);
+                }
+            }
+        }
+    }
+
+    fn at_eof(&mut self) {
+        let last = self.line_no.saturating_sub(1).max(1);
+        self.at_eof_line(last, false);
+    }
+
+    fn line(&mut self) -> LR<()> {
+        // '%' lines
+        let first_non_blank = self.buf.iter().position(|c| !matches!(c, b' ' | b'\t'));
+        if let Some(i) = first_non_blank
+            && self.buf[i] == b'%'
+        {
+            if self.skip.is_some() && !self.first_line {
+                self.at_eof_line(self.line_no, true);
+                return Ok(());
+            }
+            if self.first_line {
+                self.first_line = false;
+                self.percent_started = true;
+                return Ok(());
+            }
+            self.end_program();
+            return Ok(());
+        }
+        if first_non_blank.is_some() {
+            self.first_line = false;
+        }
+        if self.skip.is_some() {
+            return self.skip_line();
+        }
+        let reads_params = match self.lexer.prepare(&self.buf) {
+            Ok(h) => h,
+            Err(e) => return Err(self.lex_error(e)),
+        };
+        if reads_params {
+            self.params.snap_line = self.line_no as Real;
+            let p = self.prog();
+            for (i, v) in p.iter().enumerate() {
+                self.params.snap_pos[i] = if i < 3 { v / self.u } else { *v };
+            }
+            self.params.metric = self.u == 1.0;
+            self.params.incremental = self.incremental;
+        }
+        if let Err(e) = self.lexer.parse(&self.buf, &self.params) {
+            return Err(self.lex_error(e));
+        }
+        self.exec_lexed()
+    }
+
+    /// Executes the block the lexer has just read (moved out by swapping boxes, so the
+    /// interpreter can be borrowed mutably while the block is read).
+    fn exec_lexed(&mut self) -> LR<()> {
+        let spare = self.spare_block.take().unwrap_or_default();
+        let block = std::mem::replace(&mut self.lexer.block, spare);
+        let r = self.exec_block(&block);
+        self.spare_block = Some(std::mem::replace(&mut self.lexer.block, block));
+        r
+    }
+
+    fn end_program(&mut self) {
+        self.event("PROGRAM_END", Vec::new());
+        self.state = RunState::Ended;
+    }
+}
+
+impl Iterator for Interpreter {
+    type Item = Result<Record, NcError>;
+    fn next(&mut self) -> Option<Self::Item> {
+        self.next_record()
+    }
+}
