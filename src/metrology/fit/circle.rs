@@ -12,6 +12,9 @@ use super::start::{Spread, kasa_circles, rotate, tangent_basis};
 use crate::math::{Point3, Real, UnitVector3, Vector3};
 use nalgebra::SVector;
 
+#[cfg(doc)]
+use super::plane::fit_plane;
+
 /// Result of a circle fit. Standard uncertainties from the residuals: σ² (JᵀJ)⁻¹ with
 /// σ² = Σr²/(m − p) (m = 2n residuals: out-of-plane and in-plane radial; p = 6
 /// parameters); infinite when n = 3.

@@ -13,7 +13,7 @@ use nalgebra::{Cholesky, SMatrix, SVector, SymmetricEigen};
 /// a singular-value ratio of 1e-6 of the Jacobian, i.e. noise amplified a million-fold
 /// into some parameter combination (25 nm of noise becoming 25 mm of uncertainty): a
 /// guess, not a fit.
-const RANK_RATIO: Real = 1e-12;
+pub(super) const RANK_RATIO: Real = 1e-12;
 
 /// Relative Gauss–Newton step below which an iterative fit has converged: the largest
 /// length-equivalent component of the step (angles times the points' RMS spread) under

@@ -13,6 +13,9 @@ use super::sphere::SphereModel;
 use crate::math::{Point3, Real, UnitVector3, Vector3};
 use nalgebra::{SMatrix, SVector, SymmetricEigen};
 
+#[cfg(doc)]
+use super::solver::RANK_RATIO;
+
 /// Orthonormal (e1, e2) with e1 × e2 = n: e1 ⟂ n built from the coordinate axis of n's
 /// smallest component (|n × e| ≥ √(2/3), never ill-conditioned).
 pub(super) fn tangent_basis(n: &UnitVector3) -> (Vector3, Vector3) {
