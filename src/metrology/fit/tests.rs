@@ -39,7 +39,7 @@ pub(super) struct Shape {
     pub(super) centre: Point3,
     pub(super) axis: UnitVector3,
     pub(super) a: Vector3,
-    pub(super) b: Vector3,
+    b: Vector3,
     pub(super) radius: Real,
 }
 
