@@ -122,24 +122,27 @@ fn place(folder: &str, module: Option<&str>) -> Option<(usize, Option<usize>)> {
     }
 }
 
+/// The modules a folder declares by its files and subfolders (a module may be both
+/// `name.rs` and `name/`), sorted, without those in `except`.
+fn module_names(dir: &Path, except: &[&str]) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .expect("source folder")
+        .flatten()
+        .map(|e| e.path())
+        .filter(|p| p.is_dir() || p.extension().is_some_and(|x| x == "rs"))
+        .filter_map(|p| p.file_stem().and_then(|s| s.to_str()).map(str::to_string))
+        .filter(|s| !except.contains(&s.as_str()))
+        .collect();
+    names.sort();
+    names.dedup();
+    names
+}
+
 #[test]
 fn module_dependencies_point_down_the_pipeline() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     // Every file and folder of src/ is in the layout, and every module of a folder too.
-    let mut found: Vec<String> = std::fs::read_dir(&src)
-        .expect("src")
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.is_dir() || p.extension().is_some_and(|x| x == "rs"))
-        .map(|p| {
-            p.file_stem()
-                .and_then(|s| s.to_str())
-                .unwrap_or("")
-                .to_string()
-        })
-        .filter(|s| s != "lib" && s != "main")
-        .collect();
-    found.sort();
+    let found = module_names(&src, &["lib", "main"]);
     let mut listed: Vec<String> = LAYOUT.iter().map(|(n, _)| n.to_string()).collect();
     listed.sort();
     assert_eq!(found, listed, "src/ against the layout");
@@ -149,21 +152,7 @@ fn module_dependencies_point_down_the_pipeline() {
         // (module name or None for a top-level file or a folder's mod.rs, its path)
         let mut units: Vec<(Option<&str>, PathBuf)> = Vec::new();
         if dir.is_dir() {
-            let mut inside: Vec<String> = std::fs::read_dir(&dir)
-                .expect("folder")
-                .flatten()
-                .map(|e| e.path())
-                .filter(|p| p.is_dir() || p.extension().is_some_and(|x| x == "rs"))
-                .map(|p| {
-                    p.file_stem()
-                        .and_then(|s| s.to_str())
-                        .unwrap_or("")
-                        .to_string()
-                })
-                .filter(|s| s != "mod" && s != "tests")
-                .collect();
-            inside.sort();
-            inside.dedup();
+            let inside = module_names(&dir, &["mod", "tests"]);
             let mut expected: Vec<String> = modules.iter().map(|m| m.to_string()).collect();
             expected.sort();
             assert_eq!(
