@@ -1,5 +1,6 @@
-//! General identification of a machine's deviations from measured features (BRIEF §7):
-//! any chain, any set of features, any choice of deviations to solve for.
+//! General identification of a machine's deviations from measured features (see
+//! docs/identification-and-correction.md): any chain, any set of features, any choice of
+//! deviations to solve for.
 //!
 //! **Features.** A [`Feature`] is one measured quantity group with its uncertainty. Today:
 //! [`PlaneFeature`], a face cut by a straight move of a flat (or ball) end mill and fitted in
@@ -690,7 +691,7 @@ impl Model<'_> {
 }
 
 /// The realistic magnitude of a deviation, used to scale the Jacobian before deciding
-/// what is determined: 0.5 mm for offsets, 5e-4 rad for angles (BRIEF §7; the sizes of
+/// what is determined: 0.5 mm for offsets, 5e-4 rad for angles (the sizes of
 /// assembly deviations of small machines).
 pub fn magnitude(id: DeviationId) -> Real {
     if id.component.is_angle() {

@@ -1,5 +1,6 @@
-//! NC-program correction (seed 002 Fig. 1, BRIEF §7): rewrite a program so that the deviated
-//! machine reproduces the nominal tool path, and measure how well it does.
+//! NC-program correction (seed 002 Fig. 1; see docs/identification-and-correction.md):
+//! rewrite a program so that the deviated machine reproduces the nominal tool path, and
+//! measure how well it does.
 //!
 //! # The pose problem
 //!

@@ -1,5 +1,6 @@
-//! Model correction for the A-axis 0°/180° experiment (seed 002 §4, BRIEF §4): segment the
-//! two faces in a cloud, fit planes, measure the step, identify dy_AY and gamma_AY + gamma_YX.
+//! Model correction for the A-axis 0°/180° experiment (seed 002 §4; see
+//! docs/identification-and-correction.md): segment the two faces in a cloud, fit planes,
+//! measure the step, identify dy_AY and gamma_AY + gamma_YX.
 //!
 //! **Faces.** Each face is named by the NC line of the straight cut that made it. The cut's
 //! flank plane on the *model* chain (nominal plus known deviations) gives the face's

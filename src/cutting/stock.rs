@@ -1,5 +1,5 @@
 //! The stock as a tri-dexel: three orthogonal grids of rays (along x, y and z, in the
-//! workpiece frame), each ray storing the exact intervals where material is (BRIEF §5).
+//! workpiece frame), each ray storing the exact intervals where material is (docs/cutting.md).
 //!
 //! Every interval end (a *crossing*) keeps the exact surface point along its ray, the
 //! outward normal of the material there, and the NC line whose cut made it (0 for the

@@ -1,5 +1,5 @@
 //! The machine as a kinematic chain with assembly deviations (seed 002's shape-generation
-//! function, BRIEF §3).
+//! function; conventions in docs/scenes.md).
 //!
 //! A chain is an ordered list of axes from the workpiece to the tool. Between adjacent
 //! bodies sits a deviation E_j = Trans(dx,dy,dz)·Rx(alpha)·Ry(beta)·Rz(gamma), exact, never

@@ -1,5 +1,5 @@
-//! A virtual structured-light scanner (EinScan-SP class, BRIEF §6) that measures the cut
-//! stock.
+//! A virtual structured-light scanner (EinScan-SP class; see docs/scanning-and-fitting.md)
+//! that measures the cut stock.
 //!
 //! The surface it sees is the tri-dexel's: every crossing is an exact surface point with
 //! its exact normal, and is drawn as a small disc (a *splat*) in its tangent plane, of

@@ -48,7 +48,7 @@ fn set_deviation(scene: &mut Scene, name: &str, value: Real) {
 }
 
 // ---------------------------------------------------------------------------------------
-// An independent derivation of the exact faces (BRIEF §4): homogeneous 4×4 matrices built
+// An independent derivation of the exact faces (seed 002 §4): homogeneous 4×4 matrices built
 // here from the chain's definition, not from the library's kinematics or sweep code.
 
 fn trans(x: Real, y: Real, z: Real) -> Matrix4<Real> {
