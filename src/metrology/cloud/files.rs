@@ -6,8 +6,9 @@ use super::error::CloudError;
 use super::ply_binary::{
     check_finite, decode_into, skip_binary, trailing_data, truncated_vertices,
 };
+use super::ply_body::{Body, ReadError, too_large};
 use super::ply_header::{Element, Format, VertexLayout, find_end_header, parse_header};
-use super::ply_read::{Body, ReadError, assemble, malformed_ply, read_error, read_ply, too_large};
+use super::ply_read::{assemble, malformed_ply, read_error, read_ply};
 use super::ply_write::write_ply;
 use super::point_cloud::PointCloud;
 use super::text::{XyzSeparator, read_pts, read_xyz, write_xyz};

@@ -34,19 +34,20 @@
 //! One idea a file: `point_cloud` ([`PointCloud`], [`Frame`], [`ScalarField`] and the
 //! validation every writer requires), `error` ([`CloudError`]), `encode` (vertex records
 //! encoded in parallel blocks, binary and text), `ply_write` (the PLY writers), the PLY
-//! reader in `ply_read` (the entry point and what its parts share), `ply_header` (the
-//! header and the vertex layout it declares), `ply_binary` and `ply_ascii` (the two data
-//! encodings), `text` (XYZ/CSV and PTS), and `files` (files on disk, chosen by extension,
-//! binary PLY streamed).
+//! reader in parts: `ply_header` (the header and the vertex layout it declares), `ply_body`
+//! (the decoded data and the readers' error), `ply_binary` and `ply_ascii` (the two data
+//! encodings) and `ply_read` (the entry point that puts them together); `text` (XYZ/CSV and
+//! PTS), and `files` (files on disk, chosen by extension, binary PLY streamed).
 
 mod point_cloud;
 mod error;
 mod encode;
 mod ply_write;
-mod ply_read;
 mod ply_header;
+mod ply_body;
 mod ply_binary;
 mod ply_ascii;
+mod ply_read;
 mod text;
 mod files;
 #[cfg(test)]

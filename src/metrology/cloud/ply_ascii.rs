@@ -2,8 +2,8 @@
 //! (integers whole and in range), elements around the vertices checked and walked over,
 //! errors naming the file's line.
 
+use super::ply_body::{Body, ReadError, non_finite, too_large};
 use super::ply_header::{Element, Header, Kind, Role, Scalar, VertexLayout};
-use super::ply_read::{Body, ReadError, non_finite, too_large};
 use crate::math::{Point3, Real, Vector3};
 
 /// Parses one ASCII value of type `ty`: integers must be whole and in range.

@@ -3,8 +3,8 @@
 //! included), sizes checked against the data before anything is allocated, vertex records
 //! decoded in parallel, and the first non-finite vertex found.
 
+use super::ply_body::{Body, ReadError, non_finite, too_large};
 use super::ply_header::{Column, Element, Header, Kind, Scalar, VertexLayout};
-use super::ply_read::{Body, ReadError, non_finite, too_large};
 use super::point_cloud::first_non_finite;
 use crate::math::{Point3, Real, Vector3};
 use rayon::prelude::*;

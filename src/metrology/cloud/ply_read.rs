@@ -1,13 +1,13 @@
 //! Reading PLY: [`read_ply`], which parses the header (`ply_header`), reads the data in
-//! its encoding (`ply_binary`, `ply_ascii`) and assembles the cloud; and what those parts
-//! share: the reader's own error, the decoded body, and the errors' wording.
+//! its encoding (`ply_binary`, `ply_ascii`, into a `ply_body::Body`) and assembles the
+//! cloud, with the reader's errors worded for the user.
 
 use super::error::CloudError;
 use super::ply_ascii::read_ascii;
 use super::ply_binary::read_binary;
+use super::ply_body::{Body, ReadError};
 use super::ply_header::{Format, Header, VertexLayout, parse_header};
 use super::point_cloud::{Frame, PointCloud, ScalarField};
-use crate::math::{Point3, Real, Vector3};
 use std::path::Path;
 
 /// Parses a PLY file held in `bytes`; `path` only labels errors.
@@ -71,35 +71,10 @@ pub(super) fn assemble(header: &Header, layout: VertexLayout, body: Body) -> Poi
     }
 }
 
-/// Reader-internal error, given a path by [`read_ply`].
-pub(super) enum ReadError {
-    Malformed(String),
-    NonFinite {
-        index: usize,
-        what: &'static str,
-        line: Option<usize>,
-    },
-}
-
-/// What the data section yields.
-pub(super) struct Body {
-    pub(super) points: Vec<Point3>,
-    pub(super) normals: Option<Vec<Vector3>>,
-    pub(super) scalars: Vec<Vec<Real>>,
-}
-
-pub(super) fn too_large(what: &str) -> ReadError {
-    ReadError::Malformed(format!("{what}: element counts too large for the file"))
-}
-
-pub(super) fn non_finite(index: usize, what: &'static str, line: Option<usize>) -> ReadError {
-    ReadError::NonFinite { index, what, line }
-}
-
 #[cfg(test)]
 mod tests {
     use super::super::tests::read;
-    use super::*;
+    use crate::math::{Point3, Real};
 
     /// Vertex properties of every scalar type, under both sets of type names.
     #[test]

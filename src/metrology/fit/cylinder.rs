@@ -5,9 +5,10 @@
 
 use super::error::{FitError, check_input};
 use super::moments::canonical_sign;
+use super::moments::chunked_sum;
 use super::robust::{RobustRule, Trimmable, trim_and_refit};
 use super::solver::{Model, Sums, levenberg_marquardt};
-use super::start::{Spread, best_axis, rotate, tangent_basis};
+use super::start::{Spread, kasa_circles, rotate, tangent_basis};
 use crate::math::{Point3, Real, UnitVector3, Vector3};
 use nalgebra::{SMatrix, SVector};
 
@@ -189,6 +190,66 @@ fn cylinder_checked(
         n_rejected: 0,
         iterations: sol.iterations,
     })
+}
+
+/// For each candidate (centre, axis w, radius): the RMS over the points of (distance from
+/// the line centre + t·w) − r; one pass for all K, +∞ for a missing candidate.
+fn line_circle_rms<const K: usize>(
+    points: &[Point3],
+    ws: &[UnitVector3; K],
+    circles: &[Option<(Point3, Real)>; K],
+) -> [Real; K] {
+    let ss = chunked_sum(
+        points,
+        |c| {
+            let mut acc = [0.0; K];
+            for p in c {
+                for ((a, w), circle) in acc.iter_mut().zip(ws).zip(circles) {
+                    if let Some((centre, r)) = circle {
+                        let d = p - centre;
+                        let res = (d - w.into_inner() * w.dot(&d)).norm() - r;
+                        *a += res * res;
+                    }
+                }
+            }
+            acc
+        },
+        [0.0; K],
+        |mut t, o| {
+            for (a, b) in t.iter_mut().zip(o) {
+                *a += b;
+            }
+            t
+        },
+    );
+    let mut out = [Real::INFINITY; K];
+    for ((o, s), circle) in out.iter_mut().zip(ss).zip(circles) {
+        if circle.is_some() {
+            *o = (s / points.len() as Real).sqrt();
+        }
+    }
+    out
+}
+
+/// The best cylinder start among candidate axes `ws`: smallest RMS of the Kåsa circle of
+/// the points projected along the axis.
+pub(super) fn best_axis<const K: usize>(
+    points: &[Point3],
+    sp: &Spread,
+    ws: &[UnitVector3; K],
+) -> Option<CylinderModel> {
+    let circles = kasa_circles(points, sp, ws);
+    let rms = line_circle_rms(points, ws, &circles);
+    let mut best: Option<(Real, CylinderModel)> = None;
+    for ((w, circle), e) in ws.iter().zip(&circles).zip(rms) {
+        if let Some((c, r)) = circle
+            && e.is_finite()
+            && best.is_none_or(|(b, _)| e < b)
+        {
+            best = Some((e, CylinderModel::new(*c, *w, *r, sp.centroid)));
+        }
+    }
+    best.map(|(_, m)| m)
 }
 
 impl Trimmable for CylinderFit {

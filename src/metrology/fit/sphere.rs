@@ -3,11 +3,12 @@
 //! [`fit_sphere_robust`]) from the algebraic start.
 
 use super::error::{FitError, check_input};
+use super::moments::chunked_sum;
 use super::robust::{RobustRule, Trimmable, trim_and_refit};
 use super::solver::{Model, Sums, levenberg_marquardt};
-use super::start::{Spread, algebraic_sphere};
+use super::start::{Spread, solve_spd};
 use crate::math::{Point3, Real, Vector3};
-use nalgebra::SVector;
+use nalgebra::{SMatrix, SVector};
 
 /// Result of a sphere fit. Standard uncertainties from the residuals: σ² (JᵀJ)⁻¹ with
 /// σ² = Σr²/(m − p) (m = n residuals, p = 4 parameters); infinite when n = 4.
@@ -122,6 +123,36 @@ fn sphere_checked(points: &[Point3], warm: Option<&SphereFit>) -> Result<SphereF
         n_rejected: 0,
         iterations: sol.iterations,
     })
+}
+
+/// The algebraic sphere x²+y²+z² + Dx + Ey + Fz + G = 0 of the points, solved in
+/// coordinates centred on the centroid and scaled by the RMS spread.
+pub(super) fn algebraic_sphere(points: &[Point3], sp: &Spread) -> Option<SphereModel> {
+    let (g, s) = (sp.centroid, sp.rms);
+    let zero = (SMatrix::<Real, 4, 4>::zeros(), SVector::<Real, 4>::zeros());
+    let (a, b) = chunked_sum(
+        points,
+        |c| {
+            let (mut a, mut b) = zero;
+            for p in c {
+                let q = (p - g) / s;
+                let z = SVector::<Real, 4>::new(q.x, q.y, q.z, 1.0);
+                a.ger(1.0, &z, &z, 1.0);
+                b.axpy(q.norm_squared(), &z, 1.0);
+            }
+            (a, b)
+        },
+        zero,
+        |(a, b), (c, d)| (a + c, b + d),
+    );
+    let x = solve_spd(&a, &(-b))?;
+    let cq = Vector3::new(x[0], x[1], x[2]) * -0.5;
+    let r2 = cq.norm_squared() - x[3];
+    let model = SphereModel {
+        c: g + cq * s,
+        r: r2.sqrt() * s,
+    };
+    (r2 > 0.0 && model.r.is_finite()).then_some(model)
 }
 
 impl Trimmable for SphereFit {

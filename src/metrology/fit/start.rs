@@ -1,15 +1,14 @@
 //! Geometry helpers (a tangent basis of a unit vector, its rotation by a small rotation
-//! vector) and the closed-form starting values of the iterative fits: the points' principal
-//! axes ([`Spread`]), the algebraic sphere, Kåsa circles in given planes and the best
-//! cylinder axis among candidates.
+//! vector) and what the closed-form starting values of the iterative fits are made of: the
+//! points' principal axes ([`Spread`]), a small scaled linear solve, and the Kåsa circles in
+//! given planes (the sphere's algebraic start and the cylinder's best axis are in their
+//! shapes' files).
 
-use super::cylinder::CylinderModel;
 use super::error::FitError;
 use super::moments::{
     DEGENERATE_RATIO, EIGEN_ITERATIONS, canonical_sign, centred_moments, chunked_sum,
 };
 use super::solver::{Normal, Scaled, Sums, rank_deficient};
-use super::sphere::SphereModel;
 use crate::math::{Point3, Real, UnitVector3, Vector3};
 use nalgebra::{SMatrix, SVector, SymmetricEigen};
 
@@ -87,7 +86,7 @@ impl Spread {
 /// Solves the symmetric positive-definite `a·x = b` (unknowns of comparable units) after
 /// Jacobi scaling; None if `a` is non-finite, not positive definite or rank-deficient
 /// within [`RANK_RATIO`].
-fn solve_spd<const N: usize>(
+pub(super) fn solve_spd<const N: usize>(
     a: &SMatrix<Real, N, N>,
     b: &SVector<Real, N>,
 ) -> Option<SVector<Real, N>> {
@@ -101,36 +100,6 @@ fn solve_spd<const N: usize>(
         return None;
     }
     Scaled::new(&ne)?.step(0.0)
-}
-
-/// The algebraic sphere x²+y²+z² + Dx + Ey + Fz + G = 0 of the points, solved in
-/// coordinates centred on the centroid and scaled by the RMS spread.
-pub(super) fn algebraic_sphere(points: &[Point3], sp: &Spread) -> Option<SphereModel> {
-    let (g, s) = (sp.centroid, sp.rms);
-    let zero = (SMatrix::<Real, 4, 4>::zeros(), SVector::<Real, 4>::zeros());
-    let (a, b) = chunked_sum(
-        points,
-        |c| {
-            let (mut a, mut b) = zero;
-            for p in c {
-                let q = (p - g) / s;
-                let z = SVector::<Real, 4>::new(q.x, q.y, q.z, 1.0);
-                a.ger(1.0, &z, &z, 1.0);
-                b.axpy(q.norm_squared(), &z, 1.0);
-            }
-            (a, b)
-        },
-        zero,
-        |(a, b), (c, d)| (a + c, b + d),
-    );
-    let x = solve_spd(&a, &(-b))?;
-    let cq = Vector3::new(x[0], x[1], x[2]) * -0.5;
-    let r2 = cq.norm_squared() - x[3];
-    let model = SphereModel {
-        c: g + cq * s,
-        r: r2.sqrt() * s,
-    };
-    (r2 > 0.0 && model.r.is_finite()).then_some(model)
 }
 
 /// The algebraic (Kåsa) circles x²+y² + Dx + Ey + F = 0 of the points projected on the
@@ -184,64 +153,4 @@ pub(super) fn kasa_circles<const K: usize>(
         }
     }
     out
-}
-
-/// For each candidate (centre, axis w, radius): the RMS over the points of (distance from
-/// the line centre + t·w) − r; one pass for all K, +∞ for a missing candidate.
-fn line_circle_rms<const K: usize>(
-    points: &[Point3],
-    ws: &[UnitVector3; K],
-    circles: &[Option<(Point3, Real)>; K],
-) -> [Real; K] {
-    let ss = chunked_sum(
-        points,
-        |c| {
-            let mut acc = [0.0; K];
-            for p in c {
-                for ((a, w), circle) in acc.iter_mut().zip(ws).zip(circles) {
-                    if let Some((centre, r)) = circle {
-                        let d = p - centre;
-                        let res = (d - w.into_inner() * w.dot(&d)).norm() - r;
-                        *a += res * res;
-                    }
-                }
-            }
-            acc
-        },
-        [0.0; K],
-        |mut t, o| {
-            for (a, b) in t.iter_mut().zip(o) {
-                *a += b;
-            }
-            t
-        },
-    );
-    let mut out = [Real::INFINITY; K];
-    for ((o, s), circle) in out.iter_mut().zip(ss).zip(circles) {
-        if circle.is_some() {
-            *o = (s / points.len() as Real).sqrt();
-        }
-    }
-    out
-}
-
-/// The best cylinder start among candidate axes `ws`: smallest RMS of the Kåsa circle of
-/// the points projected along the axis.
-pub(super) fn best_axis<const K: usize>(
-    points: &[Point3],
-    sp: &Spread,
-    ws: &[UnitVector3; K],
-) -> Option<CylinderModel> {
-    let circles = kasa_circles(points, sp, ws);
-    let rms = line_circle_rms(points, ws, &circles);
-    let mut best: Option<(Real, CylinderModel)> = None;
-    for ((w, circle), e) in ws.iter().zip(&circles).zip(rms) {
-        if let Some((c, r)) = circle
-            && e.is_finite()
-            && best.is_none_or(|(b, _)| e < b)
-        {
-            best = Some((e, CylinderModel::new(*c, *w, *r, sp.centroid)));
-        }
-    }
-    best.map(|(_, m)| m)
 }

@@ -10,9 +10,6 @@ use crate::math::{Point3, Real};
 use crate::metrology::fit::CHUNK;
 use rayon::prelude::*;
 
-#[cfg(doc)]
-use super::region_fit::fit_region;
-
 impl Cells {
     /// Step 4: every point goes to the nearest live plane within `max_d` among the live
     /// regions of its cell and the 26 neighbours (ties: the lower region). One streaming
@@ -127,7 +124,7 @@ impl Cells {
 }
 
 /// The points assigned to a region (or a chunk's share of them): indices of the core
-/// and the fringe points (see [`fit_region`]), ascending, and the core's moments about
+/// and the fringe points (see [`fit_region`](super::region_fit::fit_region)), ascending, and the core's moments about
 /// the region plane's centroid.
 #[derive(Debug)]
 pub(super) struct RegionShare {

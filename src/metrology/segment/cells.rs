@@ -1,4 +1,4 @@
-//! Steps 1 and 2 of [`segment_planes`]: the uniform grid, the binning of the points into
+//! Steps 1 and 2 of [`segment_planes`](super::segment_planes): the uniform grid, the binning of the points into
 //! its cells with their moments (per fixed chunk, in a small hash table, then merged in
 //! chunk order), each occupied cell's plane and whether it is planar ([`MIN_CELL_POINTS`],
 //! [`MAX_CELL_FLATNESS`], [`CELL_RMS_FRACTION`], [`MIN_CELL_SPREAD_FRACTION`]), and the
@@ -6,15 +6,12 @@
 
 use super::input::{MAX_POINTS, SegmentError};
 use super::linalg::{Moments, eigen_sym3};
-use super::planes::{PlaneSegmentOptions, check_plane_options};
+use super::options::{PlaneSegmentOptions, check_plane_options};
 use crate::math::{Aabb, Point3, Real, Vector3};
 use crate::metrology::fit::CHUNK;
 use rayon::prelude::*;
 
-#[cfg(doc)]
-use super::planes::segment_planes;
-
-/// Most grid cells [`segment_planes`] lays over a cloud's bounding box: 2²⁶. Its dense
+/// Most grid cells [`segment_planes`](super::segment_planes) lays over a cloud's bounding box: 2²⁶. Its dense
 /// per-cell tables take 4 bytes a cell each (256 MiB at this size); a grid this fine means
 /// cells far below the point spacing of any scan that fits in memory.
 pub const MAX_GRID_CELLS: usize = 1 << 26;

@@ -54,20 +54,22 @@
 //!
 //! The code, one idea a file: `input` (limits, [`SegmentError`], the check of the points,
 //! fixed-chunk folds), `linalg` (moment sums and the symmetric 3 × 3 eigenproblem),
-//! `neighbours` (the k-d tree and PCA normals), `planes` (the options and
-//! [`segment_planes`]), then its steps: `cells` (1, 2: the grid, binning, cell planes),
-//! `grow` (3: region growing), `assign` (4: points to planes), `region_fit` (5: the robust
-//! fit of each region on moments); `select` (by seed point or box) and `ransac`.
+//! `neighbours` (the k-d tree and PCA normals), `options` (what segmentation is asked and
+//! returns), then the steps of [`segment_planes`]: `cells` (1, 2: the grid, binning, cell
+//! planes), `grow` (3: region growing), `assign` (4: points to planes), `region_fit` (5: the
+//! robust fit of each region on moments); `select` (by seed point or box), `planes` (the
+//! steps in order) and `ransac`. Each file uses only the files before it.
 
 mod input;
 mod linalg;
 mod neighbours;
-mod planes;
+mod options;
 mod cells;
 mod grow;
 mod assign;
 mod region_fit;
 mod select;
+mod planes;
 mod ransac;
 #[cfg(test)]
 mod tests;
@@ -77,7 +79,8 @@ pub use cells::{
 };
 pub use input::{MAX_COORD_MM, MAX_POINTS, SegmentError};
 pub use neighbours::{KdIndex, Neighbour, estimate_normals};
-pub use planes::{PlaneSegment, PlaneSegmentOptions, segment_planes};
+pub use options::{PlaneSegment, PlaneSegmentOptions};
+pub use planes::segment_planes;
 pub use ransac::{
     CylinderModel, MIN_SAMPLE_DET_RATIO, MIN_SAMPLE_SIN, RansacOptions, ShapeMatch, SphereModel,
     ransac_cylinder, ransac_plane, ransac_sphere,

@@ -4,10 +4,10 @@
 //! [`fit_plane`] on the set they settle on; and the segments that result.
 
 use super::assign::RegionShare;
-use super::grow::{LivePlane, RegionPlane};
+use super::grow::{CORE_FRACTION, LivePlane, RegionPlane};
 use super::input::{PLANE_FIT_MIN, chunked_fold, gather};
 use super::linalg::{Moments, eigen_sym3};
-use super::planes::{PlaneSegment, PlaneSegmentOptions};
+use super::options::{PlaneSegment, PlaneSegmentOptions};
 use crate::math::{Aabb, Point3, Real, tol};
 use crate::metrology::fit::{PlaneFit, RobustRule, fit_plane, fit_plane_robust};
 use rayon::prelude::*;
@@ -17,12 +17,6 @@ use rayon::prelude::*;
 /// fit is pulled off the region plane (by a neighbouring face's edge points), a second
 /// only for faces whose form departs from a plane by more than the noise.
 const MAX_RESPLITS: usize = 2;
-
-/// Core distance of a region, as a fraction of `k_sigma` times the pooled rms residual
-/// of its cells (≈ 0.93σ with ~22 points a cell): for the default rule (k = 3) points
-/// within 2.1σ of the cell-level plane are core — 96 % of them, each safely inside every
-/// threshold σ-trimming reaches (≈ 2.9σ), so only 4 % are re-tested per round.
-pub(super) const CORE_FRACTION: Real = 0.75;
 
 /// Second-smallest over largest eigenvalue below which points count as collinear: the
 /// bound of [`fit_plane`] (an aspect ratio of 1e-6), so both refuse the same sets.

@@ -1,24 +1,21 @@
-//! Selections: the planar region at a seed point ([`select_region_from_seed`]: the steps
-//! of [`segment_planes`] for the one region grown from the seed's cell) and the points in
+//! Selections: the planar region at a seed point ([`select_region_from_seed`](super::select_region_from_seed): the steps
+//! of [`segment_planes`](super::segment_planes) for the one region grown from the seed's cell) and the points in
 //! an axis-aligned box ([`select_box`]).
 
 use super::cells::Cells;
 use super::grow::LivePlane;
 use super::input::{SegmentError, chunked_fold, is_valid};
-use super::planes::{PlaneSegment, PlaneSegmentOptions};
+use super::options::{PlaneSegment, PlaneSegmentOptions};
 use super::region_fit::fit_regions;
 use crate::math::{Aabb, Point3, Real};
 use rayon::prelude::*;
 
-#[cfg(doc)]
-use super::planes::segment_planes;
-
-/// The planar region at `seed`: grown (as in [`segment_planes`]) from the cell holding the
+/// The planar region at `seed`: grown (as in [`segment_planes`](super::segment_planes)) from the cell holding the
 /// point nearest `seed` — or, when that cell is not planar, from the neighbouring planar
 /// cell whose plane passes nearest that point — then assigned and fitted alone (no other
 /// region competes for edge points).
 ///
-/// Errors: as [`segment_planes`]; a non-finite seed is [`SegmentError::BadOptions`]; no
+/// Errors: as [`segment_planes`](super::segment_planes); a non-finite seed is [`SegmentError::BadOptions`]; no
 /// planar cell at the seed, or a region of fewer than `min_points` points, is
 /// [`SegmentError::NothingFound`].
 pub fn select_region_from_seed(
