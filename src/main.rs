@@ -11,6 +11,9 @@ use twinmill::calibration::correct::write_gcode;
 use twinmill::calibration::design::{DesignOptions, design, kind_name};
 use twinmill::math::{Aabb, Point3};
 use twinmill::metrology::cloud::read_cloud_file;
+use twinmill::metrology::positioning::{
+    PositioningFigures, evaluate as evaluate_positioning, parse_readings,
+};
 use twinmill::metrology::scan::Surface;
 use twinmill::metrology::segment::{PlaneSegmentOptions, RansacOptions};
 use twinmill::nc::{Interpreter, LengthUnit, Program, write_jsonl};
@@ -193,6 +196,11 @@ enum Command {
         #[arg(long, value_delimiter = ',', num_args = 1, required = true)]
         params: Vec<String>,
     },
+    /// Evaluate measurements as a standard says (ISO 230-2 positioning).
+    Evaluate {
+        #[command(subcommand)]
+        command: EvaluateCommand,
+    },
     /// Fit shapes to any point cloud (PLY, XYZ/CSV, PTS): every planar face with the
     /// distance and angle between each pair (the default), or one plane, sphere, cylinder
     /// or circle, in all points, a box, or the planar region around a seed point.
@@ -248,6 +256,25 @@ enum Command {
         /// Worker threads (default: all cores). Results do not depend on it.
         #[arg(long)]
         threads: Option<usize>,
+    },
+}
+
+/// Which standard's evaluation.
+#[derive(Subcommand)]
+enum EvaluateCommand {
+    /// ISO 230-2 positioning accuracy and repeatability of a linear axis from a readings
+    /// file: CSV `target,direction,run,deviation` (mm; `+`/`-`; runs from 1) or a laser
+    /// system's table `target,+run1,…,+runN,-run1,…,-runN`; a unit may follow a header name
+    /// in brackets (`deviation[um]`).
+    #[command(name = "iso230-2")]
+    Iso230_2 {
+        /// The readings file.
+        file: PathBuf,
+        /// Print the figures as JSON (mm): A, A_fwd, A_bwd, B, B_mean, E, E_fwd, E_bwd, M,
+        /// R, R_fwd, R_bwd, runs and per target {target, mean_fwd, mean_bwd, mean, B, s_fwd,
+        /// s_bwd, R_fwd, R_bwd, R}.
+        #[arg(long)]
+        json: bool,
     },
 }
 
@@ -336,6 +363,67 @@ impl Progress for Bars {
     }
 }
 
+/// The ISO 230-2 figures as the CLI prints them (µm).
+fn positioning_summary(file: &Path, f: &PositioningFigures) -> String {
+    use std::fmt::Write as _;
+    let um = |x: f64| x * 1e3;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "twinmill evaluate iso230-2: {} ({} targets, {} runs each way)",
+        file.display(),
+        f.targets.len(),
+        f.runs
+    );
+    let _ = writeln!(
+        s,
+        "  accuracy      A {:.4} µm (A↑ {:.4}, A↓ {:.4})",
+        um(f.a),
+        um(f.a_fwd),
+        um(f.a_bwd)
+    );
+    let _ = writeln!(
+        s,
+        "  repeatability R {:.4} µm (R↑ {:.4}, R↓ {:.4})",
+        um(f.r),
+        um(f.r_fwd),
+        um(f.r_bwd)
+    );
+    let _ = writeln!(
+        s,
+        "  systematic    E {:.4} µm (E↑ {:.4}, E↓ {:.4}); mean M {:.4} µm",
+        um(f.e),
+        um(f.e_fwd),
+        um(f.e_bwd),
+        um(f.m)
+    );
+    let _ = writeln!(
+        s,
+        "  reversal      B {:.4} µm, mean B̄ {:+.4} µm",
+        um(f.b),
+        um(f.b_mean)
+    );
+    let _ = writeln!(
+        s,
+        "  {:>12} {:>10} {:>10} {:>10} {:>9} {:>9} {:>9}",
+        "target mm", "x̄↑ µm", "x̄↓ µm", "B µm", "s↑ µm", "s↓ µm", "R µm"
+    );
+    for t in &f.targets {
+        let _ = writeln!(
+            s,
+            "  {:>12.4} {:>10.4} {:>10.4} {:>+10.4} {:>9.4} {:>9.4} {:>9.4}",
+            t.target,
+            um(t.mean_fwd),
+            um(t.mean_bwd),
+            um(t.b),
+            um(t.s_fwd),
+            um(t.s_bwd),
+            um(t.r)
+        );
+    }
+    s
+}
+
 fn fail(msg: impl std::fmt::Display) -> ExitCode {
     let _ = writeln!(std::io::stderr(), "twinmill: error: {msg}");
     ExitCode::FAILURE
@@ -344,6 +432,24 @@ fn fail(msg: impl std::fmt::Display) -> ExitCode {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
+        Command::Evaluate {
+            command: EvaluateCommand::Iso230_2 { file, json },
+        } => {
+            let text = match std::fs::read_to_string(&file) {
+                Ok(t) => t,
+                Err(e) => return fail(format!("{}: cannot read: {e}", file.display())),
+            };
+            let figures = match parse_readings(&text, &file)
+                .and_then(|readings| evaluate_positioning(&readings, &file))
+            {
+                Ok(f) => f,
+                Err(e) => return fail(e),
+            };
+            print_out(
+                || positioning_summary(&file, &figures),
+                json.then(|| serde_json::to_string_pretty(&figures)),
+            )
+        }
         Command::Nc {
             command: NcCommand::BenchProgram { blocks },
         } => {

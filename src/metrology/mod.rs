@@ -1,8 +1,9 @@
 //! **Metrology**: measuring the cut part. Point clouds and their files ([`cloud`]), the
 //! virtual structured-light scanner ([`scan`]), least-squares fits of planes, spheres,
 //! circles and cylinders with their uncertainties ([`fit`]), and segmentation of whole
-//! clouds into faces and shapes ([`segment`]). The instruments of the standards (laser
-//! interferometer, ball bar, ball sensor) belong here too.
+//! clouds into faces and shapes ([`segment`]), and the evaluations of the standards: ISO 230-2
+//! positioning accuracy from any readings ([`positioning`]). The instruments of the standards
+//! (laser interferometer, ball bar, ball sensor) belong here too.
 //!
 //! May use [`crate::math`], [`crate::progress`] and [`crate::cutting`] (the scanner looks at
 //! the stock's crossings). Fits and segmentation work on any cloud, from twinmill or from a
@@ -12,3 +13,4 @@ pub mod cloud;
 pub mod scan;
 pub mod fit;
 pub mod segment;
+pub mod positioning;

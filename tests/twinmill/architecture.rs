@@ -28,7 +28,10 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "tool", "shape", "stock", "cutter", "envelope", "sweep", "collide", "mesh", "zmap",
         ],
     ),
-    ("metrology", &["cloud", "scan", "fit", "segment"]),
+    (
+        "metrology",
+        &["cloud", "scan", "fit", "segment", "positioning"],
+    ),
     (
         "calibration",
         &["identify", "calibrate", "design", "correct"],

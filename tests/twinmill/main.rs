@@ -12,6 +12,7 @@ mod tool_shapes;
 mod solids_collisions_deviation;
 mod simulate;
 mod sweep;
+mod evaluate;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};

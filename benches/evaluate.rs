@@ -1,0 +1,65 @@
+//! Benchmark of the ISO 230-2 evaluation (`metrology::positioning`): 10,000 readings — 100
+//! targets, 10 runs each way — from a fixed sequence, and the same readings read from the
+//! long CSV layout first.
+//!
+//! `cargo bench --bench evaluate`. Goal: ≤ 1 ms for the evaluation of 10,000 readings.
+
+use criterion::{Criterion, Throughput, criterion_group, criterion_main};
+use std::hint::black_box;
+use std::path::Path;
+use twinmill::math::CounterRng;
+use twinmill::metrology::positioning::{Direction, Reading, evaluate, parse_readings};
+
+/// 100 targets 5 mm apart, 10 runs in each direction: 10,000 readings (mm).
+fn readings() -> Vec<Reading> {
+    let rng = CounterRng::new(2302);
+    let mut out = Vec::with_capacity(10_000);
+    for i in 0..100 {
+        for (d, direction) in [Direction::Forward, Direction::Backward].iter().enumerate() {
+            for run in 1..=10 {
+                let k = (i * 20 + d * 10 + run) as u64;
+                out.push(Reading {
+                    target_mm: 5.0 * i as f64,
+                    direction: *direction,
+                    run: run as u32,
+                    deviation_mm: 0.002 * (i as f64 * 0.1).sin() - 0.003 * d as f64
+                        + 0.001 * rng.normal(k),
+                });
+            }
+        }
+    }
+    out
+}
+
+fn bench(c: &mut Criterion) {
+    let r = readings();
+    let mut text = String::from("target,direction,run,deviation\n");
+    for x in &r {
+        text.push_str(&format!(
+            "{},{},{},{}\n",
+            x.target_mm,
+            x.direction.sign(),
+            x.run,
+            x.deviation_mm
+        ));
+    }
+    let path = Path::new("bench.csv");
+    let mut g = c.benchmark_group("iso230-2");
+    g.throughput(Throughput::Elements(r.len() as u64));
+    g.bench_function("evaluate 10,000 readings", |b| {
+        b.iter(|| evaluate(black_box(&r), path).expect("complete"))
+    });
+    g.bench_function("parse and evaluate 10,000 readings (long CSV)", |b| {
+        b.iter(|| {
+            let r = parse_readings(black_box(&text), path).expect("readable");
+            evaluate(&r, path).expect("complete")
+        })
+    });
+    g.finish();
+}
+
+mod group {
+    use super::*;
+    criterion_group!(evaluate, bench);
+}
+criterion_main!(group::evaluate);

@@ -1,0 +1,152 @@
+//! `twinmill evaluate`: the ISO 230-2 figures of a readings file, against an independent
+//! computation in the test and the standard's check vector; bad files fail with their place.
+
+use crate::Sandbox;
+
+/// Sample mean and standard deviation (n − 1), written out here.
+fn mean_s(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    (
+        m,
+        (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt(),
+    )
+}
+
+#[test]
+fn iso230_2_figures_equal_an_independent_computation() {
+    // 7 targets, 5 runs each way, deviations from a fixed linear congruential sequence (mm),
+    // written as a laser system's wide table with the deviations in µm.
+    let mut state: u64 = 2024;
+    let mut next = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 10.0
+    };
+    let targets: Vec<f64> = (0..7).map(|i| -30.0 + 12.5 * i as f64).collect();
+    let mut fwd = vec![vec![0.0; 5]; 7];
+    let mut bwd = vec![vec![0.0; 5]; 7];
+    // Units apply per column: +run1 is given in µm, every other column in mm.
+    let mut text = String::from("target[mm],+run1[um],+run2,+run3,+run4,+run5,-1,-2,-3,-4,-5\n");
+    for (i, t) in targets.iter().enumerate() {
+        let mut row = format!("{t}");
+        for (j, x) in fwd[i].iter_mut().enumerate() {
+            *x = next() * 1e-3 + 0.002 * (i as f64).sin();
+            let shown = if j == 0 { *x * 1e3 } else { *x };
+            row.push_str(&format!(",{shown:?}"));
+        }
+        for x in bwd[i].iter_mut() {
+            *x = next() * 1e-3 - 0.004;
+            row.push_str(&format!(",{x:?}"));
+        }
+        text.push_str(&row);
+        text.push('\n');
+    }
+    let sb = Sandbox::new("iso230-2");
+    sb.write("x.csv", text.as_bytes());
+    let (code, stdout, stderr) = sb.run(&["evaluate", "iso230-2", "x.csv", "--json"]);
+    assert_eq!(code, 0, "{stderr}");
+    let j: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    let g = |k: &str| j[k].as_f64().unwrap_or_else(|| panic!("{k} in {j}"));
+    // The standard's definitions, computed here.
+    let (mut hi, mut lo) = (f64::NEG_INFINITY, f64::INFINITY);
+    let (mut hi_f, mut lo_f, mut hi_b, mut lo_b) = (hi, lo, hi, lo);
+    let (mut bmax, mut bsum, mut rmax, mut rfmax, mut rbmax) =
+        (0.0_f64, 0.0, 0.0_f64, 0.0_f64, 0.0_f64);
+    let (mut emax, mut emin, mut mmax, mut mmin) = (hi, lo, hi, lo);
+    let (mut ef, mut eb) = ((hi, lo), (hi, lo));
+    for i in 0..7 {
+        let (mf, sf) = mean_s(&fwd[i]);
+        let (mb, sbk) = mean_s(&bwd[i]);
+        let b = mf - mb;
+        bmax = bmax.max(b.abs());
+        bsum += b;
+        let r = (2.0 * sf + 2.0 * sbk + b.abs())
+            .max(4.0 * sf)
+            .max(4.0 * sbk);
+        rmax = rmax.max(r);
+        rfmax = rfmax.max(4.0 * sf);
+        rbmax = rbmax.max(4.0 * sbk);
+        hi_f = hi_f.max(mf + 2.0 * sf);
+        lo_f = lo_f.min(mf - 2.0 * sf);
+        hi_b = hi_b.max(mb + 2.0 * sbk);
+        lo_b = lo_b.min(mb - 2.0 * sbk);
+        hi = hi.max(hi_f).max(hi_b);
+        lo = lo.min(lo_f).min(lo_b);
+        emax = emax.max(mf).max(mb);
+        emin = emin.min(mf).min(mb);
+        mmax = mmax.max(0.5 * (mf + mb));
+        mmin = mmin.min(0.5 * (mf + mb));
+        ef = (ef.0.max(mf), ef.1.min(mf));
+        eb = (eb.0.max(mb), eb.1.min(mb));
+        let t = &j["targets"][i];
+        assert_eq!(t["target"].as_f64(), Some(targets[i]));
+        for (k, v) in [
+            ("mean_fwd", mf),
+            ("mean_bwd", mb),
+            ("B", b),
+            ("s_fwd", sf),
+            ("s_bwd", sbk),
+            ("R", r),
+        ] {
+            let got = t[k].as_f64().expect("number");
+            assert!((got - v).abs() < 1e-9, "target {i} {k}: {got} vs {v}");
+        }
+    }
+    for (k, v) in [
+        ("A", hi - lo),
+        ("A_fwd", hi_f - lo_f),
+        ("A_bwd", hi_b - lo_b),
+        ("B", bmax),
+        ("B_mean", bsum / 7.0),
+        ("E", emax - emin),
+        ("E_fwd", ef.0 - ef.1),
+        ("E_bwd", eb.0 - eb.1),
+        ("M", mmax - mmin),
+        ("R", rmax),
+        ("R_fwd", rfmax),
+        ("R_bwd", rbmax),
+    ] {
+        assert!((g(k) - v).abs() < 1e-9, "{k}: {} vs {v}", g(k));
+    }
+    assert_eq!(j["runs"].as_u64(), Some(5));
+}
+
+#[test]
+fn iso230_2_refuses_incomplete_files_with_their_place() {
+    let sb = Sandbox::new("iso230-2-bad");
+    for (name, text, expect) in [
+        (
+            "nan.csv",
+            "target,direction,run,deviation\n0,+,1,inf\n",
+            "nan.csv:2:7:",
+        ),
+        (
+            "unit.csv",
+            "target[parsec],+1,+2,-1,-2\n",
+            "unit.csv:1:1: unknown unit",
+        ),
+        (
+            "short.csv",
+            "target,+1,+2,-1,-2\n0,0,0,0,0\n5,0,0,0\n",
+            "short.csv:3:1: expected 5 fields",
+        ),
+        (
+            "runs.csv",
+            "target,direction,run,deviation\n0,+,1,0\n0,+,2,0\n0,-,1,0\n0,-,2,0\n1,+,1,0\n1,+,3,0\n1,-,1,0\n1,-,2,0\n",
+            "runs.csv: target 1 +: runs {1, 3}",
+        ),
+    ] {
+        sb.write(name, text.as_bytes());
+        let (code, stdout, stderr) = sb.run(&["evaluate", "iso230-2", name]);
+        assert_ne!(code, 0, "{name}");
+        assert!(stdout.is_empty(), "{name}: {stdout}");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{name}: {stderr}");
+        assert!(
+            stderr.contains(expect),
+            "{name}: '{expect}' not in {stderr}"
+        );
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+}
