@@ -2,12 +2,17 @@
 //! targets, 10 runs each way — from a fixed sequence, and the same readings read from the
 //! long CSV layout first.
 //!
-//! `cargo bench --bench evaluate`. Goal: ≤ 1 ms for the evaluation of 10,000 readings.
+//! And of the ISO 230-4 evaluation (`metrology::circular`): a 360-point ball-bar circle in
+//! each direction with squareness, scale mismatch, backlash and noise.
+//!
+//! `cargo bench --bench evaluate`. Goals: ≤ 1 ms for the evaluation of 10,000 readings;
+//! ≤ 1 ms for a 360-point circle with its evaluation.
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
 use std::path::Path;
 use twinmill::math::CounterRng;
+use twinmill::metrology::circular::{self, CircularOptions, Sample, Turn};
 use twinmill::metrology::positioning::{Direction, Reading, evaluate, parse_readings};
 
 /// 100 targets 5 mm apart, 10 runs in each direction: 10,000 readings (mm).
@@ -58,8 +63,50 @@ fn bench(c: &mut Criterion) {
     g.finish();
 }
 
+/// One 360-point circle of radius 100 mm in `turn`, with 50 µrad squareness, 10 ppm of scale
+/// on X, 3 µm of lost motion on X and 0.1 µm noise.
+fn circle(turn: Turn) -> Vec<Sample> {
+    let rng = CounterRng::new(2304);
+    let dir = if turn == Turn::Ccw { 1.0 } else { -1.0 };
+    (0..360)
+        .map(|i| {
+            let t = (i as f64 + 0.5).to_radians();
+            let (x, y) = (100.0 * t.cos(), 100.0 * t.sin());
+            let ax = x * (1.0 + 10e-6) + 50e-6 * y + 1.5e-3 * (t.sin() * dir).signum();
+            Sample {
+                turn,
+                angle_rad: t,
+                deviation_mm: ax.hypot(y) - 100.0 + 1e-4 * rng.normal(i),
+            }
+        })
+        .collect()
+}
+
+fn bench_circular(c: &mut Criterion) {
+    let ccw = circle(Turn::Ccw);
+    let mut both = ccw.clone();
+    both.extend(circle(Turn::Cw));
+    let opts = CircularOptions {
+        radius_mm: 100.0,
+        pitch_mm: None,
+    };
+    let with_pitch = CircularOptions {
+        pitch_mm: Some(5.0),
+        ..opts
+    };
+    let path = Path::new("bench.csv");
+    let mut g = c.benchmark_group("iso230-4");
+    g.bench_function("360-point circle", |b| {
+        b.iter(|| circular::evaluate(black_box(&ccw), &opts, path).expect("evaluates"))
+    });
+    g.bench_function("360-point circle each way, with cyclic terms", |b| {
+        b.iter(|| circular::evaluate(black_box(&both), &with_pitch, path).expect("evaluates"))
+    });
+    g.finish();
+}
+
 mod group {
     use super::*;
-    criterion_group!(evaluate, bench);
+    criterion_group!(evaluate, bench, bench_circular);
 }
 criterion_main!(group::evaluate);

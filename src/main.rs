@@ -10,6 +10,9 @@ use std::sync::Mutex;
 use twinmill::calibration::correct::write_gcode;
 use twinmill::calibration::design::{DesignOptions, design, kind_name};
 use twinmill::math::{Aabb, Point3};
+use twinmill::metrology::circular::{
+    CircularFigures, CircularOptions, Diagnosis, evaluate as evaluate_circular, parse_trace,
+};
 use twinmill::metrology::cloud::read_cloud_file;
 use twinmill::metrology::positioning::{
     PositioningFigures, evaluate as evaluate_positioning, parse_readings,
@@ -196,7 +199,8 @@ enum Command {
         #[arg(long, value_delimiter = ',', num_args = 1, required = true)]
         params: Vec<String>,
     },
-    /// Evaluate measurements as a standard says (ISO 230-2 positioning).
+    /// Evaluate measurements as a standard says (ISO 230-2 positioning, ISO 230-4 circular
+    /// tests).
     Evaluate {
         #[command(subcommand)]
         command: EvaluateCommand,
@@ -273,6 +277,25 @@ enum EvaluateCommand {
         /// Print the figures as JSON (mm): A, A_fwd, A_bwd, B, B_mean, E, E_fwd, E_bwd, M,
         /// R, R_fwd, R_bwd, runs and per target {target, mean_fwd, mean_bwd, mean, B, s_fwd,
         /// s_bwd, R_fwd, R_bwd, R}.
+        #[arg(long)]
+        json: bool,
+    },
+    /// ISO 230-4 circular test (ball bar) from a radial-deviation trace: CSV
+    /// `direction,angle,deviation` (`ccw`/`cw`, degrees, mm; `deviation[um]`, `angle[rad]`
+    /// set units): circular deviation G, radial deviation F, hysteresis H, and the
+    /// diagnostics (squareness, servo mismatch, scale mismatch, reversals, straightness,
+    /// cyclic error with --pitch).
+    #[command(name = "iso230-4")]
+    Iso230_4 {
+        /// The trace file.
+        file: PathBuf,
+        /// Nominal radius of the circle (mm).
+        #[arg(long, allow_negative_numbers = true)]
+        radius: f64,
+        /// Screw lead of the axes, for the cyclic-error terms (mm).
+        #[arg(long, allow_negative_numbers = true)]
+        pitch: Option<f64>,
+        /// Print the figures as JSON.
         #[arg(long)]
         json: bool,
     },
@@ -424,6 +447,67 @@ fn positioning_summary(file: &Path, f: &PositioningFigures) -> String {
     s
 }
 
+/// The ISO 230-4 figures and diagnostics as the CLI prints them (µm).
+fn circular_summary(file: &Path, f: &CircularFigures) -> String {
+    use std::fmt::Write as _;
+    let um = |x: f64| x * 1e3;
+    let diag = |d: &Diagnosis, scale: f64, unit: &str| match d {
+        Diagnosis::Value { value, sigma } => {
+            format!("{:+.3} ± {:.3} {unit}", value * scale, sigma * scale)
+        }
+        Diagnosis::NotDetermined { not_determined } => format!("not determined: {not_determined}"),
+    };
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "twinmill evaluate iso230-4: {} (radius {} mm)",
+        file.display(),
+        f.radius_mm
+    );
+    for d in &f.directions {
+        let _ = writeln!(
+            s,
+            "  {:<4} {} points over {:.0}°: G {:.3} µm, F {:+.3} / {:+.3} µm, centre ({:+.3}, {:+.3}) µm",
+            format!("{:?}", d.direction).to_lowercase(),
+            d.points,
+            d.span_deg,
+            um(d.g),
+            um(d.f_max),
+            um(d.f_min),
+            um(d.centre_mm[0]),
+            um(d.centre_mm[1])
+        );
+        let _ = writeln!(
+            s,
+            "       scale mismatch {}; reversal axis 1 {}; axis 2 {}",
+            diag(&d.scale_mismatch_um_per_m, 1.0, "µm/m"),
+            diag(&d.reversal_1_mm, 1e3, "µm"),
+            diag(&d.reversal_2_mm, 1e3, "µm")
+        );
+        let _ = writeln!(
+            s,
+            "       straightness axis 1 {}; axis 2 {}; residual rms {:.3} µm",
+            diag(&d.straightness_1_mm, 1e3, "µm"),
+            diag(&d.straightness_2_mm, 1e3, "µm"),
+            um(d.residual_rms_mm)
+        );
+    }
+    if let Some(h) = f.h {
+        let _ = writeln!(s, "  hysteresis H {:.3} µm", um(h));
+    }
+    let _ = writeln!(
+        s,
+        "  squareness    {}",
+        diag(&f.squareness_urad, 1.0, "µm/m")
+    );
+    let _ = writeln!(
+        s,
+        "  servo mismatch {}",
+        diag(&f.servo_mismatch_urad, 1.0, "µm/m")
+    );
+    s
+}
+
 fn fail(msg: impl std::fmt::Display) -> ExitCode {
     let _ = writeln!(std::io::stderr(), "twinmill: error: {msg}");
     ExitCode::FAILURE
@@ -447,6 +531,34 @@ fn main() -> ExitCode {
             };
             print_out(
                 || positioning_summary(&file, &figures),
+                json.then(|| serde_json::to_string_pretty(&figures)),
+            )
+        }
+        Command::Evaluate {
+            command:
+                EvaluateCommand::Iso230_4 {
+                    file,
+                    radius,
+                    pitch,
+                    json,
+                },
+        } => {
+            let text = match std::fs::read_to_string(&file) {
+                Ok(t) => t,
+                Err(e) => return fail(format!("{}: cannot read: {e}", file.display())),
+            };
+            let opts = CircularOptions {
+                radius_mm: radius,
+                pitch_mm: pitch,
+            };
+            let figures = match parse_trace(&text, &file)
+                .and_then(|samples| evaluate_circular(&samples, &opts, &file))
+            {
+                Ok(f) => f,
+                Err(e) => return fail(e),
+            };
+            print_out(
+                || circular_summary(&file, &figures),
                 json.then(|| serde_json::to_string_pretty(&figures)),
             )
         }

@@ -2,7 +2,8 @@
 //! virtual structured-light scanner ([`scan`]), least-squares fits of planes, spheres,
 //! circles and cylinders with their uncertainties ([`fit`]), and segmentation of whole
 //! clouds into faces and shapes ([`segment`]), and the evaluations of the standards: ISO 230-2
-//! positioning accuracy from any readings ([`positioning`]). The instruments of the standards
+//! positioning accuracy from any readings ([`positioning`]) and ISO 230-4 circular tests with the
+//! ball-bar diagnostics ([`circular`]). The instruments of the standards
 //! (laser interferometer, ball bar, ball sensor) belong here too.
 //!
 //! May use [`crate::math`], [`crate::progress`] and [`crate::cutting`] (the scanner looks at
@@ -14,3 +15,4 @@ pub mod scan;
 pub mod fit;
 pub mod segment;
 pub mod positioning;
+pub mod circular;

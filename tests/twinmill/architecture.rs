@@ -30,7 +30,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
     ),
     (
         "metrology",
-        &["cloud", "scan", "fit", "segment", "positioning"],
+        &["cloud", "scan", "fit", "segment", "positioning", "circular"],
     ),
     (
         "calibration",

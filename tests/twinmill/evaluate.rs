@@ -1,5 +1,6 @@
 //! `twinmill evaluate`: the ISO 230-2 figures of a readings file, against an independent
-//! computation in the test and the standard's check vector; bad files fail with their place.
+//! computation in the test and the standard's check vector; the ISO 230-4 figures and
+//! diagnostics of a ball-bar trace with known machine errors; bad files fail with their place.
 
 use crate::Sandbox;
 
@@ -140,6 +141,116 @@ fn iso230_2_refuses_incomplete_files_with_their_place() {
     ] {
         sb.write(name, text.as_bytes());
         let (code, stdout, stderr) = sb.run(&["evaluate", "iso230-2", name]);
+        assert_ne!(code, 0, "{name}");
+        assert!(stdout.is_empty(), "{name}: {stdout}");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{name}: {stderr}");
+        assert!(
+            stderr.contains(expect),
+            "{name}: '{expect}' not in {stderr}"
+        );
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
+}
+
+/// A ball-bar trace of a machine whose Y axis leans α towards X, whose X scale is s and whose
+/// axes lose b₁, b₂ at reversals, measured exactly: the distance of the actual point from the
+/// centre ball minus R, in µm, both directions, one sample a degree.
+fn ballbar_trace(r: f64, alpha: f64, s: f64, b: [f64; 2]) -> String {
+    let mut text = String::from("direction,angle[deg],deviation[um]\n");
+    for (name, dir) in [("ccw", 1.0), ("cw", -1.0)] {
+        for i in 0..360 {
+            let t = (i as f64 + 0.5).to_radians();
+            let (x, y) = (r * t.cos(), r * t.sin());
+            // Velocity of each axis along the path; the table trails b/2 behind it.
+            let (vx, vy) = (-t.sin() * dir, t.cos() * dir);
+            let ax = x * (1.0 + s) + alpha * y - 0.5 * b[0] * vx.signum();
+            let ay = y - 0.5 * b[1] * vy.signum();
+            let d = (ax.hypot(ay) - r) * 1e3;
+            text.push_str(&format!("{name},{},{d:?}\n", i as f64 + 0.5));
+        }
+    }
+    text
+}
+
+#[test]
+fn iso230_4_reads_back_squareness_scale_and_reversals() {
+    let sb = Sandbox::new("iso230-4");
+    let (r, alpha, s, b) = (100.0, 50e-6, 10e-6, [3e-3, 1.5e-3]);
+    sb.write("bb.csv", ballbar_trace(r, alpha, s, b).as_bytes());
+    let (code, stdout, stderr) = sb.run(&[
+        "evaluate", "iso230-4", "bb.csv", "--radius", "100", "--json",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let j: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    let v = |x: &serde_json::Value| x["value"].as_f64().unwrap_or_else(|| panic!("{x}"));
+    // First-order signatures on a circle: squareness α (µrad = µm/m), scale mismatch s,
+    // the lost motion b at each axis's reversals; within 2 %.
+    let sq = v(&j["squareness_urad"]);
+    assert!((sq - 50.0).abs() < 1.0, "squareness {sq}");
+    assert!(v(&j["servo_mismatch_urad"]).abs() < 1.0);
+    let dirs = j["directions"].as_array().expect("directions");
+    assert_eq!(dirs.len(), 2);
+    for d in dirs {
+        let m = v(&d["scale_mismatch_um_per_m"]);
+        assert!((m - 10.0).abs() < 0.2, "scale mismatch {m}");
+        let (r1, r2) = (v(&d["reversal_1_mm"]), v(&d["reversal_2_mm"]));
+        assert!((r1 - b[0]).abs() < 0.02 * b[0], "reversal 1 {r1}");
+        assert!((r2 - b[1]).abs() < 0.02 * b[1], "reversal 2 {r2}");
+        assert_eq!(d["points"], 360);
+    }
+    assert!(j["H"].as_f64().expect("H") > 0.0);
+    // The summary names the figures.
+    let (code, stdout, _) = sb.run(&["evaluate", "iso230-4", "bb.csv", "--radius", "100"]);
+    assert_eq!(code, 0);
+    assert!(
+        stdout.contains("squareness") && stdout.contains("hysteresis H"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn iso230_4_refuses_bad_traces_with_their_place() {
+    let sb = Sandbox::new("iso230-4-bad");
+    let full: String = (0..36).map(|i| format!("ccw,{},0\n", i * 10)).collect();
+    for (name, text, args, expect) in [
+        (
+            "nan.csv",
+            "direction,angle,deviation\nccw,0,inf\n".to_string(),
+            vec![],
+            "nan.csv:2:7:",
+        ),
+        (
+            "head.csv",
+            "dir,angle,deviation\n".to_string(),
+            vec![],
+            "head.csv:1:1: expected 'direction'",
+        ),
+        (
+            "few.csv",
+            "direction,angle,deviation\nccw,0,0\ncw,1,0\n".to_string(),
+            vec![],
+            "at least 8",
+        ),
+        (
+            "r.csv",
+            format!("direction,angle,deviation\n{full}"),
+            vec!["--radius", "-5"],
+            "radius must be positive",
+        ),
+        (
+            "p.csv",
+            format!("direction,angle,deviation\n{full}"),
+            vec!["--pitch", "0"],
+            "pitch must be positive",
+        ),
+    ] {
+        sb.write(name, text.as_bytes());
+        let mut a = vec!["evaluate", "iso230-4", name];
+        if !args.contains(&"--radius") {
+            a.extend(["--radius", "100"]);
+        }
+        a.extend(args.iter().copied());
+        let (code, stdout, stderr) = sb.run(&a);
         assert_ne!(code, 0, "{name}");
         assert!(stdout.is_empty(), "{name}: {stdout}");
         assert_eq!(stderr.trim_end().lines().count(), 1, "{name}: {stderr}");
