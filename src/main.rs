@@ -10,6 +10,7 @@ use std::sync::Mutex;
 use twinmill::calibration::correct::write_gcode;
 use twinmill::calibration::design::{DesignOptions, design, kind_name};
 use twinmill::math::{Aabb, Point3};
+use twinmill::metrology::ball_sensor::{self, BallSensor};
 use twinmill::metrology::circular::{
     CircularFigures, CircularOptions, Diagnosis, evaluate as evaluate_circular, parse_trace,
 };
@@ -299,6 +300,35 @@ enum EvaluateCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Seed 003's non-contact ball sensor: ball centres from the two micrometers' readings
+    /// (CSV `Lx1,Lx2,Ly1,Ly2`, mm; `[um]` after a name sets its unit) by eq. (1)–(3), each
+    /// with its Z error bound, and the Z working window for a tolerance.
+    #[command(name = "ball-sensor")]
+    BallSensor {
+        /// The readings file; without it, only the Z error curve and the window.
+        file: Option<PathBuf>,
+        /// Width of micrometer B's light band L_x0 (mm).
+        #[arg(long, default_value_t = 10.0)]
+        band_x: f64,
+        /// Width of micrometer A's light band L_y0 (mm).
+        #[arg(long, default_value_t = 10.0)]
+        band_y: f64,
+        /// Master ball diameter (mm).
+        #[arg(long, default_value_t = 4.0002)]
+        ball: f64,
+        /// Bound of each micrometer reading's error (µm).
+        #[arg(long, default_value_t = 0.5)]
+        accuracy: f64,
+        /// Tolerance on Z for the working window (µm).
+        #[arg(long, default_value_t = 1.0)]
+        tolerance: f64,
+        /// Shortest chord the micrometers measure within their accuracy (mm); 0: no limit.
+        #[arg(long, default_value_t = 0.0)]
+        min_chord: f64,
+        /// Print the figures as JSON.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 /// Sets the thread count, loads the scene, checks that it has what `command` needs, and
@@ -508,6 +538,113 @@ fn circular_summary(file: &Path, f: &CircularFigures) -> String {
     s
 }
 
+/// `evaluate ball-sensor`: the sensor from the options `[band_x, band_y, ball, accuracy,
+/// tolerance, min_chord]` (mm), the window, and the centres of a readings file if one is given.
+fn evaluate_ball_sensor(file: Option<&Path>, o: [f64; 6], json: bool) -> ExitCode {
+    use std::fmt::Write as _;
+    let [band_x, band_y, ball, accuracy, tolerance, min_chord] = o;
+    let checks = [
+        ("--band-x", band_x),
+        ("--band-y", band_y),
+        ("--ball", ball),
+        ("--accuracy", accuracy),
+        ("--tolerance", tolerance),
+    ];
+    if let Some((name, v)) = checks.iter().find(|(_, v)| !(v.is_finite() && *v > 0.0)) {
+        return fail(format!("{name} must be positive, got {v}"));
+    }
+    if !(min_chord.is_finite() && min_chord >= 0.0) {
+        return fail(format!(
+            "--min-chord must be 0 or positive, got {min_chord}"
+        ));
+    }
+    let mut sensor = BallSensor::seed003(band_x);
+    sensor.b.width_mm = band_x;
+    sensor.a.width_mm = band_y;
+    sensor.ball_diameter_mm = ball;
+    sensor.accuracy_mm = accuracy;
+    sensor.min_chord_mm = min_chord;
+    let centres = match file {
+        Some(f) => {
+            let text = match std::fs::read_to_string(f) {
+                Ok(t) => t,
+                Err(e) => return fail(format!("{}: cannot read: {e}", f.display())),
+            };
+            match ball_sensor::parse_readings(&text, f)
+                .and_then(|rows| ball_sensor::centres(&sensor, &rows, f))
+            {
+                Ok(c) => c,
+                Err(e) => return fail(e),
+            }
+        }
+        None => Vec::new(),
+    };
+    let window = sensor.working_window(tolerance);
+    let r = sensor.radius();
+    let curve: Vec<_> = (1..=20)
+        .map(|i| sensor.z_error(r * i as f64 / 20.0 * 0.95))
+        .collect();
+    let figures = serde_json::json!({
+        "ball_diameter_mm": ball,
+        "accuracy_mm": accuracy,
+        "window": window,
+        "z_error_curve": curve,
+        "centres": centres,
+    });
+    print_out(
+        || {
+            let mut s = String::new();
+            let _ = writeln!(
+                s,
+                "twinmill evaluate ball-sensor: ball Ø {ball} mm, micrometers ±{:.3} µm",
+                accuracy * 1e3
+            );
+            match window {
+                Some(w) => {
+                    let _ = writeln!(
+                        s,
+                        "  working window Z {:.3} … {:.3} mm (Z error ≤ {:.3} µm)",
+                        w.z_min_mm,
+                        w.z_max_mm,
+                        tolerance * 1e3
+                    );
+                }
+                None => {
+                    let _ = writeln!(
+                        s,
+                        "  no working window: no height keeps the Z error within {:.3} µm",
+                        tolerance * 1e3
+                    );
+                }
+            }
+            let _ = writeln!(s, "  Z (mm)   chord short  chord long (Z error, µm)");
+            for e in &curve {
+                let _ = writeln!(
+                    s,
+                    "  {:6.3}   {:+10.3}  {:+10.3}",
+                    e.z_mm,
+                    e.chord_short_mm * 1e3,
+                    e.chord_long_mm * 1e3
+                );
+            }
+            for (i, c) in centres.iter().enumerate() {
+                let [x, y, z] = c.centre_mm;
+                let inside = window.is_some_and(|w| (w.z_min_mm..=w.z_max_mm).contains(&z));
+                let _ = writeln!(
+                    s,
+                    "  {:>4}: X {x:+.4} Y {y:+.4} Z {z:.4} mm (±{:.3} µm{}); Z from B {:.4}",
+                    i + 1,
+                    c.z_error_bound_mm * 1e3,
+                    if inside { "" } else { ", outside the window" },
+                    c.z_from_b_mm
+                );
+            }
+            s
+        },
+        json.then(|| serde_json::to_string_pretty(&figures)),
+    )
+}
+
 fn fail(msg: impl std::fmt::Display) -> ExitCode {
     let _ = writeln!(std::io::stderr(), "twinmill: error: {msg}");
     ExitCode::FAILURE
@@ -562,6 +699,30 @@ fn main() -> ExitCode {
                 json.then(|| serde_json::to_string_pretty(&figures)),
             )
         }
+        Command::Evaluate {
+            command:
+                EvaluateCommand::BallSensor {
+                    file,
+                    band_x,
+                    band_y,
+                    ball,
+                    accuracy,
+                    tolerance,
+                    min_chord,
+                    json,
+                },
+        } => evaluate_ball_sensor(
+            file.as_deref(),
+            [
+                band_x,
+                band_y,
+                ball,
+                accuracy * 1e-3,
+                tolerance * 1e-3,
+                min_chord,
+            ],
+            json,
+        ),
         Command::Nc {
             command: NcCommand::BenchProgram { blocks },
         } => {

@@ -3,7 +3,8 @@
 //! circles and cylinders with their uncertainties ([`fit`]), and segmentation of whole
 //! clouds into faces and shapes ([`segment`]), and the evaluations of the standards: ISO 230-2
 //! positioning accuracy from any readings ([`positioning`]) and ISO 230-4 circular tests with the
-//! ball-bar diagnostics ([`circular`]). The instruments of the standards
+//! ball-bar diagnostics ([`circular`]), and seed 003's non-contact ball sensor with its Z
+//! uncertainty and working window ([`ball_sensor`]). The instruments of the standards
 //! (laser interferometer, ball bar, ball sensor) belong here too.
 //!
 //! May use [`crate::math`], [`crate::progress`] and [`crate::cutting`] (the scanner looks at
@@ -16,3 +17,4 @@ pub mod fit;
 pub mod segment;
 pub mod positioning;
 pub mod circular;
+pub mod ball_sensor;

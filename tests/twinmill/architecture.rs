@@ -30,7 +30,15 @@ const LAYOUT: &[(&str, &[&str])] = &[
     ),
     (
         "metrology",
-        &["cloud", "scan", "fit", "segment", "positioning", "circular"],
+        &[
+            "cloud",
+            "scan",
+            "fit",
+            "segment",
+            "positioning",
+            "circular",
+            "ball_sensor",
+        ],
     ),
     (
         "calibration",

@@ -261,3 +261,50 @@ fn iso230_4_refuses_bad_traces_with_their_place() {
         assert!(!stderr.contains("panicked"), "{stderr}");
     }
 }
+
+#[test]
+fn ball_sensor_readings_give_the_centre_by_eq_1_to_3_and_the_window() {
+    // A Ø 4.0002 mm ball at (0.25, −0.4, 1.2) mm in seed 003's sensor with 10 mm bands: a sheet
+    // cuts it in a disc of radius ρ = √(R² − Z²); each shadow starts at s − ρ + L0/2.
+    let sb = Sandbox::new("ball-sensor");
+    let (r, c) = (2.0001_f64, [0.25_f64, -0.4_f64, 1.2_f64]);
+    let rho = (r * r - c[2] * c[2]).sqrt();
+    let row = |x: f64, y: f64| {
+        format!(
+            "{:?},{:?},{:?},{:?}\n",
+            x - rho + 5.0,
+            2.0 * rho,
+            y - rho + 5.0,
+            2.0 * rho
+        )
+    };
+    let mut text = String::from("Lx1,Lx2,Ly1,Ly2\n");
+    text.push_str(&row(c[0], c[1]));
+    sb.write("s.csv", text.as_bytes());
+    let (code, stdout, stderr) = sb.run(&["evaluate", "ball-sensor", "s.csv", "--json"]);
+    assert_eq!(code, 0, "{stderr}");
+    let j: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+    let got = &j["centres"][0]["centre_mm"];
+    for (k, want) in c.iter().enumerate() {
+        assert!(
+            (got[k].as_f64().expect("number") - want).abs() < 1e-9,
+            "{k}: {got}"
+        );
+    }
+    // The window starts where a(√(R² − Z²))/(2Z) = 1 µm for a = 0.5 µm: Z ≈ R/√17.
+    let zmin = j["window"]["z_min_mm"].as_f64().expect("window");
+    assert!((zmin - r / 17f64.sqrt()).abs() < 0.01, "{zmin}");
+    // A shadow past the band's end is refused at its line.
+    sb.write(
+        "bad.csv",
+        b"Lx1,Lx2,Ly1,Ly2\n3.1,3.8,3.1,3.8\n3.1,3.8,7.5,3.8\n",
+    );
+    let (code, stdout, stderr) = sb.run(&["evaluate", "ball-sensor", "bad.csv"]);
+    assert_ne!(code, 0);
+    assert!(stdout.is_empty());
+    assert!(
+        stderr.contains("bad.csv:3:1:") && stderr.contains("outside its band"),
+        "{stderr}"
+    );
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+}
