@@ -83,9 +83,7 @@
 //!
 //! G5.x NURBS, G33 spindle-synchronised motion, G76, G87/G88, lathe modes, U V W axes (their
 //! words are bad characters, as in `rs274` on an X Y Z A B C machine), `#5xxx` parameters
-//! newer than LinuxCNC 2.9 and Python remaps are not supported. One
-//! corpus program is not reproduced: LinuxCNC 2.9 restarts each `M98 … L` repetition of an
-//! incremental canned cycle from the Z of the first repetition.
+//! newer than LinuxCNC 2.9 and Python remaps are not supported.
 
 pub mod comp;
 pub mod interp;

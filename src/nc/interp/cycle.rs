@@ -19,6 +19,25 @@ const PECK_CLEARANCE_MM: Real = 0.254;
 const LEVEL_TOL_MM: Real = 1e-9;
 
 impl Interpreter {
+    /// The L word as LinuxCNC reads it (`read_l`): a whole number (within 1e-4), not
+    /// negative; `None` without L.
+    pub(super) fn l_count(&self, b: &Block) -> LR<Option<u64>> {
+        let Some(l) = b.word(b'l') else {
+            return Ok(None);
+        };
+        let whole = l.round();
+        if (l - whole).abs() > 1e-4 {
+            return Err(self.err_word(b, b'l', "Non integer value for integer"));
+        }
+        if whole < 0.0 {
+            return Err(self.err_word(b, b'l', "Negative L word used"));
+        }
+        if whole > self.opts.max_blocks as Real {
+            return Err(self.err_word(b, b'l', "L word too large"));
+        }
+        Ok(Some(whole as u64))
+    }
+
     pub(super) fn cycle(&mut self, m: i32, b: &Block, explicit: bool) -> LR<()> {
         let (a1, a2, an) = self.plane.axes();
         let letters = [b'x', b'y', b'z'];
@@ -59,17 +78,9 @@ impl Interpreter {
             }
             self.cycle_q = Some(q);
         }
-        let repeat = match b.word(b'l') {
-            Some(l) => {
-                let li = l.round();
-                if li < 0.0 {
-                    return Err(self.err_word(b, b'l', "Negative L word used"));
-                }
-                if li > self.opts.max_blocks as Real {
-                    return Err(self.err_word(b, b'l', "L word too large"));
-                }
-                li as i64
-            }
+        let repeat = match self.l_count(b)? {
+            Some(0) => return Err(self.err_word(b, b'l', "Cannot do zero repeats of cycle")),
+            Some(l) => l as i64,
             None => 1,
         };
         let p = self.prog();
