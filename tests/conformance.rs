@@ -25,50 +25,15 @@ const TOL_INCH_PROGRAM: f64 = 3e-3;
 /// listed program starts to match (so the list stays true).
 const NOT_MATCHED: &[(&str, &str)] = &[
     (
-        "linuxcnc/nc_files/cone.ngc",
-        "U V W words: LinuxCNC refuses them on a machine without those axes (\"Bad character \
-         'w' used\"); we accept them",
-    ),
-    (
-        "linuxcnc/nc_files/hole-circle.ngc",
-        "polar words in an incremental canned cycle: LinuxCNC turns before each repetition",
-    ),
-    (
-        "linuxcnc/nc_files/mmount.ngc",
-        "the tool length offset applies to the whole position, also on axes a move does not name",
-    ),
-    (
-        "linuxcnc/nc_files/polar.ngc",
-        "a block with only a polar word in a canned cycle moves on the current radius",
-    ),
-    (
-        "linuxcnc/nc_files/skeleton.ngc",
-        "the tool length offset applies to the whole position, also on axes a move does not name",
-    ),
-    (
-        "linuxcnc/nc_files/smartprobe.ngc",
-        "probing: the standalone interpreter's probe result (#5070, #5061-#5069) is not set",
-    ),
-    (
         "linuxcnc/nc_files/systems.ngc",
         "G5.1 quadratic B-spline not implemented",
     ),
     ("linuxcnc/nc_files/threading.ngc", "G33 not implemented"),
-    (
-        "linuxcnc/nc_files/tool-length-probe.ngc",
-        "probing: 'Start point too close to probe point' is not checked",
-    ),
-    (
-        "linuxcnc/tests/interp/m98m99/05-M98-loops/test.ngc",
-        "LinuxCNC 2.9 starts each M98 L repetition of an incremental (G91) canned cycle from the \
-     Z of the first repetition (R recomputed from Z 0.25 each time although the tool is at \
-     the R plane 0.5); we use the actual position; not reproduced yet",
-    ),
 ];
 
 /// Programs in the corpus (LinuxCNC's 132 interpreter tests and 50 example programs, and the
-/// project's 27 samples): the test runs every one, so a program that goes missing fails it.
-const PROGRAMS: usize = 209;
+/// project's 63 samples): the test runs every one, so a program that goes missing fails it.
+const PROGRAMS: usize = 245;
 
 fn corpus_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus")

@@ -658,10 +658,11 @@ const FAST_DIGITS: usize = 15;
 /// A decimal mantissa below this times ten stays below 2^53 (exact in f64).
 const MANT_LIMIT: u64 = (1u64 << 53) / 10;
 
-/// Letters that make a word of [`Block::words`] (not g, m, n, o).
+/// Letters that make a word of [`Block::words`] (not g, m, n, o). U, V and W are bad
+/// characters, as in LinuxCNC's standalone interpreter (an X Y Z A B C machine).
 const WORD_LETTER: [bool; 256] = {
     let mut t = [false; 256];
-    let letters = b"abcdefhijklpqrstuvwxyz@^";
+    let letters = b"abcdefhijklpqrstxyz@^";
     let mut k = 0;
     while k < letters.len() {
         t[letters[k] as usize] = true;
@@ -918,11 +919,6 @@ fn read_block<P: ParamRead + ?Sized>(
                 b.words[k] = v;
                 b.present |= 1 << k;
                 b.word_pos[k] = c.orig(start) as u32;
-            }
-            b'%' if start == 0 => {
-                // a '%' line is handled by the interpreter before reading; here it is
-                // only legal alone
-                c.i += 1;
             }
             _ => {
                 let shown = if ch.is_ascii() {

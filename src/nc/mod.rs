@@ -28,7 +28,8 @@
 //!
 //! G0 G1 G2 G3 (centre I/J/K and R forms, full circles, helices, P turns) in G17/G18/G19;
 //! G4; G10 L1/L2/L10/L11/L20; G20/G21; G28/G30, G28.1/G30.1; G33.1 rigid tap; G38.2–G38.5
-//! probe (rs274's simulated probe: trips at the target, backs off 0.254 mm); G40/G41/G42/
+//! probe (rs274's simulated probe: trips at the target, backs off 0.254 mm, sets #5061–#5070);
+//! G40/G41/G42/
 //! G41.1/G42.1 cutter radius compensation ([`comp`], applied in program coordinates of the
 //! plane between motion generation and the machine conversion, as LinuxCNC does: entry and
 //! exit moves, concave corners by intersection, convex corners by inserted arcs, LinuxCNC's
@@ -80,10 +81,9 @@
 //!
 //! # Limitations
 //!
-//! G5.x NURBS, G33 spindle-synchronised motion, G76, G87/G88, lathe modes, U V W axes,
-//! `#5xxx` parameters newer than LinuxCNC 2.9 and Python remaps are not supported. One
-//! corpus program is not reproduced: LinuxCNC 2.9 restarts each `M98 … L` repetition of an
-//! incremental canned cycle from the Z of the first repetition.
+//! G5.x NURBS, G33 spindle-synchronised motion, G76, G87/G88, lathe modes, U V W axes (their
+//! words are bad characters, as in `rs274` on an X Y Z A B C machine), `#5xxx` parameters
+//! newer than LinuxCNC 2.9 and Python remaps are not supported.
 
 pub mod comp;
 pub mod interp;

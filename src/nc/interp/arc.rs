@@ -36,7 +36,7 @@ impl Interpreter {
             Plane::Yz => (b'j', b'k'),
         };
         let start_p = self.prog();
-        let end_p = self.target(b, false);
+        let end_p = self.target(b)?;
         let inch = self.u != 1.0;
         let r_word = b.word(b'r');
         let o1 = b.word(off_letters.0);

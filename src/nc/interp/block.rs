@@ -69,8 +69,14 @@ impl Interpreter {
                 960 | 970 => &mut g.spindle_mode,
                 _ => return Err(self.err_at(pos as usize, "Unknown g code used")),
             };
-            if slot.is_some() {
-                return Err(self.err_at(pos as usize, "Two G codes used from same modal group"));
+            // LinuxCNC (read_g): a G80 beside another motion code gives way to it, in
+            // either order (`G0 G80 X1` is G0); two other codes of one group are an error
+            match *slot {
+                Some(_) if code == 800 => continue,
+                Some(800) | None => {}
+                Some(_) => {
+                    return Err(self.err_at(pos as usize, "Two G codes used from same modal group"));
+                }
             }
             *slot = Some(code);
         }
@@ -108,6 +114,26 @@ impl Interpreter {
         let axis_given = [b'x', b'y', b'z', b'a', b'b', b'c', b'@', b'^']
             .iter()
             .any(|c| b.word(*c).is_some());
+        // polar words (LinuxCNC's enhance_block): only in the XY plane selected before this
+        // block, and never beside X or Y
+        if let Some(polar) = [b'@', b'^'].into_iter().find(|c| b.word(*c).is_some()) {
+            if self.plane != Plane::Xy {
+                return Err(self.err_word(
+                    b,
+                    polar,
+                    "Cannot use polar coordinate except in G17 plane",
+                ));
+            }
+            for (c, name) in [(b'x', 'X'), (b'y', 'Y')] {
+                if b.word(c).is_some() {
+                    return Err(self.err_word(
+                        b,
+                        c,
+                        format!("Cannot specify both polar coordinate and {name} word"),
+                    ));
+                }
+            }
+        }
 
         // motion mode after this block
         let motion_now = g.motion.or(self.motion);
@@ -231,7 +257,15 @@ impl Interpreter {
         }
         // 6. tool change
         if let Some((m, pos)) = toolchange {
+            // LinuxCNC reads the position back from the canon before the next line
+            self.resync_pending = true;
             if m == 6 {
+                if self.comp_on {
+                    return Err(self.err_at(
+                        pos,
+                        "Cannot change tools with cutter radius compensation on",
+                    ));
+                }
                 self.tool = self.selected;
                 self.event("CHANGE_TOOL", vec![EventArg::Num(self.tool as Real)]);
             } else {
@@ -363,8 +397,8 @@ impl Interpreter {
                 280 | 300 => self.g28(b, nm)?,
                 281 | 301 => {
                     let base = if nm == 281 { 5161 } else { 5181 };
-                    for i in 0..6 {
-                        let v = self.mpos[i];
+                    let cur_m = self.cur_machine();
+                    for (i, v) in cur_m.into_iter().enumerate() {
                         self.params.numbered[base + i] = if i < 3 { v / self.ext } else { v };
                     }
                 }
@@ -406,6 +440,11 @@ impl Interpreter {
                 && self.motion.is_some());
         if g53 && !matches!(motion_now, Some(0 | 10)) {
             return Err(self.err_g(b, 530, "Must use G0 or G1 with G53"));
+        }
+        if g.motion == Some(800)
+            || run_motion && !matches!(self.motion, Some(730 | 740 | 810..=890))
+        {
+            self.cycle_il = None;
         }
         if run_motion && let Some(m) = self.motion {
             self.do_motion(m, b, g53, g.motion.is_some())?;

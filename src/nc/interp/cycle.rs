@@ -1,19 +1,43 @@
 //! Canned cycles (G73, G74, G81–G86, G89) in the selected plane, with G98/G99 retract,
-//! L repeats, incremental positions, and the sticky Z, R and Q words.
+//! L repeats, incremental positions (also polar: `@` and `^` step before each hole), and the
+//! sticky Z, R and Q words.
 
 use crate::math::Real;
 use crate::nc::lex::Block;
 use crate::nc::output::{EventArg, MotionKind, Plane};
 
 use super::errors::LR;
+use super::motion::polar;
 use super::{FeedMode, Interpreter, MM_PER_INCH};
 
 /// Rapid clearance above each peck of G73/G83, inch programs (LinuxCNC: 0.010 in).
 const PECK_CLEARANCE_INCH: Real = 0.010;
 /// Same for mm programs (LinuxCNC: 0.254 mm).
 const PECK_CLEARANCE_MM: Real = 0.254;
+/// Levels closer than this (mm) are one level: LinuxCNC compares the levels it stored
+/// exactly; ours come back from machine coordinates with rounding.
+const LEVEL_TOL_MM: Real = 1e-9;
 
 impl Interpreter {
+    /// The L word as LinuxCNC reads it (`read_l`): a whole number (within 1e-4), not
+    /// negative; `None` without L.
+    pub(super) fn l_count(&self, b: &Block) -> LR<Option<u64>> {
+        let Some(l) = b.word(b'l') else {
+            return Ok(None);
+        };
+        let whole = l.round();
+        if (l - whole).abs() > 1e-4 {
+            return Err(self.err_word(b, b'l', "Non integer value for integer"));
+        }
+        if whole < 0.0 {
+            return Err(self.err_word(b, b'l', "Negative L word used"));
+        }
+        if whole > self.opts.max_blocks as Real {
+            return Err(self.err_word(b, b'l', "L word too large"));
+        }
+        Ok(Some(whole as u64))
+    }
+
     pub(super) fn cycle(&mut self, m: i32, b: &Block, explicit: bool) -> LR<()> {
         let (a1, a2, an) = self.plane.axes();
         let letters = [b'x', b'y', b'z'];
@@ -54,27 +78,29 @@ impl Interpreter {
             }
             self.cycle_q = Some(q);
         }
-        let repeat = match b.word(b'l') {
-            Some(l) => {
-                let li = l.round();
-                if li < 0.0 {
-                    return Err(self.err_word(b, b'l', "Negative L word used"));
-                }
-                if li > self.opts.max_blocks as Real {
-                    return Err(self.err_word(b, b'l', "L word too large"));
-                }
-                li as i64
-            }
+        let repeat = match self.l_count(b)? {
+            Some(0) => return Err(self.err_word(b, b'l', "Cannot do zero repeats of cycle")),
+            Some(l) => l as i64,
             None => 1,
         };
         let p = self.prog();
-        let old_cc0 = p[an];
+        // LinuxCNC 2.9 keeps the level of the first block of a run of cycles (until a
+        // motion that is not a cycle) as the old level of every later block: the G98
+        // retract height and the base of incremental R
+        let current_cc0 = p[an];
+        let old_cc0 = *self.cycle_il.get_or_insert(current_cc0);
         let (mut aa, mut bb, r, cc, inc_a, inc_b);
         let w1 = b.word(letters[a1]).map(|v| v * self.u);
         let w2 = b.word(letters[a2]).map(|v| v * self.u);
+        // polar words (XY plane only, without X and Y: checked with the block)
+        let radius = b.word(b'@').map(|v| v * self.u);
+        let theta = b.word(b'^').map(Real::to_radians);
+        let (mut inc_radius, mut inc_theta) = (0.0, 0.0);
         if self.incremental {
             inc_a = w1.unwrap_or(0.0);
             inc_b = w2.unwrap_or(0.0);
+            inc_radius = radius.unwrap_or(0.0);
+            inc_theta = theta.unwrap_or(0.0);
             r = r_word * self.u + old_cc0;
             cc = r + z_word * self.u;
             aa = p[a1];
@@ -84,8 +110,15 @@ impl Interpreter {
             inc_b = 0.0;
             r = r_word * self.u;
             cc = z_word * self.u;
-            aa = w1.unwrap_or(p[a1]);
-            bb = w2.unwrap_or(p[a2]);
+            if radius.is_some() || theta.is_some() {
+                (aa, bb) = polar(
+                    radius.unwrap_or_else(|| p[a2].hypot(p[a1])),
+                    theta.unwrap_or_else(|| p[a2].atan2(p[a1])),
+                );
+            } else {
+                aa = w1.unwrap_or(p[a1]);
+                bb = w2.unwrap_or(p[a2]);
+            }
         }
         if r < cc {
             let pl = match self.plane {
@@ -102,6 +135,7 @@ impl Interpreter {
             return Err(self.err_g(b, m, "Cannot feed with zero feed rate"));
         }
         let mut old_cc = old_cc0;
+        let mut current_cc = current_cc0;
         let mk = |s: &Self, a: Real, bv: Real, c: Real| -> [Real; 6] {
             let mut q = s.prog();
             q[a1] = a;
@@ -109,10 +143,11 @@ impl Interpreter {
             q[an] = c;
             s.to_machine(&q)
         };
-        if old_cc < r {
+        if old_cc < r - LEVEL_TOL_MM {
             let t = mk(self, p[a1], p[a2], r);
             self.emit_line(MotionKind::Rapid, t, None);
             old_cc = r;
+            current_cc = r;
         }
         let clear = if self.retract_r { r } else { old_cc };
         let feed = Some(self.feed);
@@ -121,12 +156,39 @@ impl Interpreter {
         } else {
             PECK_CLEARANCE_INCH * MM_PER_INCH
         };
-        for _ in 0..repeat {
+        for k in 0..repeat {
             aa += inc_a;
             bb += inc_b;
-            let t = mk(self, aa, bb, old_cc);
+            // LinuxCNC's CYCLE_MACRO: incremental polar words step the radius, then turn,
+            // before each hole
+            for (step, letter) in [(inc_radius, b'@'), (inc_theta, b'^')] {
+                if step == 0.0 {
+                    continue;
+                }
+                if aa == 0.0 && bb == 0.0 {
+                    return Err(self.err_word(
+                        b,
+                        letter,
+                        "Incremental motion with polar coordinates is indeterminate when at \
+                         the origin",
+                    ));
+                }
+                (aa, bb) = if letter == b'@' {
+                    polar(bb.hypot(aa) + step, bb.atan2(aa))
+                } else {
+                    polar(bb.hypot(aa), bb.atan2(aa) + step)
+                };
+            }
+            // the first hole is reached at the current level, the later ones at the
+            // clearance level, each then down to R
+            let level = if k == 0 && current_cc > r + LEVEL_TOL_MM {
+                current_cc
+            } else {
+                clear
+            };
+            let t = mk(self, aa, bb, level);
             self.emit_line(MotionKind::Rapid, t, None);
-            if old_cc != r {
+            if level > r + LEVEL_TOL_MM {
                 let t = mk(self, aa, bb, r);
                 self.emit_line(MotionKind::Rapid, t, None);
             }
@@ -201,7 +263,7 @@ impl Interpreter {
                     }
                     let t = mk(self, aa, bb, r);
                     self.emit_line(MotionKind::Linear, t, feed);
-                    if clear != r {
+                    if (clear - r).abs() > LEVEL_TOL_MM {
                         let t = mk(self, aa, bb, clear);
                         self.emit_line(MotionKind::Rapid, t, None);
                     }
@@ -237,7 +299,6 @@ impl Interpreter {
                 }
                 _ => return Err(self.err_g(b, m, "Canned cycle not supported")),
             }
-            old_cc = clear;
         }
         Ok(())
     }

@@ -90,7 +90,7 @@ impl Interpreter {
                 Ok(true) => {}
                 _ => break,
             }
-            if buf.first() == Some(&b'%') {
+            if super::is_percent_line(&buf) {
                 continue;
             }
             if let Err(e) = lexer.read(&buf, &NoParams) {

@@ -33,7 +33,7 @@ use crate::math::Real;
 
 use super::comp::{Compensator, Plane as CompPlane};
 use super::lex::{Block, Lexer, NUM_PARAMS};
-use super::output::{Event, EventArg, Motion, Plane, Record, RecordBody};
+use super::output::{Event, EventArg, Motion, MotionKind, Plane, Record, RecordBody};
 use super::source::{Pos, Source};
 use super::{AxisValues, Diagnostic, InterpOptions, LengthUnit, NcError};
 
@@ -92,6 +92,9 @@ pub struct Interpreter {
     cycle_z: Option<Real>,
     cycle_r: Option<Real>,
     cycle_q: Option<Real>,
+    /// The level (program coordinate along the plane normal, mm) where the present run of
+    /// canned cycles began: LinuxCNC's `cycle_il`, forgotten at a motion that is not a cycle.
+    cycle_il: Option<Real>,
     coord: usize,
     g5x: [Real; 6],
     g92: [Real; 6],
@@ -113,6 +116,20 @@ pub struct Interpreter {
     prog_override: Option<[Real; 6]>,
     /// After G40: the next move is the exit move and must be straight.
     exit_pending: bool,
+    /// Where the standalone interpreter's canon believes the tool is, minus
+    /// `to_program(mpos)` (program coordinates, mm): the tool length changes since the
+    /// last move (the canon position does not follow them) and, after a probe, the
+    /// difference between the canon's backoff and the machine's. Zero after every move.
+    canon_off: [Real; 6],
+    /// The current point minus `to_program(mpos)`: LinuxCNC sets its current point to the
+    /// canon position after a probe and after a tool change (M6, M61); zero after every
+    /// move.
+    cur_off: [Real; 6],
+    /// `canon_off` or `cur_off` is not zero.
+    offs_set: bool,
+    /// A tool changed in this block: the current point is read back from the canon before
+    /// the next line.
+    resync_pending: bool,
     // control flow
     frames: Vec<Frame>,
     loops: HashMap<(usize, String), LoopState>,
@@ -208,6 +225,7 @@ impl Interpreter {
             cycle_z: None,
             cycle_r: None,
             cycle_q: None,
+            cycle_il: None,
             coord,
             g5x: [0.0; 6],
             g92: [0.0; 6],
@@ -222,6 +240,10 @@ impl Interpreter {
             comp_plane: CompPlane::Xy,
             prog_override: None,
             exit_pending: false,
+            canon_off: [0.0; 6],
+            cur_off: [0.0; 6],
+            offs_set: false,
+            resync_pending: false,
             frames: Vec::new(),
             loops: HashMap::new(),
             ifs: HashMap::new(),
@@ -287,6 +309,12 @@ impl Interpreter {
         if let Some(p) = self.out_pos.take() {
             m.start = AxisValues::from_array(p);
         }
+        // a move sets the canon position (rs274's rigid tap leaves it, coming back)
+        if self.offs_set && m.kind != MotionKind::RigidTap {
+            self.canon_off = [0.0; 6];
+            self.cur_off = [0.0; 6];
+            self.offs_set = false;
+        }
         let rec = Record {
             body: RecordBody::Motion(m),
             path: self.files[self.cur].path.clone(),
@@ -333,6 +361,11 @@ impl Interpreter {
             self.fail(e);
             return;
         }
+        if self.resync_pending {
+            // LinuxCNC re-reads the position from the canon after a tool change
+            self.resync_pending = false;
+            self.cur_off = self.canon_off;
+        }
         self.line_start = self.tell();
         let mut buf = std::mem::take(&mut self.buf);
         let more = self.files[self.cur].read_line(&mut buf);
@@ -359,24 +392,25 @@ impl Interpreter {
     }
 
     fn line(&mut self) -> LR<()> {
-        // '%' lines
-        let first_non_blank = self.buf.iter().position(|c| !matches!(c, b' ' | b'\t'));
-        if let Some(i) = first_non_blank
-            && self.buf[i] == b'%'
-        {
-            if self.skip.is_some() && !self.first_line {
-                self.at_eof_line(self.line_no, true);
-                return Ok(());
-            }
+        // '%' lines: a program whose first non-blank line is a lone '%' ends at the next
+        // one (also while skipping to an O-word); any other '%' is a bad character (read
+        // by the lexer), except on a line passed over while skipping
+        if is_percent_line(&self.buf) {
             if self.first_line {
                 self.first_line = false;
                 self.percent_started = true;
                 return Ok(());
             }
-            self.end_program();
-            return Ok(());
+            if self.percent_started {
+                if self.skip.is_some() {
+                    self.at_eof_line(self.line_no, true);
+                } else {
+                    self.end_program();
+                }
+                return Ok(());
+            }
         }
-        if first_non_blank.is_some() {
+        if self.buf.iter().any(|c| !c_space(*c)) {
             self.first_line = false;
         }
         if self.skip.is_some() {
@@ -422,4 +456,15 @@ impl Iterator for Interpreter {
     fn next(&mut self) -> Option<Self::Item> {
         self.next_record()
     }
+}
+
+/// C's `isspace` in the "C" locale: what LinuxCNC trims around a `%` line.
+fn c_space(c: u8) -> bool {
+    matches!(c, b' ' | b'\t' | b'\n' | b'\x0b' | b'\x0c' | b'\r')
+}
+
+/// A line holding a lone `%` between white space (LinuxCNC's program delimiter).
+pub(super) fn is_percent_line(line: &[u8]) -> bool {
+    let mut rest = line.iter().filter(|c| !c_space(**c));
+    rest.next() == Some(&b'%') && rest.next().is_none()
 }

@@ -80,7 +80,7 @@ impl Interpreter {
     }
 
     /// Machine → program coordinates (mm, deg).
-    fn to_program(&self, m: &[Real; 6]) -> [Real; 6] {
+    pub(super) fn to_program(&self, m: &[Real; 6]) -> [Real; 6] {
         let mut q = [0.0; 6];
         for i in 0..6 {
             q[i] = m[i] - self.g5x[i] - self.tool_off[i];
@@ -97,14 +97,62 @@ impl Interpreter {
         q
     }
 
+    /// The current point (program coordinates, mm).
     pub(super) fn prog(&self) -> [Real; 6] {
         match self.prog_override {
             Some(p) => p,
-            None => self.to_program(&self.mpos),
+            None => {
+                let mut p = self.to_program(&self.mpos);
+                if self.offs_set {
+                    for i in 0..6 {
+                        p[i] += self.cur_off[i];
+                    }
+                }
+                p
+            }
         }
     }
 
+    /// The machine position of the current point: `mpos`, unless a probe or a tool change
+    /// has set the current point elsewhere (see `cur_off`).
+    pub(super) fn cur_machine(&self) -> [Real; 6] {
+        if self.offs_set && self.prog_override.is_none() {
+            self.to_machine(&self.prog())
+        } else {
+            self.mpos
+        }
+    }
+
+    /// Where the standalone interpreter's canon believes the tool is (program coordinates,
+    /// mm): the end of the last move in the present offsets, before tool length changes
+    /// made since.
+    pub(super) fn canon_pos(&self) -> [Real; 6] {
+        let mut p = self.to_program(&self.mpos);
+        for i in 0..6 {
+            p[i] += self.canon_off[i];
+        }
+        p
+    }
+
+    /// Sets where the canon and the current point are, as offsets from `to_program(mpos)`.
+    pub(super) fn set_canon_offsets(&mut self, canon_off: [Real; 6], cur_off: [Real; 6]) {
+        self.canon_off = canon_off;
+        self.cur_off = cur_off;
+        self.offs_set = canon_off.iter().chain(&cur_off).any(|v| *v != 0.0);
+    }
+
+    /// G43, G43.1, G49. The current point keeps its machine position, so its program
+    /// coordinates change by the change of offset; the canon's position does not (it moves
+    /// with the next move, or the current point is read back from it after a tool change).
     pub(super) fn tool_length(&mut self, l: i32, b: &Block) -> LR<()> {
+        if self.comp_on {
+            return Err(self.err_g(
+                b,
+                l,
+                "Cannot change tool offset with cutter radius compensation on",
+            ));
+        }
+        let old = self.tool_off;
         match l {
             490 => self.tool_off = [0.0; 6],
             430 => {
@@ -161,6 +209,13 @@ impl Interpreter {
             })
             .collect();
         self.event("USE_TOOL_LENGTH_OFFSET", args);
+        if self.tool_off != old {
+            let mut canon_off = self.canon_off;
+            for i in 0..6 {
+                canon_off[i] += self.tool_off[i] - old[i];
+            }
+            self.set_canon_offsets(canon_off, self.cur_off);
+        }
         Ok(())
     }
 
@@ -202,6 +257,7 @@ impl Interpreter {
                     // current point without work offset: m - tool; in the work system
                     // m = rot(p + g92) + off + tool
                     let xy_given = b.word(b'x').is_some() || b.word(b'y').is_some();
+                    let cur_m = self.cur_machine();
                     for (i, c) in [b'x', b'y', b'z', b'a', b'b', b'c'].iter().enumerate() {
                         let word = b
                             .word(*c)
@@ -218,9 +274,9 @@ impl Interpreter {
                                         + self.g92[1],
                                 ];
                                 let rq = [q[0] * co - q[1] * s, q[0] * s + q[1] * co];
-                                self.mpos[i] - self.tool_off[i] - rq[i]
+                                cur_m[i] - self.tool_off[i] - rq[i]
                             } else {
-                                self.mpos[i] - self.tool_off[i] - (vm + self.g92[i])
+                                cur_m[i] - self.tool_off[i] - (vm + self.g92[i])
                             };
                             self.params.numbered[base + i] =
                                 if i < 3 { off / self.ext } else { off };
@@ -244,6 +300,7 @@ impl Interpreter {
                     ));
                 }
                 let prog = self.prog();
+                let cur_m = self.cur_machine();
                 let mut entry = self.opts.tool_table.tools[&p];
                 for (i, c) in [b'x', b'y', b'z', b'a', b'b', b'c'].iter().enumerate() {
                     if let Some(v) = b.word(*c) {
@@ -260,7 +317,7 @@ impl Interpreter {
                                 self.g5x[i] + self.g92[i]
                             };
                             let _ = prog;
-                            self.mpos[i] - fixture - vm
+                            cur_m[i] - fixture - vm
                         };
                         entry.offset[i] = if i < 3 { val_mm / self.ext } else { val_mm };
                     }
@@ -313,7 +370,7 @@ impl Interpreter {
         }
         let any = given.iter().any(|g| *g);
         // intermediate point
-        let end = self.target(b, false);
+        let end = self.target(b)?;
         let m_int = self.to_machine(&end);
         self.emit_line(MotionKind::Rapid, m_int, None);
         let mut home = self.mpos;

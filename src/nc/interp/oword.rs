@@ -544,7 +544,12 @@ impl Interpreter {
                 "'O.... sub' subroutine must be called with 'O.... call'",
             ));
         }
-        let repeat = b.word(b'l').map_or(1, |l| l.round().max(1.0) as u32);
+        // LinuxCNC: L0 does not call (nor look for) the subprogram
+        let repeat = match self.l_count(b)? {
+            Some(0) => return Ok(()),
+            Some(l) => u32::try_from(l).unwrap_or(u32::MAX),
+            None => 1,
+        };
         let call = PendingCall {
             label,
             args: Vec::new(),
