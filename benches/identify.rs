@@ -68,7 +68,7 @@ fn benches(c: &mut Criterion) {
         .expect("scan")
         .cloud;
     let _ = std::fs::remove_dir_all(&dir);
-    let features = extract_features(&scene, &program, &cloud.points).expect("features");
+    let features = extract_features(&scene, &program, &cloud.points, None).expect("features");
     let solve = || {
         correction_loop(
             &scene.model,
@@ -95,8 +95,8 @@ fn benches(c: &mut Criterion) {
         format!("identify (fit + solve, {} points)", cloud.points.len()),
         |b| {
             b.iter(|| {
-                let f =
-                    extract_features(&scene, &program, black_box(&cloud.points)).expect("features");
+                let f = extract_features(&scene, &program, black_box(&cloud.points), None)
+                    .expect("features");
                 correction_loop(
                     &scene.model,
                     &ids,

@@ -8,7 +8,6 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Mutex;
 use twinmill::calibration::correct::write_gcode;
-use twinmill::calibration::design::{DesignOptions, design, kind_name};
 use twinmill::math::{Aabb, Point3};
 use twinmill::metrology::ball_sensor::{self, BallSensor};
 use twinmill::metrology::circular::{
@@ -25,14 +24,12 @@ use twinmill::output::{
     MeshFormat, json_bytes, ply_bytes, write_files, write_outcome, write_simulation, write_streamed,
 };
 use twinmill::pipeline::{
-    FitRequest, Selection, Shape, correct, fit_cloud, identified_model, identify_scene,
-    machine_part, run, scanner_study, simulate,
+    FitRequest, Selection, Shape, correct, design_scene, fit_cloud, identified_model,
+    identify_scene, machine_part, run, scanner_study, simulate,
 };
 use twinmill::progress::Progress;
-use twinmill::report::DesignReport;
 use twinmill::report::{ScanFileReport, ScanReport};
-use twinmill::scene::design_scene_toml;
-use twinmill::scene::{Need, Scene, SceneError};
+use twinmill::scene::{MemoryBudget, Need, Scene, SceneError};
 
 /// twinmill: a digital twin of machine-tool accuracy.
 #[derive(Parser)]
@@ -59,6 +56,10 @@ struct SceneArgs {
     /// List every problem found in the NC program, not only the first.
     #[arg(short, long)]
     verbose: bool,
+    /// Memory the tri-dexel stock may use, e.g. 2G, 512M, 1.5GiB (default: half the
+    /// installed memory).
+    #[arg(long, value_name = "SIZE")]
+    memory: Option<String>,
 }
 
 /// Which NC command.
@@ -173,6 +174,10 @@ enum Command {
         /// List every problem found in the NC program, not only the first.
         #[arg(short, long)]
         verbose: bool,
+        /// Memory the tri-dexel stock may use, e.g. 2G, 512M, 1.5GiB (default: half the
+        /// installed memory).
+        #[arg(long, value_name = "SIZE")]
+        memory: Option<String>,
     },
     /// Identify the scene's `[identify] parameters` from its faces (any number, flanks and
     /// floors) in its simulated scan or in a given cloud: identifiability (singular values,
@@ -337,6 +342,7 @@ fn prepare(
     scene: &Path,
     threads: Option<usize>,
     verbose: bool,
+    memory: Option<&str>,
     command: &str,
     needs: &[Need],
 ) -> Result<(Scene, Program), ExitCode> {
@@ -347,7 +353,11 @@ fn prepare(
     {
         return Err(fail(e));
     }
-    let scene = Scene::load(scene).map_err(fail)?;
+    let budget = match memory {
+        Some(m) => MemoryBudget::parse(m).map_err(fail)?,
+        None => MemoryBudget::installed(),
+    };
+    let scene = Scene::load_with(scene, &budget).map_err(fail)?;
     scene.require(command, needs).map_err(fail)?;
     let program = match scene.load_program() {
         Ok(p) => p,
@@ -790,12 +800,14 @@ fn main() -> ExitCode {
                     json,
                     threads,
                     verbose,
+                    memory,
                 },
         } => {
             let (scene, program) = match prepare(
                 &scene,
                 threads,
                 verbose,
+                memory.as_deref(),
                 "run",
                 &[Need::Scanner, Need::StepFaces],
             ) {
@@ -830,13 +842,15 @@ fn main() -> ExitCode {
                     json,
                     threads,
                     verbose,
+                    memory,
                 },
             mesh,
         } => {
-            let (scene, program) = match prepare(&scene, threads, verbose, "simulate", &[]) {
-                Ok(x) => x,
-                Err(code) => return code,
-            };
+            let (scene, program) =
+                match prepare(&scene, threads, verbose, memory.as_deref(), "simulate", &[]) {
+                    Ok(x) => x,
+                    Err(code) => return code,
+                };
             let formats: Vec<MeshFormat> = mesh
                 .iter()
                 .map(|f| match f.as_str() {
@@ -878,6 +892,7 @@ fn main() -> ExitCode {
                     json,
                     threads,
                     verbose,
+                    memory,
                 },
             study,
         } => {
@@ -885,8 +900,14 @@ fn main() -> ExitCode {
                 Some(_) => ("scan --study", &[Need::Scanner, Need::StepFaces]),
                 None => ("scan", &[Need::Scanner]),
             };
-            let (scene, program) = match prepare(&scene, threads, verbose, scan_command, scan_needs)
-            {
+            let (scene, program) = match prepare(
+                &scene,
+                threads,
+                verbose,
+                memory.as_deref(),
+                scan_command,
+                scan_needs,
+            ) {
                 Ok(x) => x,
                 Err(code) => return code,
             };
@@ -912,7 +933,7 @@ fn main() -> ExitCode {
                     if n > 0 {
                         opts.trials = n;
                     }
-                    match scanner_study(&scene, &program, &surface, &opts) {
+                    match scanner_study(&scene, &program, &part.stock, &surface, &opts) {
                         Ok(c) => c,
                         Err(e) => return fail(e),
                     }
@@ -947,6 +968,7 @@ fn main() -> ExitCode {
             json,
             threads,
             verbose,
+            memory,
         } => {
             if !(accuracy_mm.is_finite() && accuracy_mm > 0.0) {
                 return fail(format!(
@@ -960,11 +982,17 @@ fn main() -> ExitCode {
                     &[Need::Scanner, Need::StepFaces],
                 ),
             };
-            let (scene, program) =
-                match prepare(&scene, threads, verbose, correct_command, correct_needs) {
-                    Ok(x) => x,
-                    Err(code) => return code,
-                };
+            let (scene, program) = match prepare(
+                &scene,
+                threads,
+                verbose,
+                memory.as_deref(),
+                correct_command,
+                correct_needs,
+            ) {
+                Ok(x) => x,
+                Err(code) => return code,
+            };
             let bars = bars(json);
             let chain = match model {
                 ModelSource::Injected => scene.chain.clone(),
@@ -1032,6 +1060,7 @@ fn main() -> ExitCode {
                     json,
                     threads,
                     verbose,
+                    memory,
                 },
             cloud,
             monte_carlo,
@@ -1041,11 +1070,17 @@ fn main() -> ExitCode {
                 Some(_) => &[Need::Parameters],
                 None => &[Need::Parameters, Need::Scanner],
             };
-            let (scene, program) =
-                match prepare(&scene, threads, verbose, "identify", identify_needs) {
-                    Ok(x) => x,
-                    Err(code) => return code,
-                };
+            let (scene, program) = match prepare(
+                &scene,
+                threads,
+                verbose,
+                memory.as_deref(),
+                "identify",
+                identify_needs,
+            ) {
+                Ok(x) => x,
+                Err(code) => return code,
+            };
             let given = match &cloud {
                 Some(path) => match read_cloud_file(path) {
                     Ok(c) => Some((c, path.display().to_string())),
@@ -1106,10 +1141,18 @@ fn main() -> ExitCode {
                     json,
                     threads,
                     verbose,
+                    memory,
                 },
             params,
         } => {
-            let (scene, _) = match prepare(&scene, threads, verbose, "design", &[Need::Scanner]) {
+            let (scene, _) = match prepare(
+                &scene,
+                threads,
+                verbose,
+                memory.as_deref(),
+                "design",
+                &[Need::Scanner],
+            ) {
                 Ok(x) => x,
                 Err(code) => return code,
             };
@@ -1120,60 +1163,19 @@ fn main() -> ExitCode {
                     Err(e) => return fail(format!("--params: {e}")),
                 }
             }
-            let scanner = match scene.scanner_for("design") {
-                Ok(s) => s,
-                Err(e) => return fail(e),
-            };
-            let mut opts = DesignOptions::standard();
-            opts.noise_sigma_mm = scanner.noise_sigma_mm;
-            opts.pitch_mm = scanner.pitch_mm;
-            let d = match design(&scene.model, &scene.tool, &ids, &opts) {
-                Ok(d) => d,
-                Err(e) => return fail(e),
-            };
             let name = format!("{}-design", scene.name);
-            let toml = match design_scene_toml(&scene, &d, &opts, &params, &name, "design.ngc") {
-                Ok(t) => t,
+            let outcome = match design_scene(&scene, &params, &ids, &name, &bars(json)) {
+                Ok(o) => o,
                 Err(e) => return fail(e),
             };
-            let i = &d.identifiability;
-            let report = DesignReport {
-                scene: scene.name.clone(),
-                parameters: params.clone(),
-                cuts: d
-                    .cuts
-                    .iter()
-                    .map(|c| (c.name.clone(), c.index_deg, c.cut.line))
-                    .collect(),
-                faces: d
-                    .faces
-                    .iter()
-                    .map(|f| (f.name.clone(), kind_name(f.kind).to_string()))
-                    .collect(),
-                singular_values: i.singular_values.clone(),
-                condition_number: i.condition_number,
-                identified: i.identified.clone(),
-                determined_combinations: i
-                    .determined_combinations
-                    .iter()
-                    .map(|c| c.name.clone())
-                    .collect(),
-                not_determined: i
-                    .undetermined_combinations
-                    .iter()
-                    .map(|c| c.name.clone())
-                    .collect(),
-                relative_sigma: d.relative_sigma.clone(),
-                evaluated: d.evaluated,
-                notes: d.notes.clone(),
-            };
+            let report = &outcome.report;
             let dir = out.join(&name);
-            let files = json_bytes(&report, &dir.join("design.json"))
+            let files = json_bytes(report, &dir.join("design.json"))
                 .map(|j| {
                     vec![
                         ("design.json", j),
-                        ("design.ngc", d.program.clone().into_bytes()),
-                        ("design.toml", toml.into_bytes()),
+                        ("design.ngc", outcome.design.program.clone().into_bytes()),
+                        ("design.toml", outcome.scene_toml.clone().into_bytes()),
                     ]
                 })
                 .and_then(|files| write_files(&dir, &files));
@@ -1188,7 +1190,7 @@ fn main() -> ExitCode {
                         dir.display()
                     )
                 },
-                json.then(|| serde_json::to_string_pretty(&report)),
+                json.then(|| serde_json::to_string_pretty(report)),
             )
         }
         Command::Fit {

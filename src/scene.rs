@@ -19,7 +19,7 @@ use crate::metrology::fit::RobustRule;
 use crate::metrology::scan::{Misregistration, ScanError, ScannerConfig, StudyOptions, Turntable};
 use crate::nc::{
     AxisLetter, AxisValues, InterpOptions, LengthUnit, NcError, Program, interpret_program,
-    options_from_files,
+    options_from_texts,
 };
 use crate::report::deviation_map::DesignModel;
 use serde::Deserialize;
@@ -346,6 +346,21 @@ pub struct NcFiles {
     pub external_unit: LengthUnit,
 }
 
+/// A file the scene names and reads after loading (the program, the `[nc]` files): its key,
+/// its resolved path, and where its value stands in the scene file, so that a file that
+/// cannot be read is reported at that line and column.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FileKey {
+    /// The scene key (`program`, `nc.tool_table`, …).
+    pub key: String,
+    /// The file, resolved against the scene's folder.
+    pub path: PathBuf,
+    /// 1-based line of the value in the scene file.
+    pub line: usize,
+    /// 1-based column of the value.
+    pub column: usize,
+}
+
 /// The stock's initial solid (workpiece frame, mm).
 #[derive(Clone, Debug)]
 pub enum StockShape {
@@ -375,6 +390,9 @@ pub struct Scene {
     pub program_path: PathBuf,
     /// `[nc]` tool table, var file and INI (resolved paths), and their length unit.
     pub nc_files: NcFiles,
+    /// Where the scene names the program and the `[nc]` files (read by
+    /// [`Scene::load_program`]).
+    pub file_keys: Vec<FileKey>,
     /// The simulated (real) machine: chain with the injected deviations.
     pub chain: Chain,
     /// Deviations injected, by name (mm or rad), as written in the scene.
@@ -401,8 +419,9 @@ pub struct Scene {
     pub design: Option<(PathBuf, DesignModel)>,
     /// Tri-dexel pitch (mm).
     pub pitch_mm: Real,
-    /// Bytes the tri-dexel may use on this machine (read once, when the scene loads).
-    pub memory_budget_bytes: Real,
+    /// The memory the tri-dexel may use ([`MemoryBudget`]: half the installed memory, or
+    /// `--memory`).
+    pub memory: MemoryBudget,
     /// Sweep options.
     pub sweep: SweepOptions,
     /// The virtual scanner (`[scanner]`), for the commands that scan.
@@ -874,17 +893,83 @@ fn deviation_map(
     Ok(out)
 }
 
-/// The memory the tri-dexel may use: the machine's available memory, less a quarter for the
-/// rest of the pipeline; 16 GiB if it cannot be read.
-pub fn memory_budget_bytes() -> Real {
-    let avail = std::fs::read_to_string("/proc/meminfo").ok().and_then(|s| {
-        s.lines()
-            .find(|l| l.starts_with("MemAvailable:"))
-            .and_then(|l| l.split_whitespace().nth(1))
-            .and_then(|kb| kb.parse::<Real>().ok())
-            .map(|kb| kb * 1024.0)
-    });
-    avail.unwrap_or(16.0 * 1073741824.0) * 0.75
+/// The memory the tri-dexel may use, and where that figure comes from (for messages).
+///
+/// By default half the machine's installed memory (`MemTotal` in `/proc/meminfo`; 16 GiB
+/// assumed where it cannot be read): a stable figure, so that whether a scene loads does
+/// not depend on what else the machine is doing at that moment. The stock is the
+/// pipeline's largest structure; the other half is left to the scan, the mesh and the rest
+/// of the machine. `--memory SIZE` sets it instead.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MemoryBudget {
+    /// Bytes.
+    pub bytes: Real,
+    /// Where the figure comes from, as messages say it: `the budget is half of the
+    /// installed 23.4 GiB; …`, `the budget is --memory 2G`.
+    pub source: String,
+}
+
+/// The fraction of the installed memory the tri-dexel may use by default.
+pub const INSTALLED_MEMORY_FRACTION: Real = 0.5;
+
+/// Installed memory assumed where `/proc/meminfo` cannot be read (bytes).
+const ASSUMED_INSTALLED_BYTES: Real = 16.0 * GIB;
+
+const GIB: Real = 1073741824.0;
+
+impl MemoryBudget {
+    /// [`INSTALLED_MEMORY_FRACTION`] of the installed memory.
+    pub fn installed() -> Self {
+        let total = std::fs::read_to_string("/proc/meminfo").ok().and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("MemTotal:"))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|kb| kb.parse::<Real>().ok())
+                .map(|kb| kb * 1024.0)
+        });
+        let (bytes, what) = match total {
+            Some(t) => (t, "installed"),
+            None => (ASSUMED_INSTALLED_BYTES, "assumed installed"),
+        };
+        MemoryBudget {
+            bytes: bytes * INSTALLED_MEMORY_FRACTION,
+            source: format!(
+                "the budget is half of the {what} {:.1} GiB; --memory sets another",
+                bytes / GIB
+            ),
+        }
+    }
+
+    /// A budget given as a size: a number of bytes with an optional unit `K`, `M`, `G` or
+    /// `T` (powers of 1024; `KiB`, `MB`, … accepted alike), e.g. `2G`, `1.5GiB`, `512M`.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let t = text.trim();
+        let split = t.find(|c: char| c.is_ascii_alphabetic()).unwrap_or(t.len());
+        let (num, unit) = (t[..split].trim(), t[split..].trim());
+        let scale = match unit.to_ascii_uppercase().as_str() {
+            "" | "B" => 1.0,
+            "K" | "KB" | "KIB" => 1024.0,
+            "M" | "MB" | "MIB" => 1048576.0,
+            "G" | "GB" | "GIB" => GIB,
+            "T" | "TB" | "TIB" => 1024.0 * GIB,
+            _ => {
+                return Err(format!(
+                    "--memory: '{}': expected a size such as 2G, 512M or 1.5GiB",
+                    text.escape_debug()
+                ));
+            }
+        };
+        match num.parse::<Real>() {
+            Ok(v) if v.is_finite() && v > 0.0 && (v * scale).is_finite() => Ok(MemoryBudget {
+                bytes: v * scale,
+                source: format!("the budget is --memory {t}"),
+            }),
+            _ => Err(format!(
+                "--memory: '{}': expected a positive size such as 2G, 512M or 1.5GiB",
+                text.escape_debug()
+            )),
+        }
+    }
 }
 
 impl Scene {
@@ -938,14 +1023,26 @@ impl Scene {
         })
     }
 
-    /// Loads and validates a scene file.
+    /// Loads and validates a scene file, with the default memory budget
+    /// ([`MemoryBudget::installed`]).
     pub fn load(path: &Path) -> Result<Scene, SceneError> {
+        Self::load_with(path, &MemoryBudget::installed())
+    }
+
+    /// Loads and validates a scene file; the stock must fit in `memory`.
+    pub fn load_with(path: &Path, memory: &MemoryBudget) -> Result<Scene, SceneError> {
         let text = read_text(path)?;
-        Self::parse(&text, path)
+        Self::parse_with(&text, path, memory)
     }
 
     /// Parses and validates scene text; `path` locates messages and relative file names.
+    /// The default memory budget ([`MemoryBudget::installed`]).
     pub fn parse(text: &str, path: &Path) -> Result<Scene, SceneError> {
+        Self::parse_with(text, path, &MemoryBudget::installed())
+    }
+
+    /// Parses and validates scene text; the stock must fit in `memory`.
+    pub fn parse_with(text: &str, path: &Path, memory: &MemoryBudget) -> Result<Scene, SceneError> {
         let ctx = Ctx { path, text };
         let file: SceneFile = toml::from_str(text).map_err(|e| {
             let span = e.span().unwrap_or(0..0);
@@ -1272,11 +1369,10 @@ impl Scene {
             }
         };
         let pitch_mm = ctx.positive(&file.stock.pitch_mm, "pitch_mm")?;
-        let memory_budget = memory_budget_bytes();
-        crate::cutting::stock::check_memory(&stock_box, pitch_mm, memory_budget).map_err(|e| {
+        crate::cutting::stock::check_memory(&stock_box, pitch_mm, memory.bytes).map_err(|e| {
             ctx.err(
                 file.stock.pitch_mm.span(),
-                format!("stock.pitch_mm = {pitch_mm}: {e}"),
+                format!("stock.pitch_mm = {pitch_mm}: {e} ({})", memory.source),
             )
         })?;
         // Fixtures and design model.
@@ -1379,13 +1475,26 @@ impl Scene {
             Some(f) => identify_setup(&ctx, &chain, f)?,
             None => IdentifySetup::none(),
         };
-        let program_path = dir.join(file.program.get_ref());
+        let mut file_keys = Vec::new();
+        let mut name_file = |key: &str, f: &Spanned<String>| {
+            let path = dir.join(f.get_ref());
+            let (line, column) = line_col(text, f.span().start);
+            file_keys.push(FileKey {
+                key: key.to_string(),
+                path: path.clone(),
+                line,
+                column,
+            });
+            path
+        };
+        let program_path = name_file("program", &file.program);
         let mut nc_files = NcFiles::default();
         if let Some(nc) = &file.nc {
-            let resolve = |f: &Option<Spanned<String>>| f.as_ref().map(|f| dir.join(f.get_ref()));
-            nc_files.tool_table = resolve(&nc.tool_table);
-            nc_files.var_file = resolve(&nc.var_file);
-            nc_files.ini = resolve(&nc.ini);
+            let mut resolve =
+                |key: &str, f: &Option<Spanned<String>>| f.as_ref().map(|f| name_file(key, f));
+            nc_files.tool_table = resolve("nc.tool_table", &nc.tool_table);
+            nc_files.var_file = resolve("nc.var_file", &nc.var_file);
+            nc_files.ini = resolve("nc.ini", &nc.ini);
             if let Some(u) = &nc.external_units {
                 nc_files.external_unit = match u.get_ref().as_str() {
                     "mm" => LengthUnit::Mm,
@@ -1405,6 +1514,7 @@ impl Scene {
             machine_name: file.machine.name,
             program_path,
             nc_files,
+            file_keys,
             chain,
             injected,
             model,
@@ -1417,7 +1527,7 @@ impl Scene {
             fixtures,
             design,
             pitch_mm,
-            memory_budget_bytes: memory_budget,
+            memory: memory.clone(),
             sweep: SweepOptions {
                 rotary_step_bound_mm: bound,
             },
@@ -1433,20 +1543,44 @@ impl Scene {
         })
     }
 
+    /// Reads a file the scene names; one that cannot be read is reported at the scene's
+    /// line and column of its key (`scene.toml:2:11: program: p.ngc: cannot read: …`).
+    fn read_named(&self, path: &Path) -> Result<String, SceneError> {
+        read_text(path).map_err(
+            |e| match (e, self.file_keys.iter().find(|k| k.path == path)) {
+                (SceneError::Io { path, source }, Some(k)) => SceneError::Invalid {
+                    path: self.path.clone(),
+                    line: k.line,
+                    column: k.column,
+                    message: format!("{}: {}: cannot read: {source}", k.key, path.display()),
+                },
+                (e, _) => e,
+            },
+        )
+    }
+
     /// Reads and parses the scene's NC program, checking that it drives only axes the
     /// machine has.
     pub fn load_program(&self) -> Result<Program, SceneError> {
-        let text = read_text(&self.program_path)?;
+        let text = self.read_named(&self.program_path)?;
+        self.program_from_text(&text)
+    }
+
+    /// Parses `text` as the scene's NC program (with the scene's `[nc]` files), checking
+    /// that it drives only axes the machine has; messages name the scene's program file.
+    pub fn program_from_text(&self, text: &str) -> Result<Program, SceneError> {
         let f = &self.nc_files;
-        let opts = options_from_files(
-            f.tool_table.as_deref(),
-            f.var_file.as_deref(),
-            f.ini.as_deref(),
+        let read = |p: &Option<PathBuf>| p.as_ref().map(|p| self.read_named(p)).transpose();
+        let (table, var, ini) = (read(&f.tool_table)?, read(&f.var_file)?, read(&f.ini)?);
+        let opts = options_from_texts(
+            table.as_deref().zip(f.tool_table.as_deref()),
+            var.as_deref().zip(f.var_file.as_deref()),
+            ini.as_deref().zip(f.ini.as_deref()),
             f.external_unit,
         )
         .map_err(SceneError::Program)?;
         let program = interpret_program(
-            &text,
+            text,
             &self.program_path,
             InterpOptions {
                 start: self.home,
@@ -1637,5 +1771,39 @@ mod tests {
     fn line_col_counts_from_one() {
         assert_eq!(line_col("ab\ncd", 0), (1, 1));
         assert_eq!(line_col("ab\ncd", 4), (2, 2));
+    }
+
+    #[test]
+    fn memory_sizes_parse_in_powers_of_1024_and_bad_ones_are_refused() {
+        for (text, bytes) in [
+            ("2G", 2.0 * 1073741824.0),
+            ("1.5GiB", 1.5 * 1073741824.0),
+            ("512M", 512.0 * 1048576.0),
+            ("64 kb", 64.0 * 1024.0),
+            ("1T", 1099511627776.0),
+            ("1000", 1000.0),
+            ("1000B", 1000.0),
+        ] {
+            let b = MemoryBudget::parse(text).expect(text);
+            assert_eq!(b.bytes, bytes, "{text}");
+            assert!(b.source.contains(text.trim()), "{}", b.source);
+        }
+        for bad in [
+            "", "G", "0", "-1G", "nan", "inf", "1e400", "1e300T", "2X", "1.5.2M", "½G",
+        ] {
+            let e = MemoryBudget::parse(bad).expect_err(bad);
+            assert!(e.starts_with("--memory:") && !e.contains('\n'), "{e}");
+        }
+    }
+
+    /// The default budget is a fixed fraction of the installed memory, read each time the
+    /// same: it does not follow what is free at the moment.
+    #[test]
+    fn the_default_budget_is_half_the_installed_memory() {
+        let a = MemoryBudget::installed();
+        assert_eq!(INSTALLED_MEMORY_FRACTION, 0.5);
+        assert!(a.bytes.is_finite() && a.bytes > 0.0);
+        assert_eq!(MemoryBudget::installed(), a);
+        assert!(a.source.contains("installed"), "{}", a.source);
     }
 }

@@ -47,12 +47,13 @@
 //! determine.
 
 use crate::calibration::identify::{
-    FaceDesign, FaceOptions, FaceSpec, extent, extract_face, face_design, flank, region_indices,
+    FaceDesign, FaceOptions, FaceSelection, FaceSpec, extent, face_design, fit_face, fit_selection,
+    flank, select_face, used_points,
 };
 use crate::cutting::tool::{Tool, ToolKind};
 use crate::machine::chain::{Chain, DeviationId};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
-use crate::metrology::fit::{Plane, fit_plane_robust};
+use crate::metrology::fit::Plane;
 use crate::nc::{AxisValues, Move};
 use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
 use nalgebra::{DMatrix, DVector, Dyn, Matrix2, Owned};
@@ -709,6 +710,13 @@ pub const ANGLE_MAGNITUDE_RAD: Real = 5e-4;
 /// this fraction of its realistic magnitude: it is then known to a tenth of what it could
 /// plausibly be.
 pub const DETERMINED_FRACTION: Real = 0.1;
+/// A direction whose singular value lies within this factor of the threshold of
+/// determination (either side) is *borderline*: its uncertainty is judged from the scan's
+/// own residuals (σ, and its inflation for correlated noise by block averaging), which
+/// another scan of the same part estimates differently — by about ±5 % on the designed
+/// scenes, so a factor 1.25 is a few of those spreads — and another scan may decide it the
+/// other way. Both `design` and `identify` name borderline directions.
+pub const BORDERLINE_FACTOR: Real = 1.25;
 /// A parameter counts as identified on its own when the part of its unit direction (in
 /// scaled units) outside the determined subspace is below this: then the undetermined
 /// directions, held at their prior, move its value by at most this fraction of their
@@ -747,6 +755,10 @@ pub struct Identifiability {
     pub determined_combinations: Vec<Combination>,
     /// Directions not determined (named), held at their prior values.
     pub undetermined_combinations: Vec<Combination>,
+    /// Directions whose singular value is within [`BORDERLINE_FACTOR`] of the threshold
+    /// (named, with their singular values): determined or not, another scan may decide
+    /// them the other way.
+    pub borderline: Vec<(Combination, Real)>,
     /// Parameters not identified on their own (they may still enter a determined
     /// combination).
     pub not_identified: Vec<String>,
@@ -969,6 +981,19 @@ pub fn identifiability(
         DMatrix::from_fn(keep.len(), np, |r, c| vt[(keep[r], c)])
     };
     let undetermined_combinations = named_combinations(&complement, &scale, &names);
+    let borderline = order
+        .iter()
+        .filter(|&&i| {
+            let s = svd.singular_values[i];
+            s >= threshold / BORDERLINE_FACTOR && s < threshold * BORDERLINE_FACTOR
+        })
+        .filter_map(|&i| {
+            let row = DMatrix::from_fn(1, np, |_, c| vt[(i, c)]);
+            named_combinations(&row, &scale, &names)
+                .pop()
+                .map(|c| (c, svd.singular_values[i]))
+        })
+        .collect();
     // What the registration absorbs: the deviation combination each registration column
     // reproduces best (least squares), if it does so well.
     let mut registration_absorbs = Vec::new();
@@ -1028,6 +1053,7 @@ pub fn identifiability(
         identified: identified_idx.iter().map(|&k| names[k].clone()).collect(),
         determined_combinations,
         undetermined_combinations,
+        borderline,
         not_identified: (0..np)
             .filter(|k| !identified_idx.contains(k))
             .map(|k| names[k].clone())
@@ -1283,8 +1309,8 @@ const NO_DATA_SENSITIVITY: Real = 1e-3;
 // ---------------------------------------------------------------------------------------
 // Features from a cloud.
 
-/// Extracts and fits one face of the scene's program as a plane feature: the flank by
-/// [`extract_face`], the floor by the same region logic on the tool's bottom.
+/// Extracts and fits one face of the scene's program as a plane feature:
+/// [`select_plane_face`], then [`plane_feature`].
 pub fn extract_plane_feature(
     points: &[Point3],
     spec: &FaceSpec,
@@ -1294,11 +1320,42 @@ pub fn extract_plane_feature(
     stock: &Aabb,
     opts: &FaceOptions,
 ) -> Result<PlaneFeature, CalibrateError> {
-    match spec.kind {
+    let sel = select_plane_face(points, spec, moves, model, tool, stock, opts)?;
+    plane_feature(points, &sel, model, tool, opts)
+}
+
+/// Selects the points of a face (flank or floor) in a cloud ([`select_face`]); a floor
+/// needs a flat end mill.
+pub fn select_plane_face(
+    points: &[Point3],
+    spec: &FaceSpec,
+    moves: &[Move],
+    model: &Chain,
+    tool: &Tool,
+    stock: &Aabb,
+    opts: &FaceOptions,
+) -> Result<FaceSelection, CalibrateError> {
+    if spec.kind == FaceKind::Floor && tool.kind() != ToolKind::Flat {
+        return Err(CalibrateError::FloorNeedsFlatTool(spec.name.clone()));
+    }
+    Ok(select_face(points, spec, moves, model, tool, stock, opts)?)
+}
+
+/// Fits a selected face as a plane feature: the flank by [`fit_face`], the floor with the
+/// cross-feed range and envelope moments of the points it keeps.
+pub fn plane_feature(
+    points: &[Point3],
+    sel: &FaceSelection,
+    model: &Chain,
+    tool: &Tool,
+    opts: &FaceOptions,
+) -> Result<PlaneFeature, CalibrateError> {
+    let name = &sel.spec.name;
+    match sel.spec.kind {
         FaceKind::Flank => {
-            let face = extract_face(points, spec, moves, model, tool, stock, opts)?;
+            let face = fit_face(points, sel, model, opts)?;
             Ok(PlaneFeature::from_design(
-                &spec.name,
+                name,
                 face.cut,
                 FaceKind::Flank,
                 face.flank.plane.normal,
@@ -1308,80 +1365,27 @@ pub fn extract_plane_feature(
             ))
         }
         FaceKind::Floor => {
-            if tool.kind() != ToolKind::Flat {
-                return Err(CalibrateError::FloorNeedsFlatTool(spec.name.clone()));
-            }
-            let mv = moves.iter().find(|m| m.line == spec.line).ok_or_else(|| {
-                crate::calibration::identify::IdentifyError::NoMove {
-                    face: spec.name.clone(),
-                    line: spec.line,
-                }
-            })?;
-            let empty = || {
-                CalibrateError::Face(crate::calibration::identify::IdentifyError::EmptyRegion {
-                    face: spec.name.clone(),
-                })
-            };
-            // Reuse the flank for the cut's validity check and frame.
-            let fl = flank(model, tool, mv, stock).ok_or_else(empty)?;
-            crate::calibration::identify::find_cut(moves, spec, model)?;
-            let u = fl.u;
-            let v = fl.v;
-            let e2 = UnitVector3::try_new(v.cross(&u), tol::LENGTH_EPS).ok_or_else(empty)?;
-            let m = UnitVector3::new_normalize(u.into_inner() * u.dot(&v) - v.into_inner());
-            let plane = Plane::through(&fl.tip, m);
-            let (su, se) = (extent(stock, &fl.tip, &u), extent(stock, &fl.tip, &e2));
-            let mg = opts.margin_mm;
-            let (u0, u1) = (su.0.max(0.0) + mg, su.1.min(fl.length) - mg);
-            let r = tool.radius();
-            let (w0, w1) = (se.0.max(-r) + mg, se.1.min(r) - mg);
-            if u0 >= u1 || w0 >= w1 {
-                return Err(empty());
-            }
-            let indices = region_indices(points, &spec.region, |p| {
-                let w = p - fl.tip;
-                let (a, b) = (u.dot(&w), e2.dot(&w));
-                a >= u0
-                    && a <= u1
-                    && b >= w0
-                    && b <= w1
-                    && plane.signed_distance(p).abs() <= opts.band_mm
-            });
-            let sel: Vec<Point3> = indices.iter().map(|&i| points[i]).collect();
-            let mut fit = fit_plane_robust(&sel, &opts.robust).map_err(|source| {
-                CalibrateError::Face(crate::calibration::identify::IdentifyError::Fit {
-                    face: spec.name.clone(),
-                    points: sel.len(),
-                    source,
-                })
-            })?;
-            fit.plane = fit.plane.oriented_towards(&m);
-            let used: Vec<Point3> = sel
+            let (selected, fit) = fit_selection(points, sel, opts)?;
+            let used = used_points(&selected, &fit, opts);
+            let [u, e2] = sel.window.axes;
+            let tip = sel.window.origin;
+            let xs: Vec<Real> = used.iter().map(|p| e2.dot(&(p - tip))).collect();
+            let cross = xs
                 .iter()
-                .copied()
-                .filter(|p| {
-                    fit.plane.signed_distance(p).abs()
-                        <= opts.robust.k_sigma * fit.rms_mm.max(tol::LENGTH_EPS)
-                })
-                .collect();
-            let cross = used
-                .iter()
-                .fold((Real::INFINITY, Real::NEG_INFINITY), |(a, b), p| {
-                    let x = e2.dot(&(p - fl.tip));
+                .fold((Real::INFINITY, Real::NEG_INFINITY), |(a, b), &x| {
                     (a.min(x), b.max(x))
                 });
             let design = face_design(&used, &fit, [u, e2]);
-            let xs: Vec<Real> = used.iter().map(|p| e2.dot(&(p - fl.tip))).collect();
             let mut f = PlaneFeature::from_design(
-                &spec.name,
-                *mv,
+                name,
+                sel.cut,
                 FaceKind::Floor,
-                m,
+                sel.window.plane.normal,
                 &fit,
                 &design,
                 cross,
             );
-            f.cross_moments = sampled_envelope_line(r, &xs);
+            f.cross_moments = sampled_envelope_line(tool.radius(), &xs);
             Ok(f)
         }
     }

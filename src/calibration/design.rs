@@ -55,8 +55,8 @@
 //! **Invariant:** plans and writes text; runs no sweep or scan and touches no files.
 
 use crate::calibration::calibrate::{
-    ANGLE_MAGNITUDE_RAD, CalibrateError, Feature, Identifiability, Model, Registration,
-    identifiability, magnitude, synthetic_plane_feature,
+    ANGLE_MAGNITUDE_RAD, CalibrateError, Feature, Identifiability, Model, PlaneFeature,
+    Registration, identifiability, magnitude, synthetic_plane_feature,
 };
 use crate::calibration::identify::{FaceKind, FaceRegion, FaceSpec};
 use crate::cutting::tool::{Tool, ToolKind};
@@ -64,6 +64,7 @@ use crate::machine::chain::{AxisKind, Chain, DeviationId};
 use crate::math::{Aabb, Point3, Real, Vector3};
 use crate::nc::{AxisLetter, AxisValues, Move, MoveKind};
 use rayon::prelude::*;
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
 /// Errors of test-cut design.
@@ -87,7 +88,9 @@ pub struct DesignOptions {
     pub half_section_mm: Real,
     /// Bar length along the rotary axis (mm).
     pub length_mm: Real,
-    /// Shoulder width into the side (mm); must exceed twice the face margin.
+    /// Shoulder width into the side (mm); must exceed twice the face margin. The tool
+    /// overshoots the bar's edge by its diameter less this width, at least [`CLEARANCE_MM`]:
+    /// a wider shoulder is narrowed to that.
     pub width_mm: Real,
     /// The shoulder depths the design chooses from (mm). A depth is used only where the
     /// tool's cutting length reaches it with a margin to spare and it leaves a margin of
@@ -105,14 +108,15 @@ pub struct DesignOptions {
 
 impl DesignOptions {
     /// The bar and scanner used by `twinmill design` by default: 40 × 40 × 80 mm bar,
-    /// 6 mm shoulders 3, 8, 13, 18 or 23 mm deep (tip heights 17 … −3 mm above the rotary
-    /// axis: the lever that separates the spindle's tilt from the squareness of Z), EinScan-
-    /// class noise 0.025 mm at 0.185 mm pitch.
+    /// 5 mm shoulders (cut by the Ø6 tool 1 mm beyond the bar's edge) 3, 8, 13, 18 or 23 mm
+    /// deep (tip heights 17 … −3 mm above the rotary axis: the lever that separates the
+    /// spindle's tilt from the squareness of Z), EinScan-class noise 0.025 mm at 0.185 mm
+    /// pitch.
     pub fn standard() -> Self {
         DesignOptions {
             half_section_mm: 20.0,
             length_mm: 80.0,
-            width_mm: 6.0,
+            width_mm: 5.0,
             depths_mm: [3.0, 8.0, 13.0, 18.0, 23.0],
             noise_sigma_mm: 0.025,
             pitch_mm: 0.185,
@@ -130,6 +134,15 @@ impl DesignOptions {
         }
     }
 }
+
+/// How far the tool reaches beyond the bar's edge at least (mm): twice a realistic offset
+/// deviation ([`crate::calibration::calibrate::OFFSET_MAGNITUDE_MM`]). A tool that ends at
+/// the edge leaves, on a machine whose axes are offset, a sliver of the edge standing
+/// beside the shoulder, which hides most of its wall from the scanner.
+pub const CLEARANCE_MM: Real = 2.0 * crate::calibration::calibrate::OFFSET_MAGNITUDE_MM;
+
+/// Narrowest floor strip measured (mm, after the margins).
+const MIN_FLOOR_MM: Real = 1.0;
 
 /// One designed cut.
 #[derive(Clone, Debug, PartialEq)]
@@ -289,14 +302,11 @@ impl Cut {
         }
     }
 
-    /// The faces a scanner can measure: the flank always; the floor only when the wall
-    /// beside it, seen at 45°, leaves more than two margins of it in view (depth + 2·margin
-    /// below the shoulder's width).
+    /// The faces a scanner can measure: the flank always; the floor when its strip, the
+    /// shoulder's width less two margins, is at least [`MIN_FLOOR_MM`] wide (the shoulder
+    /// opens towards the bar's corner, and the views at the corners see into it).
     fn faces(&self, o: &DesignOptions) -> Vec<FaceKind> {
-        let depth = match *self {
-            Cut::XShoulder { depth, .. } | Cut::YShoulder { depth, .. } => depth,
-        };
-        if depth + 2.0 * o.margin_mm < o.width_mm {
+        if o.width_mm - 2.0 * o.margin_mm >= MIN_FLOOR_MM {
             vec![FaceKind::Flank, FaceKind::Floor]
         } else {
             vec![FaceKind::Flank]
@@ -313,14 +323,14 @@ impl Cut {
         };
         match kind {
             FaceKind::Flank => ((along - m).max(0.0), (depth - m).max(0.0)),
-            FaceKind::Floor => ((along - m).max(0.0), (o.width_mm - depth - m).max(0.0)),
+            FaceKind::Floor => ((along - m).max(0.0), (o.width_mm - m).max(0.0)),
         }
     }
 }
 
 /// Ranking of a candidate: undetermined directions, parameters not identified alone,
 /// information score (higher is better).
-type Key = (usize, usize, Real);
+pub type Key = (usize, usize, Real);
 
 /// A candidate design's ranking, identifiability and relative uncertainties.
 type Evaluated = (Key, Identifiability, Vec<(String, Real)>);
@@ -363,11 +373,16 @@ fn candidates(o: &DesignOptions, tool: &Tool) -> Vec<Cut> {
 /// The rotary indices the bar is cut at (degrees).
 const INDICES_DEG: [Real; 4] = [0.0, 90.0, 180.0, 270.0];
 
+/// Faces measured on a simulated scan of an earlier design, by face name: the search uses
+/// them instead of its expectation for the same faces.
+pub type MeasuredFaces = BTreeMap<String, PlaneFeature>;
+
 fn features_of(
     cuts: &[Cut],
     o: &DesignOptions,
     model: &Chain,
     tool: &Tool,
+    measured: &MeasuredFaces,
 ) -> Option<Vec<Feature>> {
     let stock = o.stock();
     let r = tool.radius();
@@ -375,6 +390,10 @@ fn features_of(
     for c in cuts {
         let mv = c.motion(o, r);
         for kind in c.faces(o) {
+            if let Some(f) = measured.get(&format!("{}-{}", c.name(), kind_name(kind))) {
+                out.push(Feature::Plane(f.clone()));
+                continue;
+            }
             let (a, b) = c.face_sizes(o, kind);
             let n = expected_points(a * b, o.pitch_mm).max(3.0);
             let s = o.noise_sigma_mm;
@@ -384,9 +403,8 @@ fn features_of(
                 region: FaceRegion::Auto,
                 kind,
             };
-            // Floors: the part of the track inside the stock, across the feed (symmetric
-            // when the shoulder is one tool diameter wide).
-            let half = ((o.width_mm.min(2.0 * r) - depth_of(c)) / 2.0 - o.margin_mm).max(0.0);
+            // Floors: the part of the track inside the stock, across the feed.
+            let half = (o.width_mm.min(2.0 * r) / 2.0 - o.margin_mm).max(0.0);
             let cross = (-half, half);
             let f = synthetic_plane_feature(
                 &spec,
@@ -405,12 +423,6 @@ fn features_of(
     Some(out)
 }
 
-fn depth_of(c: &Cut) -> Real {
-    match *c {
-        Cut::XShoulder { depth, .. } | Cut::YShoulder { depth, .. } => depth,
-    }
-}
-
 /// "flank" or "floor".
 pub fn kind_name(kind: FaceKind) -> &'static str {
     match kind {
@@ -425,8 +437,9 @@ fn evaluate(
     model: &Chain,
     tool: &Tool,
     ids: &[DeviationId],
+    measured: &MeasuredFaces,
 ) -> Option<(Identifiability, Vec<(String, Real)>)> {
-    let feats = features_of(cuts, o, model, tool)?;
+    let feats = features_of(cuts, o, model, tool, measured)?;
     let m = Model {
         chain: model,
         ids,
@@ -453,16 +466,42 @@ fn evaluate(
     Some((ident, rel))
 }
 
-/// Designs test cuts that make `params` observable on `model` (see the module docs).
+/// Designs test cuts that make `params` observable on `model` (see the module docs), from
+/// the faces' expected uncertainties.
 pub fn design(
     model: &Chain,
     tool: &Tool,
     params: &[DeviationId],
     o: &DesignOptions,
 ) -> Result<Design, DesignError> {
+    design_with(model, tool, params, o, &MeasuredFaces::new())
+}
+
+/// [`design`], with the faces already measured on simulated scans of earlier designs used
+/// instead of their expected uncertainties.
+pub fn design_with(
+    model: &Chain,
+    tool: &Tool,
+    params: &[DeviationId],
+    o: &DesignOptions,
+    measured: &MeasuredFaces,
+) -> Result<Design, DesignError> {
     check_machine(model)?;
     if tool.kind() != ToolKind::Flat {
         return Err(DesignError::Tool);
+    }
+    // The tool reaches CLEARANCE_MM beyond the bar's edge: the shoulder is its diameter
+    // less that wide at most.
+    let o = &DesignOptions {
+        width_mm: o.width_mm.min(2.0 * tool.radius() - CLEARANCE_MM),
+        ..*o
+    };
+    if o.width_mm <= 2.0 * o.margin_mm {
+        return Err(DesignError::Machine(format!(
+            "a tool of more than {} mm diameter (a shoulder wider than two face margins, cut \
+             {CLEARANCE_MM} mm beyond the bar's edge)",
+            2.0 * o.margin_mm + CLEARANCE_MM
+        )));
     }
     if params.is_empty() {
         return Err(DesignError::Calibrate(CalibrateError::NoParameters));
@@ -505,7 +544,7 @@ pub fn design(
             .par_iter()
             .map(|set| {
                 let cuts: Vec<Cut> = set.iter().map(|&k| pool[k]).collect();
-                let (ident, rel) = evaluate(&cuts, o, model, tool, params)?;
+                let (ident, rel) = evaluate(&cuts, o, model, tool, params, measured)?;
                 Some((key_of(&ident, params.len()), ident, rel))
             })
             .collect();
@@ -538,9 +577,9 @@ pub fn design(
         best.ok_or_else(|| DesignError::Machine("a bar the candidate cuts can reach".into()))?;
     let mut chosen: Vec<Cut> = set.iter().map(|&k| pool[k]).collect();
     chosen.sort_by(|a, b| a.index().total_cmp(&b.index()));
-    let notes = lever_notes(&chosen, o, model, tool, params);
+    let feats = features_of(&chosen, o, model, tool, measured);
     let mut d = finish(chosen, ident, rel, o, tool, evaluated);
-    d.notes = notes;
+    d.notes = feats.map_or_else(Vec::new, |f| lever_notes(&d.cuts, &f, model, tool, params));
     Ok(d)
 }
 
@@ -573,7 +612,9 @@ const MIN_GAIN: Real = std::f64::consts::LN_2;
 const SCORE_FLOOR: Real = 1e-3;
 const SCORE_CAP: Real = 100.0;
 
-fn key_of(ident: &Identifiability, np: usize) -> Key {
+/// The ranking of what `ident` determines for `np` parameters: undetermined directions,
+/// parameters not identified alone, information score (see [`order`]).
+pub fn key_of(ident: &Identifiability, np: usize) -> Key {
     let score = ident
         .singular_values
         .iter()
@@ -584,7 +625,7 @@ fn key_of(ident: &Identifiability, np: usize) -> Key {
 
 /// Ranking: fewer undetermined directions, then fewer parameters not identified alone, then
 /// the higher information score.
-fn order(a: &Key, b: &Key) -> std::cmp::Ordering {
+pub fn order(a: &Key, b: &Key) -> std::cmp::Ordering {
     (a.0, a.1).cmp(&(b.0, b.1)).then(b.2.total_cmp(&a.2))
 }
 
@@ -612,27 +653,28 @@ const LEVER_PAIRS: [(&str, &str, bool); 2] = [
 ];
 
 /// For the requested lever pairs: the tip-height spread of the faces that see them and the
-/// expected standard uncertainty along their difference's unit direction `(p₁ − p₂)/√2`
-/// (the quantity the identifiability threshold applies to).
-fn lever_notes(
-    cuts: &[Cut],
-    o: &DesignOptions,
+/// standard uncertainty along their difference's unit direction `(p₁ − p₂)/√2` (the
+/// quantity the identifiability threshold applies to) that `features` give: expected
+/// ones, or those measured on the designed scene's simulated scan.
+pub fn lever_notes(
+    cuts: &[DesignedCut],
+    features: &[Feature],
     model: &Chain,
     tool: &Tool,
     params: &[DeviationId],
 ) -> Vec<String> {
     let names: Vec<String> = params.iter().map(|id| model.deviation_name(*id)).collect();
-    let cov = features_of(cuts, o, model, tool).and_then(|feats| {
+    let cov = {
         let m = Model {
             chain: model,
             ids: params,
             tool,
-            features: &feats,
+            features,
             registration: Registration::Estimate,
         };
-        let j = m.jacobian(&m.start())?;
-        (j.transpose() * &j).pseudo_inverse(1e-12).ok()
-    });
+        m.jacobian(&m.start())
+            .and_then(|j| (j.transpose() * &j).pseudo_inverse(1e-12).ok())
+    };
     let mut out = Vec::new();
     for (a, b, across_x) in LEVER_PAIRS {
         let (Some(i), Some(k)) = (
@@ -641,11 +683,11 @@ fn lever_notes(
         ) else {
             continue;
         };
-        let h = o.half_section_mm;
+        // The programmed tip heights of the faces across X (Y-shoulder walls) or across Y.
         let tips: Vec<Real> = cuts
             .iter()
-            .filter(|c| matches!(c, Cut::YShoulder { .. }) == across_x)
-            .map(|c| h - depth_of(c))
+            .filter(|c| c.name.contains("-end-") == across_x)
+            .map(|c| c.cut.start.get(AxisLetter::Z))
             .collect();
         let lo = tips.iter().copied().fold(Real::INFINITY, Real::min);
         let hi = tips.iter().copied().fold(Real::NEG_INFINITY, Real::max);
@@ -662,7 +704,7 @@ fn lever_notes(
         );
         if let Some(s) = sigma {
             note.push_str(&format!(
-                "; expected σ of ({a} − {b})/√2 {s:.2e} rad = {:.0} % of \
+                "; σ of ({a} − {b})/√2 {s:.2e} rad = {:.0} % of \
                  {ANGLE_MAGNITUDE_RAD:e} rad (determined below {:.0} %)",
                 100.0 * s / ANGLE_MAGNITUDE_RAD,
                 100.0 * crate::calibration::calibrate::DETERMINED_FRACTION
@@ -762,6 +804,12 @@ fn fmt(v: Real) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn depth_of(c: &Cut) -> Real {
+        match *c {
+            Cut::XShoulder { depth, .. } | Cut::YShoulder { depth, .. } => depth,
+        }
+    }
 
     const NINE: [&str; 9] = [
         "dy_AY", "dz_AY", "beta_AY", "gamma_AY", "alpha_YX", "gamma_YX", "beta_XZ", "alpha_ZS",

@@ -24,6 +24,7 @@
 //! **Invariant:** identification reads a cloud and the program's moves; it never runs the
 //! sweep or the scanner (it must work on clouds twinmill did not make).
 
+use crate::cutting::stock::TriDexel;
 use crate::cutting::tool::Tool;
 use crate::machine::chain::{AxisKind, Chain, Component, DeviationId};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
@@ -58,7 +59,31 @@ pub enum IdentifyError {
         /// Face name.
         face: String,
     },
-    /// The plane fit failed (too few points in the region, degenerate).
+    /// The face's cut left none of its surface inside the face region: nothing was cut
+    /// there, so there is no face to fit (checked on the cut stock of a simulated scan,
+    /// whose crossings carry the NC line that cut them).
+    #[error("face '{face}': line {line} cut nothing inside the face region ({detail})")]
+    NotCut {
+        /// Face name.
+        face: String,
+        /// The cut's NC line.
+        line: usize,
+        /// The region, and where the cut's surface is instead.
+        detail: String,
+    },
+    /// Too few points of the cloud lie in the face region to fit a plane.
+    #[error(
+        "face '{face}': {found} points of the cloud inside the face region ({region}); a plane needs at least {MIN_FACE_POINTS}"
+    )]
+    FewPoints {
+        /// Face name.
+        face: String,
+        /// Points found.
+        found: usize,
+        /// The region.
+        region: String,
+    },
+    /// The plane fit failed (degenerate points).
     #[error("face '{face}': {source} ({points} points in the region)")]
     Fit {
         /// Face name.
@@ -136,16 +161,11 @@ pub struct Flank {
 }
 
 /// The flank plane of `mv` on `chain`: tangent to the tool cylinder, parallel to the tool
-/// axis and the cut direction, on the side where more of `stock` lies.
+/// axis and the cut direction, on the side where more of `stock` lies. This decides which
+/// side of the cut is its face from the geometry as planned (on the model chain); the same
+/// face on another chain is [`flank_towards`] the model flank's normal.
 pub fn flank(chain: &Chain, tool: &Tool, mv: &Move, stock: &Aabb) -> Option<Flank> {
-    let p0 = chain.w_from_t(&mv.start);
-    let p1 = chain.w_from_t(&mv.end);
-    let tip = p0 * Point3::origin();
-    let d = p1 * Point3::origin() - tip;
-    let length = d.norm();
-    let v = UnitVector3::new_normalize(p0.rotation * Vector3::z());
-    let u = UnitVector3::try_new(d, tol::LENGTH_EPS)?;
-    let side = UnitVector3::try_new(u.cross(&v), tol::LENGTH_EPS)?;
+    let (tip, _, _, side) = cut_frame(chain, mv)?;
     // Pick the side with the stock beyond it.
     let reach = |n: &Vector3| {
         corners(stock)
@@ -153,11 +173,23 @@ pub fn flank(chain: &Chain, tool: &Tool, mv: &Move, stock: &Aabb) -> Option<Flan
             .map(|c| n.dot(&(c - tip)) - tool.radius())
             .fold(Real::NEG_INFINITY, Real::max)
     };
-    let n = if reach(&side) >= reach(&-side.into_inner()) {
+    let toward = if reach(&side) >= reach(&-side.into_inner()) {
         side
     } else {
         -side
     };
+    flank_towards(chain, tool, mv, &toward)
+}
+
+/// The flank plane of `mv` on `chain` on the side `toward` points to (its normal has a
+/// positive component along `toward`): the same face of the cut on any chain, whatever the
+/// deviations move it by. A side chosen afresh on a deviated chain (by where the stock
+/// lies) would flip to the cut's other flank once the tool passes the stock's middle.
+pub fn flank_towards(chain: &Chain, tool: &Tool, mv: &Move, toward: &UnitVector3) -> Option<Flank> {
+    let (tip, d, v, side) = cut_frame(chain, mv)?;
+    let length = d.norm();
+    let u = UnitVector3::try_new(d, tol::LENGTH_EPS)?;
+    let n = if side.dot(toward) >= 0.0 { side } else { -side };
     Some(Flank {
         plane: Plane::through(&(tip + n.into_inner() * tool.radius()), n),
         u,
@@ -165,6 +197,19 @@ pub fn flank(chain: &Chain, tool: &Tool, mv: &Move, stock: &Aabb) -> Option<Flan
         tip,
         length,
     })
+}
+
+/// The tip at the cut's start, the tip's travel, the tool axis and the unit normal
+/// `u × v` of a straight cut on `chain`; `None` for a cut along the tool axis or no cut.
+fn cut_frame(chain: &Chain, mv: &Move) -> Option<(Point3, Vector3, UnitVector3, UnitVector3)> {
+    let p0 = chain.w_from_t(&mv.start);
+    let p1 = chain.w_from_t(&mv.end);
+    let tip = p0 * Point3::origin();
+    let d = p1 * Point3::origin() - tip;
+    let v = UnitVector3::new_normalize(p0.rotation * Vector3::z());
+    let u = UnitVector3::try_new(d, tol::LENGTH_EPS)?;
+    let side = UnitVector3::try_new(u.cross(&v), tol::LENGTH_EPS)?;
+    Some((tip, d, v, side))
 }
 
 /// The range of `w · (x − origin)` over the box: its extent along `w` (mm).
@@ -359,7 +404,312 @@ pub fn region_indices(
     }
 }
 
-/// Segments and fits one face.
+/// Fewest points a face's plane is fitted to.
+pub const MIN_FACE_POINTS: usize = 3;
+
+/// A crossing of the cut stock belongs to a face when its material's outward normal is
+/// within 25° of the face's outward normal (cos 25° ≈ 0.9); the crossings on a cut face lie
+/// within microradians of it, those of the cut's other flank or its floor 90° or more off.
+const FACING_COS: Real = 0.9;
+
+/// Where a face is expected: the part of the cut's face (flank or floor) on the model
+/// chain, clipped to the stock and shrunk by the margin, and the band around its plane.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FaceWindow {
+    /// Origin of the in-plane coordinates: the tool tip at the cut's start.
+    pub origin: Point3,
+    /// In-plane directions: the cut direction and the tool axis (flank) or the cross-feed
+    /// direction (floor).
+    pub axes: [UnitVector3; 2],
+    /// The face's extent along each in-plane direction (mm, from `origin`).
+    pub ranges: [(Real, Real); 2],
+    /// The expected plane, normal from the tool into the material.
+    pub plane: Plane,
+    /// Half-width of the band around the plane (mm).
+    pub band_mm: Real,
+}
+
+impl FaceWindow {
+    /// Whether `p` lies over the face's extent (at any distance from its plane).
+    pub fn over(&self, p: &Point3) -> bool {
+        let w = p - self.origin;
+        (0..2).all(|k| {
+            let x = self.axes[k].dot(&w);
+            x >= self.ranges[k].0 && x <= self.ranges[k].1
+        })
+    }
+
+    /// Whether `p` lies in the window: over the face's extent and within the band.
+    pub fn contains(&self, p: &Point3) -> bool {
+        self.over(p) && self.plane.signed_distance(p).abs() <= self.band_mm
+    }
+
+    /// The window in words, for messages.
+    pub fn describe(&self) -> String {
+        let size = |k: usize| self.ranges[k].1 - self.ranges[k].0;
+        format!(
+            "within {} mm of the expected plane over {:.1} × {:.1} mm",
+            self.band_mm,
+            size(0),
+            size(1)
+        )
+    }
+}
+
+/// The window of a face of the straight cut `mv` on the model chain: the flank between the
+/// move's ends and between the tool's flank start and its length, or the floor across the
+/// tool's diameter; clipped to the stock and shrunk by the margin. Also returns the cut's
+/// model flank (its frame and, for flanks, its plane).
+pub fn face_window(
+    spec: &FaceSpec,
+    mv: &Move,
+    model: &Chain,
+    tool: &Tool,
+    stock: &Aabb,
+    opts: &FaceOptions,
+) -> Result<(FaceWindow, Flank), IdentifyError> {
+    let empty = || IdentifyError::EmptyRegion {
+        face: spec.name.clone(),
+    };
+    let fl = flank(model, tool, mv, stock).ok_or_else(empty)?;
+    let m = opts.margin_mm;
+    let su = extent(stock, &fl.tip, &fl.u);
+    let along = (su.0.max(0.0) + m, su.1.min(fl.length) - m);
+    let (second, across, plane) = match spec.kind {
+        FaceKind::Flank => {
+            // The flank is the cylindrical part of the tool at its full radius: from the
+            // tip (flat) or one radius above it (ball); a tool with no such part makes no
+            // planar flank.
+            let flank_start = tool.flank_start().ok_or_else(empty)?;
+            let sv = extent(stock, &fl.tip, &fl.v);
+            let across = (sv.0.max(flank_start) + m, sv.1.min(tool.length()) - m);
+            (fl.v, across, fl.plane)
+        }
+        FaceKind::Floor => {
+            // The bottom of a flat end mill: across the feed over the tool's diameter; its
+            // normal from the tool into the material below it.
+            let e2 = UnitVector3::try_new(fl.v.cross(&fl.u), tol::LENGTH_EPS).ok_or_else(empty)?;
+            let mn =
+                UnitVector3::new_normalize(fl.u.into_inner() * fl.u.dot(&fl.v) - fl.v.into_inner());
+            let se = extent(stock, &fl.tip, &e2);
+            let r = tool.radius();
+            let across = (se.0.max(-r) + m, se.1.min(r) - m);
+            (e2, across, Plane::through(&fl.tip, mn))
+        }
+    };
+    if along.0 >= along.1 || across.0 >= across.1 {
+        return Err(empty());
+    }
+    Ok((
+        FaceWindow {
+            origin: fl.tip,
+            axes: [fl.u, second],
+            ranges: [along, across],
+            plane,
+            band_mm: opts.band_mm,
+        },
+        fl,
+    ))
+}
+
+/// The points of a cloud a face selects, with its cut and window.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FaceSelection {
+    /// The face.
+    pub spec: FaceSpec,
+    /// The cut that made it.
+    pub cut: Move,
+    /// The cut's flank on the model chain.
+    pub flank: Flank,
+    /// Where the face is expected.
+    pub window: FaceWindow,
+    /// Indices of the cloud points in the face's region.
+    pub indices: Vec<usize>,
+}
+
+impl FaceSelection {
+    /// The face's region in words, for messages.
+    pub fn describe_region(&self) -> String {
+        match &self.spec.region {
+            FaceRegion::Auto => self.window.describe(),
+            FaceRegion::Box(b) => format!(
+                "in the box [{}, {}, {}] – [{}, {}, {}]",
+                b.min.x, b.min.y, b.min.z, b.max.x, b.max.y, b.max.z
+            ),
+            FaceRegion::Seed(p) => {
+                format!("the planar region grown around [{}, {}, {}]", p.x, p.y, p.z)
+            }
+        }
+    }
+}
+
+/// Selects the points of a face: its cut, its window on the model chain, and the cloud
+/// points in its region ([`FaceRegion`]).
+pub fn select_face(
+    points: &[Point3],
+    spec: &FaceSpec,
+    moves: &[Move],
+    model: &Chain,
+    tool: &Tool,
+    stock: &Aabb,
+    opts: &FaceOptions,
+) -> Result<FaceSelection, IdentifyError> {
+    let mv = find_cut(moves, spec, model)?;
+    let (window, fl) = face_window(spec, mv, model, tool, stock, opts)?;
+    let indices = region_indices(points, &spec.region, |p| window.contains(p));
+    Ok(FaceSelection {
+        spec: spec.clone(),
+        cut: *mv,
+        flank: fl,
+        window,
+        indices,
+    })
+}
+
+/// Checks, on the cut stock a simulated scan was made of, that the face's cut left its
+/// surface inside the face's region: a face may be fitted only where its cut removed
+/// material. The stock's crossings carry the NC line that cut them; those of the face's
+/// line, facing like the face, must lie in its region (the window for an automatic
+/// region, the box, or — for a seed — the box of the selected points grown by the band).
+/// Otherwise the points found there are of another surface (the uncut stock, another
+/// cut), and fitting them would give a number for a measurement that did not happen.
+pub fn check_cut(
+    sel: &FaceSelection,
+    points: &[Point3],
+    stock: &TriDexel,
+) -> Result<(), IdentifyError> {
+    let w = &sel.window;
+    let seed_box = match &sel.spec.region {
+        FaceRegion::Seed(_) if sel.indices.is_empty() => return Ok(()),
+        FaceRegion::Seed(_) => {
+            let grow = Vector3::repeat(w.band_mm);
+            let (lo, hi) = sel.indices.iter().fold(
+                (
+                    Point3::from(Vector3::repeat(Real::INFINITY)),
+                    Point3::from(Vector3::repeat(Real::NEG_INFINITY)),
+                ),
+                |(lo, hi), &i| (lo.inf(&points[i]), hi.sup(&points[i])),
+            );
+            Some(Aabb {
+                min: lo - grow,
+                max: hi + grow,
+            })
+        }
+        _ => None,
+    };
+    let inside = |p: &Point3| match (&sel.spec.region, &seed_box) {
+        (FaceRegion::Auto, _) => w.contains(p),
+        (FaceRegion::Box(b), _) | (FaceRegion::Seed(_), Some(b)) => {
+            (0..3).all(|k| p[k] >= b.min[k] && p[k] <= b.max[k])
+        }
+        (FaceRegion::Seed(_), None) => false,
+    };
+    let n = w.plane.normal.into_inner();
+    let line = sel.spec.line;
+    let (mut found, mut elsewhere) = (0usize, Vec::new());
+    for g in stock.grids() {
+        g.for_each_crossing(|p, c| {
+            if c.line as usize != line || c.normal().dot(&n) > -FACING_COS {
+                return;
+            }
+            if inside(&p) {
+                found += 1;
+            } else if w.over(&p) {
+                elsewhere.push(w.plane.signed_distance(&p));
+            }
+        });
+    }
+    if found >= MIN_FACE_POINTS {
+        return Ok(());
+    }
+    let region = sel.describe_region();
+    let detail = if elsewhere.is_empty() {
+        format!(
+            "{region}: no surface of line {line} remains there; the cut missed the stock, or a \
+             later cut removed what it left"
+        )
+    } else {
+        elsewhere.sort_by(Real::total_cmp);
+        let median = elsewhere[elsewhere.len() / 2];
+        format!(
+            "{region}: its surface there lies {median:+.3} mm from the expected plane, beyond \
+             band_mm = {}",
+            w.band_mm
+        )
+    };
+    Err(IdentifyError::NotCut {
+        face: sel.spec.name.clone(),
+        line,
+        detail,
+    })
+}
+
+/// Fits the plane of a selected flank.
+pub fn fit_face(
+    points: &[Point3],
+    sel: &FaceSelection,
+    model: &Chain,
+    opts: &FaceOptions,
+) -> Result<Face, IdentifyError> {
+    let (sel_points, fit) = fit_selection(points, sel, opts)?;
+    let fl = sel.flank;
+    let used = used_points(&sel_points, &fit, opts);
+    let design = face_design(&used, &fit, [fl.u, fl.v]);
+    let rotary_deg = model
+        .axes()
+        .iter()
+        .filter(|a| a.kind == AxisKind::Rotary)
+        .map(|a| sel.cut.start.get(a.letter))
+        .collect();
+    Ok(Face {
+        name: sel.spec.name.clone(),
+        cut: sel.cut,
+        flank: fl,
+        rotary_deg,
+        fit,
+        indices: sel.indices.clone(),
+        design,
+    })
+}
+
+/// The selected points and their robust plane fit, normal oriented like the window's; an
+/// error if there are too few points to fit.
+pub fn fit_selection(
+    points: &[Point3],
+    sel: &FaceSelection,
+    opts: &FaceOptions,
+) -> Result<(Vec<Point3>, PlaneFit), IdentifyError> {
+    let sel_points: Vec<Point3> = sel.indices.iter().map(|&i| points[i]).collect();
+    if sel_points.len() < MIN_FACE_POINTS {
+        return Err(IdentifyError::FewPoints {
+            face: sel.spec.name.clone(),
+            found: sel_points.len(),
+            region: sel.describe_region(),
+        });
+    }
+    let mut fit =
+        fit_plane_robust(&sel_points, &opts.robust).map_err(|source| IdentifyError::Fit {
+            face: sel.spec.name.clone(),
+            points: sel_points.len(),
+            source,
+        })?;
+    fit.plane = fit.plane.oriented_towards(&sel.window.plane.normal);
+    Ok((sel_points, fit))
+}
+
+/// The points a robust fit kept (within its rejection limit).
+pub fn used_points(points: &[Point3], fit: &PlaneFit, opts: &FaceOptions) -> Vec<Point3> {
+    points
+        .iter()
+        .copied()
+        .filter(|p| {
+            fit.plane.signed_distance(p).abs()
+                <= opts.robust.k_sigma * fit.rms_mm.max(tol::LENGTH_EPS)
+        })
+        .collect()
+}
+
+/// Segments and fits one face (a flank) in a cloud: [`select_face`], then [`fit_face`].
 pub fn extract_face(
     points: &[Point3],
     spec: &FaceSpec,
@@ -369,62 +719,8 @@ pub fn extract_face(
     stock: &Aabb,
     opts: &FaceOptions,
 ) -> Result<Face, IdentifyError> {
-    let mv = find_cut(moves, spec, model)?;
-    let empty = || IdentifyError::EmptyRegion {
-        face: spec.name.clone(),
-    };
-    let fl = flank(model, tool, mv, stock).ok_or_else(empty)?;
-    // Extent of the stock along u and v, relative to the cut's start tip.
-    let (su, sv) = (extent(stock, &fl.tip, &fl.u), extent(stock, &fl.tip, &fl.v));
-    let m = opts.margin_mm;
-    let (u0, u1) = (su.0.max(0.0) + m, su.1.min(fl.length) - m);
-    // The flank is the cylindrical part of the tool at its full radius: from the tip (flat)
-    // or one radius above it (ball); a tool with no such part makes no planar flank.
-    let flank_start = tool.flank_start().ok_or_else(empty)?;
-    let (v0, v1) = (sv.0.max(flank_start) + m, sv.1.min(tool.length()) - m);
-    if u0 >= u1 || v0 >= v1 {
-        return Err(empty());
-    }
-    let indices = region_indices(points, &spec.region, |p| {
-        let w = p - fl.tip;
-        let (u, v) = (fl.u.dot(&w), fl.v.dot(&w));
-        u >= u0
-            && u <= u1
-            && v >= v0
-            && v <= v1
-            && fl.plane.signed_distance(p).abs() <= opts.band_mm
-    });
-    let sel: Vec<Point3> = indices.iter().map(|&i| points[i]).collect();
-    let mut fit = fit_plane_robust(&sel, &opts.robust).map_err(|source| IdentifyError::Fit {
-        face: spec.name.clone(),
-        points: sel.len(),
-        source,
-    })?;
-    fit.plane = fit.plane.oriented_towards(&fl.plane.normal);
-    let used: Vec<Point3> = sel
-        .iter()
-        .copied()
-        .filter(|p| {
-            fit.plane.signed_distance(p).abs()
-                <= opts.robust.k_sigma * fit.rms_mm.max(tol::LENGTH_EPS)
-        })
-        .collect();
-    let design = face_design(&used, &fit, [fl.u, fl.v]);
-    let rotary_deg = model
-        .axes()
-        .iter()
-        .filter(|a| a.kind == AxisKind::Rotary)
-        .map(|a| mv.start.get(a.letter))
-        .collect();
-    Ok(Face {
-        name: spec.name.clone(),
-        cut: *mv,
-        flank: fl,
-        rotary_deg,
-        fit,
-        indices,
-        design,
-    })
+    let sel = select_face(points, spec, moves, model, tool, stock, opts)?;
+    fit_face(points, &sel, model, opts)
 }
 
 /// The geometry the step and tilt are measured with, fixed from the model.
@@ -485,8 +781,9 @@ struct StepProblem<'a> {
     ids: [DeviationId; 2],
     base: [Real; 2],
     cuts: [&'a Move; 2],
+    /// The faces' model normals: which flank of each cut is its face, on any chain.
+    toward: [UnitVector3; 2],
     tool: &'a Tool,
-    stock: &'a Aabb,
     frame: StepFrame,
     measured: Vector2<Real>,
     x: Vector2<Real>,
@@ -498,8 +795,8 @@ impl StepProblem<'_> {
         for k in 0..2 {
             chain.set_deviation(self.ids[k], self.base[k] + x[k]);
         }
-        let f0 = flank(&chain, self.tool, self.cuts[0], self.stock)?;
-        let f1 = flank(&chain, self.tool, self.cuts[1], self.stock)?;
+        let f0 = flank_towards(&chain, self.tool, self.cuts[0], &self.toward[0])?;
+        let f1 = flank_towards(&chain, self.tool, self.cuts[1], &self.toward[1])?;
         let (s, t) = self.frame.measure(&f0.plane, &f1.plane)?;
         Some(Vector2::new(s, t))
     }
@@ -548,7 +845,6 @@ pub fn identify_step(
     faces: &[Face; 2],
     model: &Chain,
     tool: &Tool,
-    stock: &Aabb,
 ) -> Result<StepIdentification, IdentifyError> {
     let [f0, f1] = faces;
     // The rotary axis whose position differs by 180° between the cuts.
@@ -612,8 +908,8 @@ pub fn identify_step(
         ids,
         base: [model.deviation(ids[0]), model.deviation(ids[1])],
         cuts: [&f0.cut, &f1.cut],
+        toward: [f0.flank.plane.normal, f1.flank.plane.normal],
         tool,
-        stock,
         frame,
         measured: Vector2::new(step, tilt),
         x: Vector2::zeros(),
@@ -691,15 +987,16 @@ pub fn identify_step(
     })
 }
 
-/// The step and tilt the exact chain predicts for two cuts, measured in `frame`.
+/// The step and tilt the exact chain predicts for two cuts, measured in `frame`: on each
+/// cut the flank on the side `toward` points to — the side of its face's model flank, the
+/// side the material is on, whatever the deviations ([`flank_towards`]; for fitted faces
+/// `[(&f.cut, &f.flank.plane.normal), …]`).
 pub fn predicted_step(
     chain: &Chain,
     tool: &Tool,
-    cuts: [&Move; 2],
-    stock: &Aabb,
+    cuts: [(&Move, &UnitVector3); 2],
     frame: &StepFrame,
 ) -> Option<(Real, Real)> {
-    let f0 = flank(chain, tool, cuts[0], stock)?;
-    let f1 = flank(chain, tool, cuts[1], stock)?;
-    frame.measure(&f0.plane, &f1.plane)
+    let [a, b] = cuts.map(|(mv, toward)| flank_towards(chain, tool, mv, toward));
+    frame.measure(&a?.plane, &b?.plane)
 }

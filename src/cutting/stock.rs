@@ -35,7 +35,10 @@ pub enum StockError {
     BadPitch(Real),
     /// The tri-dexel would not fit in the memory budget.
     #[error(
-        "the tri-dexel stock at pitch {pitch} mm would need {needed_mib:.0} MiB, more than the {budget_mib:.0} MiB available; use a pitch of at least {suggested_pitch:.3} mm"
+        "the tri-dexel stock at pitch {pitch} mm would need {} MiB, more than the {} MiB budget; use a pitch of at least {} mm",
+        sig3(*needed_mib),
+        sig3(*budget_mib),
+        sig3(*suggested_pitch)
     )]
     TooMuchMemory {
         /// Requested pitch (mm).
@@ -44,9 +47,32 @@ pub enum StockError {
         needed_mib: Real,
         /// Budget (MiB).
         budget_mib: Real,
-        /// The finest pitch that fits (mm).
+        /// The finest pitch that fits (mm), rounded up to three significant digits: it fits,
+        /// and one unit less in its third digit does not.
         suggested_pitch: Real,
     },
+    /// Not even one ray per grid fits in the budget: no pitch helps.
+    #[error(
+        "the tri-dexel stock needs at least {} MiB at any pitch (one ray per grid), more than the {} MiB budget",
+        sig3(*least_mib),
+        sig3(*budget_mib)
+    )]
+    NoPitchFits {
+        /// What the coarsest grid needs (MiB).
+        least_mib: Real,
+        /// Budget (MiB).
+        budget_mib: Real,
+    },
+}
+
+/// `x` with three significant digits (at least as many as an integer part has), as
+/// printed in messages.
+pub fn sig3(x: Real) -> String {
+    if !(x.is_finite() && x > 0.0) {
+        return format!("{x}");
+    }
+    let digits = (2 - x.log10().floor() as i64).max(0) as usize;
+    format!("{x:.digits$}")
 }
 
 /// One end of a material interval.
@@ -636,26 +662,58 @@ fn subtract(
 }
 
 /// Estimated bytes of a tri-dexel over `bounds` at `pitch`, assuming two segments per
-/// ray on average (a cut part) plus the offset tables.
+/// ray on average (a cut part) plus the offset tables, on the grids [`TriDexel::new_box`]
+/// lays out: `round(size/pitch)` rays per side, at least one.
 pub fn estimate_bytes(bounds: &Aabb, pitch: Real) -> Real {
-    let e = bounds.max - bounds.min;
-    let rays = (e.y * e.z + e.x * e.z + e.x * e.y) / (pitch * pitch);
-    rays * (2.0 * std::mem::size_of::<Segment>() as Real + 4.0)
+    let count = |k: usize| ((bounds.max[k] - bounds.min[k]) / pitch).round().max(1.0);
+    let (nx, ny, nz) = (count(0), count(1), count(2));
+    let rays = ny * nz + nx * nz + nx * ny;
+    rays * BYTES_PER_RAY
 }
 
-/// Checks that a tri-dexel over `bounds` at `pitch` fits in `budget_bytes`; the error
-/// suggests the finest pitch that does (memory scales as 1/pitch²).
+/// Estimated bytes per ray: two segments and an offset.
+const BYTES_PER_RAY: Real = 2.0 * std::mem::size_of::<Segment>() as Real + 4.0;
+
+/// Checks that a tri-dexel over `bounds` at `pitch` fits in `budget_bytes`. Over the budget,
+/// the error gives the finest pitch that fits, rounded up to three significant digits
+/// (always finite), or says that no pitch does (not even one ray per grid fits).
 pub fn check_memory(bounds: &Aabb, pitch: Real, budget_bytes: Real) -> Result<(), StockError> {
     let needed = estimate_bytes(bounds, pitch);
-    if needed > budget_bytes {
-        return Err(StockError::TooMuchMemory {
-            pitch,
-            needed_mib: needed / 1048576.0,
-            budget_mib: budget_bytes / 1048576.0,
-            suggested_pitch: pitch * (needed / budget_bytes).sqrt() * 1.01,
+    if needed <= budget_bytes {
+        return Ok(());
+    }
+    const MIB: Real = 1048576.0;
+    let fits = |p: Real| estimate_bytes(bounds, p) <= budget_bytes;
+    // One ray per grid from a pitch of twice the largest extent on (round(size/p) ≤ 1).
+    let e = bounds.max - bounds.min;
+    let coarsest = 2.0 * e.x.max(e.y).max(e.z);
+    if !fits(coarsest) {
+        return Err(StockError::NoPitchFits {
+            least_mib: estimate_bytes(bounds, coarsest) / MIB,
+            budget_mib: budget_bytes / MIB,
         });
     }
-    Ok(())
+    // The need never grows with the pitch: bisect for the boundary between `pitch`
+    // (too fine) and `coarsest` (fits), then round up to three significant digits.
+    let (mut lo, mut hi) = (pitch, coarsest);
+    for _ in 0..200 {
+        let mid = 0.5 * (lo + hi);
+        if mid <= lo || mid >= hi {
+            break;
+        }
+        if fits(mid) { hi = mid } else { lo = mid }
+    }
+    let unit = 10f64.powi(hi.log10().floor() as i32 - 2);
+    let mut suggested = (hi / unit).ceil() * unit;
+    while !fits(suggested) {
+        suggested += unit;
+    }
+    Err(StockError::TooMuchMemory {
+        pitch,
+        needed_mib: needed / MIB,
+        budget_mib: budget_bytes / MIB,
+        suggested_pitch: suggested,
+    })
 }
 
 /// The tri-dexel stock.
@@ -928,6 +986,74 @@ mod tests {
                 assert!(estimate_bytes(&unit_box(100.0), suggested_pitch) <= 24e9);
             }
             other => panic!("unexpected {other:?}"),
+        }
+    }
+
+    #[test]
+    fn a_budget_no_pitch_fits_says_so_instead_of_suggesting_inf() {
+        // Once ruled by 1/pitch², a zero budget suggested "a pitch of at least inf mm".
+        let b = unit_box(10.0);
+        for budget in [0.0, 1.0, BYTES_PER_RAY] {
+            match check_memory(&b, 0.1, budget) {
+                Err(e @ StockError::NoPitchFits { .. }) => {
+                    let text = e.to_string();
+                    assert!(text.contains("one ray per grid"), "{text}");
+                    assert!(!text.contains("inf"), "{text}");
+                }
+                other => panic!("budget {budget}: {other:?}"),
+            }
+        }
+        // Three rays fit exactly: the suggestion is the pitch from which each grid of the
+        // 10 mm cube holds one ray, round(10/p) = 1, i.e. p > 10/1.5 mm, to three digits.
+        match check_memory(&b, 0.1, 3.0 * BYTES_PER_RAY) {
+            Err(StockError::TooMuchMemory {
+                suggested_pitch, ..
+            }) => {
+                assert!((suggested_pitch - 6.67).abs() < 1e-9, "{suggested_pitch}");
+                assert!(check_memory(&b, suggested_pitch, 3.0 * BYTES_PER_RAY).is_ok());
+            }
+            other => panic!("{other:?}"),
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig { cases: 2000, failure_persistence: None, ..Default::default() })]
+        /// Over any box, pitch and budget: the stock fits, or the suggested pitch is finite,
+        /// fits, and one unit less in its third significant digit does not; or no pitch fits
+        /// and the coarsest grid is indeed over the budget.
+        #[test]
+        fn the_suggested_pitch_is_finite_and_the_finest_that_fits(
+            ex in -3.0..4.0f64, ey in -3.0..4.0f64, ez in -3.0..4.0f64,
+            lp in -4.0..1.0f64, lb in -1.0..12.0f64, zero in proptest::bool::weighted(0.05),
+        ) {
+            let b = Aabb {
+                min: Point3::origin(),
+                max: Point3::new(10f64.powf(ex), 10f64.powf(ey), 10f64.powf(ez)),
+            };
+            let pitch = 10f64.powf(lp);
+            let budget = if zero { 0.0 } else { 10f64.powf(lb) };
+            match check_memory(&b, pitch, budget) {
+                Ok(()) => proptest::prop_assert!(estimate_bytes(&b, pitch) <= budget),
+                Err(StockError::TooMuchMemory { suggested_pitch: s, needed_mib, budget_mib, .. }) => {
+                    proptest::prop_assert!(s.is_finite() && s > pitch, "{s}");
+                    proptest::prop_assert!(needed_mib > budget_mib);
+                    proptest::prop_assert!(check_memory(&b, s, budget).is_ok(), "{s} does not fit");
+                    let unit = 10f64.powi(s.log10().floor() as i32 - 2);
+                    proptest::prop_assert!(
+                        estimate_bytes(&b, s - unit) > budget,
+                        "{} fits too: {s} is not the finest", s - unit
+                    );
+                    // The message prints the suggestion as it is.
+                    let text = check_memory(&b, pitch, budget).expect_err("over").to_string();
+                    proptest::prop_assert!(text.ends_with(&format!("at least {} mm", sig3(s))), "{text}");
+                    proptest::prop_assert!(!text.contains("inf") && !text.contains("NaN"), "{text}");
+                }
+                Err(StockError::NoPitchFits { least_mib, budget_mib }) => {
+                    proptest::prop_assert!(least_mib > budget_mib);
+                    proptest::prop_assert!(estimate_bytes(&b, 1e12) > budget);
+                }
+                Err(other) => proptest::prop_assert!(false, "{other:?}"),
+            }
         }
     }
 

@@ -334,22 +334,42 @@ pub fn options_from_files(
     ini: Option<&Path>,
     unit: LengthUnit,
 ) -> Result<InterpOptions, NcError> {
-    let read = |p: &Path| {
-        std::fs::read_to_string(p).map_err(|e| file_error(p, 0, format!("cannot read: {e}")))
-    };
+    fn read(p: Option<&Path>) -> Result<Option<String>, NcError> {
+        p.map(|p| {
+            std::fs::read_to_string(p).map_err(|e| file_error(p, 0, format!("cannot read: {e}")))
+        })
+        .transpose()
+    }
+    let (t, v, i) = (read(tool_table)?, read(var)?, read(ini)?);
+    options_from_texts(
+        t.as_deref().zip(tool_table),
+        v.as_deref().zip(var),
+        i.as_deref().zip(ini),
+        unit,
+    )
+}
+
+/// Options from the texts of a tool table, var file and INI file (each optional, with the
+/// path that names it in messages and resolves the INI's folders), lengths in `unit`.
+pub fn options_from_texts(
+    tool_table: Option<(&str, &Path)>,
+    var: Option<(&str, &Path)>,
+    ini: Option<(&str, &Path)>,
+    unit: LengthUnit,
+) -> Result<InterpOptions, NcError> {
     let table = |e: TableError| file_error(Path::new(&e.path), e.line, e.message);
     let mut opts = InterpOptions {
         external_unit: unit,
         ..InterpOptions::default()
     };
-    if let Some(p) = tool_table {
-        opts.tool_table = ToolTable::parse(&read(p)?, p).map_err(table)?;
+    if let Some((text, p)) = tool_table {
+        opts.tool_table = ToolTable::parse(text, p).map_err(table)?;
     }
-    if let Some(p) = var {
-        opts.parameters = parse_var_file(&read(p)?, p).map_err(table)?;
+    if let Some((text, p)) = var {
+        opts.parameters = parse_var_file(text, p).map_err(table)?;
     }
-    if let Some(p) = ini {
-        let settings = parse_ini(&read(p)?, p);
+    if let Some((text, p)) = ini {
+        let settings = parse_ini(text, p);
         opts.apply_ini(&settings);
     }
     Ok(opts)

@@ -4,10 +4,12 @@
 
 use super::{PipelineError, machine_part};
 use crate::calibration::calibrate::{
-    CalibrateError, Feature, Identification, Model, PlaneFeature, Registration,
-    extract_plane_feature, predicted_plane,
+    CalibrateError, Feature, Identification, Model, PlaneFeature, Registration, plane_feature,
+    predicted_plane, select_plane_face,
 };
 use crate::calibration::design::kind_name;
+use crate::calibration::identify::check_cut;
+use crate::cutting::stock::TriDexel;
 use crate::machine::chain::{Chain, DeviationId};
 use crate::math::{Point3, Real};
 use crate::metrology::cloud::PointCloud;
@@ -28,6 +30,8 @@ pub struct IdentifyOutcome {
     pub report: IdentifyReport,
     /// The cloud the features were measured in.
     pub cloud: PointCloud,
+    /// The faces measured in it, as the identification used them.
+    pub features: Vec<Feature>,
     /// The final identification (last loop round).
     pub identification: Identification,
     /// The twin after the loop: the model chain with the determined directions updated.
@@ -37,17 +41,24 @@ pub struct IdentifyOutcome {
 /// Most rounds of the model-correction loop: the solve converges in one; a second confirms.
 const MAX_ROUNDS: usize = 5;
 
-/// Measures every face of the scene in `points` as a plane feature.
+/// Measures every face of the scene in `points` as a plane feature. With `cut`, the stock
+/// the cloud was scanned from, a face is measured only if its cut left its surface inside
+/// the face's region ([`check_cut`]); every face is checked before any is fitted.
 pub fn extract_features(
     scene: &Scene,
     program: &Program,
     points: &[Point3],
+    cut: Option<&TriDexel>,
 ) -> Result<Vec<Feature>, PipelineError> {
-    scene
+    let err = |source| PipelineError::Calibrate {
+        path: scene.path.display().to_string(),
+        source,
+    };
+    let selected = scene
         .faces
         .iter()
         .map(|spec| {
-            extract_plane_feature(
+            select_plane_face(
                 points,
                 spec,
                 &program.moves,
@@ -56,11 +67,20 @@ pub fn extract_features(
                 &scene.stock_box,
                 &scene.face_options,
             )
-            .map(Feature::Plane)
-            .map_err(|source| PipelineError::Calibrate {
-                path: scene.path.display().to_string(),
-                source,
-            })
+            .map_err(err)
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    if let Some(stock) = cut {
+        for sel in &selected {
+            check_cut(sel, points, stock).map_err(|e| err(e.into()))?;
+        }
+    }
+    selected
+        .iter()
+        .map(|sel| {
+            plane_feature(points, sel, &scene.model, &scene.tool, &scene.face_options)
+                .map(Feature::Plane)
+                .map_err(err)
         })
         .collect()
 }
@@ -226,8 +246,8 @@ pub fn identify_scene(
         timings.push((name.to_string(), clock.elapsed().as_secs_f64()));
         clock = Instant::now();
     };
-    let (cloud, source, surface) = match cloud {
-        Some((c, src)) => (c.clone(), src.to_string(), None),
+    let (cloud, source, surface, stock) = match cloud {
+        Some((c, src)) => (c.clone(), src.to_string(), None, None),
         None => {
             let scanner = scene.scanner_for("identify")?;
             let part = machine_part(scene, program, progress)?;
@@ -239,11 +259,16 @@ pub fn identify_scene(
                         path: spath.clone(),
                         source,
                     })?;
-            (scanned.cloud, "simulated scan".to_string(), Some(surface))
+            (
+                scanned.cloud,
+                "simulated scan".to_string(),
+                Some(surface),
+                Some(part.stock),
+            )
         }
     };
     lap("scan", &mut timings);
-    let features = extract_features(scene, program, &cloud.points)?;
+    let features = extract_features(scene, program, &cloud.points, stock.as_ref())?;
     lap("fit", &mut timings);
     let (ident, twin, rounds, converged) = correction_loop(
         &scene.model,
@@ -269,7 +294,7 @@ pub fn identify_scene(
                     path: spath.clone(),
                     source,
                 })?;
-            let f = extract_features(scene, program, &scanned.cloud.points)?;
+            let f = extract_features(scene, program, &scanned.cloud.points, None)?;
             let m = Model {
                 chain: &scene.model,
                 ids: &ids,
@@ -332,6 +357,11 @@ pub fn identify_scene(
             .iter()
             .map(|c| c.name.clone())
             .collect(),
+        borderline: id
+            .borderline
+            .iter()
+            .map(|(c, sv)| (c.name.clone(), *sv))
+            .collect(),
         not_identified: id.not_identified.clone(),
         no_data: id.no_data.clone(),
         registration_absorbs: id.registration_absorbs.clone(),
@@ -351,6 +381,7 @@ pub fn identify_scene(
     Ok(IdentifyOutcome {
         report,
         cloud,
+        features,
         identification: ident,
         twin,
     })

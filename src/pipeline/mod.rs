@@ -2,8 +2,8 @@
 //! program, or a cloud), returns everything it made — reports, clouds, pictures, meshes,
 //! corrected moves — and writes nothing ([`crate::output`] does). One module per command:
 //! [`simulate()`], [`run()`] (and [`scanner_study`]), [`fit_cloud`], [`correct()`],
-//! [`identify_scene`]; this file holds what they share: the stock, the sweep of the
-//! program through the deviated machine, and the errors.
+//! [`identify_scene`], [`design_scene`]; this file holds what they share: the stock, the
+//! sweep of the program through the deviated machine, and the errors.
 //!
 //! May use every stage folder and [`crate::scene`]. **Invariant:** the same scene and
 //! program give the same outcome (except the timings) for any thread count.
@@ -13,8 +13,10 @@ mod run;
 mod fit;
 mod correct;
 mod identify;
+mod design;
 
 pub use correct::{CorrectOutcome, correct, identified_model};
+pub use design::{DesignOutcome, MAX_DESIGN_ROUNDS, design_scene};
 pub use fit::{FitRequest, Selection, Shape, fit_cloud};
 pub use identify::{IdentifyOutcome, correction_loop, extract_features, identify_scene};
 pub use run::{Outcome, extract_faces, run, scanner_study};
@@ -102,6 +104,14 @@ pub enum PipelineError {
         /// Why.
         source: CalibrateError,
     },
+    /// Test cuts could not be designed.
+    #[error("{path}: design: {source}")]
+    Design {
+        /// Scene file.
+        path: String,
+        /// Why.
+        source: crate::calibration::design::DesignError,
+    },
     /// The deviation map against the design model failed.
     #[error("{path}: [design]: {source}")]
     Deviation {
@@ -139,7 +149,7 @@ pub struct Part {
 /// [`Scene::stock_box`] at the scene's pitch (refused before allocating if over the memory
 /// budget).
 pub fn make_stock(scene: &Scene) -> Result<TriDexel, PipelineError> {
-    let (b, h, budget) = (scene.stock_box, scene.pitch_mm, scene.memory_budget_bytes);
+    let (b, h, budget) = (scene.stock_box, scene.pitch_mm, scene.memory.bytes);
     match &scene.stock_shape {
         StockShape::Box => TriDexel::new_box(b, h, budget),
         StockShape::Cylinder(c) => TriDexel::from_solid(b, h, budget, c),

@@ -4,6 +4,7 @@
 
 use super::{PipelineError, machine_part};
 use crate::calibration::identify::{self, Face};
+use crate::cutting::stock::TriDexel;
 use crate::math::{Point3, Real};
 use crate::metrology::cloud::PointCloud;
 use crate::metrology::fit::Plane;
@@ -58,19 +59,22 @@ fn colour_range_um(points: &[Point3], plane: &Plane) -> Real {
     nice_ceil(p99.max(1e-3))
 }
 
-/// Segments and fits the scene's two faces in a cloud (workpiece frame).
+/// Segments and fits the scene's two faces in a cloud (workpiece frame). With `cut`, the
+/// stock the cloud was scanned from, each face is fitted only if its cut left its surface
+/// inside the face's region ([`identify::check_cut`]).
 pub fn extract_faces(
     scene: &Scene,
     program: &Program,
     points: &[Point3],
+    cut: Option<&TriDexel>,
 ) -> Result<[Face; 2], PipelineError> {
     let id_err = |source| PipelineError::Identify {
         path: scene.path.display().to_string(),
         source,
     };
     scene.require("run", &[Need::StepFaces])?;
-    let face = |k: usize| {
-        identify::extract_face(
+    let select = |k: usize| {
+        identify::select_face(
             points,
             &scene.faces[k],
             &program.moves,
@@ -81,7 +85,15 @@ pub fn extract_faces(
         )
         .map_err(id_err)
     };
-    Ok([face(0)?, face(1)?])
+    let selected = [select(0)?, select(1)?];
+    if let Some(stock) = cut {
+        for sel in &selected {
+            identify::check_cut(sel, points, stock).map_err(id_err)?;
+        }
+    }
+    let fit =
+        |sel| identify::fit_face(points, sel, &scene.model, &scene.face_options).map_err(id_err);
+    Ok([fit(&selected[0])?, fit(&selected[1])?])
 }
 
 /// Runs the whole pipeline on `scene` with its parsed `program`.
@@ -112,7 +124,7 @@ pub fn run(
     lap("scan", &mut timings);
 
     let points = &scanned.cloud.points;
-    let faces = extract_faces(scene, program, points)?;
+    let faces = extract_faces(scene, program, points, Some(&stock))?;
     lap("fit", &mut timings);
 
     let id_err = |source| PipelineError::Identify {
@@ -120,13 +132,11 @@ pub fn run(
         source,
     };
     let cuts = [&faces[0].cut, &faces[1].cut];
-    let ident = identify::identify_step(&faces, &scene.model, &scene.tool, &scene.stock_box)
-        .map_err(id_err)?;
+    let ident = identify::identify_step(&faces, &scene.model, &scene.tool).map_err(id_err)?;
     let (predicted_step, predicted_tilt) = identify::predicted_step(
         &scene.chain,
         &scene.tool,
-        cuts,
-        &scene.stock_box,
+        faces.each_ref().map(|f| (&f.cut, &f.flank.plane.normal)),
         &ident.frame,
     )
     .unwrap_or((Real::NAN, Real::NAN));
@@ -230,11 +240,13 @@ pub fn run(
 /// all together, and reports how the identified offset moves: the answer to "how much of
 /// my result is the scanner?".
 ///
-/// `surface` is the machined part of `scene` and `program`, prepared for scanning once by
-/// the caller (see [`machine_part`] and [`Surface::new`]).
+/// `surface` is the machined part of `scene` and `program` (`stock`), prepared for scanning
+/// once by the caller (see [`machine_part`] and [`Surface::new`]); the faces are measured
+/// only if their cuts left them in the stock ([`identify::check_cut`]).
 pub fn scanner_study(
     scene: &Scene,
     program: &Program,
+    stock: &TriDexel,
     surface: &Surface,
     opts: &StudyOptions,
 ) -> Result<Vec<StudyCase>, PipelineError> {
@@ -309,10 +321,16 @@ pub fn scanner_study(
             let scanned = surface
                 .scan(&c, &crate::progress::NoProgress)
                 .map_err(scan_err)?;
-            let faces = extract_faces(scene, program, &scanned.cloud.points)?;
+            // The cut stock is the same for every trial: checked on the first.
+            let first = out.is_empty() && k == 0;
+            let faces = extract_faces(
+                scene,
+                program,
+                &scanned.cloud.points,
+                first.then_some(stock),
+            )?;
             let ident =
-                identify::identify_step(&faces, &scene.model, &scene.tool, &scene.stock_box)
-                    .map_err(id_err)?;
+                identify::identify_step(&faces, &scene.model, &scene.tool).map_err(id_err)?;
             if let Some((n, v, s)) = &ident.offset {
                 name.clone_from(n);
                 values.push(*v);

@@ -15,7 +15,7 @@ pub struct DesignReport {
     pub cuts: Vec<(String, f64, usize)>,
     /// Faces to measure: name and kind.
     pub faces: Vec<(String, String)>,
-    /// Singular values of the scaled Jacobian expected with the scene's scanner noise.
+    /// Singular values of the scaled Jacobian on the designed scene's simulated scan.
     pub singular_values: Vec<f64>,
     /// Condition number.
     pub condition_number: f64,
@@ -25,8 +25,14 @@ pub struct DesignReport {
     pub determined_combinations: Vec<String>,
     /// Directions the design does not determine.
     pub not_determined: Vec<String>,
-    /// Expected standard uncertainty of each identified parameter over its realistic
-    /// magnitude (0.5 mm, 5e-4 rad).
+    /// Directions near the threshold of determination (named, with the singular value):
+    /// another scan may decide them the other way.
+    pub borderline: Vec<(String, f64)>,
+    /// How the promise was made: the designed scene cut, scanned and identified as
+    /// `twinmill identify` does it (which scan, how many designs were tried).
+    pub verified: String,
+    /// Standard uncertainty of each identified parameter on the designed scene's simulated
+    /// scan, over its realistic magnitude (0.5 mm, 5e-4 rad).
     pub relative_sigma: Vec<(String, f64)>,
     /// Candidate evaluations made.
     pub evaluated: usize,
@@ -57,7 +63,11 @@ impl DesignReport {
         for c in &self.not_determined {
             let _ = writeln!(s, "  not determined {c}");
         }
+        for (c, sv) in &self.borderline {
+            let _ = writeln!(s, "  {}", super::identify::borderline_line(c, *sv));
+        }
         let _ = writeln!(s, "  condition     {:.3e}", self.condition_number);
+        let _ = writeln!(s, "  verified      {}", self.verified);
         for n in &self.notes {
             let _ = writeln!(s, "  lever         {n}");
         }

@@ -84,6 +84,9 @@ pub struct IdentifyReport {
     pub combinations: Vec<EstimateReport>,
     /// Directions not determined (named); held at their known values, never valued.
     pub not_determined: Vec<String>,
+    /// Directions whose singular value is near the threshold of determination (named, with
+    /// the singular value): another scan may decide them the other way.
+    pub borderline: Vec<(String, f64)>,
     /// Parameters without an identified value of their own.
     pub not_identified: Vec<String>,
     /// Parameters no feature depends on at all.
@@ -151,6 +154,9 @@ impl IdentifyReport {
         for n in &self.not_determined {
             let _ = writeln!(s, "  not determined {n}");
         }
+        for (n, sv) in &self.borderline {
+            let _ = writeln!(s, "  {}", borderline_line(n, *sv));
+        }
         if !self.no_data.is_empty() {
             let _ = writeln!(s, "  no data       {}", self.no_data.join(", "));
         }
@@ -189,4 +195,12 @@ impl IdentifyReport {
         }
         s
     }
+}
+
+/// The summary line of a borderline direction (shared by `identify` and `design`).
+pub fn borderline_line(name: &str, singular_value: f64) -> String {
+    format!(
+        "borderline    {name} (singular value {singular_value:.2}, determined from {:.0}: another scan may decide it the other way)",
+        1.0 / crate::calibration::calibrate::DETERMINED_FRACTION
+    )
 }

@@ -61,7 +61,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
     ("scene", &[]),
     (
         "pipeline",
-        &["simulate", "run", "fit", "correct", "identify"],
+        &["simulate", "run", "fit", "correct", "identify", "design"],
     ),
     ("output", &[]),
 ];

@@ -1,7 +1,7 @@
 //! The command line: `run`, `simulate` and `fit` write what they report, the scene's [nc]
 //! section, clouds from CloudCompare, and bad input failing cleanly with a located message.
 
-use crate::{Sandbox, builtin};
+use crate::{Sandbox, builtin, files_in};
 use proptest::prelude::*;
 use std::path::Path;
 use twinmill::nc::AxisLetter;
@@ -253,11 +253,60 @@ fn bad_input_fails_cleanly_with_a_located_message() {
             "use a pitch of at least",
         ],
     );
+    // A file the scene names and that cannot be read is reported at the scene's line and
+    // column of its value (the opening quote).
+    let at_value = |needle: &str| {
+        let l = line_of(needle);
+        let col = scene
+            .lines()
+            .nth(l - 1)
+            .and_then(|t| t.find('"'))
+            .expect("quoted")
+            + 1;
+        format!("scene.toml:{l}:{col}:")
+    };
     check_bad(
         "missing-program",
         &scene.replace("\"mdx50-step.ngc\"", "\"nowhere.ngc\""),
         program.as_bytes(),
-        &["nowhere.ngc: cannot read"],
+        &[&at_value("program"), "program:", "nowhere.ngc: cannot read"],
+    );
+    let with_nc = scene.replace("[machine]", "[nc]\ntool_table = \"none.tbl\"\n\n[machine]");
+    let l = with_nc
+        .lines()
+        .position(|t| t.starts_with("tool_table"))
+        .expect("inserted")
+        + 1;
+    check_bad(
+        "missing-tool-table",
+        &with_nc,
+        program.as_bytes(),
+        &[
+            &format!("scene.toml:{l}:14:"),
+            "nc.tool_table:",
+            "none.tbl: cannot read",
+        ],
+    );
+    // Cuts that do not cut their faces (the A axis 50 mm off: nothing is cut where the
+    // faces should be): no numbers, one line naming the face and its NC line.
+    check_bad(
+        "cut-misses-face",
+        &scene.replace("dy_AY = -0.50", "dy_AY = 50"),
+        program.as_bytes(),
+        &["scene.toml", "face 'A0'", "line 9 cut nothing"],
+    );
+    // The faces named by lines whose cuts a later cut removes entirely (the A = 0° cut
+    // repeated at A = 180° after it, 1 mm deeper into the stock's middle).
+    check_bad(
+        "face-cut-away",
+        &scene,
+        program
+            .replace(
+                "G0 Z60\nG0 A0\nM30",
+                "G0 Z60\nG0 A0\nG0 X-30 Y-24\nG0 Z0\nG1 X30 F600\nG0 Z60\nM30",
+            )
+            .as_bytes(),
+        &["scene.toml", "face 'A0'", "line 9 cut nothing"],
     );
     check_bad(
         "unreadable-program",
@@ -346,5 +395,83 @@ proptest! {
             prop_assert!(scene.pitch_mm > 0.0 && scene.pitch_mm.is_finite());
             prop_assert!(scene.scanner.as_ref().is_none_or(|s| s.validate().is_ok()));
         }
+    }
+}
+
+/// The stock's memory budget is a stable figure — half the installed memory, or
+/// `--memory` — and a stock over it is refused with a finite pitch that does fit
+/// (issue 17, item 8).
+#[test]
+fn memory_budget_is_stable_and_the_suggested_pitch_fits() {
+    use twinmill::scene::MemoryBudget;
+    // The default: half of MemTotal, read here from /proc/meminfo independently of what
+    // is free at the moment.
+    if let Some(kb) = std::fs::read_to_string("/proc/meminfo").ok().and_then(|m| {
+        m.lines()
+            .find(|l| l.starts_with("MemTotal:"))
+            .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+    }) {
+        let b = MemoryBudget::installed();
+        assert_eq!(b.bytes, kb * 1024.0 / 2.0);
+        assert_eq!(MemoryBudget::installed(), b, "the same figure every time");
+    }
+    let sb = Sandbox::new("memory");
+    sb.write("mdx50-step.ngc", builtin("mdx50-step.ngc").as_bytes());
+    let scene = builtin("mdx50-step.toml");
+    let with_pitch = |p: &str| {
+        let text = scene.replace("pitch_mm = 0.1 ", &format!("pitch_mm = {p} "));
+        sb.write("s.toml", text.as_bytes());
+    };
+    with_pitch("0.1");
+    // The 40 × 32 × 20 mm stock at 0.1 mm has 320·200 + 400·200 + 400·320 = 272,000 rays:
+    // over 1 MiB at any plausible size per ray (two segments of at least two f64s).
+    let (code, stdout, stderr) = sb.run(&["simulate", "s.toml", "--memory", "1M"]);
+    assert_ne!(code, 0);
+    assert!(stdout.is_empty());
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.contains("--memory 1M") && !stderr.contains("inf") && !stderr.contains("NaN"),
+        "{stderr}"
+    );
+    let suggested = stderr
+        .split("use a pitch of at least ")
+        .nth(1)
+        .and_then(|t| t.split_whitespace().next())
+        .expect("a suggested pitch")
+        .to_string();
+    let p: f64 = suggested.parse().expect("a number");
+    assert!(p.is_finite() && p > 0.1, "{p}");
+    // It fits; a pitch a unit finer in its third significant digit does not.
+    with_pitch(&suggested);
+    let (code, _, stderr) = sb.run(&["simulate", "s.toml", "--memory", "1M", "--out", "o"]);
+    assert_eq!(code, 0, "{stderr}");
+    let unit = 10f64.powi(p.log10().floor() as i32 - 2);
+    with_pitch(&format!("{}", p - unit));
+    let (code, _, stderr) = sb.run(&["simulate", "s.toml", "--memory", "1M", "--out", "o2"]);
+    assert_ne!(code, 0, "{}: {stderr}", p - unit);
+    // A budget no pitch fits says so; bad sizes are one-line errors.
+    with_pitch("0.1");
+    for (size, word) in [
+        ("1", "at any pitch"),
+        ("0", "--memory"),
+        ("-2G", "--memory"),
+        ("lots", "--memory"),
+        ("1e400", "--memory"),
+    ] {
+        let (code, _, stderr) = sb.run(&[
+            "simulate",
+            "s.toml",
+            &format!("--memory={size}"),
+            "--out",
+            "x",
+        ]);
+        assert_ne!(code, 0, "{size}");
+        assert!(
+            stderr.contains(word) && !stderr.contains("panicked"),
+            "{size}: {stderr}"
+        );
+        assert!(!stderr.contains("inf mm"), "{stderr}");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+        assert!(files_in(&sb.dir.join("x")).is_empty());
     }
 }

@@ -289,6 +289,20 @@ fn cli_design_writes_a_program_and_scene_that_identify_all_nine() {
     assert_eq!(scene.parameters.len(), 9);
     assert_eq!(scene.faces.len(), r["faces"].as_array().map_or(0, Vec::len));
     scene.load_program().expect("the designed program parses");
+    // The promise is what `identify` then finds on the design it wrote (issue 17, item 7:
+    // the design once promised alpha_YX alone, and identify found its direction
+    // undetermined): the same parameters alone, combinations, undetermined and borderline
+    // directions and singular values.
+    let (code, stdout, stderr) = sb.run(&[
+        "identify",
+        "out/mdx50-step-design/design.toml",
+        "--json",
+        "--out",
+        "id",
+    ]);
+    assert!(code == 0 || code == 2, "{stderr}");
+    let id: serde_json::Value = serde_json::from_str(&stdout).expect("identify json");
+    assert_same_judgement(&r, &id);
     // Bad requests: one line, no files.
     for (args, word) in [
         (
@@ -309,4 +323,103 @@ fn cli_design_writes_a_program_and_scene_that_identify_all_nine() {
         assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
         assert!(files_in(&sb.dir.join("x")).is_empty());
     }
+}
+
+/// `design`'s report (`d`) and `identify`'s (`id`) on the design judge alike.
+fn assert_same_judgement(d: &serde_json::Value, id: &serde_json::Value) {
+    let names = |v: &serde_json::Value| -> Vec<String> {
+        v.as_array()
+            .expect("a list")
+            .iter()
+            .map(|e| {
+                e.get("name")
+                    .and_then(|n| n.as_str())
+                    .or_else(|| e.as_str())
+                    .or_else(|| e[0].as_str())
+                    .expect("a name")
+                    .to_string()
+            })
+            .collect()
+    };
+    assert_eq!(names(&d["identified"]), names(&id["identified"]));
+    assert_eq!(
+        names(&d["determined_combinations"]),
+        names(&id["combinations"])
+    );
+    assert_eq!(names(&d["not_determined"]), names(&id["not_determined"]));
+    assert_eq!(names(&d["borderline"]), names(&id["borderline"]));
+    let sv = |v: &serde_json::Value| -> Vec<f64> {
+        v["singular_values"]
+            .as_array()
+            .expect("singular values")
+            .iter()
+            .map(|x| x.as_f64().expect("a number"))
+            .collect()
+    };
+    let (a, b) = (sv(d), sv(id));
+    assert_eq!(a.len(), b.len());
+    for (x, y) in a.iter().zip(&b) {
+        assert!((x - y).abs() <= 1e-9 * x.abs().max(1.0), "{a:?} vs {b:?}");
+    }
+}
+
+/// Random requests (seeded: parameter subsets of the nine, scanner noise and seed): what
+/// `design` promises is what `identify` finds on the scene and program it wrote, judged by
+/// the one criterion on the same scan (issue 17, item 7).
+#[test]
+fn designs_promise_what_identify_finds_for_random_requests() {
+    use twinmill::pipeline::{design_scene, identify_scene};
+    let mut state: u64 = 0x17_07;
+    let mut next = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    for case in 0..4 {
+        let mut s = scene();
+        s.pitch_mm = 0.2;
+        let sc = scanner(&mut s);
+        sc.pitch_mm = 0.3;
+        sc.noise_sigma_mm = 0.005 + 0.03 * next();
+        sc.seed = (next() * 1e6) as u64;
+        let mut params: Vec<String> = NINE
+            .iter()
+            .filter(|_| next() < 0.5)
+            .map(|p| p.to_string())
+            .collect();
+        if params.is_empty() {
+            params.push("dy_AY".into());
+        }
+        let ids: Vec<_> = params
+            .iter()
+            .map(|n| s.model.deviation_id(n).expect("known"))
+            .collect();
+        let name = format!("random-{case}");
+        let out = design_scene(&s, &params, &ids, &name, &NoProgress).expect("a design");
+        let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(&name);
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        std::fs::write(dir.join("design.ngc"), &out.design.program).expect("program");
+        let path = dir.join("design.toml");
+        std::fs::write(&path, &out.scene_toml).expect("scene");
+        let designed = Scene::load(&path).expect("the designed scene loads");
+        let program = designed.load_program().expect("the program parses");
+        let found =
+            identify_scene(&designed, &program, None, Some(0), &NoProgress).expect("identifies");
+        let (d, id) = (&out.report, &found.report);
+        let ctx = format!("case {case}: {params:?}, σ {}", sc_noise(&s));
+        assert_eq!(d.identified, names(&id.identified), "{ctx}");
+        assert_eq!(d.determined_combinations, names(&id.combinations), "{ctx}");
+        assert_eq!(d.not_determined, id.not_determined, "{ctx}");
+        assert_eq!(d.borderline, id.borderline, "{ctx}");
+        assert_eq!(d.singular_values, id.singular_values, "{ctx}");
+    }
+}
+
+fn sc_noise(s: &Scene) -> f64 {
+    s.scanner.as_ref().map_or(0.0, |c| c.noise_sigma_mm)
+}
+
+fn names(e: &[twinmill::report::EstimateReport]) -> Vec<String> {
+    e.iter().map(|e| e.name.clone()).collect()
 }

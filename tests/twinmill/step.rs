@@ -128,7 +128,8 @@ fn scanner_study_separates_the_effects_and_reports_honest_uncertainties() {
     let cases = {
         let part = twinmill::pipeline::machine_part(&s, &program, &NoProgress).expect("machines");
         let surface = twinmill::metrology::scan::Surface::new(&part.stock);
-        twinmill::pipeline::scanner_study(&s, &program, &surface, &s.study).expect("runs")
+        twinmill::pipeline::scanner_study(&s, &program, &part.stock, &surface, &s.study)
+            .expect("runs")
     };
     assert_eq!(cases.len(), 6);
     let [ideal, white, correlated, misregistered, all, _configured] = &cases[..] else {
@@ -402,4 +403,79 @@ fn output_is_identical_for_one_and_two_threads() {
     assert_eq!(a.cloud, b.cloud);
     assert_eq!(a.report, b.report);
     assert_eq!(a.heat_map_png, b.heat_map_png);
+}
+
+// ---------------------------------------------------------------------------------------
+// A cut that misses its face (issue 17, item 6).
+
+/// With the A axis 50 mm off in Y nothing of the step is cut where its faces should be:
+/// `run` fails naming the face and its NC line instead of fitting the uncut stock, and the
+/// step the twin predicts is taken on the flank the material is on — −2·dy_AY = −100 mm by
+/// the independent derivation (each face's normal on the +Y side, where the stock lies),
+/// not the flank that the stock's middle would pick on the deviated chain.
+#[test]
+fn a_cut_that_misses_its_face_fails_and_the_twin_predicts_the_material_side() {
+    use twinmill::calibration::identify::{StepFrame, flank, predicted_step};
+    use twinmill::math::{Point3, UnitVector3};
+    let mut s = scene();
+    set_deviation(&mut s, "dy_AY", 50.0);
+    let program = s.load_program().expect("parses");
+    let err = run(&s, &program, &NoProgress)
+        .expect_err("a cut that cuts nothing is an error")
+        .to_string();
+    assert!(
+        err.contains("face 'A0'") && err.contains("line 9 cut nothing"),
+        "{err}"
+    );
+    assert_eq!(err.lines().count(), 1, "{err}");
+
+    // The twin's prediction on the deviated chain, each cut on its face's model side.
+    let cut = |line: usize| {
+        program
+            .moves
+            .iter()
+            .find(|m| m.line == line)
+            .expect("the cut")
+    };
+    let (c0, c1) = (cut(9), cut(14));
+    let side = |mv| {
+        flank(&s.model, &s.tool, mv, &s.stock_box)
+            .expect("a flank")
+            .plane
+            .normal
+    };
+    let (n0, n1) = (side(c0), side(c1));
+    let at = Vector3::new(0.0, -22.0, 5.0);
+    let frame = StepFrame {
+        at: Point3::from(at),
+        n: UnitVector3::new_normalize(Vector3::y()),
+        u: UnitVector3::new_normalize(Vector3::x()),
+    };
+    let (step, tilt) =
+        predicted_step(&s.chain, &s.tool, [(c0, &n0), (c1, &n1)], &frame).expect("predicts");
+    let (exact_step, exact_tilt) = exact_step_and_tilt(&mdx50_deviations(&s), s.tool.radius(), at);
+    assert!((exact_step + 100.0).abs() < 1e-9, "exact {exact_step}");
+    assert!(
+        (step - exact_step).abs() < 1e-9,
+        "twin {step} vs exact {exact_step}"
+    );
+    assert!((tilt - exact_tilt).abs() < 1e-12);
+}
+
+/// A cut that lands beside its face region (the A axis 3 mm off: the A = 0° flank 3 mm
+/// into the material, beyond the 2 mm band) fails too, saying where its surface is.
+#[test]
+fn a_cut_beside_its_face_region_fails_saying_how_far() {
+    let mut s = scene();
+    set_deviation(&mut s, "dy_AY", 3.0);
+    let program = s.load_program().expect("parses");
+    let err = run(&s, &program, &NoProgress)
+        .expect_err("a face outside its region is an error")
+        .to_string();
+    // The A = 0° flank lies at y = −25 + 3 + 3 (tip, offset, radius), the expected plane
+    // at y = −22: +3 mm along the face's normal (+Y).
+    assert!(
+        err.contains("face 'A0'") && err.contains("line 9") && err.contains("+3.000 mm"),
+        "{err}"
+    );
 }
