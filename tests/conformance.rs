@@ -50,11 +50,6 @@ const NOT_MATCHED: &[(&str, &str)] = &[
         "probing: the standalone interpreter's probe result (#5070, #5061-#5069) is not set",
     ),
     (
-        "linuxcnc/nc_files/systems.ngc",
-        "G5.1 quadratic B-spline not implemented",
-    ),
-    ("linuxcnc/nc_files/threading.ngc", "G33 not implemented"),
-    (
         "linuxcnc/nc_files/tool-length-probe.ngc",
         "probing: 'Start point too close to probe point' is not checked",
     ),

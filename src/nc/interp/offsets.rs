@@ -80,7 +80,7 @@ impl Interpreter {
     }
 
     /// Machine → program coordinates (mm, deg).
-    fn to_program(&self, m: &[Real; 6]) -> [Real; 6] {
+    pub(super) fn to_program(&self, m: &[Real; 6]) -> [Real; 6] {
         let mut q = [0.0; 6];
         for i in 0..6 {
             q[i] = m[i] - self.g5x[i] - self.tool_off[i];
