@@ -535,6 +535,15 @@ impl<E> Compensator<E> {
         self.along
     }
 
+    /// Moves the tool point (and the normal-axis coordinate) without a move, the programmed
+    /// point staying: LinuxCNC does this when a canonical move bypasses its compensation
+    /// queue (a G5.2 … G5.3 curve, or G33 with a zero radius), which sets the interpreter's
+    /// current point only. The next move is compensated from there.
+    pub fn set_tool_point(&mut self, tool: [Real; 2], along: Real) {
+        self.tool = tool;
+        self.along = along;
+    }
+
     /// True until the first move after G41/G42 (the entry move) has been pushed.
     pub fn awaiting_entry(&self) -> bool {
         self.first_move

@@ -27,15 +27,18 @@
 //! # Language
 //!
 //! G0 G1 G2 G3 (centre I/J/K and R forms, full circles, helices, P turns) in G17/G18/G19;
-//! G4; G10 L1/L2/L10/L11/L20; G20/G21; G28/G30, G28.1/G30.1; G33.1 rigid tap; G38.2–G38.5
-//! probe (rs274's simulated probe: trips at the target, backs off 0.254 mm, sets #5061–#5070);
-//! G40/G41/G42/
+//! G4; G5 cubic spline, G5.1 quadratic B-spline, G5.2/G5.3 NURBS (issued as the arcs and
+//! lines LinuxCNC's task makes of the curve); G10 L1/L2/L10/L11/L20; G20/G21; G28/G30,
+//! G28.1/G30.1; G33 spindle-synchronised motion; G33.1 rigid tap; G38.2–G38.5
+//! probe (rs274's simulated probe: trips at the target, backs off 0.254 mm, sets
+//! #5061–#5070); G40/G41/G42/
 //! G41.1/G42.1 cutter radius compensation ([`comp`], applied in program coordinates of the
 //! plane between motion generation and the machine conversion, as LinuxCNC does: entry and
 //! exit moves, concave corners by intersection, convex corners by inserted arcs, LinuxCNC's
 //! gouging errors); G43 (H or current tool), G43.1, G49;
 //! G52/G92/G92.1/G92.2/G92.3; G53; G54–G59.3; G61/G61.1/G64; canned cycles G73 G81 G82
-//! G83 G84 G85 G86 G89 with G98/G99, L repeats and sticky Z/R/Q; G80; G90/G91,
+//! G83 G84 G85 G86 G89 with G98/G99, L repeats and sticky Z/R/Q; the G76 threading cycle
+//! (as LinuxCNC runs it on a mill: across X, along Z); G80; G90/G91,
 //! G90.1/G91.1; G93/G94/G95; M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30 M60 M61; M98/M99
 //! Fanuc-style subprograms; T S F; A B C rotary words in degrees (no wrap). O-words:
 //! sub/endsub/call with arguments, return with value (`#<_value>`), if/elseif/else/endif,
@@ -66,8 +69,8 @@
 //! whose end radius differs from the start radius by more than LinuxCNC's tolerance are
 //! rejected (not corrected); `R` cannot make a full circle; G92 offsets persist until
 //! G92.1; `G43 H` names a tool number (not an offset register); rotary words do not wrap.
-//! Fanuc-only codes (G15/G16 polar, G51/G51.1 scaling and mirror, G54.1, G65, G68, G76 on
-//! a mill, Macro B `WHILE…DO`/`GOTO`, canned-cycle `K` repeats) are rejected with
+//! Fanuc-only codes (G15/G16 polar, G51/G51.1 scaling and mirror, G54.1, G65, G68, Fanuc's
+//! G76 fine boring without I J K, Macro B `WHILE…DO`/`GOTO`, canned-cycle `K` repeats) are rejected with
 //! LinuxCNC's message. Fanuc-style `O1000 … M99` subprograms called by `M98 P1000 L2` are
 //! accepted, as LinuxCNC does; [`InterpOptions::fanuc_subs`] = false (`--no-fanuc-subs`,
 //! or `DISABLE_FANUC_STYLE_SUB = 1` in the INI) turns them off.
@@ -81,9 +84,9 @@
 //!
 //! # Limitations
 //!
-//! G5.x NURBS, G33 spindle-synchronised motion, G76, G87/G88, lathe modes, U V W axes (their
-//! words are bad characters, as in `rs274` on an X Y Z A B C machine), `#5xxx` parameters
-//! newer than LinuxCNC 2.9 and Python remaps are not supported.
+//! G87/G88, the lathe cycles G70–G72 and lathe modes (G7/G8), U V W axes (their words are
+//! bad characters, as in `rs274` on an X Y Z A B C machine), `#5xxx` parameters newer than
+//! LinuxCNC 2.9 and Python remaps are not supported.
 
 pub mod comp;
 pub mod interp;

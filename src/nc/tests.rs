@@ -216,3 +216,21 @@ proptest! {
         exercise(&apply(SEEDS[seed], &edits));
     }
 }
+
+#[test]
+fn splines_and_threads_that_linuxcnc_would_run_for_ever_are_clean_errors() {
+    // LinuxCNC loops (practically) for ever on these; twinmill stops with the line.
+    let spindle = "G21 G18 G90 S500 M3\nG0 X10 Y0 Z5\n";
+    let err = run(&format!("{spindle}G76 P1 Z-10 I-1 J1e-9 K1\nM2\n")).unwrap_err();
+    assert_eq!(err.diagnostics[0].line, 3, "{err}");
+    let err = run("G21 G17 G90 F100\nG5.2 X1 Y1 P1 L40\nX2 Y0 P1\nG5.3\nM2\n").unwrap_err();
+    assert_eq!(err.diagnostics[0].line, 4, "{err}");
+    // a long NURBS evaluates in time linear in its control points
+    let mut text = String::from("G21 G17 G90 F100\nG5.2 X0 Y1 P1\n");
+    for i in 1..20_000 {
+        text.push_str(&format!("X{i} Y{} P1\n", i % 2));
+    }
+    text.push_str("G5.3\nM2\n");
+    let moves = ends(&text);
+    assert!(moves.len() > 20_000, "{}", moves.len());
+}

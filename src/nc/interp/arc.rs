@@ -185,13 +185,24 @@ impl Interpreter {
         c2: Real,
         turn: i32,
     ) -> ([Real; 6], ArcGeom, Real) {
+        self.arc_geometry_from(&self.mpos, end_p, c1, c2, turn)
+    }
+
+    /// [`Interpreter::arc_geometry`] of an arc that starts at machine position `start_m`.
+    pub(super) fn arc_geometry_from(
+        &self,
+        start_m: &[Real; 6],
+        end_p: &[Real; 6],
+        c1: Real,
+        c2: Real,
+        turn: i32,
+    ) -> ([Real; 6], ArcGeom, Real) {
         let (a1, a2, an) = self.plane.axes();
         let mut cen_p = *end_p;
         cen_p[a1] = c1;
         cen_p[a2] = c2;
         let cm = self.to_machine(&cen_p);
         let end_m = self.to_machine(end_p);
-        let start_m = self.mpos;
         let mut normal = [0.0; 3];
         normal[an] = 1.0;
         let mut ux = [0.0; 3];
@@ -208,7 +219,7 @@ impl Interpreter {
                 d[0] * uy[0] + d[1] * uy[1] + d[2] * uy[2],
             )
         };
-        let (q1, q2) = proj(&start_m);
+        let (q1, q2) = proj(start_m);
         let (w1, w2) = proj(&end_m);
         let radius = q1.hypot(q2);
         let radius_end = w1.hypot(w2);

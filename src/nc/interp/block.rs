@@ -49,7 +49,7 @@ impl Interpreter {
         let mut g = GCodes::default();
         for &(code, pos) in b.gs() {
             let slot = match code {
-                40 | 100 | 280 | 281 | 300 | 301 | 520 | 530 | 920 | 921 | 922 | 923 => {
+                40 | 53 | 100 | 280 | 281 | 300 | 301 | 520 | 530 | 920 | 921 | 922 | 923 => {
                     &mut g.nonmodal
                 }
                 0 | 10 | 20 | 30 | 331 | 382 | 383 | 384 | 385 | 730 | 800 | 810 | 820 | 830
@@ -169,7 +169,7 @@ impl Interpreter {
         }
         // words without a user
         if b.word(b'r').is_some() {
-            let r_ok = matches!(motion_now, Some(20 | 30 | 730 | 740 | 810..=890))
+            let r_ok = matches!(motion_now, Some(20 | 30 | 730 | 740 | 760 | 810..=890))
                 && (g.motion.is_some() || axis_given)
                 || g.nonmodal == Some(100);
             if !r_ok {
@@ -191,6 +191,7 @@ impl Interpreter {
         // E belongs to G76 and M66-M68 only: `X1e5` is X1 followed by a stray E word.
         if b.word(b'e').is_some()
             && g.motion != Some(760)
+            && !(g.motion.is_none() && axis_given && self.motion == Some(760))
             && !b.m[..b.nm].iter().any(|(m, _)| matches!(m, 66..=68))
         {
             return Err(self.err_word(b, b'e', "E word with no G76, M66, M67 or M68 to use it"));
@@ -206,12 +207,13 @@ impl Interpreter {
                 }
             }
         }
-        if g.motion == Some(760) {
-            if b.word(b'i').is_none() || b.word(b'j').is_none() || b.word(b'k').is_none() {
-                return Err(self.err_g(b, 760, "I J or K words missing with G76"));
-            }
-            return Err(self.err_g(b, 760, "G76 is a lathe cycle, not supported on a mill"));
-        }
+        let nonmodal_takes_axes = g
+            .nonmodal
+            .is_some_and(|c| matches!(c, 100 | 280 | 300 | 520 | 920));
+        let motion_to_be = g
+            .motion
+            .or(self.motion.filter(|_| axis_given && !nonmodal_takes_axes));
+        self.check_spline_thread_words(b, g.motion, motion_to_be, g.nonmodal, g.path, axis_given)?;
 
         // 2. feed mode, 3. feed, 4. speed
         if let Some(fm) = g.feed_mode {
@@ -420,10 +422,12 @@ impl Interpreter {
                     self.load_offsets();
                     self.announce_g92();
                 }
+                53 => self.nurbs_end(b, axis_given && g.motion.is_none())?,
                 _ => {}
             }
         }
         // 20. motion
+        self.motion_before = self.motion;
         if g.motion == Some(800) {
             self.motion = None;
             self.cycle_z = None;

@@ -13,7 +13,12 @@
 //! * `cutter_comp`: cutter radius compensation on and off, and the moves it releases;
 //! * `motion`: end points, feeds, straight moves, rigid tapping and probing;
 //! * `arc`: G2/G3 in the centre and radius formats, and their machine geometry;
-//! * `cycle`: the drilling, boring and tapping canned cycles.
+//! * `cycle`: the drilling, boring and tapping canned cycles;
+//! * `nurbs`: the curve maths of G5/G5.1/G5.2 (LinuxCNC's rational B-spline and its task's
+//!   biarc segmentation);
+//! * `spline`: G5, G5.1 and G5.2 … G5.3 as the interpreter reads them, and the moves of a
+//!   curve;
+//! * `thread`: spindle-synchronised motion, G33, and the G76 threading cycle.
 
 mod params;
 mod errors;
@@ -24,6 +29,9 @@ mod cutter_comp;
 mod motion;
 mod arc;
 mod cycle;
+mod nurbs;
+mod spline;
+mod thread;
 
 use std::collections::{HashMap, VecDeque};
 use std::path::Path;
@@ -141,6 +149,19 @@ pub struct Interpreter {
     first_line: bool,
     main_title: bool,
     blocks: u64,
+    // splines and threading
+    /// The motion mode before this block's motion step (LinuxCNC's `motion_mode` there).
+    motion_before: Option<i32>,
+    /// Control points gathered by G5.2 (program units: X, Y, weight), shared with G5/G5.1
+    /// as LinuxCNC shares its list.
+    nurbs_points: Vec<[Real; 3]>,
+    /// Order of the G5.2 curve (3 unless an L word above 3 says otherwise).
+    nurbs_order: usize,
+    /// G5's first control-point offset when I and J are left out: the last G5's −P, −Q
+    /// (program units).
+    spline_ij: [Real; 2],
+    /// Feed (mm/min) of the last feed move: what LinuxCNC's task runs a curve at in G93.
+    last_feed: Option<Real>,
 }
 
 fn round4(v: Real) -> Real {
@@ -254,6 +275,11 @@ impl Interpreter {
             first_line: true,
             main_title: false,
             blocks: 0,
+            motion_before: None,
+            nurbs_points: Vec::new(),
+            nurbs_order: 3,
+            spline_ij: [0.0; 2],
+            last_feed: None,
             opts,
         };
         it.load_offsets();
@@ -314,6 +340,13 @@ impl Interpreter {
             self.canon_off = [0.0; 6];
             self.cur_off = [0.0; 6];
             self.offs_set = false;
+        }
+        if m.kind != MotionKind::Rapid
+            && !m.feed_per_rev
+            && let Some(f) = m.feed
+            && f > 0.0
+        {
+            self.last_feed = Some(f);
         }
         let rec = Record {
             body: RecordBody::Motion(m),

@@ -219,6 +219,10 @@ impl Interpreter {
                 self.probe(m, b)?;
             }
             730 | 740 | 810..=890 => self.cycle(m, b, explicit)?,
+            50 | 51 => self.spline(m, b)?,
+            52 => self.nurbs_block(b)?,
+            330 => self.g33(b)?,
+            760 => self.g76(b)?,
             _ => {
                 return Err(self.err_g(b, m, "Motion mode not supported"));
             }
