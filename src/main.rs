@@ -285,6 +285,9 @@ enum EvaluateCommand {
         /// s_bwd, R_fwd, R_bwd, R}.
         #[arg(long)]
         json: bool,
+        /// Also draw the standard's bidirectional plot into this PNG file.
+        #[arg(long)]
+        png: Option<PathBuf>,
     },
     /// ISO 230-4 circular test (ball bar) from a radial-deviation trace: CSV
     /// `direction,angle,deviation` (`ccw`/`cw`, degrees, mm; `deviation[um]`, `angle[rad]`
@@ -304,6 +307,9 @@ enum EvaluateCommand {
         /// Print the figures as JSON.
         #[arg(long)]
         json: bool,
+        /// Also draw the polar plot into this PNG file.
+        #[arg(long)]
+        png: Option<PathBuf>,
     },
     /// Seed 003's non-contact ball sensor: ball centres from the two micrometers' readings
     /// (CSV `Lx1,Lx2,Ly1,Ly2`, mm; `[um]` after a name sets its unit) by eq. (1)–(3), each
@@ -664,7 +670,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Command::Evaluate {
-            command: EvaluateCommand::Iso230_2 { file, json },
+            command: EvaluateCommand::Iso230_2 { file, json, png },
         } => {
             let text = match std::fs::read_to_string(&file) {
                 Ok(t) => t,
@@ -676,6 +682,19 @@ fn main() -> ExitCode {
                 Ok(f) => f,
                 Err(e) => return fail(e),
             };
+            if let Some(png) = &png {
+                let title = format!("ISO 230-2: {}", file.display());
+                let drawn = twinmill::report::plots::positioning_plot(&figures, &title)
+                    .and_then(|img| twinmill::report::render::encode_png(&img));
+                match drawn {
+                    Ok(bytes) => {
+                        if let Err(e) = twinmill::output::write_file(png, &bytes) {
+                            return fail(e);
+                        }
+                    }
+                    Err(e) => return fail(format!("{}: {e}", png.display())),
+                }
+            }
             print_out(
                 || positioning_summary(&file, &figures),
                 json.then(|| serde_json::to_string_pretty(&figures)),
@@ -688,6 +707,7 @@ fn main() -> ExitCode {
                     radius,
                     pitch,
                     json,
+                    png,
                 },
         } => {
             let text = match std::fs::read_to_string(&file) {
@@ -698,12 +718,27 @@ fn main() -> ExitCode {
                 radius_mm: radius,
                 pitch_mm: pitch,
             };
-            let figures = match parse_trace(&text, &file)
-                .and_then(|samples| evaluate_circular(&samples, &opts, &file))
-            {
+            let samples = match parse_trace(&text, &file) {
+                Ok(s) => s,
+                Err(e) => return fail(e),
+            };
+            let figures = match evaluate_circular(&samples, &opts, &file) {
                 Ok(f) => f,
                 Err(e) => return fail(e),
             };
+            if let Some(png) = &png {
+                let title = format!("ISO 230-4: {}", file.display());
+                let drawn = twinmill::report::plots::polar_plot(&samples, &figures, &title)
+                    .and_then(|img| twinmill::report::render::encode_png(&img));
+                match drawn {
+                    Ok(bytes) => {
+                        if let Err(e) = twinmill::output::write_file(png, &bytes) {
+                            return fail(e);
+                        }
+                    }
+                    Err(e) => return fail(format!("{}: {e}", png.display())),
+                }
+            }
             print_out(
                 || circular_summary(&file, &figures),
                 json.then(|| serde_json::to_string_pretty(&figures)),

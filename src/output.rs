@@ -71,6 +71,30 @@ pub fn write_files(dir: &Path, files: &[(&str, Vec<u8>)]) -> Result<PathBuf, Out
     result
 }
 
+/// Writes one file whole or not at all: into a temporary sibling first, then renamed over
+/// `path`.
+pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
+    let parent = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    let staging = parent.join(format!(".{name}.partial-{}", std::process::id()));
+    let result = io(
+        &staging,
+        std::fs::File::create(&staging)
+            .and_then(|mut f| f.write_all(bytes).and_then(|_| f.sync_all())),
+    )
+    .and_then(|()| io(path, std::fs::rename(&staging, path)));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&staging);
+    }
+    result
+}
+
 /// Serialises `value` as pretty JSON.
 pub fn json_bytes(value: &impl serde::Serialize, path: &Path) -> Result<Vec<u8>, OutputError> {
     serde_json::to_vec_pretty(value).map_err(|e| OutputError {

@@ -1,5 +1,6 @@
 //! **Reports**: what the commands tell the user. PNG heat maps with a colour bar
-//! ([`render`]), the deviation map of a cut part against its design model
+//! ([`render`]), the standards' plots (ISO 230-2 bidirectional, ISO 230-4 polar:
+//! [`plots`]), the deviation map of a cut part against its design model
 //! ([`deviation_map`]), and the serialisable report of every command with the summary text
 //! the CLI prints: one private module per command (`simulate`, `scan`, `run`, `fit`,
 //! `correct`, `identify`, `design`), their types re-exported here ([`Report`],
@@ -11,6 +12,7 @@
 
 pub mod render;
 pub mod deviation_map;
+pub mod plots;
 mod simulate;
 mod scan;
 mod run;

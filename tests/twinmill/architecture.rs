@@ -49,6 +49,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
         &[
             "render",
             "deviation_map",
+            "plots",
             "simulate",
             "scan",
             "run",
