@@ -248,9 +248,19 @@ fn iso230_4_reads_back_squareness_scale_and_reversals() {
         assert_eq!(d["points"], 360);
     }
     assert!(j["H"].as_f64().expect("H") > 0.0);
-    // The summary names the figures.
-    let (code, stdout, _) = sb.run(&["evaluate", "iso230-4", "bb.csv", "--radius", "100"]);
+    // The summary names the figures; --png draws the polar plot as a PNG file.
+    let (code, stdout, _) = sb.run(&[
+        "evaluate",
+        "iso230-4",
+        "bb.csv",
+        "--radius",
+        "100",
+        "--png",
+        "polar.png",
+    ]);
     assert_eq!(code, 0);
+    let png = std::fs::read(sb.dir.join("polar.png")).expect("the plot is written");
+    assert!(png.starts_with(b"\x89PNG\r\n\x1a\n"));
     assert!(
         stdout.contains("squareness") && stdout.contains("hysteresis H"),
         "{stdout}"
