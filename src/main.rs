@@ -661,6 +661,17 @@ fn evaluate_ball_sensor(file: Option<&Path>, o: [f64; 6], json: bool) -> ExitCod
     )
 }
 
+/// Encodes a drawn plot and writes it whole to `png`, or says why not.
+fn write_plot(
+    png: &Path,
+    drawn: Result<image::RgbImage, twinmill::report::render::RenderError>,
+) -> Result<(), String> {
+    let bytes = drawn
+        .and_then(|img| twinmill::report::render::encode_png(&img))
+        .map_err(|e| format!("{}: {e}", png.display()))?;
+    twinmill::output::write_file(png, &bytes).map_err(|e| e.to_string())
+}
+
 fn fail(msg: impl std::fmt::Display) -> ExitCode {
     let _ = writeln!(std::io::stderr(), "twinmill: error: {msg}");
     ExitCode::FAILURE
@@ -684,15 +695,11 @@ fn main() -> ExitCode {
             };
             if let Some(png) = &png {
                 let title = format!("ISO 230-2: {}", file.display());
-                let drawn = twinmill::report::plots::positioning_plot(&figures, &title)
-                    .and_then(|img| twinmill::report::render::encode_png(&img));
-                match drawn {
-                    Ok(bytes) => {
-                        if let Err(e) = twinmill::output::write_file(png, &bytes) {
-                            return fail(e);
-                        }
-                    }
-                    Err(e) => return fail(format!("{}: {e}", png.display())),
+                if let Err(e) = write_plot(
+                    png,
+                    twinmill::report::plots::positioning_plot(&figures, &title),
+                ) {
+                    return fail(e);
                 }
             }
             print_out(
@@ -728,15 +735,11 @@ fn main() -> ExitCode {
             };
             if let Some(png) = &png {
                 let title = format!("ISO 230-4: {}", file.display());
-                let drawn = twinmill::report::plots::polar_plot(&samples, &figures, &title)
-                    .and_then(|img| twinmill::report::render::encode_png(&img));
-                match drawn {
-                    Ok(bytes) => {
-                        if let Err(e) = twinmill::output::write_file(png, &bytes) {
-                            return fail(e);
-                        }
-                    }
-                    Err(e) => return fail(format!("{}: {e}", png.display())),
+                if let Err(e) = write_plot(
+                    png,
+                    twinmill::report::plots::polar_plot(&samples, &figures, &title),
+                ) {
+                    return fail(e);
                 }
             }
             print_out(

@@ -45,6 +45,7 @@
 //! finite and geometrically possible (0 < L₂ ≤ 2R + tolerance, the shadow inside the band);
 //! anything else is an error naming what is wrong, never a number.
 
+use super::table::{fields, length_unit, name_and_unit, number, rows};
 use crate::math::{Point3, Real, UnitVector3, Vector3};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -351,27 +352,7 @@ pub fn parse_readings(
         column,
         message,
     };
-    let split = |l: &str| -> Vec<(usize, String)> {
-        let mut out = Vec::new();
-        let mut start = 1;
-        let mut cur = String::new();
-        for (col, c) in (1..).zip(l.chars()) {
-            if c == ',' || c == ';' || c == '\t' {
-                out.push((start, cur.trim().to_string()));
-                cur.clear();
-                start = col + 1;
-            } else {
-                cur.push(c);
-            }
-        }
-        out.push((start, cur.trim().to_string()));
-        out
-    };
-    let mut rows = text
-        .lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.trim_end_matches('\r')))
-        .filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
+    let mut rows = rows(text);
     let Some((hline, header)) = rows.next() else {
         return Err(err(
             1,
@@ -382,15 +363,9 @@ pub fn parse_readings(
     let names = ["lx1", "lx2", "ly1", "ly2"];
     let mut index = [usize::MAX; 4];
     let mut scale = [1.0; 4];
-    let head = split(header);
+    let head = fields(header);
     for (k, (col, cell)) in head.iter().enumerate() {
-        let (name, unit) = match cell.find('[') {
-            Some(i) => match cell[i + 1..].strip_suffix(']') {
-                Some(u) => (cell[..i].trim(), Some(u.trim())),
-                None => return Err(err(hline, *col, format!("unclosed unit in '{cell}'"))),
-            },
-            None => (cell.as_str(), None),
-        };
+        let (name, unit) = name_and_unit(cell).map_err(|m| err(hline, *col, m))?;
         let Some(slot) = names.iter().position(|n| name.eq_ignore_ascii_case(n)) else {
             return Err(err(
                 hline,
@@ -403,15 +378,14 @@ pub fn parse_readings(
         }
         index[slot] = k;
         scale[slot] = match unit {
-            None | Some("mm") => 1.0,
-            Some("um" | "µm" | "μm") => 1e-3,
-            Some(u) => {
-                return Err(err(
+            None => 1.0,
+            Some(u) => length_unit(u).ok_or_else(|| {
+                err(
                     hline,
                     *col,
-                    format!("unknown unit '{u}' (use mm, um or µm)"),
-                ));
-            }
+                    format!("unknown unit '{u}' (use mm, um, µm or in)"),
+                )
+            })?,
         };
     }
     if let Some(missing) = (0..4).find(|&k| index[k] == usize::MAX) {
@@ -426,7 +400,7 @@ pub fn parse_readings(
     }
     let mut out = Vec::new();
     for (line, l) in rows {
-        let f = split(l);
+        let f = fields(l);
         if f.len() != head.len() {
             return Err(err(
                 line,
@@ -437,20 +411,8 @@ pub fn parse_readings(
         let mut v = [0.0; 4];
         for k in 0..4 {
             let (col, s) = &f[index[k]];
-            v[k] = match s.parse::<Real>() {
-                Ok(x) if x.is_finite() => x * scale[k],
-                Ok(x) => {
-                    return Err(err(
-                        line,
-                        *col,
-                        format!(
-                            "{} must be finite, got {x}",
-                            ["Lx1", "Lx2", "Ly1", "Ly2"][k]
-                        ),
-                    ));
-                }
-                Err(_) => return Err(err(line, *col, format!("'{s}' is not a number"))),
-            };
+            v[k] = number(s, ["Lx1", "Lx2", "Ly1", "Ly2"][k]).map_err(|m| err(line, *col, m))?
+                * scale[k];
         }
         out.push((
             line,
@@ -692,7 +654,7 @@ mod tests {
                 .starts_with("s.csv:2:3:")
         );
         assert!(
-            run("Lx1[in],Lx2,Ly1,Ly2\n")
+            run("Lx1[ft],Lx2,Ly1,Ly2\n")
                 .unwrap_err()
                 .contains("unknown unit")
         );

@@ -48,6 +48,7 @@
 //! reach an axis's reversal, a rank-deficient fit) is reported as not determined, never as
 //! a number.
 
+use super::table::{fields, length_unit, name_and_unit, number, rows};
 use crate::math::Real;
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
@@ -190,9 +191,7 @@ fn unit_factor(unit: &str, angle: bool) -> Option<Real> {
     match (unit, angle) {
         ("deg", true) => Some(1.0_f64.to_radians()),
         ("rad", true) => Some(1.0),
-        ("mm", false) => Some(1.0),
-        ("um" | "µm" | "μm", false) => Some(1e-3),
-        ("in", false) => Some(25.4),
+        (u, false) => length_unit(u),
         _ => None,
     }
 }
@@ -205,34 +204,14 @@ pub fn parse_trace(text: &str, path: &Path) -> Result<Vec<Sample>, TraceError> {
         column,
         message,
     };
-    let mut rows = text
-        .lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.trim_end_matches('\r')))
-        .filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
+    let mut rows = rows(text);
     let Some((hline, header)) = rows.next() else {
         return Err(TraceError::Unusable {
             path: path.to_path_buf(),
             message: "no header and no samples".into(),
         });
     };
-    let split = |l: &str| -> Vec<(usize, String)> {
-        let mut out = Vec::new();
-        let mut start_col = 1;
-        let mut cur = String::new();
-        for (col, c) in (1..).zip(l.chars()) {
-            if c == ',' || c == ';' || c == '\t' {
-                out.push((start_col, cur.trim().to_string()));
-                cur.clear();
-                start_col = col + 1;
-            } else {
-                cur.push(c);
-            }
-        }
-        out.push((start_col, cur.trim().to_string()));
-        out
-    };
-    let head = split(header);
+    let head = fields(header);
     let mut factors = [1.0_f64.to_radians(), 1.0];
     let expected = ["direction", "angle", "deviation"];
     if head.len() != 3 {
@@ -243,13 +222,7 @@ pub fn parse_trace(text: &str, path: &Path) -> Result<Vec<Sample>, TraceError> {
         ));
     }
     for (k, ((col, cell), want)) in head.iter().zip(expected).enumerate() {
-        let (name, unit) = match cell.find('[') {
-            Some(i) => match cell[i + 1..].strip_suffix(']') {
-                Some(u) => (cell[..i].trim(), Some(u.trim())),
-                None => return Err(syntax(hline, *col, format!("unclosed unit in '{cell}'"))),
-            },
-            None => (cell.as_str(), None),
-        };
+        let (name, unit) = name_and_unit(cell).map_err(|m| syntax(hline, *col, m))?;
         if !name.eq_ignore_ascii_case(want) {
             return Err(syntax(
                 hline,
@@ -280,7 +253,7 @@ pub fn parse_trace(text: &str, path: &Path) -> Result<Vec<Sample>, TraceError> {
     }
     let mut out = Vec::new();
     for (line, l) in rows {
-        let f = split(l);
+        let f = fields(l);
         if f.len() != 3 {
             return Err(syntax(
                 line,
@@ -302,16 +275,8 @@ pub fn parse_trace(text: &str, path: &Path) -> Result<Vec<Sample>, TraceError> {
                 ));
             }
         };
-        let num = |(col, s): &(usize, String), what: &str| -> Result<Real, TraceError> {
-            match s.parse::<Real>() {
-                Ok(v) if v.is_finite() => Ok(v),
-                Ok(v) => Err(syntax(
-                    line,
-                    *col,
-                    format!("{what} must be finite, got {v}"),
-                )),
-                Err(_) => Err(syntax(line, *col, format!("{what}: '{s}' is not a number"))),
-            }
+        let num = |&(col, s): &(usize, &str), what: &str| -> Result<Real, TraceError> {
+            number(s, what).map_err(|m| syntax(line, col, m))
         };
         out.push(Sample {
             turn,

@@ -1,7 +1,7 @@
 //! **Metrology**: measuring the cut part. Point clouds and their files ([`cloud`]), the
 //! virtual structured-light scanner ([`scan`]), least-squares fits of planes, spheres,
 //! circles and cylinders with their uncertainties ([`fit`]), and segmentation of whole
-//! clouds into faces and shapes ([`segment`]), and the evaluations of the standards: ISO 230-2
+//! clouds into faces and shapes ([`segment`]), and the evaluations of the standards, which read one small CSV dialect ([`table`]): ISO 230-2
 //! positioning accuracy from any readings ([`positioning`]) and ISO 230-4 circular tests with the
 //! ball-bar diagnostics ([`circular`]), and seed 003's non-contact ball sensor with its Z
 //! uncertainty and working window ([`ball_sensor`]). The instruments of the standards
@@ -15,6 +15,7 @@ pub mod cloud;
 pub mod scan;
 pub mod fit;
 pub mod segment;
+pub mod table;
 pub mod positioning;
 pub mod circular;
 pub mod ball_sensor;

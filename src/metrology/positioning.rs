@@ -31,6 +31,7 @@
 //! finite. Anything else is an error naming what is missing — never a figure from part of the
 //! data.
 
+use super::table::{fields, length_unit, name_and_unit, number, rows};
 use crate::math::Real;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -169,48 +170,19 @@ pub struct PositioningFigures {
     pub targets: Vec<TargetFigures>,
 }
 
-/// A unit a column may be given in, as a factor to mm.
-fn unit_factor(unit: &str) -> Option<Real> {
-    match unit {
-        "mm" => Some(1.0),
-        "um" | "µm" | "μm" => Some(1e-3),
-        "in" | "inch" => Some(25.4),
-        _ => None,
-    }
-}
-
 /// A header cell: its name (lower case) and unit factor, or the unit problem.
 fn header_cell(cell: &str) -> Result<(String, Real), String> {
-    let cell = cell.trim();
-    match cell.find('[') {
-        None => Ok((cell.to_ascii_lowercase(), 1.0)),
-        Some(i) => {
-            let Some(unit) = cell[i + 1..].strip_suffix(']') else {
-                return Err(format!("unclosed unit in '{cell}'"));
-            };
-            let unit = unit.trim();
-            let f = unit_factor(unit).ok_or_else(|| {
-                format!("unknown unit '{unit}' in '{cell}' (use mm, um, µm or in)")
-            })?;
-            Ok((cell[..i].trim().to_ascii_lowercase(), f))
-        }
-    }
-}
-
-/// Splits a line into fields with their 1-based starting columns.
-fn fields(line: &str) -> Vec<(usize, &str)> {
-    let mut out = Vec::new();
-    let mut start = 0;
-    let mut field_col = 1;
-    for (col, (i, c)) in (1..).zip(line.char_indices()) {
-        if c == ',' || c == ';' || c == '\t' {
-            out.push((field_col, line[start..i].trim()));
-            start = i + c.len_utf8();
-            field_col = col + 1;
-        }
-    }
-    out.push((field_col, line[start..].trim()));
-    out
+    let (name, unit) = name_and_unit(cell)?;
+    let f = match unit {
+        None => 1.0,
+        Some(u) => length_unit(u).ok_or_else(|| {
+            format!(
+                "unknown unit '{u}' in '{}' (use mm, um, µm or in)",
+                cell.trim()
+            )
+        })?,
+    };
+    Ok((name.to_ascii_lowercase(), f))
 }
 
 /// Reads a readings file's text (`path` names it in messages): the long or the wide layout
@@ -223,11 +195,7 @@ pub fn parse_readings(text: &str, path: &Path) -> Result<Vec<Reading>, ReadingsE
         column,
         message,
     };
-    let mut rows = text
-        .lines()
-        .enumerate()
-        .map(|(i, l)| (i + 1, l.trim_end_matches('\r')))
-        .filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
+    let mut rows = rows(text);
     let Some((hline, header)) = rows.next() else {
         return Err(ReadingsError::Incomplete {
             path: path.to_path_buf(),
@@ -243,11 +211,7 @@ pub fn parse_readings(text: &str, path: &Path) -> Result<Vec<Reading>, ReadingsE
         })
         .collect::<Result<_, _>>()?;
     let number = |line: usize, col: usize, s: &str, what: &str| -> Result<Real, ReadingsError> {
-        match s.parse::<Real>() {
-            Ok(v) if v.is_finite() => Ok(v),
-            Ok(v) => Err(syntax(line, col, format!("{what} must be finite, got {v}"))),
-            Err(_) => Err(syntax(line, col, format!("{what}: '{s}' is not a number"))),
-        }
+        number(s, what).map_err(|m| syntax(line, col, m))
     };
     let names: Vec<&str> = cells.iter().map(|(_, n, _)| n.as_str()).collect();
     let mut out = Vec::new();

@@ -35,6 +35,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "scan",
             "fit",
             "segment",
+            "table",
             "positioning",
             "circular",
             "ball_sensor",
