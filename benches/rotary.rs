@@ -6,6 +6,9 @@
 //! - **P4, simultaneous XA**: one turn of a helical groove 1 mm deep on a Ø16 mm bar, ball
 //!   Ø4 mm, A and X together in 60 moves of 6°, every move cut by the per-ray envelope;
 //!   moves per second, at tri-dexel pitches 0.2 and 0.1 mm.
+//! - **Chain pose**: one `w_from_t` of the MDX-50 chain with its deviations, and of the
+//!   same chain with error motions on X, Y and Z (a table, a polynomial and a periodic term
+//!   each, and a reversal), poses per second.
 
 use criterion::criterion_main;
 
@@ -119,6 +122,36 @@ mod group {
                 )
             });
         }
+        g.finish();
+
+        // The chain's pose with and without error motions.
+        use twinmill::machine::error_motion::{AxisErrorMotions, Term};
+        let mut g = c.benchmark_group("chain");
+        g.throughput(Throughput::Elements(1));
+        let q = AxisValues::default()
+            .with(AxisLetter::X, 12.5)
+            .with(AxisLetter::Y, -20.0)
+            .with(AxisLetter::Z, 3.0)
+            .with(AxisLetter::A, 30.0);
+        let plain = scene.chain.clone();
+        g.bench_function("w_from_t without error motions", |b| {
+            b.iter(|| plain.w_from_t(std::hint::black_box(&q)))
+        });
+        let mut with = scene.chain.clone();
+        for l in [AxisLetter::X, AxisLetter::Y, AxisLetter::Z] {
+            let mut e = AxisErrorMotions::for_axis(l);
+            e.functions[0].terms = vec![
+                Term::table(vec![-50.0, 0.0, 50.0], vec![0.0, 2e-3, -1e-3]).expect("valid"),
+                Term::polynomial(vec![0.0, 1e-5, 1e-7]).expect("valid"),
+                Term::periodic(1e-3, 5.0, 0.0).expect("valid"),
+            ];
+            e.functions[4].terms = vec![Term::polynomial(vec![1e-5, 1e-7]).expect("valid")];
+            e.reversal = -0.003;
+            with.set_error_motions(l, e).expect("axis");
+        }
+        g.bench_function("w_from_t with error motions", |b| {
+            b.iter(|| with.w_from_t(std::hint::black_box(&q)))
+        });
         g.finish();
     }
 

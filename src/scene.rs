@@ -14,6 +14,7 @@ use crate::cutting::shape::{ClosedMesh, Cylinder, Solid, read_obj, read_stl};
 use crate::cutting::sweep::SweepOptions;
 use crate::cutting::tool::{Tool, ToolKind};
 use crate::machine::chain::{Axis, AxisKind, Chain};
+use crate::machine::error_motion::{self, AxisErrorMotions};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
 use crate::metrology::fit::RobustRule;
 use crate::metrology::scan::{Misregistration, ScanError, ScannerConfig, StudyOptions, Turntable};
@@ -87,6 +88,10 @@ struct SceneFile {
     machine: MachineFile,
     #[serde(default)]
     deviations: BTreeMap<String, Spanned<Real>>,
+    #[serde(default)]
+    error_motions: BTreeMap<String, Spanned<MotionFile>>,
+    #[serde(default)]
+    reversal: BTreeMap<String, Spanned<Real>>,
     tool: ToolFile,
     stock: StockFile,
     #[serde(default)]
@@ -103,6 +108,34 @@ struct SceneFile {
     fixtures: Vec<MeshFile>,
     #[serde(default)]
     design: Option<MeshFile>,
+}
+
+/// One `[error_motions]` entry: a sum of a table, a polynomial and periodic terms.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct MotionFile {
+    #[serde(default)]
+    table: Option<Spanned<TableFile>>,
+    #[serde(default)]
+    polynomial: Option<Vec<Spanned<Real>>>,
+    #[serde(default)]
+    periodic: Vec<Spanned<PeriodicFile>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TableFile {
+    q: Vec<Spanned<Real>>,
+    values: Vec<Spanned<Real>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PeriodicFile {
+    amplitude: Spanned<Real>,
+    period: Spanned<Real>,
+    #[serde(default)]
+    phase_deg: Option<Spanned<Real>>,
 }
 
 /// `[[fixtures]]` and `[design]`: a closed OBJ or STL mesh, relative to the scene file, and
@@ -876,21 +909,153 @@ fn read_text(path: &Path) -> Result<String, SceneError> {
     })
 }
 
+/// Sets the deviations of `map` on `chain`: names `<component>_<joint>` first, then the
+/// ISO location and squareness names (`EY0A`, `EC(0X)Y`, …) composed onto them.
 fn deviation_map(
     ctx: &Ctx,
     chain: &mut Chain,
     map: &BTreeMap<String, Spanned<Real>>,
 ) -> Result<BTreeMap<String, Real>, SceneError> {
     let mut out = BTreeMap::new();
-    for (name, value) in map {
-        let id = chain
-            .deviation_id(name)
-            .map_err(|e| ctx.err(value.span(), e.to_string()))?;
-        let v = ctx.finite(value, name)?;
-        chain.set_deviation(id, v);
-        out.insert(name.clone(), v);
+    for iso in [false, true] {
+        for (name, value) in map.iter().filter(|(n, _)| n.contains('_') != iso) {
+            let v = ctx.finite(value, name)?;
+            if iso {
+                chain
+                    .apply_iso_term(name, v)
+                    .map_err(|e| ctx.err(value.span(), e.to_string()))?;
+            } else {
+                let id = chain
+                    .deviation_id(name)
+                    .map_err(|e| ctx.err(value.span(), e.to_string()))?;
+                chain.set_deviation(id, v);
+            }
+            out.insert(name.clone(), v);
+        }
     }
     Ok(out)
+}
+
+/// The `[error_motions]` and `[reversal]` sections set on `chain`.
+fn error_motions(
+    ctx: &Ctx,
+    chain: &mut Chain,
+    motions: &BTreeMap<String, Spanned<MotionFile>>,
+    reversal: &BTreeMap<String, Spanned<Real>>,
+) -> Result<(), SceneError> {
+    let mut per_axis: BTreeMap<usize, AxisErrorMotions> = BTreeMap::new();
+    let axes_list = || {
+        chain
+            .axes()
+            .iter()
+            .map(|a| a.letter.as_char().to_string())
+            .collect::<Vec<_>>()
+            .join(" ")
+    };
+    let axis_of = |name: &str, letter: AxisLetter, span: Range<usize>| {
+        if chain.has_axis(letter) {
+            Ok(letter)
+        } else {
+            Err(ctx.err(
+                span,
+                format!(
+                    "'{name}' names axis {}, which this machine does not have (axes: {})",
+                    letter.as_char(),
+                    axes_list()
+                ),
+            ))
+        }
+    };
+    for (name, entry) in motions {
+        let (component, letter) =
+            error_motion::parse_name(name).map_err(|e| ctx.err(entry.span(), e.to_string()))?;
+        let letter = axis_of(name, letter, entry.span())?;
+        let f = entry.get_ref();
+        let mut terms = Vec::new();
+        if let Some(t) = &f.table {
+            let tf = t.get_ref();
+            let mut q = Vec::with_capacity(tf.q.len());
+            for (k, x) in tf.q.iter().enumerate() {
+                let v = ctx.finite(x, &format!("{name}.table.q[{k}]"))?;
+                if let Some(&prev) = q.last()
+                    && v <= prev
+                {
+                    return Err(ctx.err(
+                        x.span(),
+                        format!(
+                            "{name}.table.q must increase strictly: q[{k}] = {v} after q[{}] = {prev}",
+                            k - 1
+                        ),
+                    ));
+                }
+                q.push(v);
+            }
+            let mut vals = Vec::with_capacity(tf.values.len());
+            for (k, x) in tf.values.iter().enumerate() {
+                vals.push(ctx.finite(x, &format!("{name}.table.values[{k}]"))?);
+            }
+            terms.push(
+                error_motion::Term::table(q, vals)
+                    .map_err(|e| ctx.err(t.span(), format!("{name}.table: {e}")))?,
+            );
+        }
+        if let Some(p) = &f.polynomial {
+            let mut c = Vec::with_capacity(p.len());
+            for (k, x) in p.iter().enumerate() {
+                c.push(ctx.finite(x, &format!("{name}.polynomial[{k}]"))?);
+            }
+            terms.push(
+                error_motion::Term::polynomial(c)
+                    .map_err(|e| ctx.err(entry.span(), format!("{name}.polynomial: {e}")))?,
+            );
+        }
+        for (k, p) in f.periodic.iter().enumerate() {
+            let pf = p.get_ref();
+            let what = |field: &str| format!("{name}.periodic[{k}].{field}");
+            let amplitude = ctx.finite(&pf.amplitude, &what("amplitude"))?;
+            let period = ctx.positive(&pf.period, &what("period"))?;
+            let phase = ctx.opt(&pf.phase_deg, &what("phase_deg"), 0.0)?;
+            terms.push(
+                error_motion::Term::periodic(amplitude, period, phase)
+                    .map_err(|e| ctx.err(p.span(), format!("{}: {e}", what("period"))))?,
+            );
+        }
+        if terms.is_empty() {
+            return Err(ctx.err(
+                entry.span(),
+                format!("{name} needs a table, a polynomial or periodic terms"),
+            ));
+        }
+        per_axis
+            .entry(letter.index())
+            .or_insert_with(|| AxisErrorMotions::for_axis(letter))
+            .functions[component as usize]
+            .terms = terms;
+    }
+    for (name, value) in reversal {
+        let letter = match name.chars().collect::<Vec<_>>()[..] {
+            [c] => AxisLetter::from_char(c),
+            _ => None,
+        }
+        .ok_or_else(|| {
+            ctx.err(
+                value.span(),
+                format!("reversal: '{name}' is not an axis letter (X Y Z A B C)"),
+            )
+        })?;
+        let letter = axis_of(&format!("reversal.{name}"), letter, value.span())?;
+        let b = ctx.finite(value, &format!("reversal.{name}"))?;
+        per_axis
+            .entry(letter.index())
+            .or_insert_with(|| AxisErrorMotions::for_axis(letter))
+            .reversal = b;
+    }
+    for (index, e) in per_axis {
+        chain
+            .set_error_motions(AxisLetter::ALL[index], e)
+            .map_err(|e| ctx.err(0..0, e.to_string()))?;
+    }
+    Ok(())
 }
 
 /// The memory the tri-dexel may use, and where that figure comes from (for messages).
@@ -1121,7 +1286,9 @@ impl Scene {
         }
         let model_nominal = chain.nominal();
         let injected = deviation_map(&ctx, &mut chain, &file.deviations)?;
-        let mut model = model_nominal;
+        error_motions(&ctx, &mut chain, &file.error_motions, &file.reversal)?;
+        // The model knows the machine's error motions (measured, like `known`).
+        let mut model = model_nominal.with_error_motions_of(&chain);
         let known = match &file.identify {
             Some(id) => deviation_map(&ctx, &mut model, &id.known)?,
             None => BTreeMap::new(),

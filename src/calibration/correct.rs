@@ -77,6 +77,7 @@ use crate::calibration::identify::{FaceOptions, FaceSpec, StepFrame, extent, fla
 use crate::cutting::stock::TriDexel;
 use crate::cutting::tool::Tool;
 use crate::machine::chain::{AxisKind, Chain};
+use crate::machine::error_motion::{self, Direction, Directions};
 use crate::math::{Aabb, Isometry3, Point3, Real, Vector3};
 use crate::metrology::fit::{Plane, fit_plane};
 use crate::nc::{AxisLetter, AxisValues, Move, MoveKind, Program};
@@ -289,6 +290,9 @@ pub struct PoseFit {
 #[derive(Clone, Debug)]
 pub struct PoseSolver<'a> {
     machine: &'a Chain,
+    /// The reversal shares the machine carries at the poses solved
+    /// ([`Chain::reversal_state`]); all settled in `+` until set.
+    state: [Real; 6],
     nominal: Chain,
     flute: FlutePoints,
     max_correction: Real,
@@ -306,11 +310,73 @@ impl<'a> PoseSolver<'a> {
     pub fn new(machine: &'a Chain, tool: &Tool, max_correction: Real) -> Self {
         Self {
             machine,
+            state: machine.reversal_state(&Directions::default()),
             nominal: machine.nominal(),
             flute: FlutePoints::of(tool),
             max_correction,
             lever_mm_per_deg: tool.length().to_radians(),
         }
+    }
+
+    /// Solves the next poses with the axes settled in `dirs` (their reversal shares).
+    pub fn set_directions(&mut self, dirs: &Directions) {
+        self.state = self.machine.reversal_state(dirs);
+    }
+
+    /// Corrects `q` like [`PoseSolver::solve`] for a corrected move from `from`, with each
+    /// axis's reversal share consistent with the direction the corrected move takes: solved
+    /// first with the axes as `dirs` leaves them; an axis with a reversal whose correction
+    /// then moves the other way is turned (its lost motion taken up, so the settled share
+    /// of the new direction applies) and the pose solved again. Returns the fit and the
+    /// directions after the move.
+    pub fn solve_from(
+        &mut self,
+        q: &AxisValues,
+        guess: &AxisValues,
+        free: &[bool; 6],
+        line: usize,
+        (from, dirs): (&AxisValues, Directions),
+    ) -> Result<(PoseFit, Directions), CorrectError> {
+        let mut d = dirs;
+        let mut fit = None;
+        for _ in 0..4 {
+            self.set_directions(&d);
+            let f = self.solve(q, guess, free, line)?;
+            let mut turned = false;
+            for axis in self.machine.axes() {
+                let l = axis.letter;
+                let has_reversal = self
+                    .machine
+                    .error_motions(l)
+                    .is_some_and(|e| e.reversal != 0.0);
+                let dq = f.q.get(l) - from.get(l);
+                if has_reversal && dq != 0.0 && dq.signum() != d.get(l).sign() {
+                    let flipped = match d.get(l) {
+                        Direction::Positive => Direction::Negative,
+                        Direction::Negative => Direction::Positive,
+                    };
+                    d.set(l, flipped);
+                    turned = true;
+                }
+            }
+            fit = Some(f);
+            if !turned {
+                break;
+            }
+        }
+        // Directions of the axes without a reversal follow the move.
+        let after = d;
+        let f = fit.ok_or(CorrectError::NotConverged {
+            line,
+            iterations: 0,
+            step_mm: Real::INFINITY,
+        })?;
+        let mut out = dirs.after_move(from, &f.q);
+        for axis in self.machine.axes() {
+            out.set(axis.letter, after.get(axis.letter));
+        }
+        self.set_directions(&out);
+        Ok((f, out))
     }
 
     /// The nominal chain.
@@ -337,7 +403,15 @@ impl<'a> PoseSolver<'a> {
             .enumerate()
         {
             bases[i] = prefix;
-            prefix = prefix * axis.motion(q.get(axis.letter)) * dev.transform();
+            let qi = q.get(axis.letter);
+            prefix *= axis.motion(qi);
+            if let Some(e) = &self.machine.error_motions_all()[i] {
+                // Error motions: in the pose exactly; their slopes (µm/mm) are left out of
+                // the Jacobian, which Gauss–Newton tolerates (a contraction by the slope).
+                let v = e.values_with_offset(qi, self.state[axis.letter.index()]);
+                prefix *= error_motion::transform(&v, &self.machine.error_centre(i));
+            }
+            prefix *= dev.transform();
         }
         let pts = self.flute.gauss.map(|h| prefix * axis_point(h));
         let mut j = Jacobian::zeros();
@@ -367,7 +441,7 @@ impl<'a> PoseSolver<'a> {
     /// (RMS over the flute, largest at the flute's ends), mm.
     pub fn residual(&self, commanded: &AxisValues, corrected: &AxisValues) -> (Real, Real) {
         let (dev, nom) = (
-            self.machine.w_from_t(corrected),
+            self.machine.w_from_t_state(corrected, &self.state),
             self.nominal.w_from_t(commanded),
         );
         let e = |h: Real| (dev * axis_point(h) - nom * axis_point(h)).norm_squared();
@@ -470,14 +544,16 @@ pub fn path_point(mv: &Move, s: Real) -> AxisValues {
 }
 
 /// Whether the move is a straight line in axis space with every rotary axis of `chain`
-/// fixed (then its deviated path is straight too: see the module docs).
+/// fixed and no axis with error motions moving (then its deviated path is straight too:
+/// see the module docs).
 pub fn straight_at_fixed_rotary(chain: &Chain, mv: &Move) -> bool {
     match mv.kind {
         MoveKind::Rapid | MoveKind::Linear => chain
             .axes()
             .iter()
-            .filter(|a| a.kind == AxisKind::Rotary)
-            .all(|a| mv.start.get(a.letter) == mv.end.get(a.letter)),
+            .zip(chain.error_motions_all())
+            .filter(|(a, e)| a.kind == AxisKind::Rotary || e.is_some())
+            .all(|(a, _)| mv.start.get(a.letter) == mv.end.get(a.letter)),
         MoveKind::Arc(_) => false,
     }
 }
@@ -490,6 +566,23 @@ fn emitted_kind(kind: MoveKind) -> MoveKind {
     } else {
         MoveKind::Linear
     }
+}
+
+/// Where the path of a move from `from` really starts when its axes change their reversal
+/// share from `old` to `new` ([`Chain::reversal_state`]): the lost motion is taken up first
+/// (the axis dwells while the command travels `old − new`), so the commanded point whose
+/// settled pose is the move's true start is `from + (old − new)` on each such axis. The
+/// path checks compare the move from there; the dwell itself is a delay along the path,
+/// not a departure from it.
+fn taken_up(machine: &Chain, from: &AxisValues, old: &[Real; 6], new: &[Real; 6]) -> AxisValues {
+    let mut q = *from;
+    for axis in machine.axes() {
+        let k = axis.letter.index();
+        if old[k] != new[k] {
+            q.set(axis.letter, from.get(axis.letter) + old[k] - new[k]);
+        }
+    }
+    q
 }
 
 fn lerp(a: &AxisValues, b: &AxisValues, s: Real) -> AxisValues {
@@ -627,7 +720,9 @@ pub fn correct_program(
     opts: &CorrectOptions,
 ) -> Result<CorrectedProgram, CorrectError> {
     opts.validate()?;
-    let solver = PoseSolver::new(machine, tool, opts.max_correction);
+    let mut solver = PoseSolver::new(machine, tool, opts.max_correction);
+    // Each axis's lost motion as the commanded program leaves it (all `+` at the start).
+    let mut dirs = Directions::default();
     let axes: Vec<AxisLetter> = AxisLetter::ALL
         .into_iter()
         .filter(|l| machine.has_axis(*l))
@@ -691,6 +786,7 @@ pub fn correct_program(
 
     for (index, mv) in program.moves.iter().enumerate() {
         let kind = emitted_kind(mv.kind);
+        let dirs0 = dirs;
         let offset = |q: &AxisValues| {
             // Warm start: the correction varies slowly along a program.
             let (p, s0) = (prev.to_array(), mv.start.to_array());
@@ -703,7 +799,9 @@ pub fn correct_program(
             for a in machine.axes().iter().filter(|a| a.kind == AxisKind::Rotary) {
                 guess.set(a.letter, prev.get(a.letter));
             }
-            let fit = solver.solve(&mv.end, &guess, &linear_free, mv.line)?;
+            let (fit, d) =
+                solver.solve_from(&mv.end, &guess, &linear_free, mv.line, (&prev, dirs0))?;
+            dirs = d;
             note(&fit, &mv.end, mv.line, &mut summary);
             blocks.push(Block {
                 kind,
@@ -729,6 +827,7 @@ pub fn correct_program(
         let (points, worst, fits) = loop {
             let mut pts = vec![prev];
             let mut fits = Vec::with_capacity(n);
+            let mut point_dirs = vec![dirs0];
             for j in 1..=n {
                 let s = j as Real / n as Real;
                 let q = path_point(mv, s);
@@ -738,28 +837,38 @@ pub fn correct_program(
                     let (l, pq, qa) = (last.to_array(), prev_q.to_array(), q.to_array());
                     AxisValues::from_array(std::array::from_fn(|k| qa[k] + (l[k] - pq[k])))
                 };
-                let fit = solver.solve(&q, &guess, &all_free, mv.line)?;
+                let from = (&last, point_dirs[j - 1]);
+                let (fit, d) = solver.solve_from(&q, &guess, &all_free, mv.line, from)?;
                 note(&fit, &q, mv.line, &mut summary);
                 pts.push(fit.q);
                 fits.push(fit);
+                point_dirs.push(d);
             }
             // Check the chords against the best achievable pose inside each part.
             let mut worst: Real = 0.0;
             for j in 0..n {
-                let (ca, cb) = (pts[j], pts[j + 1]);
+                let before = machine.reversal_state(&point_dirs[j]);
+                solver.set_directions(&point_dirs[j + 1]);
+                let ca = taken_up(machine, &pts[j], &before, &solver.state);
+                let cb = pts[j + 1];
                 for t in CHECK_AT {
                     let s = (j as Real + t) / n as Real;
                     let q = path_point(mv, s);
                     let chord = lerp(&ca, &cb, t);
                     let best = solver.solve(&q, &chord, &all_free, mv.line)?;
                     summary.poses_solved += 1;
-                    let (pc, pb) = (machine.w_from_t(&chord), machine.w_from_t(&best.q));
+                    let (pc, pb) = (
+                        machine.w_from_t_state(&chord, &solver.state),
+                        machine.w_from_t_state(&best.q, &solver.state),
+                    );
                     for h in solver.flute.ends {
                         worst = worst.max((pc * axis_point(h) - pb * axis_point(h)).norm());
                     }
                 }
             }
             if worst <= opts.path_tolerance_mm {
+                dirs = *point_dirs.last().unwrap_or(&dirs0);
+                solver.set_directions(&dirs);
                 break (pts, worst, fits);
             }
             // The chord error falls as 1/n²: jump close to the n needed, at least double.
@@ -987,8 +1096,12 @@ pub fn path_error(
     let mut out = PathError::default();
     let mut sum = 0.0;
     let mut at = corrected.start;
+    let mut dirs = Directions::default();
     for b in &corrected.blocks {
-        let from = at;
+        let old = machine.reversal_state(&dirs);
+        dirs = dirs.after_move(&at, &b.end);
+        let state = machine.reversal_state(&dirs);
+        let from = taken_up(machine, &at, &old, &state);
         at = b.end;
         let Some(src) = b.source.and_then(|i| program.moves.get(i)) else {
             continue;
@@ -996,7 +1109,7 @@ pub fn path_error(
         for i in 0..=PATH_SAMPLES + 1 {
             let t = i as Real / (PATH_SAMPLES + 1) as Real;
             let s = b.s.0 + (b.s.1 - b.s.0) * t;
-            let dev = machine.w_from_t(&lerp(&from, &b.end, t));
+            let dev = machine.w_from_t_state(&lerp(&from, &b.end, t), &state);
             let nom = nominal.w_from_t(&path_point(src, s));
             for h in flute.ends {
                 let d = (dev * axis_point(h) - nom * axis_point(h)).norm();

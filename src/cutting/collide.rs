@@ -616,10 +616,11 @@ fn first_envelope_contact(
     chain: &Chain,
     tool: &Tool,
     mv: &Move,
+    state: &[Real; 6],
 ) -> Option<Overlap> {
-    let env = RotaryEnvelope::new(chain, tool, &mv.start, &mv.end).ok()?;
+    let env = RotaryEnvelope::with_state(chain, tool, &mv.start, &mv.end, state).ok()?;
     let whole = overlap(stock, &env)?;
-    let p0 = chain.w_from_t(&mv.start);
+    let p0 = chain.w_from_t_state(&mv.start, state);
     let v = UnitVector3::new_normalize(p0.rotation * Vector3::z());
     let mut best = overlap(
         stock,
@@ -631,7 +632,8 @@ fn first_envelope_contact(
         while env.speed_bound() * (hi - lo) > CONTACT_RESOLUTION {
             let mid = 0.5 * (lo + hi);
             let part =
-                RotaryEnvelope::new(chain, tool, &mv.start, &axes_at(chain, mv, mid)).ok()?;
+                RotaryEnvelope::with_state(chain, tool, &mv.start, &axes_at(chain, mv, mid), state)
+                    .ok()?;
             match overlap(stock, &part) {
                 Some(o) => {
                     hi = mid;
@@ -823,8 +825,14 @@ impl Scene<'_> {
 
     /// The after-checks of a move that turns a rotary axis, in sub-steps meeting
     /// [`Scene::bound`] for every point of the assembly; returns the achieved bound (mm).
-    fn after_rotary(&self, stock: &TriDexel, log: &mut Log, mv: &Move) -> Result<Real, SweepError> {
-        let rb = RotaryBound::of(self.chain, self.tool, mv);
+    fn after_rotary(
+        &self,
+        stock: &TriDexel,
+        log: &mut Log,
+        mv: &Move,
+        state: &[Real; 6],
+    ) -> Result<Real, SweepError> {
+        let rb = RotaryBound::of_state(self.chain, self.tool, mv, state);
         // The bound's first term grows with the distance of the farthest point from the
         // tool's mid point: the whole assembly's instead of the flutes'.
         let mid = self.tool.length() / 2.0;
@@ -861,6 +869,7 @@ impl Scene<'_> {
             self.chain,
             self.tool,
             mv,
+            state,
             n,
             |tip, d, rot| {
                 self.near(
@@ -944,7 +953,9 @@ impl SweepObserver for Checks<'_> {
                 near.then(|| contact(stock, seen, tool, 0.0, tip, d, v))
                     .flatten()
             }
-            Piece::Rotary { .. } => first_envelope_contact(stock, self.scene.chain, tool, mv),
+            Piece::Rotary { state, .. } => {
+                first_envelope_contact(stock, self.scene.chain, tool, mv, &state)
+            }
         };
         if let Some(o) = contact {
             self.log.note(
@@ -973,8 +984,8 @@ impl SweepObserver for Checks<'_> {
             Piece::Translation { tip, d, rotation } => {
                 self.scene.after(stock, &mut self.log, tip, d, rotation);
             }
-            Piece::Rotary { .. } => {
-                let e = self.scene.after_rotary(stock, &mut self.log, mv)?;
+            Piece::Rotary { state, .. } => {
+                let e = self.scene.after_rotary(stock, &mut self.log, mv, &state)?;
                 self.log.check_error = self.log.check_error.max(e);
             }
         }

@@ -64,6 +64,7 @@
 use crate::cutting::stock::{Cutter, RayCut};
 use crate::cutting::tool::{Tool, ToolKind};
 use crate::machine::chain::{AxisKind, Chain};
+use crate::machine::error_motion::{self, AxisErrorMotions, Directions};
 use crate::math::{Aabb, Isometry3, Matrix3, Point3, Real, Vector3, tol};
 use crate::nc::AxisValues;
 
@@ -120,6 +121,16 @@ enum Factor {
         cross: Matrix3,
         outer: Matrix3,
     },
+    /// The error motions of an axis that moves from `q0` by `dq`, turning about `centre`,
+    /// with its reversal share moving from `off0` toward `target` at the commanded rate.
+    Error {
+        motions: Box<AxisErrorMotions>,
+        centre: Point3,
+        q0: Real,
+        dq: Real,
+        off0: Real,
+        target: Real,
+    },
 }
 
 /// A pose and its rate of change per unit `λ`.
@@ -137,11 +148,25 @@ struct Sample {
 }
 
 impl MovePath {
-    /// The path of the move from `start` to `end` on `chain`.
+    /// The path of the move from `start` to `end` on `chain`, every axis that moves settled
+    /// in the direction of its motion (no lost motion taken up during the move).
     pub fn new(chain: &Chain, start: &AxisValues, end: &AxisValues) -> Self {
+        let state = chain.reversal_state(&Directions::default().after_move(start, end));
+        Self::with_state(chain, start, end, &state)
+    }
+
+    /// The path of the move from `start` to `end` on `chain` starting from the reversal
+    /// shares `state` ([`Chain::reversal_state`]): an axis that reverses takes up its lost
+    /// motion over the first `|B|` of its travel.
+    pub fn with_state(
+        chain: &Chain,
+        start: &AxisValues,
+        end: &AxisValues,
+        state: &[Real; 6],
+    ) -> Self {
         let mut factors = Vec::new();
         let (mut rot, mut t0, mut t1) = (Matrix3::identity(), Vector3::zeros(), Vector3::zeros());
-        for (axis, dev) in chain.axes().iter().zip(chain.deviations()) {
+        for (i, (axis, dev)) in chain.axes().iter().zip(chain.deviations()).enumerate() {
             let (q0, q1) = (start.get(axis.letter), end.get(axis.letter));
             match axis.kind {
                 AxisKind::Linear => {
@@ -165,6 +190,29 @@ impl MovePath {
                         dth: (q1 - q0).to_radians(),
                         cross: dir.cross_matrix(),
                         outer: dir * dir.transpose(),
+                    });
+                    (rot, t0, t1) = (Matrix3::identity(), Vector3::zeros(), Vector3::zeros());
+                }
+            }
+            if let Some(e) = &chain.error_motions_all()[i] {
+                let (q0, q1) = (start.get(axis.letter), end.get(axis.letter));
+                let off0 = state[axis.letter.index()];
+                let centre = chain.error_centre(i);
+                if q0 == q1 {
+                    let g = error_motion::transform(&e.values_with_offset(q0, off0), &centre);
+                    t0 += rot * g.translation.vector;
+                    rot *= g.rotation.to_rotation_matrix().into_inner();
+                } else {
+                    if !(rot == Matrix3::identity() && t0 == Vector3::zeros() && t1 == t0) {
+                        factors.push(Factor::Affine { rot, t0, t1 });
+                    }
+                    factors.push(Factor::Error {
+                        motions: Box::new(e.clone()),
+                        centre,
+                        q0,
+                        dq: q1 - q0,
+                        off0,
+                        target: e.reversal * (q1 - q0).signum() / 2.0,
                     });
                     (rot, t0, t1) = (Matrix3::identity(), Vector3::zeros(), Vector3::zeros());
                 }
@@ -218,6 +266,36 @@ impl MovePath {
                     }
                     t += r * (origin - rt * origin);
                     r *= rt;
+                }
+                Factor::Error {
+                    motions,
+                    centre,
+                    q0,
+                    dq,
+                    off0,
+                    target,
+                } => {
+                    let q = q0 + dq * lambda;
+                    let (mut vals, mut slopes) = motions.values_and_slopes(q);
+                    for s in &mut slopes {
+                        *s *= dq;
+                    }
+                    if let Some(p) = motions.positioning {
+                        let (gap, done) = (target - off0, (dq * lambda).abs());
+                        if done < gap.abs() {
+                            vals[p as usize] += off0 + gap.signum() * done;
+                            slopes[p as usize] += gap.signum() * dq.abs();
+                        } else {
+                            vals[p as usize] += target;
+                        }
+                    }
+                    let g = error_motion::transform(&vals, centre);
+                    let (wl, ul) = error_motion::twist(&vals, &slopes, centre);
+                    let ww = r * wl;
+                    w += ww;
+                    v += r * ul - ww.cross(&t);
+                    t += r * g.translation.vector;
+                    r *= g.rotation.to_rotation_matrix().into_inner();
                 }
             }
         }
@@ -348,12 +426,26 @@ pub struct RotaryEnvelope {
 }
 
 impl RotaryEnvelope {
-    /// The envelope of `tool` on the move `start → end` of `chain`.
+    /// The envelope of `tool` on the move `start → end` of `chain` (moving axes settled in
+    /// their direction of motion, see [`MovePath::new`]).
     pub fn new(
         chain: &Chain,
         tool: &Tool,
         start: &AxisValues,
         end: &AxisValues,
+    ) -> Result<Self, EnvelopeError> {
+        let state = chain.reversal_state(&Directions::default().after_move(start, end));
+        Self::with_state(chain, tool, start, end, &state)
+    }
+
+    /// The envelope of `tool` on the move `start → end` of `chain` from the reversal
+    /// shares `state` (see [`MovePath::with_state`]).
+    pub fn with_state(
+        chain: &Chain,
+        tool: &Tool,
+        start: &AxisValues,
+        end: &AxisValues,
+        state: &[Real; 6],
     ) -> Result<Self, EnvelopeError> {
         let shape = match tool.kind() {
             ToolKind::Flat => Shape::Flat,
@@ -361,8 +453,8 @@ impl RotaryEnvelope {
             _ => return Err(EnvelopeError::UnsupportedTool),
         };
         let (r, l) = (tool.radius(), tool.length());
-        let path = MovePath::new(chain, start, end);
-        let speed = speed_bound(chain, l / 2.0, tool.reach_from(l / 2.0), start, end);
+        let path = MovePath::with_state(chain, start, end, state);
+        let speed = speed_bound(chain, l / 2.0, tool.reach_from(l / 2.0), start, end, state);
         // The capsule of radius R about the axis segment [z0, l] holds the tool; its pieces
         // and their own speed bounds.
         let z0 = match shape {
@@ -373,7 +465,7 @@ impl RotaryEnvelope {
             std::array::from_fn(|k| z0 + (l - z0) * k as Real / PARTS as Real);
         let part_speed: [Real; PARTS] = std::array::from_fn(|k| {
             let half = (part_z[k + 1] - part_z[k]) / 2.0;
-            speed_bound(chain, part_z[k] + half, half + r, start, end)
+            speed_bound(chain, part_z[k] + half, half + r, start, end, state)
         });
         let want = speed / (2.0 * CELL_GROWTH * r);
         if !(want.is_finite() && want <= MAX_CELLS as Real) {
@@ -850,13 +942,15 @@ fn tool_normal(q: &Vector3, face: Face, r: Real) -> Option<Vector3> {
 /// point from a rotary axis, plus the linear travel. `ρ` is taken at both ends (distance of
 /// the axis point from each rotary axis line, plus `reach`) and grown by the travel, which is
 /// the most it can change while the rotation turns points about the axis; several rotary
-/// axes widen it by `(1 + ω)` as the sub-step bound does.
+/// axes widen it by `(1 + ω)` as the sub-step bound does. Error motions add their own
+/// speed ([`error_motion_speed`]).
 fn speed_bound(
     chain: &Chain,
     mid: Real,
     reach: Real,
     start: &AxisValues,
     end: &AxisValues,
+    state: &[Real; 6],
 ) -> Real {
     let (mut omega, mut travel) = (0.0, 0.0);
     let mut rotaries = 0;
@@ -883,7 +977,79 @@ fn speed_bound(
     if rotaries > 1 {
         rho *= 1.0 + omega;
     }
-    omega * rho + travel
+    let base = omega * rho + travel;
+    if chain.has_error_motions() {
+        base + error_motion_speed(chain, &mid, reach, start, end, state).0
+    } else {
+        base
+    }
+}
+
+/// What error motions add to the speed of points within `reach` of the tool point `mid`
+/// (tool frame) on the move `start → end` from the reversal shares `state`, per unit λ, and
+/// the rate of the orientation they turn (rad per unit λ): for each axis `i` that moves by
+/// `Δq_i`, `|Δq_i|·(s_δ + r + s_θ·ρ_i)` with `s_δ`, `s_θ` bounds on its offset and angular
+/// slopes over the move, `r` 1 when its lost motion is taken up during the move, and `ρ_i`
+/// a bound on the distance of the points from the axis's error centre (its distance at
+/// both ends plus `reach`, the travel and 1 mm for the error offsets themselves, widened by
+/// `(1 + ω)` when a rotary axis turns). A point of the frame after the axis moves at
+/// `w × (x − c) + δ'` relative to the frame before it, `|w| ≤ s_θ·|Δq|`, `|δ'| ≤ (s_δ + r)·|Δq|`.
+pub fn error_motion_speed(
+    chain: &Chain,
+    mid: &Point3,
+    reach: Real,
+    start: &AxisValues,
+    end: &AxisValues,
+    state: &[Real; 6],
+) -> (Real, Real) {
+    let (mut omega, mut travel) = (0.0, 0.0);
+    for axis in chain.axes() {
+        let dq = (end.get(axis.letter) - start.get(axis.letter)).abs();
+        match axis.kind {
+            AxisKind::Rotary => omega += dq.to_radians(),
+            AxisKind::Linear => travel += dq,
+        }
+    }
+    let (mut speed, mut turn) = (0.0, 0.0);
+    for (i, axis) in chain.axes().iter().enumerate() {
+        let Some(e) = &chain.error_motions_all()[i] else {
+            continue;
+        };
+        let (q0, q1) = (start.get(axis.letter), end.get(axis.letter));
+        let dq = (q1 - q0).abs();
+        if dq == 0.0 {
+            continue;
+        }
+        let (sd, sa) = e.slope_bounds(q0.min(q1), q0.max(q1));
+        let ramp = if e.reversal != 0.0 { 1.0 } else { 0.0 };
+        let mut rho: Real = 0.0;
+        for q in [start, end] {
+            let c = centre_in_w(chain, i, q, state);
+            rho = rho.max((chain.w_from_t_state(q, state) * mid - c).norm());
+        }
+        rho = (rho + reach + travel + 1.0) * (1.0 + omega);
+        speed += dq * (sd + ramp + sa * rho);
+        turn += dq * sa;
+    }
+    (speed, turn)
+}
+
+/// The error centre of axis `i` in W at `q` (the frame after its motion).
+fn centre_in_w(chain: &Chain, i: usize, q: &AxisValues, state: &[Real; 6]) -> Point3 {
+    let mut pose = Isometry3::identity();
+    for (j, (axis, dev)) in chain.axes().iter().zip(chain.deviations()).enumerate() {
+        let qj = q.get(axis.letter);
+        pose *= axis.motion(qj);
+        if j == i {
+            return pose * chain.error_centre(i);
+        }
+        if let Some(e) = &chain.error_motions_all()[j] {
+            let v = e.values_with_offset(qj, state[axis.letter.index()]);
+            pose *= error_motion::transform(&v, &chain.error_centre(j));
+        }
+        pose *= dev.transform();
+    }
+    pose * Point3::origin()
 }
 
 /// Box of the tool (grown by `margin`) at a pose.

@@ -37,10 +37,11 @@
 //! observer only reads the stock.
 
 use crate::cutting::cutter::{Line, Quadric, SweptTool, t_extremes};
-use crate::cutting::envelope::{ENVELOPE_TOL, RotaryEnvelope};
+use crate::cutting::envelope::{ENVELOPE_TOL, MovePath, RotaryEnvelope, error_motion_speed};
 use crate::cutting::stock::{Cutter, RayCut, TriDexel};
 use crate::cutting::tool::{Tool, ToolKind};
 use crate::machine::chain::{AxisKind, Chain};
+use crate::machine::error_motion::Directions;
 use crate::math::{Aabb, Isometry3, Point3, Real, Rotation3, UnitVector3, Vector3, tol};
 use crate::nc::{AxisLetter, AxisValues, Move, MoveKind};
 use crate::progress::Progress;
@@ -103,6 +104,10 @@ pub struct SweepReport {
     pub cutting_moves: usize,
     /// Moves that turned a rotary axis.
     pub rotary_moves: usize,
+    /// Moves at fixed rotary values swept as curved moves because an axis with error
+    /// motions moves (cut like rotary moves; absent from the report when 0).
+    #[serde(skip_serializing_if = "is_zero")]
+    pub curved_moves: usize,
     /// Sweeps evaluated (1 per run of joined straight moves, 1 per rotary move cut by the
     /// envelope, N per rotary move cut in sub-steps, pruned ones excluded).
     pub sweeps: usize,
@@ -115,6 +120,10 @@ pub struct SweepReport {
     /// Largest distance between the true and the simulated tool motion over all moves (mm):
     /// per move its chord sagitta plus its rotary bound, the largest over the moves.
     pub error_bound_mm: Real,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 /// Largest number of sub-steps for one rotary move.
@@ -655,8 +664,39 @@ pub struct RotaryBound {
 }
 
 impl RotaryBound {
-    /// The bound for a move on `chain` with `tool`.
+    /// The bound for a move on `chain` with `tool`, moving axes settled in their direction
+    /// of motion.
     pub fn of(chain: &Chain, tool: &Tool, mv: &Move) -> Self {
+        let state = chain.reversal_state(&Directions::default().after_move(&mv.start, &mv.end));
+        Self::of_state(chain, tool, mv, &state)
+    }
+
+    /// The bound for a move on `chain` with `tool` from the reversal shares `state`. With
+    /// error motions it adds `a_e/N + b_e/N²` (see docs/cutting.md#sweep-bounds):
+    /// `a_e = E + ρ_tool·ω'/2` and `b_e = ((v + ω·ρ_axis)·ω' + ω·E)/2`, `E` the speed the
+    /// error motions add to the mid point and `ω'` the rotation they turn
+    /// ([`error_motion_speed`]).
+    pub fn of_state(chain: &Chain, tool: &Tool, mv: &Move, state: &[Real; 6]) -> Self {
+        let plain = Self::plain(chain, tool, mv);
+        if !chain.has_error_motions() {
+            return plain;
+        }
+        let (omega, v) = rotation_and_travel(chain, &mv.start, &mv.end);
+        let reach = tool.reach_from(tool.length() / 2.0);
+        let (e, turn) = error_motion_speed(chain, &mid_point(tool), 0.0, &mv.start, &mv.end, state);
+        // ρ_axis from the plain bound's second term: b = (ω²ρ + 2ωv)/8.
+        let rho_axis = if omega > 0.0 {
+            ((8.0 * plain.b - 2.0 * omega * v) / (omega * omega)).max(0.0)
+        } else {
+            0.0
+        };
+        Self {
+            a: plain.a + e + reach * turn / 2.0,
+            b: plain.b + ((v + omega * rho_axis) * turn + omega * e) / 2.0,
+        }
+    }
+
+    fn plain(chain: &Chain, tool: &Tool, mv: &Move) -> Self {
         let (omega, v) = rotation_and_travel(chain, &mv.start, &mv.end);
         let rotaries = chain
             .axes()
@@ -717,6 +757,22 @@ fn pose_at(chain: &Chain, mv: &Move, lambda: Real) -> Isometry3 {
     chain.w_from_t(&q)
 }
 
+/// The poses along a move: the chain's at interpolated axis values, or, with error
+/// motions, the exact [`MovePath`] from the reversal shares the move starts with.
+enum Poses<'a> {
+    Plain(&'a Chain, &'a Move),
+    Path(MovePath),
+}
+
+impl Poses<'_> {
+    fn at(&self, lambda: Real) -> Isometry3 {
+        match self {
+            Poses::Plain(chain, mv) => pose_at(chain, mv, lambda),
+            Poses::Path(p) => p.w_from_t(lambda),
+        }
+    }
+}
+
 /// The moves with every arc replaced by chords within `bound` (mm) of it: borrowed as they
 /// are when there is no arc.
 pub fn as_chords(moves: &[Move], bound: Real) -> std::borrow::Cow<'_, [Move]> {
@@ -741,12 +797,15 @@ pub enum Piece {
         /// The tool's orientation (T to W); its +z is the tool axis.
         rotation: Rotation3,
     },
-    /// A whole move that turns a rotary axis. `envelope`: cut at once by the exact
-    /// [`RotaryEnvelope`] of the tool; else cut in sub-steps (each shown to
-    /// [`SweepObserver::before_rapid`] as a [`Piece::Translation`]).
+    /// A whole move that turns a rotary axis, or that moves an axis with error motions.
+    /// `envelope`: cut at once by the exact [`RotaryEnvelope`] of the tool; else cut in
+    /// sub-steps (each shown to [`SweepObserver::before_rapid`] as a
+    /// [`Piece::Translation`]).
     Rotary {
         /// Whether the move was cut by the envelope.
         envelope: bool,
+        /// The reversal shares the move starts from ([`Chain::reversal_state`]).
+        state: [Real; 6],
     },
 }
 
@@ -810,6 +869,7 @@ pub fn rotary_substeps<E>(
     chain: &Chain,
     tool: &Tool,
     mv: &Move,
+    state: &[Real; 6],
     n: usize,
     mut keep_group: impl FnMut(Point3, Vector3, Rotation3) -> bool,
     mut each: impl FnMut(Point3, Vector3, Rotation3) -> Result<(), E>,
@@ -820,6 +880,12 @@ pub fn rotary_substeps<E>(
         let v = rotation * Vector3::z();
         (a - v * half, b - a, rotation)
     };
+    let poses = if chain.has_error_motions() {
+        Poses::Path(MovePath::with_state(chain, &mv.start, &mv.end, state))
+    } else {
+        Poses::Plain(chain, mv)
+    };
+    let pose_at = |_: &Chain, _: &Move, l: Real| poses.at(l);
     let per = n / COARSE;
     for j in 0..COARSE {
         let (l0, l1) = (j as Real / COARSE as Real, (j + 1) as Real / COARSE as Real);
@@ -905,6 +971,9 @@ pub fn sweep_observed(
     progress.start("sweep", moves.len() as u64);
     let joinable = TranslatedTool::has_closed_form(tool);
     let mut run: Option<Run> = None;
+    // Before the first move every axis is taken as last moved in +.
+    let errors = chain.has_error_motions();
+    let mut state = chain.reversal_state(&Directions::default());
     for (k, mv) in moves.iter().enumerate() {
         if let Some(missing) = AxisLetter::ALL
             .into_iter()
@@ -921,10 +990,22 @@ pub fn sweep_observed(
         report.chord_error_bound_mm = report.chord_error_bound_mm.max(sagitta);
         report.error_bound_mm = report.error_bound_mm.max(sagitta);
         let (omega, _) = rotation_and_travel(chain, &mv.start, &mv.end);
-        if omega == 0.0 {
-            let p0 = chain.w_from_t(&mv.start);
+        let curved = errors && moves_error_axis(chain, mv);
+        let before = state;
+        if errors {
+            state = chain.reversal_after_move(&state, &mv.start, &mv.end);
+        }
+        if omega == 0.0 && !curved {
+            let (p0, p1) = if errors {
+                (
+                    chain.w_from_t_state(&mv.start, &before),
+                    chain.w_from_t_state(&mv.end, &state),
+                )
+            } else {
+                (chain.w_from_t(&mv.start), chain.w_from_t(&mv.end))
+            };
             let tip0 = p0 * Point3::origin();
-            let tip1 = chain.w_from_t(&mv.end) * Point3::origin();
+            let tip1 = p1 * Point3::origin();
             if let Some(r) = &mut run
                 && joinable
                 && mv.kind != MoveKind::Rapid
@@ -937,7 +1018,21 @@ pub fn sweep_observed(
             run = Some(Run::new(k, mv, tip0, tip1, p0.rotation));
         } else {
             flush(run.take(), stock, tool, moves, &mut report, observer)?;
-            let e = sweep_rotary(stock, chain, tool, k, mv, bound, &mut report, observer)?;
+            if omega == 0.0 {
+                report.curved_moves += 1;
+            } else {
+                report.rotary_moves += 1;
+            }
+            let e = sweep_rotary(
+                stock,
+                chain,
+                tool,
+                (k, mv),
+                &before,
+                bound,
+                &mut report,
+                observer,
+            )?;
             report.rotary_error_bound_mm = report.rotary_error_bound_mm.max(e);
             // A chord of an arc that also turns a rotary axis carries both errors.
             report.error_bound_mm = report.error_bound_mm.max(e + sagitta);
@@ -959,22 +1054,24 @@ fn sweep_rotary(
     stock: &mut TriDexel,
     chain: &Chain,
     tool: &Tool,
-    k: usize,
-    mv: &Move,
+    (k, mv): (usize, &Move),
+    state: &[Real; 6],
     bound: Real,
     report: &mut SweepReport,
     observer: &mut dyn SweepObserver,
 ) -> Result<Real, SweepError> {
     let line = mv.line as u32;
     let rapid = mv.kind == MoveKind::Rapid;
-    report.rotary_moves += 1;
     // Flat and ball end mills: the exact per-ray envelope, unless a bound tighter than its
     // tolerance is asked for.
     let envelope = (bound >= ENVELOPE_TOL)
-        .then(|| RotaryEnvelope::new(chain, tool, &mv.start, &mv.end).ok())
+        .then(|| RotaryEnvelope::with_state(chain, tool, &mv.start, &mv.end, state).ok())
         .flatten();
     if let Some(env) = envelope {
-        let piece = Piece::Rotary { envelope: true };
+        let piece = Piece::Rotary {
+            envelope: true,
+            state: *state,
+        };
         if rapid {
             observer.before_rapid(stock, k, mv, &piece)?;
         }
@@ -985,7 +1082,7 @@ fn sweep_rotary(
         observer.after_move(stock, k, mv, &piece)?;
         return Ok(ENVELOPE_TOL);
     }
-    let rb = RotaryBound::of(chain, tool, mv);
+    let rb = RotaryBound::of_state(chain, tool, mv, state);
     let n = rb.steps_for(bound, mv.line)?;
     // A coarse sub-step's box, grown by its own bound, holds every fine sub-step in it.
     let eps_c = rb.at(COARSE) + tol::SLIVER;
@@ -995,6 +1092,7 @@ fn sweep_rotary(
         chain,
         tool,
         mv,
+        state,
         n,
         |tip, d, rot| {
             TranslatedTool::new(tool.clone(), tip, d, Piece::axis(&rot))
@@ -1015,8 +1113,26 @@ fn sweep_rotary(
     if cut {
         report.cutting_moves += 1;
     }
-    observer.after_move(stock, k, mv, &Piece::Rotary { envelope: false })?;
+    observer.after_move(
+        stock,
+        k,
+        mv,
+        &Piece::Rotary {
+            envelope: false,
+            state: *state,
+        },
+    )?;
     Ok(rb.at(n))
+}
+
+/// Whether the move changes the value of an axis that has error motions (its pose then
+/// follows a curved path: the move is swept like a rotary one).
+fn moves_error_axis(chain: &Chain, mv: &Move) -> bool {
+    chain
+        .axes()
+        .iter()
+        .zip(chain.error_motions_all())
+        .any(|(a, e)| e.is_some() && mv.start.get(a.letter) != mv.end.get(a.letter))
 }
 
 /// Largest distance (mm) of a move's end from the line of the run it joins. Far below any

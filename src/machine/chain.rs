@@ -16,6 +16,7 @@
 //! **Invariant:** the chain knows nothing about files, G-code text or stock; it maps axis
 //! values to poses, and names deviations.
 
+use crate::machine::error_motion::{self, AxisErrorMotions, Direction, Directions};
 use crate::math::{Isometry3, Point3, Real, Rotation3, UnitVector3, Vector3};
 use crate::nc::{AxisLetter, AxisValues};
 use std::fmt;
@@ -40,6 +41,24 @@ pub enum KinematicsError {
     /// A chain without axes.
     #[error("the chain has no axes")]
     Empty,
+    /// Error motions or an ISO name for an axis the chain does not have.
+    #[error("'{name}' names axis {axis}, which this machine does not have (axes: {axes})")]
+    MissingAxis {
+        /// The name as given.
+        name: String,
+        /// The axis letter.
+        axis: char,
+        /// The chain's axes.
+        axes: String,
+    },
+    /// A location or squareness name that is not one twinmill maps.
+    #[error("unknown location or squareness name '{name}' ({expected})")]
+    UnknownIsoName {
+        /// The name as given.
+        name: String,
+        /// What is accepted.
+        expected: String,
+    },
 }
 
 /// Whether an axis translates or rotates.
@@ -84,51 +103,7 @@ impl Axis {
     }
 }
 
-/// The six components of a deviation.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Component {
-    /// Offset along x (mm).
-    Dx,
-    /// Offset along y (mm).
-    Dy,
-    /// Offset along z (mm).
-    Dz,
-    /// Rotation about x (rad).
-    Alpha,
-    /// Rotation about y (rad).
-    Beta,
-    /// Rotation about z (rad).
-    Gamma,
-}
-
-impl Component {
-    /// All six, in storage order.
-    pub const ALL: [Component; 6] = [
-        Component::Dx,
-        Component::Dy,
-        Component::Dz,
-        Component::Alpha,
-        Component::Beta,
-        Component::Gamma,
-    ];
-
-    /// The prefix used in names (`dx`, …, `gamma`).
-    pub fn prefix(self) -> &'static str {
-        match self {
-            Component::Dx => "dx",
-            Component::Dy => "dy",
-            Component::Dz => "dz",
-            Component::Alpha => "alpha",
-            Component::Beta => "beta",
-            Component::Gamma => "gamma",
-        }
-    }
-
-    /// Whether the component is an angle (rad) rather than an offset (mm).
-    pub fn is_angle(self) -> bool {
-        matches!(self, Component::Alpha | Component::Beta | Component::Gamma)
-    }
-}
+pub use crate::machine::Component;
 
 /// A deviation between two adjacent bodies: offsets in mm, angles in rad.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
@@ -151,6 +126,21 @@ impl Deviation {
     pub fn is_zero(&self) -> bool {
         self.values.iter().all(|v| *v == 0.0)
     }
+
+    /// The six values of a rigid transform: the inverse of [`Deviation::transform`] (angles
+    /// within ±90° about y, as deviations are).
+    pub fn from_transform(t: &Isometry3) -> Self {
+        let r = t.rotation.to_rotation_matrix().into_inner();
+        // R = Rx(α)·Ry(β)·Rz(γ): R02 = sin β, R12 = −sin α cos β, R22 = cos α cos β,
+        // R01 = −cos β sin γ, R00 = cos β cos γ.
+        let beta = r[(0, 2)].clamp(-1.0, 1.0).asin();
+        let alpha = (-r[(1, 2)]).atan2(r[(2, 2)]);
+        let gamma = (-r[(0, 1)]).atan2(r[(0, 0)]);
+        let d = t.translation.vector;
+        Self {
+            values: [d.x, d.y, d.z, alpha, beta, gamma],
+        }
+    }
 }
 
 /// Names one deviation parameter of a chain: joint `joint` (between body `joint` and
@@ -169,6 +159,8 @@ pub struct Chain {
     axes: Vec<Axis>,
     spindle: String,
     deviations: Vec<Deviation>,
+    /// Error motions per axis, in chain order (`None`: none).
+    errors: Vec<Option<AxisErrorMotions>>,
 }
 
 impl Chain {
@@ -194,6 +186,7 @@ impl Chain {
             axes,
             spindle: spindle.to_string(),
             deviations: vec![Deviation::default(); n],
+            errors: vec![None; n],
         })
     }
 
@@ -259,11 +252,181 @@ impl Chain {
         self.deviations[id.joint].values[id.component as usize] = value;
     }
 
-    /// The same chain with every deviation zero: the nominal machine.
+    /// The same chain with every deviation zero and no error motions: the nominal machine.
     pub fn nominal(&self) -> Chain {
         Chain {
             deviations: vec![Deviation::default(); self.axes.len()],
+            errors: vec![None; self.axes.len()],
             ..self.clone()
+        }
+    }
+
+    /// The same chain without error motions (deviations kept).
+    pub fn without_error_motions(&self) -> Chain {
+        Chain {
+            errors: vec![None; self.axes.len()],
+            ..self.clone()
+        }
+    }
+
+    /// The same chain with the error motions of `other` (a chain of the same axes).
+    pub fn with_error_motions_of(&self, other: &Chain) -> Chain {
+        let mut out = self.clone();
+        if other.axes.len() == out.axes.len() {
+            out.errors = other.errors.clone();
+        }
+        out
+    }
+
+    fn missing_axis(&self, name: &str, letter: AxisLetter) -> KinematicsError {
+        KinematicsError::MissingAxis {
+            name: name.to_string(),
+            axis: letter.as_char(),
+            axes: self
+                .axes
+                .iter()
+                .map(|a| a.letter.as_char().to_string())
+                .collect::<Vec<_>>()
+                .join(" "),
+        }
+    }
+
+    fn index_of(&self, letter: AxisLetter) -> Option<usize> {
+        self.axes.iter().position(|a| a.letter == letter)
+    }
+
+    /// Sets the error motions of the axis `letter` (zero ones are dropped, so a chain given
+    /// only zero error motions computes exactly as one without).
+    pub fn set_error_motions(
+        &mut self,
+        letter: AxisLetter,
+        motions: AxisErrorMotions,
+    ) -> Result<(), KinematicsError> {
+        let i = self
+            .index_of(letter)
+            .ok_or_else(|| self.missing_axis(&format!("E?{}", letter.as_char()), letter))?;
+        self.errors[i] = (!motions.is_zero()).then_some(motions);
+        Ok(())
+    }
+
+    /// The error motions of the axis `letter`, if it has any.
+    pub fn error_motions(&self, letter: AxisLetter) -> Option<&AxisErrorMotions> {
+        self.index_of(letter).and_then(|i| self.errors[i].as_ref())
+    }
+
+    /// The error motions of every axis, in chain order.
+    pub fn error_motions_all(&self) -> &[Option<AxisErrorMotions>] {
+        &self.errors
+    }
+
+    /// Whether any axis has error motions (or a reversal).
+    pub fn has_error_motions(&self) -> bool {
+        self.errors.iter().any(Option::is_some)
+    }
+
+    /// The six error-motion values of the axis `letter` at `q` after moving in `dir`
+    /// (`EX? EY? EZ?` mm, `EA? EB? EC?` rad); zero for an axis without error motions.
+    pub fn error_motion_values(&self, letter: AxisLetter, q: Real, dir: Direction) -> [Real; 6] {
+        self.error_motions(letter)
+            .map_or([0.0; 6], |e| e.values(q, dir))
+    }
+
+    /// The centre the angular error motions of axis `i` turn about: the rotary axis's
+    /// origin, the frame origin of a linear axis.
+    pub fn error_centre(&self, i: usize) -> Point3 {
+        match self.axes[i].kind {
+            AxisKind::Rotary => self.axes[i].origin,
+            AxisKind::Linear => Point3::origin(),
+        }
+    }
+
+    /// The error-motion transform `Err_i` of axis `i` at `q` after moving in `dir`, `None`
+    /// for an axis without error motions.
+    pub fn error_transform(&self, i: usize, q: Real, dir: Direction) -> Option<Isometry3> {
+        self.errors[i]
+            .as_ref()
+            .map(|e| error_motion::transform(&e.values(q, dir), &self.error_centre(i)))
+    }
+
+    /// Applies an ISO 230-1 / 230-7 location or squareness term by its name, composed
+    /// exactly onto the joint deviations around the axis it names (see docs/scenes.md):
+    ///
+    /// - location of a rotary axis: `EY0A`/`Y0A`, `EZ0A`, `EB0A`, `EC0A` for A (offsets of
+    ///   its line across it, mm; tilts of its line, rad), likewise `EX0B`, `EZ0B`, `EA0B`,
+    ///   `EC0B` and `EX0C`, `EY0C`, `EA0C`, `EB0C`;
+    /// - squareness of a linear axis to another: `EC(0X)Y` (or `EC0XY`): Y's line of motion
+    ///   turned by the value (rad) about +Z, X the reference; any `E<r>(0<ref>)<axis>` with
+    ///   `<r>` the rotation about the third direction.
+    ///
+    /// The term is the transform `L` (offset or tilt about the axis origin) that takes the
+    /// nominal line to the actual one: the axis motion becomes `L·M·L⁻¹`, so the joint
+    /// before the axis becomes `E·L` and the joint after it `L⁻¹·E`. For the first axis of
+    /// the chain the `L` next to the workpiece frame only moves that frame (the workpiece
+    /// zero) and is left out.
+    pub fn apply_iso_term(&mut self, name: &str, value: Real) -> Result<(), KinematicsError> {
+        let (i, values) = self.iso_term(name, value)?;
+        let l = error_motion::transform(&values, &self.error_centre(i));
+        let after = l.inverse() * self.deviations[i].transform();
+        self.deviations[i] = Deviation::from_transform(&after);
+        if i > 0 {
+            let before = self.deviations[i - 1].transform() * l;
+            self.deviations[i - 1] = Deviation::from_transform(&before);
+        }
+        Ok(())
+    }
+
+    /// Parses a location or squareness name: the axis index and the six values of `L`.
+    fn iso_term(&self, name: &str, value: Real) -> Result<(usize, [Real; 6]), KinematicsError> {
+        let unknown = || KinematicsError::UnknownIsoName {
+            name: name.to_string(),
+            expected: "rotary axis location as EY0A, Y0A, EB0A …; squareness as EC(0X)Y, \
+                       EB(0X)Z, EA(0Y)Z …; error motions as EXX, EBX … go in [error_motions]"
+                .to_string(),
+        };
+        let letters: Vec<char> = name.chars().filter(|c| !matches!(c, '(' | ')')).collect();
+        let letters: &[char] = match letters.first() {
+            Some('E') => &letters[1..],
+            _ => &letters[..],
+        };
+        let l = |c: char| AxisLetter::from_char(c);
+        let mut v = [0.0; 6];
+        match letters {
+            // Location: <c>0<axis>, axis rotary, c across it.
+            [c, '0', a] => {
+                let (Some(c), Some(a)) = (l(*c), l(*a)) else {
+                    return Err(unknown());
+                };
+                if !a.is_rotary() {
+                    return Err(unknown());
+                }
+                // The rotary's own direction and rotation about it are not location terms.
+                let own = a.index() - 3;
+                if c.index() % 3 == own {
+                    return Err(unknown());
+                }
+                let i = self.index_of(a).ok_or_else(|| self.missing_axis(name, a))?;
+                v[error_motion::component_of(c) as usize] = value;
+                Ok((i, v))
+            }
+            // Squareness: <r>0<ref><axis>, r a rotation about the third direction.
+            [r, '0', re, a] => {
+                let (Some(r), Some(re), Some(a)) = (l(*r), l(*re), l(*a)) else {
+                    return Err(unknown());
+                };
+                if !r.is_rotary() || re.is_rotary() || a.is_rotary() || re == a {
+                    return Err(unknown());
+                }
+                if r.index() - 3 == re.index() || r.index() - 3 == a.index() {
+                    return Err(unknown());
+                }
+                let i = self.index_of(a).ok_or_else(|| self.missing_axis(name, a))?;
+                if !self.has_axis(re) {
+                    return Err(self.missing_axis(name, re));
+                }
+                v[error_motion::component_of(r) as usize] = value;
+                Ok((i, v))
+            }
+            _ => Err(unknown()),
         }
     }
 
@@ -272,13 +435,71 @@ impl Chain {
         self.axes.iter().any(|a| a.letter == letter)
     }
 
-    /// The tool's pose in the workpiece frame for axis values `q` (mm, degrees).
+    /// The tool's pose in the workpiece frame for axis values `q` (mm, degrees), every
+    /// axis taken as last moved in `+` (see [`Chain::w_from_t_dir`]).
     pub fn w_from_t(&self, q: &AxisValues) -> Isometry3 {
+        self.w_from_t_dir(q, &Directions::default())
+    }
+
+    /// The tool's pose in the workpiece frame for axis values `q` with each axis's error
+    /// motions at its value and its reversal for the direction in `dirs`:
+    /// `Π M_i(q_i)·Err_i(q_i, dir_i)·E_i`. Without error motions it is `Π M_i(q_i)·E_i`,
+    /// whatever `dirs`.
+    pub fn w_from_t_dir(&self, q: &AxisValues, dirs: &Directions) -> Isometry3 {
+        self.w_from_t_state(q, &self.reversal_state(dirs))
+    }
+
+    /// The reversal share each axis carries after last moving in `dirs`: `±B/2` per axis
+    /// (indexed by [`AxisLetter::index`]; zero for axes without a reversal).
+    pub fn reversal_state(&self, dirs: &Directions) -> [Real; 6] {
+        let mut out = [0.0; 6];
+        for (axis, e) in self.axes.iter().zip(&self.errors) {
+            if let Some(e) = e {
+                out[axis.letter.index()] = e.settled_offset(dirs.get(axis.letter));
+            }
+        }
+        out
+    }
+
+    /// The reversal shares after the move `start → end` from `state`: each moving axis
+    /// takes up its lost motion at the commanded rate
+    /// ([`AxisErrorMotions::offset_after`]).
+    pub fn reversal_after_move(
+        &self,
+        state: &[Real; 6],
+        start: &AxisValues,
+        end: &AxisValues,
+    ) -> [Real; 6] {
+        let mut out = *state;
+        for (axis, e) in self.axes.iter().zip(&self.errors) {
+            if let Some(e) = e {
+                let l = axis.letter;
+                out[l.index()] = e.offset_after(state[l.index()], end.get(l) - start.get(l));
+            }
+        }
+        out
+    }
+
+    /// The tool's pose with each axis carrying the reversal share `state[letter]` (see
+    /// [`Chain::reversal_state`]); the general form of [`Chain::w_from_t_dir`].
+    pub fn w_from_t_state(&self, q: &AxisValues, state: &[Real; 6]) -> Isometry3 {
         let mut pose = Isometry3::identity();
-        for (axis, dev) in self.axes.iter().zip(&self.deviations) {
-            pose = pose * axis.motion(q.get(axis.letter)) * dev.transform();
+        for (i, (axis, dev)) in self.axes.iter().zip(&self.deviations).enumerate() {
+            let qi = q.get(axis.letter);
+            pose *= axis.motion(qi);
+            if let Some(e) = &self.errors[i] {
+                let v = e.values_with_offset(qi, state[axis.letter.index()]);
+                pose *= error_motion::transform(&v, &self.error_centre(i));
+            }
+            pose *= dev.transform();
         }
         pose
+    }
+
+    /// The tool tip (the origin of T) in the workpiece frame: what an instrument between
+    /// the spindle and the table (laser, ball bar) follows.
+    pub fn tool_point(&self, q: &AxisValues, dirs: &Directions) -> Point3 {
+        self.w_from_t_dir(q, dirs) * Point3::origin()
     }
 
     /// The rotary axes as lines in the workpiece frame for axis values `q`: a point on each
@@ -286,14 +507,19 @@ impl Chain {
     pub fn rotary_lines_in_w(&self, q: &AxisValues) -> Vec<(Point3, Vector3)> {
         let mut pose = Isometry3::identity();
         let mut out = Vec::new();
-        for (axis, dev) in self.axes.iter().zip(&self.deviations) {
+        for (i, (axis, dev)) in self.axes.iter().zip(&self.deviations).enumerate() {
             if axis.kind == AxisKind::Rotary {
                 out.push((
                     pose * axis.origin,
                     pose.rotation * axis.direction.into_inner(),
                 ));
             }
-            pose = pose * axis.motion(q.get(axis.letter)) * dev.transform();
+            let qi = q.get(axis.letter);
+            pose *= axis.motion(qi);
+            if let Some(err) = self.error_transform(i, qi, Direction::Positive) {
+                pose *= err;
+            }
+            pose *= dev.transform();
         }
         out
     }
@@ -393,6 +619,81 @@ mod tests {
             1.0, -g, b, 0.1, g, 1.0, -a, -0.2, -b, a, 1.0, 0.3, 0.0, 0.0, 0.0, 1.0,
         );
         assert!((m - expect).abs().max() < 1e-11);
+    }
+
+    /// `Tx·Err_X·Ty·Tz` built here from 4×4 matrices of the definition.
+    #[test]
+    fn error_motions_enter_the_pose_exactly() {
+        use crate::machine::error_motion::{AxisErrorMotions, Term};
+        let ax = |letter, d: Vector3| Axis {
+            letter,
+            kind: AxisKind::Linear,
+            direction: UnitVector3::new_normalize(d),
+            origin: Point3::origin(),
+        };
+        let mut c = Chain::new(
+            vec![
+                ax(AxisLetter::X, Vector3::x()),
+                ax(AxisLetter::Y, Vector3::y()),
+                ax(AxisLetter::Z, Vector3::z()),
+            ],
+            "S",
+        )
+        .expect("valid");
+        let plain = c.clone();
+        let mut e = AxisErrorMotions::for_axis(AxisLetter::X);
+        e.functions[0].terms = vec![Term::polynomial(vec![0.01, 1e-4]).expect("valid")];
+        e.functions[4].terms = vec![Term::polynomial(vec![2e-4]).expect("valid")];
+        e.reversal = -0.004;
+        c.set_error_motions(AxisLetter::X, e).expect("axis");
+        let q = AxisValues::default()
+            .with(AxisLetter::X, 20.0)
+            .with(AxisLetter::Y, 5.0)
+            .with(AxisLetter::Z, 30.0);
+        let t = |x: Real, y: Real, z: Real| {
+            let mut m = nalgebra::Matrix4::identity();
+            m[(0, 3)] = x;
+            m[(1, 3)] = y;
+            m[(2, 3)] = z;
+            m
+        };
+        let (s, co) = (2e-4 as Real).sin_cos();
+        let mut ry = nalgebra::Matrix4::identity();
+        ry[(0, 0)] = co;
+        ry[(0, 2)] = s;
+        ry[(2, 0)] = -s;
+        ry[(2, 2)] = co;
+        for (dir, half) in [(Direction::Positive, -0.002), (Direction::Negative, 0.002)] {
+            let err = t(0.01 + 1e-4 * 20.0 + half, 0.0, 0.0) * ry;
+            let want = t(20.0, 0.0, 0.0) * err * t(0.0, 5.0, 0.0) * t(0.0, 0.0, 30.0);
+            let dirs = Directions::default().with(AxisLetter::X, dir);
+            let got = c.w_from_t_dir(&q, &dirs).to_homogeneous();
+            assert!((got - want).abs().max() < 1e-12, "{dir:?}");
+        }
+        // Abbe: the tip 30 above the X frame's origin moves by 30·sin(β) in X.
+        let tip = c.tool_point(&q, &Directions::default());
+        assert!((tip.x - (20.0 + 0.012 - 0.002 + 30.0 * s)).abs() < 1e-12);
+        // Zero error motions are dropped: the chain computes as one without, bit for bit.
+        let mut z = plain.clone();
+        z.set_error_motions(AxisLetter::X, AxisErrorMotions::for_axis(AxisLetter::X))
+            .expect("axis");
+        assert!(!z.has_error_motions());
+        assert_eq!(z.w_from_t(&q), plain.w_from_t(&q));
+        assert!(
+            c.set_error_motions(AxisLetter::A, AxisErrorMotions::for_axis(AxisLetter::A))
+                .is_err()
+        );
+    }
+
+    #[test]
+    fn deviation_from_transform_inverts_transform() {
+        let d = Deviation {
+            values: [0.1, -0.2, 0.3, 1e-3, -2e-3, 3e-3],
+        };
+        let back = Deviation::from_transform(&d.transform());
+        for k in 0..6 {
+            assert!((back.values[k] - d.values[k]).abs() < 1e-15, "{k}");
+        }
     }
 
     #[test]

@@ -1,9 +1,59 @@
 //! **The machine**: what turns axis values into tool poses. A machine is a kinematic chain
 //! of linear and rotary axes from the workpiece to the tool, with an exact rigid deviation
-//! at every joint ([`chain`]); a scene describes it as data, never as code.
+//! at every joint ([`chain`]) and, optionally, error motions of each axis as functions of
+//! its position ([`error_motion`]); a scene describes it as data, never as code.
 //!
-//! Owns the chain, the deviation names (`dy_AY`, `gamma_YX`, …) and their exact transforms.
+//! Owns the chain, the deviation names (`dy_AY`, `gamma_YX`, …), the six components of a
+//! deviation ([`Component`]), the error-motion names (`EXX`, `EBX`, …) and their exact
+//! transforms.
 //! May use [`crate::math`] and [`crate::nc`] (axis letters and values). Knows nothing of
 //! tools, stock, measurements or files.
 
+pub mod error_motion;
 pub mod chain;
+
+/// The six components of a deviation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Component {
+    /// Offset along x (mm).
+    Dx,
+    /// Offset along y (mm).
+    Dy,
+    /// Offset along z (mm).
+    Dz,
+    /// Rotation about x (rad).
+    Alpha,
+    /// Rotation about y (rad).
+    Beta,
+    /// Rotation about z (rad).
+    Gamma,
+}
+
+impl Component {
+    /// All six, in storage order.
+    pub const ALL: [Component; 6] = [
+        Component::Dx,
+        Component::Dy,
+        Component::Dz,
+        Component::Alpha,
+        Component::Beta,
+        Component::Gamma,
+    ];
+
+    /// The prefix used in names (`dx`, …, `gamma`).
+    pub fn prefix(self) -> &'static str {
+        match self {
+            Component::Dx => "dx",
+            Component::Dy => "dy",
+            Component::Dz => "dz",
+            Component::Alpha => "alpha",
+            Component::Beta => "beta",
+            Component::Gamma => "gamma",
+        }
+    }
+
+    /// Whether the component is an angle (rad) rather than an offset (mm).
+    pub fn is_angle(self) -> bool {
+        matches!(self, Component::Alpha | Component::Beta | Component::Gamma)
+    }
+}

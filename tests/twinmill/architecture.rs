@@ -21,7 +21,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "synthetic",
         ],
     ),
-    ("machine", &["chain"]),
+    ("machine", &["error_motion", "chain"]),
     (
         "cutting",
         &[

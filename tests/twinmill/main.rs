@@ -13,6 +13,7 @@ mod solids_collisions_deviation;
 mod simulate;
 mod sweep;
 mod evaluate;
+mod error_motions;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};
