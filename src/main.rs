@@ -575,7 +575,6 @@ fn evaluate_ball_sensor(file: Option<&Path>, o: [f64; 6], json: bool) -> ExitCod
         ));
     }
     let mut sensor = BallSensor::seed003(band_x);
-    sensor.b.width_mm = band_x;
     sensor.a.width_mm = band_y;
     sensor.ball_diameter_mm = ball;
     sensor.accuracy_mm = accuracy;

@@ -45,10 +45,10 @@
 //! finite and geometrically possible (0 < L₂ ≤ 2R + tolerance, the shadow inside the band);
 //! anything else is an error naming what is wrong, never a number.
 
-use super::table::{fields, length_unit, name_and_unit, number, rows};
+use super::table::{FieldError, fields, length_unit, name_and_unit, number, rows};
 use crate::math::{Point3, Real, UnitVector3, Vector3};
 use serde::Serialize;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// One optical micrometer: a sheet of light through `origin`, beams along `beam`, the band
 /// (measured direction) along `band`, `width` wide (L₀), accurate over the central `range`.
@@ -109,19 +109,8 @@ pub enum SensorError {
     Impossible(String),
 }
 
-/// A readings file that cannot be used.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-#[error("{}:{line}:{column}: {message}", path.display())]
-pub struct ReadingsError {
-    /// The file.
-    pub path: PathBuf,
-    /// 1-based line.
-    pub line: usize,
-    /// 1-based column.
-    pub column: usize,
-    /// What is wrong.
-    pub message: String,
-}
+/// A readings file that cannot be used, at its line and column.
+pub type ReadingsError = FieldError;
 
 /// The sensor: micrometer A (measures Y), micrometer B (measures X), the master ball, and
 /// the micrometers' accuracy.
@@ -346,12 +335,8 @@ pub fn parse_readings(
     text: &str,
     path: &Path,
 ) -> Result<Vec<(usize, Reading, Reading)>, ReadingsError> {
-    let err = |line: usize, column: usize, message: String| ReadingsError {
-        path: path.to_path_buf(),
-        line,
-        column,
-        message,
-    };
+    let err =
+        |line: usize, column: usize, message: String| FieldError::at(path, line, column, message);
     let mut rows = rows(text);
     let Some((hline, header)) = rows.next() else {
         return Err(err(
@@ -438,23 +423,20 @@ pub fn centres(
             // The readings must lie inside the band: 0 ≤ L₁, L₁ + L₂ ≤ L₀.
             for (m, r, which) in [(&sensor.b, b, 'B'), (&sensor.a, a, 'A')] {
                 if r.l1 < 0.0 || r.l2 <= 0.0 || r.l1 + r.l2 > m.width_mm {
-                    return Err(ReadingsError {
-                        path: path.to_path_buf(),
-                        line: *line,
-                        column: 1,
-                        message: format!(
+                    return Err(FieldError::at(
+                        path,
+                        *line,
+                        1,
+                        format!(
                             "micrometer {which}: L1 {:.4} mm and L2 {:.4} mm are outside its band of {} mm",
                             r.l1, r.l2, m.width_mm
                         ),
-                    });
+                    ));
                 }
             }
-            sensor.centre(a, b).map_err(|e| ReadingsError {
-                path: path.to_path_buf(),
-                line: *line,
-                column: 1,
-                message: e.to_string(),
-            })
+            sensor
+                .centre(a, b)
+                .map_err(|e| FieldError::at(path, *line, 1, e.to_string()))
         })
         .collect()
 }

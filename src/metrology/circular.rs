@@ -48,7 +48,7 @@
 //! reach an axis's reversal, a rank-deficient fit) is reported as not determined, never as
 //! a number.
 
-use super::table::{fields, length_unit, name_and_unit, number, rows};
+use super::table::{FieldError, fields, length_unit, name_and_unit, number, rows};
 use crate::math::Real;
 use nalgebra::{DMatrix, DVector};
 use serde::Serialize;
@@ -79,17 +79,8 @@ pub struct Sample {
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum TraceError {
     /// A line cannot be read.
-    #[error("{}:{line}:{column}: {message}", path.display())]
-    Syntax {
-        /// The file.
-        path: PathBuf,
-        /// 1-based line.
-        line: usize,
-        /// 1-based column.
-        column: usize,
-        /// What is wrong.
-        message: String,
-    },
+    #[error(transparent)]
+    Syntax(#[from] FieldError),
     /// The trace cannot be evaluated (too few points, too short an arc, bad radius).
     #[error("{}: {message}", path.display())]
     Unusable {
@@ -198,11 +189,8 @@ fn unit_factor(unit: &str, angle: bool) -> Option<Real> {
 
 /// Reads a trace file's text (see the module documentation); `path` names it in messages.
 pub fn parse_trace(text: &str, path: &Path) -> Result<Vec<Sample>, TraceError> {
-    let syntax = |line: usize, column: usize, message: String| TraceError::Syntax {
-        path: path.to_path_buf(),
-        line,
-        column,
-        message,
+    let syntax = |line: usize, column: usize, message: String| {
+        TraceError::Syntax(FieldError::at(path, line, column, message))
     };
     let mut rows = rows(text);
     let Some((hline, header)) = rows.next() else {

@@ -31,7 +31,7 @@
 //! finite. Anything else is an error naming what is missing — never a figure from part of the
 //! data.
 
-use super::table::{fields, length_unit, name_and_unit, number, rows};
+use super::table::{FieldError, fields, length_unit, name_and_unit, number, rows};
 use crate::math::Real;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -75,17 +75,8 @@ pub struct Reading {
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum ReadingsError {
     /// A line cannot be read (syntax, a non-finite number, an unknown unit or direction).
-    #[error("{}:{line}:{column}: {message}", path.display())]
-    Syntax {
-        /// The file.
-        path: PathBuf,
-        /// 1-based line.
-        line: usize,
-        /// 1-based column (in characters).
-        column: usize,
-        /// What is wrong.
-        message: String,
-    },
+    #[error(transparent)]
+    Syntax(#[from] FieldError),
     /// The readings do not form a complete bidirectional test.
     #[error("{}: {message}", path.display())]
     Incomplete {
@@ -189,11 +180,8 @@ fn header_cell(cell: &str) -> Result<(String, Real), String> {
 /// (see the module documentation). Checks syntax, units and finiteness; completeness is
 /// checked by [`evaluate`].
 pub fn parse_readings(text: &str, path: &Path) -> Result<Vec<Reading>, ReadingsError> {
-    let syntax = |line: usize, column: usize, message: String| ReadingsError::Syntax {
-        path: path.to_path_buf(),
-        line,
-        column,
-        message,
+    let syntax = |line: usize, column: usize, message: String| {
+        ReadingsError::Syntax(FieldError::at(path, line, column, message))
     };
     let mut rows = rows(text);
     let Some((hline, header)) = rows.next() else {

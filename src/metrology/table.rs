@@ -7,6 +7,33 @@
 //! message can name `file:line:column`.
 
 use crate::math::Real;
+use std::path::{Path, PathBuf};
+
+/// A field of a file that cannot be read, at its place: `file:line:column: message`.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{}:{line}:{column}: {message}", path.display())]
+pub struct FieldError {
+    /// The file.
+    pub path: PathBuf,
+    /// 1-based line.
+    pub line: usize,
+    /// 1-based column (in characters).
+    pub column: usize,
+    /// What is wrong.
+    pub message: String,
+}
+
+impl FieldError {
+    /// The error at `line`, `column` of `path`.
+    pub fn at(path: &Path, line: usize, column: usize, message: String) -> Self {
+        Self {
+            path: path.to_path_buf(),
+            line,
+            column,
+            message,
+        }
+    }
+}
 
 /// The lines that carry data or a header, with their 1-based numbers: blank lines and
 /// `#` comments skipped, a trailing `\r` removed.
