@@ -2,12 +2,25 @@
 //! docs/identification-and-correction.md): any chain, any set of features, any choice of
 //! deviations to solve for.
 //!
-//! **Features.** A [`Feature`] is one measured quantity group with its uncertainty. Today:
+//! **Features.** A [`Feature`] is one measured quantity group with its uncertainty:
 //! [`PlaneFeature`], a face cut by a straight move of a flat (or ball) end mill and fitted in
 //! a scan — its *flank* (tangent to the tool cylinder, containing the tool axis and the path:
-//! an exact plane) or, for flat end mills, its *floor*. The enum leaves room for ball centres,
-//! ball-bar lengths and interferometer readings: each only needs a prediction from the chain
-//! written with the generic scalar below.
+//! an exact plane) or, for flat end mills, its *floor*; and [`BallFeature`], a ball centre: the
+//! tool-side point (a probe's stylus ball, a master ball in the spindle) at known axis values,
+//! measured relative to a point fixed on the table (a calibration sphere a probe touched, a
+//! ball sensor's origin). Ball-bar lengths and interferometer readings are further variants:
+//! each only needs a prediction from the chain written with the generic scalar below.
+//!
+//! **Parameters.** The unknowns are joint deviations (`dy_AY`) and, on top of the chain's
+//! current values, ISO 230-7 location and squareness terms ([`IsoTerm`]: `EX0C`, `EB0A`,
+//! `EC(0X)Y`) applied exactly as [`Chain::apply_iso_term`] does — the names a user of
+//! KinematicsOpt or CYCLE996 reads.
+//!
+//! **Balls.** Residual: `(p(q) − (a_k + m))/σ` per coordinate, `p(q)` the tool-side point in
+//! the workpiece frame, `m` the measured offset from the fixed point `k` (zero when a probe
+//! found the sphere's centre, the sensor's reading otherwise) and `a_k` the fixed point's
+//! position, estimated jointly (3 nuisance parameters per fixed point): where a sphere sits on
+//! the table is never known well enough to take as given.
 //!
 //! **Floors.** The bottom disc of a flat end mill translating along `u` sweeps an exact plane
 //! only when the tool axis `v` is perpendicular to `u`. With `t = u·v ≠ 0` the disc's rim
@@ -296,6 +309,13 @@ impl<T: Scalar> Rigid<T> {
     fn rotate(&self, v: V3<T>) -> V3<T> {
         std::array::from_fn(|i| self.r[i][0] * v[0] + self.r[i][1] * v[1] + self.r[i][2] * v[2])
     }
+    fn inverse(&self) -> Rigid<T> {
+        let r: [[T; 3]; 3] = std::array::from_fn(|i| std::array::from_fn(|j| self.r[j][i]));
+        let t = std::array::from_fn(|i| {
+            -(r[i][0] * self.t[0] + r[i][1] * self.t[1] + r[i][2] * self.t[2])
+        });
+        Rigid { r, t }
+    }
 }
 
 fn mat_mul<T: Scalar>(a: &[[T; 3]; 3], b: &[[T; 3]; 3]) -> [[T; 3]; 3] {
@@ -304,19 +324,50 @@ fn mat_mul<T: Scalar>(a: &[[T; 3]; 3], b: &[[T; 3]; 3]) -> [[T; 3]; 3] {
     })
 }
 
-/// `w_from_t(q)` of `chain` with the deviations `ids` replaced by `p` (generic scalars).
-fn pose<T: Scalar>(chain: &Chain, ids: &[DeviationId], p: &[T], q: &AxisValues) -> Rigid<T> {
+/// The unknowns a pose depends on: joint deviations replaced by `p`, ISO terms `iso` with
+/// values `t` composed on top (generic scalars).
+#[derive(Clone, Copy)]
+struct Params<'a, T> {
+    ids: &'a [DeviationId],
+    p: &'a [T],
+    iso: &'a [IsoTerm],
+    t: &'a [T],
+}
+
+/// `w_from_t(q)` of `chain` with the deviations `ids` replaced by `p` and the ISO terms
+/// applied (generic scalars): an axis with terms moves as `L·M·L⁻¹` (`M·L⁻¹` for the first
+/// axis, whose `L` next to the workpiece frame only moves that frame), exactly as
+/// [`Chain::apply_iso_term`] composes them onto the joints.
+fn pose<T: Scalar>(chain: &Chain, x: &Params<T>, q: &AxisValues) -> Rigid<T> {
     let mut out = Rigid::from_isometry(&crate::math::Isometry3::identity());
     for (j, (axis, dev)) in chain.axes().iter().zip(chain.deviations()).enumerate() {
         let mut d: [T; 6] = std::array::from_fn(|k| T::c(dev.values[k]));
-        for (id, v) in ids.iter().zip(p) {
+        for (id, v) in x.ids.iter().zip(x.p) {
             if id.joint == j {
                 d[id.component as usize] = *v;
             }
         }
-        out = out
-            .compose(&Rigid::from_isometry(&axis.motion(q.get(axis.letter))))
-            .compose(&Rigid::deviation(&d));
+        let m = Rigid::from_isometry(&axis.motion(q.get(axis.letter)));
+        let m = if x.iso.iter().any(|t| t.axis == j) {
+            let mut v: [T; 6] = std::array::from_fn(|_| T::c(0.0));
+            for (term, val) in x.iso.iter().zip(x.t) {
+                if term.axis == j {
+                    v[term.component as usize] = v[term.component as usize] + *val;
+                }
+            }
+            let o = v3::<T>(&chain.error_centre(j).coords);
+            let e = Rigid::deviation(&v);
+            // L = Trans(o)·Trans(d)·R·Trans(−o)
+            let l = Rigid {
+                r: e.r,
+                t: vsub(vadd(o, e.t), e.rotate(o)),
+            };
+            let ml = m.compose(&l.inverse());
+            if j == 0 { ml } else { l.compose(&ml) }
+        } else {
+            m
+        };
+        out = out.compose(&m).compose(&Rigid::deviation(&d));
     }
     out
 }
@@ -358,12 +409,36 @@ pub struct PlaneFeature {
     pub rms_mm: Real,
 }
 
-/// A measured feature. Planes today; ball centres, ball-bar lengths and interferometer
-/// readings are further variants with their own prediction from the chain.
+/// A measured ball centre: the tool-side point at axis values `q`, relative to a point
+/// fixed on the table (see the module documentation).
 #[derive(Clone, Debug, PartialEq)]
+pub struct BallFeature {
+    /// Name used in reports.
+    pub name: String,
+    /// The axis values at the measurement (mm, degrees).
+    pub q: AxisValues,
+    /// The tool-side point in the tool frame (mm): a stylus or master ball's centre.
+    pub tool_offset: Vector3,
+    /// Which fixed point on the table (index from 0; each has its own unknown position).
+    pub anchor: usize,
+    /// The measured position of the tool-side point relative to the fixed point, in the
+    /// workpiece frame (mm).
+    pub measured: Vector3,
+    /// Standard uncertainty of each coordinate of `measured` (mm).
+    pub sigma_mm: [Real; 3],
+}
+
+/// A measured feature: each has its own prediction from the chain.
+#[derive(Clone, Debug, PartialEq)]
+#[expect(
+    clippy::large_enum_variant,
+    reason = "features number tens to hundreds per identification; boxing planes would cost               an allocation each for no measurable gain"
+)]
 pub enum Feature {
     /// A fitted face of a straight cut.
     Plane(PlaneFeature),
+    /// A ball centre relative to a fixed point on the table.
+    Ball(BallFeature),
 }
 
 impl Feature {
@@ -371,13 +446,42 @@ impl Feature {
     pub fn name(&self) -> &str {
         match self {
             Feature::Plane(p) => &p.name,
+            Feature::Ball(b) => &b.name,
         }
     }
     /// How many residuals it contributes.
     pub fn residual_count(&self) -> usize {
         match self {
-            Feature::Plane(_) => 3,
+            Feature::Plane(_) | Feature::Ball(_) => 3,
         }
+    }
+}
+
+/// An ISO 230-7 location or squareness term solved for: its name as given, the axis it
+/// belongs to (chain index) and its component of the transform `L` (see
+/// [`Chain::apply_iso_term`]).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct IsoTerm {
+    /// The name (`EX0C`, `EC(0X)Y`).
+    pub name: String,
+    /// The axis's index in the chain.
+    pub axis: usize,
+    /// Which component of `L`.
+    pub component: crate::machine::Component,
+}
+
+impl IsoTerm {
+    /// The term `name` of `chain`, or why it is not one.
+    pub fn parse(
+        chain: &Chain,
+        name: &str,
+    ) -> Result<Self, crate::machine::chain::KinematicsError> {
+        let (axis, component) = chain.iso_term_id(name)?;
+        Ok(IsoTerm {
+            name: name.to_string(),
+            axis,
+            component,
+        })
     }
 }
 
@@ -508,13 +612,12 @@ fn envelope_moments(r: Real, (a, b): (Real, Real)) -> (Real, Real) {
 /// and offset, or `None` when the cut is degenerate.
 fn predict_plane<T: Scalar>(
     chain: &Chain,
-    ids: &[DeviationId],
-    p: &[T],
+    x: &Params<T>,
     tool: &Tool,
     f: &PlaneFeature,
 ) -> Option<(V3<T>, T)> {
-    let p0 = pose(chain, ids, p, &f.cut.start);
-    let p1 = pose(chain, ids, p, &f.cut.end);
+    let p0 = pose(chain, x, &f.cut.start);
+    let p1 = pose(chain, x, &f.cut.end);
     let tip = p0.t;
     let d = vsub(p1.t, tip);
     let v = [p0.r[0][2], p0.r[1][2], p0.r[2][2]];
@@ -554,18 +657,27 @@ fn predict_plane<T: Scalar>(
     }
 }
 
-/// The residuals of one feature for deviations `p` and registration `reg` (generic).
+/// The residuals of one feature for the unknowns `x`, registration `reg` and fixed points
+/// `anchors` (generic).
 fn feature_residuals<T: Scalar>(
     chain: &Chain,
-    ids: &[DeviationId],
-    p: &[T],
+    x: &Params<T>,
     reg: &[T; 6],
+    anchors: &[T],
     tool: &Tool,
     f: &Feature,
 ) -> Option<[T; 3]> {
     match f {
+        Feature::Ball(b) => {
+            let pose = pose(chain, x, &b.q);
+            let p = vadd(pose.rotate(v3(&b.tool_offset)), pose.t);
+            let a = anchors.get(3 * b.anchor..3 * b.anchor + 3)?;
+            Some(std::array::from_fn(|k| {
+                (p[k] - a[k] - T::c(b.measured[k])) / T::c(b.sigma_mm[k])
+            }))
+        }
         Feature::Plane(pf) => {
-            let (n, d) = predict_plane(chain, ids, p, tool, pf)?;
+            let (n, d) = predict_plane(chain, x, tool, pf)?;
             let s_from_w = Rigid::deviation(reg);
             let ns = s_from_w.rotate(n);
             let ds = d + dot(ns, s_from_w.t);
@@ -588,7 +700,13 @@ fn feature_residuals<T: Scalar>(
 /// The predicted plane of a feature on `chain` (workpiece frame): normal into the material
 /// and offset. `None` for a degenerate cut.
 pub fn predicted_plane(chain: &Chain, tool: &Tool, f: &PlaneFeature) -> Option<Plane> {
-    let (n, d) = predict_plane::<Real>(chain, &[], &[], tool, f)?;
+    let none = Params {
+        ids: &[],
+        p: &[],
+        iso: &[],
+        t: &[],
+    };
+    let (n, d) = predict_plane::<Real>(chain, &none, tool, f)?;
     let n = UnitVector3::new_normalize(values(n));
     Some(Plane {
         normal: n,
@@ -616,6 +734,8 @@ pub struct Model<'a> {
     pub chain: &'a Chain,
     /// The deviations solved for.
     pub ids: &'a [DeviationId],
+    /// The ISO location and squareness terms solved for, on top of the chain's values.
+    pub iso_terms: &'a [IsoTerm],
     /// The tool.
     pub tool: &'a Tool,
     /// The features.
@@ -630,25 +750,75 @@ impl Model<'_> {
         self.features.iter().map(Feature::residual_count).sum()
     }
 
-    /// Number of unknowns: deviations, then 6 registration parameters if estimated.
+    /// Number of unknowns: deviations, ISO terms, then 6 registration parameters if
+    /// estimated (and planes are measured), then 3 per fixed point of the ball features.
     pub fn cols(&self) -> usize {
-        self.ids.len() + self.reg_cols()
+        self.params() + self.reg_cols() + 3 * self.anchor_count()
     }
 
-    fn reg_cols(&self) -> usize {
+    /// Number of parameters of the machine solved for: deviations, then ISO terms.
+    pub fn params(&self) -> usize {
+        self.ids.len() + self.iso_terms.len()
+    }
+
+    /// The parameters' names, in solve order.
+    pub fn param_names(&self) -> Vec<String> {
+        self.ids
+            .iter()
+            .map(|id| self.chain.deviation_name(*id))
+            .chain(self.iso_terms.iter().map(|t| t.name.clone()))
+            .collect()
+    }
+
+    /// The parameters' realistic magnitudes ([`magnitude`]), in solve order.
+    pub fn param_scales(&self) -> Vec<Real> {
+        self.ids
+            .iter()
+            .map(|id| magnitude(*id))
+            .chain(
+                self.iso_terms
+                    .iter()
+                    .map(|t| component_magnitude(t.component)),
+            )
+            .collect()
+    }
+
+    /// Number of registration parameters: 6 when estimated and a plane is measured.
+    pub fn reg_cols(&self) -> usize {
+        let planes = self.features.iter().any(|f| matches!(f, Feature::Plane(_)));
         match self.registration {
-            Registration::Estimate => 6,
-            Registration::Workpiece => 0,
+            Registration::Estimate if planes => 6,
+            _ => 0,
         }
+    }
+
+    /// Number of fixed points the ball features are measured from.
+    pub fn anchor_count(&self) -> usize {
+        self.features
+            .iter()
+            .filter_map(|f| match f {
+                Feature::Ball(b) => Some(b.anchor + 1),
+                Feature::Plane(_) => None,
+            })
+            .max()
+            .unwrap_or(0)
     }
 
     fn eval<T: Scalar>(&self, x: &[T]) -> Option<Vec<T>> {
         let (p, rest) = x.split_at(self.ids.len());
-        let reg: [T; 6] = std::array::from_fn(|k| rest.get(k).copied().unwrap_or(T::c(0.0)));
+        let (t, rest) = rest.split_at(self.iso_terms.len());
+        let (reg, anchors) = rest.split_at(self.reg_cols());
+        let reg: [T; 6] = std::array::from_fn(|k| reg.get(k).copied().unwrap_or(T::c(0.0)));
+        let params = Params {
+            ids: self.ids,
+            p,
+            iso: self.iso_terms,
+            t,
+        };
         let mut out = Vec::with_capacity(self.rows());
         for f in self.features {
             out.extend(feature_residuals(
-                self.chain, self.ids, p, &reg, self.tool, f,
+                self.chain, &params, &reg, anchors, self.tool, f,
             )?);
         }
         Some(out)
@@ -681,13 +851,44 @@ impl Model<'_> {
         Some(j)
     }
 
-    /// The starting point: the chain's current deviation values, registration zero.
+    /// The starting point: the chain's current deviation values, ISO terms and
+    /// registration zero, each fixed point at the mean of where its balls put it.
     pub fn start(&self) -> DVector<Real> {
         let mut x = DVector::zeros(self.cols());
         for (k, id) in self.ids.iter().enumerate() {
             x[k] = self.chain.deviation(*id);
         }
+        let base = self.params() + self.reg_cols();
+        let mut count = vec![0usize; self.anchor_count()];
+        for f in self.features {
+            if let Feature::Ball(b) = f {
+                let p = self.chain.w_from_t(&b.q) * Point3::from(b.tool_offset) - b.measured;
+                for k in 0..3 {
+                    x[base + 3 * b.anchor + k] += p[k];
+                }
+                count[b.anchor] += 1;
+            }
+        }
+        for (a, n) in count.iter().enumerate() {
+            for k in 0..3 {
+                x[base + 3 * a + k] /= (*n).max(1) as Real;
+            }
+        }
         x
+    }
+
+    /// Names of the nuisance unknowns after the parameters: registration, fixed points.
+    fn nuisance_names(&self) -> Vec<String> {
+        let reg = ["dx", "dy", "dz", "alpha", "beta", "gamma"];
+        reg.iter()
+            .take(self.reg_cols())
+            .map(|r| format!("registration {r}"))
+            .chain((0..self.anchor_count()).flat_map(|a| {
+                ["x", "y", "z"]
+                    .into_iter()
+                    .map(move |c| format!("fixed point {} {c}", a + 1))
+            }))
+            .collect()
     }
 }
 
@@ -695,7 +896,12 @@ impl Model<'_> {
 /// what is determined: 0.5 mm for offsets, 5e-4 rad for angles (the sizes of
 /// assembly deviations of small machines).
 pub fn magnitude(id: DeviationId) -> Real {
-    if id.component.is_angle() {
+    component_magnitude(id.component)
+}
+
+/// The realistic magnitude of a component (see [`magnitude`]).
+pub fn component_magnitude(c: crate::machine::Component) -> Real {
+    if c.is_angle() {
         ANGLE_MAGNITUDE_RAD
     } else {
         OFFSET_MAGNITUDE_MM
@@ -904,12 +1110,8 @@ pub fn identifiability(
     model: &Model,
     x: &DVector<Real>,
 ) -> Result<Identifiability, CalibrateError> {
-    let names: Vec<String> = model
-        .ids
-        .iter()
-        .map(|id| model.chain.deviation_name(*id))
-        .collect();
-    let np = model.ids.len();
+    let names = model.param_names();
+    let np = model.params();
     let j = model.jacobian(x).ok_or_else(|| {
         CalibrateError::Degenerate(
             model
@@ -918,7 +1120,7 @@ pub fn identifiability(
                 .map_or(String::new(), |f| f.name().to_string()),
         )
     })?;
-    let scale: Vec<Real> = model.ids.iter().map(|id| magnitude(*id)).collect();
+    let scale = model.param_scales();
     let mut jp = j.columns(0, np).into_owned();
     for (k, s) in scale.iter().enumerate() {
         jp.column_mut(k).scale_mut(*s);
@@ -998,7 +1200,7 @@ pub fn identifiability(
     // reproduces best (least squares), if it does so well.
     let mut registration_absorbs = Vec::new();
     if jr.ncols() > 0 {
-        let reg_names = ["dx", "dy", "dz", "alpha", "beta", "gamma"];
+        let reg_names = model.nuisance_names();
         let pinv = jp.clone().pseudo_inverse(RANK_EPS).ok();
         for (k, reg_name) in reg_names.iter().enumerate().take(jr.ncols()) {
             let col = jr.column(k).into_owned();
@@ -1020,16 +1222,12 @@ pub fn identifiability(
                                 }
                             })
                             .collect();
-                        format!(
-                            "registration {}: mimics {}",
-                            reg_name,
-                            combo_name(&names, &c)
-                        )
+                        format!("{}: mimics {}", reg_name, combo_name(&names, &c))
                     } else {
-                        format!("registration {}: absorbs no deviation", reg_name)
+                        format!("{}: absorbs no deviation", reg_name)
                     }
                 }
-                _ => format!("registration {}: not constrained by the features", reg_name),
+                _ => format!("{}: not constrained by the features", reg_name),
             };
             registration_absorbs.push(text);
         }
@@ -1111,6 +1309,9 @@ pub struct Identification {
     /// The estimated registration (dx, dy, dz mm, alpha, beta, gamma rad), zero when the
     /// workpiece frame is trusted.
     pub registration: [Real; 6],
+    /// The fixed points of the ball features (workpiece frame, mm) with their standard
+    /// uncertainties per coordinate.
+    pub anchors: Vec<(Point3, [Real; 3])>,
     /// Solver account.
     pub solver: SolveReport,
     /// Per feature: whitened residuals after the solve.
@@ -1154,7 +1355,7 @@ impl LeastSquaresProblem<Real, Dyn, Dyn> for Subspace<'_> {
 /// determined subspace (with the registration if estimated), and propagates the features'
 /// uncertainties. Never gives a value to what is not determined.
 pub fn identify(model: &Model) -> Result<Identification, CalibrateError> {
-    if model.ids.is_empty() {
+    if model.params() == 0 {
         return Err(CalibrateError::NoParameters);
     }
     if model.features.is_empty() {
@@ -1167,7 +1368,8 @@ pub fn identify(model: &Model) -> Result<Identification, CalibrateError> {
         }
     }
     let ident = identifiability(model, &x0)?;
-    let np = model.ids.len();
+    let np = model.params();
+    let scale = model.param_scales();
     if ident.no_data.len() == np {
         return Err(CalibrateError::NoData(ident.no_data.join(", ")));
     }
@@ -1195,7 +1397,7 @@ pub fn identify(model: &Model) -> Result<Identification, CalibrateError> {
     let mut dirs = DMatrix::zeros(model.cols(), rank + nreg);
     for c in 0..rank {
         for k in 0..np {
-            dirs[(k, c)] = ident.determined_basis[(k, c)] * magnitude(model.ids[k]);
+            dirs[(k, c)] = ident.determined_basis[(k, c)] * scale[k];
         }
     }
     for (c, d) in reg_dirs.iter().enumerate() {
@@ -1250,7 +1452,6 @@ pub fn identify(model: &Model) -> Result<Identification, CalibrateError> {
     // A parameter identified on its own is valued as the determined combination nearest to
     // it (its projection on the determined subspace), whose other coefficients are below
     // LEAKAGE in scaled units: so its value does not depend on the undetermined directions.
-    let scale: Vec<Real> = model.ids.iter().map(|id| magnitude(*id)).collect();
     let basis = &ident.determined_basis;
     let parameters = ident
         .identified
@@ -1270,9 +1471,20 @@ pub fn identify(model: &Model) -> Result<Identification, CalibrateError> {
         .map(|c| estimate(c.name.clone(), c.coefficients.clone()))
         .collect();
     let mut registration = [0.0; 6];
-    for (c, r) in registration.iter_mut().enumerate().take(model.cols() - np) {
+    for (c, r) in registration.iter_mut().enumerate().take(model.reg_cols()) {
         *r = x[np + c];
     }
+    let base = np + model.reg_cols();
+    let anchors = (0..model.anchor_count())
+        .map(|a| {
+            let k = base + 3 * a;
+            let cov = |i: usize| cov_x[(k + i, k + i)].max(0.0).sqrt();
+            (
+                Point3::new(x[k], x[k + 1], x[k + 2]),
+                [cov(0), cov(1), cov(2)],
+            )
+        })
+        .collect();
     let mut residuals = Vec::new();
     let mut i = 0;
     for f in model.features {
@@ -1287,6 +1499,7 @@ pub fn identify(model: &Model) -> Result<Identification, CalibrateError> {
         combinations,
         solution: x.rows(0, np).iter().copied().collect(),
         registration,
+        anchors,
         solver: SolveReport {
             evaluations: rep.number_of_evaluations,
             termination: format!("{:?}", rep.termination),
@@ -1305,6 +1518,32 @@ const REGISTRATION_RANK_EPS: Real = 1e-9;
 /// A parameter whose realistic magnitude moves no whitened residual by more than this has
 /// no data at all (a thousandth of a standard uncertainty).
 const NO_DATA_SENSITIVITY: Real = 1e-3;
+
+// ---------------------------------------------------------------------------------------
+// Features from a rotary-axis test.
+
+/// Ball features from a motion test's or a probing cycle's samples (see
+/// [`crate::metrology::rotary_test`]), all measured from fixed point `anchor`, the
+/// tool-side ball at `tool_offset` in the tool frame.
+pub fn ball_features(
+    samples: &[crate::metrology::rotary_test::Sample],
+    tool_offset: Vector3,
+    anchor: usize,
+) -> Vec<Feature> {
+    samples
+        .iter()
+        .map(|s| {
+            Feature::Ball(BallFeature {
+                name: format!("sweep {} {} = {}°", s.sweep, s.axis, s.angle_deg),
+                q: s.q,
+                tool_offset,
+                anchor,
+                measured: Vector3::from(s.deviation_mm),
+                sigma_mm: s.sigma_mm,
+            })
+        })
+        .collect()
+}
 
 // ---------------------------------------------------------------------------------------
 // Features from a cloud.
@@ -1625,6 +1864,7 @@ mod tests {
         let model = Model {
             chain: &chain,
             ids: &id,
+            iso_terms: &[],
             tool: &tool(),
             features: &feats,
             registration: Registration::Estimate,
@@ -1668,6 +1908,7 @@ mod tests {
         let model = Model {
             chain: &chain,
             ids: &id,
+            iso_terms: &[],
             tool: &tool(),
             features: &feats,
             registration: Registration::Estimate,
@@ -1700,6 +1941,7 @@ mod tests {
         let model = Model {
             chain: &chain,
             ids: &id,
+            iso_terms: &[],
             tool: &tool(),
             features: &feats,
             registration: Registration::Workpiece,

@@ -443,6 +443,7 @@ fn evaluate(
     let m = Model {
         chain: model,
         ids,
+        iso_terms: &[],
         tool,
         features: &feats,
         registration: Registration::Estimate,
@@ -668,6 +669,7 @@ pub fn lever_notes(
         let m = Model {
             chain: model,
             ids: params,
+            iso_terms: &[],
             tool,
             features,
             registration: Registration::Estimate,
@@ -960,6 +962,7 @@ mod tests {
             let m = Model {
                 chain: &c,
                 ids: &ids,
+                iso_terms: &[],
                 tool: &tool(),
                 features: &feats,
                 registration: Registration::Workpiece,

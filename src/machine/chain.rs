@@ -375,8 +375,110 @@ impl Chain {
         Ok(())
     }
 
+    /// The joint an ISO location or squareness term acts on and its component of `L`: the
+    /// axis index `i` and the component (offset across the axis or tilt), as
+    /// [`Chain::apply_iso_term`] applies it — for parameterising an identification by the
+    /// names users know (`EX0C`, `EB0C`, `EC(0X)Y`).
+    ///
+    /// For identification it also takes the two terms of a rotary axis that are not location
+    /// errors — the offset along its own line and the zero of its angle (`EZ0C`, `EC0C`) —
+    /// so a report can say what a test cannot determine: on the first axis of the chain they
+    /// move the rest of the machine against the workpiece frame; elsewhere they leave the
+    /// motion unchanged (`L` commutes with the rotation).
+    pub fn iso_term_id(&self, name: &str) -> Result<(usize, Component), KinematicsError> {
+        let (i, v) = self.iso_term_with(name, 1.0, true)?;
+        let c = Component::ALL
+            .into_iter()
+            .find(|c| v[*c as usize] != 0.0)
+            .unwrap_or(Component::Dx);
+        Ok((i, c))
+    }
+
+    /// The ISO 230-7 location terms of every rotary axis of the chain, in chain order: per
+    /// rotary axis the two offsets across it and the two tilts of its line (`EX0C`,
+    /// `EY0C`, `EA0C`, `EB0C` for C; `EY0A`, `EZ0A`, `EB0A`, `EC0A` for A; …). For a rotary
+    /// axis first in the chain (a table carrying the workpiece) also its offset along
+    /// itself and the zero of its angle (`EZ0C`, `EC0C`): not location errors, but what a
+    /// user asks about and a table-side test cannot see — an identification names them
+    /// as not determined. Elsewhere those two leave the motion unchanged and are left out.
+    pub fn rotary_location_terms(&self) -> Vec<String> {
+        let letters = ['X', 'Y', 'Z', 'A', 'B', 'C'];
+        let mut out = Vec::new();
+        for (i, a) in self.axes.iter().enumerate() {
+            if a.kind != AxisKind::Rotary || !a.letter.is_rotary() {
+                continue;
+            }
+            let own = a.letter.index() - 3;
+            for (k, c) in letters.iter().enumerate() {
+                if k % 3 != own || i == 0 {
+                    out.push(format!("E{c}0{}", a.letter.as_char()));
+                }
+            }
+        }
+        out
+    }
+
+    /// The values of the linear axes that put the point `point_t` of the tool frame at
+    /// `target` (workpiece frame) with the rotary axes at their values in `q`, every axis as
+    /// last moved in `dirs`: the
+    /// inverse kinematics a controller runs (on the nominal chain) and the position a probe
+    /// finds (on the actual one). With the rotary axes fixed the tool point is affine in the
+    /// linear axes on a chain without error motions, so Newton's method converges in one
+    /// step; error motions make it nonlinear and it iterates to 1e-10 mm. `None` when the
+    /// linear axes do not span three directions or it does not converge.
+    pub fn solve_linear_axes(
+        &self,
+        q: &AxisValues,
+        point_t: &Point3,
+        target: &Point3,
+        dirs: &Directions,
+    ) -> Option<AxisValues> {
+        let linear: Vec<AxisLetter> = self
+            .axes
+            .iter()
+            .filter(|a| a.kind == AxisKind::Linear)
+            .map(|a| a.letter)
+            .collect();
+        if linear.len() != 3 {
+            return None;
+        }
+        let mut q = *q;
+        const STEP_MM: Real = 1.0;
+        let at = |q: &AxisValues| self.w_from_t_dir(q, dirs) * point_t;
+        for _ in 0..20 {
+            let p = at(&q);
+            let r = target - p;
+            if r.norm() <= 1e-10 {
+                return Some(q);
+            }
+            let mut j = crate::math::Matrix3::zeros();
+            for (k, l) in linear.iter().enumerate() {
+                let dp = at(&q.with(*l, q.get(*l) + STEP_MM)) - p;
+                j.set_column(k, &(dp / STEP_MM));
+            }
+            let dq = j.lu().solve(&r)?;
+            if !dq.iter().all(|v| v.is_finite()) {
+                return None;
+            }
+            for (k, l) in linear.iter().enumerate() {
+                q.set(*l, q.get(*l) + dq[k]);
+            }
+        }
+        None
+    }
+
     /// Parses a location or squareness name: the axis index and the six values of `L`.
     fn iso_term(&self, name: &str, value: Real) -> Result<(usize, [Real; 6]), KinematicsError> {
+        self.iso_term_with(name, value, false)
+    }
+
+    /// [`Chain::iso_term`], taking a rotary axis's own-direction terms when `own` is set.
+    fn iso_term_with(
+        &self,
+        name: &str,
+        value: Real,
+        own: bool,
+    ) -> Result<(usize, [Real; 6]), KinematicsError> {
         let unknown = || KinematicsError::UnknownIsoName {
             name: name.to_string(),
             expected: "rotary axis location as EY0A, Y0A, EB0A …; squareness as EC(0X)Y, \
@@ -400,8 +502,7 @@ impl Chain {
                     return Err(unknown());
                 }
                 // The rotary's own direction and rotation about it are not location terms.
-                let own = a.index() - 3;
-                if c.index() % 3 == own {
+                if c.index() % 3 == a.index() - 3 && !own {
                     return Err(unknown());
                 }
                 let i = self.index_of(a).ok_or_else(|| self.missing_axis(name, a))?;

@@ -5,10 +5,12 @@
 //! positioning accuracy from any readings ([`positioning`]) and ISO 230-4 circular tests with the
 //! ball-bar diagnostics ([`circular`]), and seed 003's non-contact ball sensor with its Z
 //! uncertainty and working window ([`ball_sensor`]). The instruments of the standards
-//! (laser interferometer, ball bar, ball sensor) belong here too.
+//! run on the twin belong here too: the ISO 10791-6 motion test read by the ball sensor and
+//! probed sphere positions at rotary indices ([`rotary_test`]).
 //!
-//! May use [`crate::math`], [`crate::progress`] and [`crate::cutting`] (the scanner looks at
-//! the stock's crossings). Fits and segmentation work on any cloud, from twinmill or from a
+//! May use [`crate::math`], [`crate::progress`], [`crate::nc`] (axis values),
+//! [`crate::machine`] (the instruments follow the chain) and [`crate::cutting`] (the scanner
+//! looks at the stock's crossings). Fits and segmentation work on any cloud, from twinmill or from a
 //! real instrument: they never run the sweep, and nothing here identifies deviations.
 
 pub mod cloud;
@@ -19,3 +21,4 @@ pub mod table;
 pub mod positioning;
 pub mod circular;
 pub mod ball_sensor;
+pub mod rotary_test;

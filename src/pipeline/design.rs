@@ -74,7 +74,9 @@ pub fn design_scene(
         let verified = identify_scene(&designed, &program, None, Some(0), progress)?;
         tried += 1;
         for f in &verified.features {
-            let Feature::Plane(p) = f;
+            let Feature::Plane(p) = f else {
+                continue;
+            };
             measured.insert(p.name.clone(), p.clone());
         }
         let (expected, found) = (&d.identifiability, &verified.identification.identifiability);

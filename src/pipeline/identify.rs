@@ -122,7 +122,9 @@ fn face_match(
     let mut worst: Real = 0.0;
     let mut all = true;
     for f in features {
-        let Feature::Plane(p) = f;
+        let Feature::Plane(p) = f else {
+            continue;
+        };
         let Some(pl) = predicted_plane(twin, tool, p) else {
             return (Real::INFINITY, false);
         };
@@ -173,6 +175,7 @@ pub fn correction_loop(
         let m = Model {
             chain: &twin,
             ids,
+            iso_terms: &[],
             tool,
             features,
             registration,
@@ -200,6 +203,17 @@ pub fn correction_loop(
 fn feature_report(f: &Feature, residuals: [Real; 3]) -> FeatureReport {
     match f {
         Feature::Plane(p) => plane_feature_report(p, residuals),
+        Feature::Ball(b) => FeatureReport {
+            name: b.name.clone(),
+            kind: "ball".into(),
+            line: 0,
+            points: 1,
+            rms_mm: 0.0,
+            normal: [0.0; 3],
+            centroid_mm: [b.measured.x, b.measured.y, b.measured.z],
+            offset_sigma_mm: b.sigma_mm[0],
+            residuals,
+        },
     }
 }
 
@@ -298,6 +312,7 @@ pub fn identify_scene(
             let m = Model {
                 chain: &scene.model,
                 ids: &ids,
+                iso_terms: &[],
                 tool: &scene.tool,
                 features: &f,
                 registration: scene.registration,

@@ -39,6 +39,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "positioning",
             "circular",
             "ball_sensor",
+            "rotary_test",
         ],
     ),
     (

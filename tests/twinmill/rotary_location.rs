@@ -1,0 +1,253 @@
+//! Rotary-axis location errors identified from the ISO 10791-6 motion test read by the ball
+//! sensor and from probed sphere positions: injected errors come back within their reported
+//! uncertainties, and the report names what a test cannot determine.
+
+use crate::builtin;
+use twinmill::calibration::calibrate::{IsoTerm, Model, Registration, ball_features, identify};
+use twinmill::cutting::tool::{Tool, ToolKind};
+use twinmill::machine::chain::Chain;
+use twinmill::math::{CounterRng, Point3, Real, Vector3};
+use twinmill::metrology::ball_sensor::BallSensor;
+use twinmill::metrology::rotary_test::{Setup, Sweep, probe_test, sensor_test};
+use twinmill::nc::{AxisLetter, AxisValues};
+use twinmill::scene::Scene;
+
+fn letter(c: char) -> AxisLetter {
+    AxisLetter::from_char(c).expect("letter")
+}
+
+/// The trunnion A/C machine of the built-in scene, nominal.
+fn trunnion() -> Chain {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/trunnion-ac.toml");
+    Scene::parse(&builtin("trunnion-ac.toml"), &path)
+        .expect("scene")
+        .chain
+        .nominal()
+}
+
+/// C turned a full circle at A = 0 and at A = −30°, A swept −60…60° at C = 0, and A and C
+/// together (two rotary and three linear axes).
+fn sweeps() -> Vec<Sweep> {
+    let at = |a: Real| AxisValues::default().with(letter('A'), a);
+    vec![
+        Sweep {
+            axis: letter('C'),
+            from: 0.0,
+            to: 330.0,
+            positions: 12,
+            at: at(0.0),
+            also: vec![],
+        },
+        Sweep {
+            axis: letter('C'),
+            from: 0.0,
+            to: 330.0,
+            positions: 12,
+            at: at(-30.0),
+            also: vec![],
+        },
+        Sweep {
+            axis: letter('A'),
+            from: -60.0,
+            to: 60.0,
+            positions: 9,
+            at: at(0.0),
+            also: vec![],
+        },
+        Sweep {
+            axis: letter('A'),
+            from: -45.0,
+            to: 45.0,
+            positions: 13,
+            at: at(0.0),
+            also: vec![(letter('C'), 0.0, 180.0)],
+        },
+    ]
+}
+
+fn setup(seed: u64, mounting: Vector3) -> Setup {
+    Setup {
+        point_w: Point3::new(60.0, 0.0, 30.0),
+        mounting_mm: mounting,
+        tool_offset: Vector3::zeros(),
+        seed,
+    }
+}
+
+/// The location terms of the trunnion (the C table's offset along itself and angle zero
+/// included, which no table-side test can see).
+fn terms(chain: &Chain) -> (Vec<String>, Vec<IsoTerm>) {
+    let names = chain.rotary_location_terms();
+    let terms = names
+        .iter()
+        .map(|n| IsoTerm::parse(chain, n).expect("term"))
+        .collect();
+    (names, terms)
+}
+
+/// Random location errors of a trial: offsets uniform in ±50 µm, tilts in ±100 µrad, the
+/// two terms no test sees left zero.
+fn draw(rng: &CounterRng, trial: u64, names: &[String]) -> Vec<Real> {
+    names
+        .iter()
+        .enumerate()
+        .map(|(k, n)| {
+            let u = 2.0 * rng.uniform(trial, k as u64) - 1.0;
+            match n.as_str() {
+                "EZ0C" | "EC0C" => 0.0,
+                _ if matches!(n.as_bytes()[1], b'A' | b'B' | b'C') => 100e-6 * u,
+                _ => 0.05 * u,
+            }
+        })
+        .collect()
+}
+
+fn inject(nominal: &Chain, names: &[String], values: &[Real]) -> Chain {
+    let mut actual = nominal.clone();
+    // The two terms no test sees are not location errors: never injected (drawn zero).
+    for (n, v) in names.iter().zip(values).filter(|(_, v)| **v != 0.0) {
+        actual.apply_iso_term(n, *v).expect("known term");
+    }
+    actual
+}
+
+fn mounting(rng: &CounterRng, trial: u64) -> Vector3 {
+    Vector3::from_fn(|k, _| 0.2 * (2.0 * rng.uniform(trial, 100 + k as u64) - 1.0))
+}
+
+/// Runs `trials` identifications with `measure` giving the samples of a trial, and checks
+/// that every identified term is within 3 of its standard uncertainties of the truth in
+/// at least 95 % of them, and that the table's offset along itself and angle zero are
+/// named as not determined.
+fn coverage(
+    trials: u64,
+    measure: impl Fn(&Chain, &Chain, u64, Vector3) -> Vec<twinmill::metrology::rotary_test::Sample>,
+) {
+    let nominal = trunnion();
+    let (names, terms) = terms(&nominal);
+    let tool = Tool::try_new(ToolKind::Flat, 6.0, 20.0).expect("tool");
+    let rng = CounterRng::new(10791);
+    let mut inside = vec![0usize; names.len()];
+    for trial in 0..trials {
+        let truth = draw(&rng, trial, &names);
+        let actual = inject(&nominal, &names, &truth);
+        let samples = measure(&actual, &nominal, trial, mounting(&rng, trial));
+        let feats = ball_features(&samples, Vector3::zeros(), 0);
+        let model = Model {
+            chain: &nominal,
+            ids: &[],
+            iso_terms: &terms,
+            tool: &tool,
+            features: &feats,
+            registration: Registration::Workpiece,
+        };
+        let r = identify(&model).expect("identifies");
+        let mut undetermined: Vec<&str> = r
+            .identifiability
+            .undetermined_combinations
+            .iter()
+            .map(|c| c.name.as_str())
+            .collect();
+        undetermined.sort();
+        assert_eq!(undetermined, ["EC0C", "EZ0C"], "trial {trial}");
+        assert_eq!(r.parameters.len(), 8, "trial {trial}");
+        for e in &r.parameters {
+            let k = names.iter().position(|n| *n == e.name).expect("named");
+            if (e.value - truth[k]).abs() <= 3.0 * e.sigma {
+                inside[k] += 1;
+            }
+        }
+    }
+    for (n, c) in names.iter().zip(&inside) {
+        if n == "EZ0C" || n == "EC0C" {
+            continue;
+        }
+        assert!(
+            *c as u64 * 100 >= 95 * trials,
+            "{n}: within 3σ in {c} of {trials} trials"
+        );
+    }
+}
+
+#[test]
+fn the_ball_sensor_motion_test_identifies_the_trunnion_location_errors_within_3_sigma() {
+    let sensor = BallSensor::seed003(8.0);
+    coverage(100, |actual, nominal, trial, m| {
+        sensor_test(actual, nominal, &sensor, 1.0, &setup(trial, m), &sweeps()).expect("trace")
+    });
+}
+
+#[test]
+fn probed_sphere_positions_identify_the_trunnion_location_errors_within_3_sigma() {
+    // A touch probe repeatable to 1 µm (2σ).
+    coverage(100, |actual, _, trial, m| {
+        probe_test(actual, 0.5e-3, &setup(trial, m), &sweeps()).expect("probed")
+    });
+}
+
+#[test]
+fn an_offset_a_line_moves_the_ball_as_derived() {
+    // A's line offset by e along Y (EY0A): with C = 0 the tool point is L·Rx(a)·L⁻¹·t and the
+    // controller sets t = Rx(a)⁻¹·s about the nominal line, so the ball ends at
+    // s + (I − Rx(a))·e·ŷ about the line: deviation e·(0, 1 − cos a, −sin a).
+    let nominal = trunnion();
+    let e = 0.03;
+    let actual = inject(&nominal, &["EY0A".to_string()], &[e]);
+    let mut sensor = BallSensor::seed003(8.0);
+    sensor.accuracy_mm = 1e-12;
+    let sweep = vec![sweeps().swap_remove(2)];
+    let samples = sensor_test(
+        &actual,
+        &nominal,
+        &sensor,
+        1.0,
+        &setup(1, Vector3::zeros()),
+        &sweep,
+    )
+    .expect("trace");
+    assert_eq!(samples.len(), 9);
+    for s in &samples {
+        let a = s.angle_deg.to_radians();
+        let expect = [0.0, e * (1.0 - a.cos()), -e * a.sin()];
+        for k in 0..3 {
+            assert!(
+                (s.deviation_mm[k] - expect[k]).abs() < 1e-9,
+                "A = {}: {:?} vs {expect:?}",
+                s.angle_deg,
+                s.deviation_mm
+            );
+        }
+    }
+}
+
+#[test]
+fn a_test_that_never_tilts_a_names_its_terms_as_without_data() {
+    let nominal = trunnion();
+    let (names, terms) = terms(&nominal);
+    let actual = inject(&nominal, &names, &draw(&CounterRng::new(3), 0, &names));
+    let sensor = BallSensor::seed003(8.0);
+    let only_c = vec![sweeps().swap_remove(0)];
+    let samples = sensor_test(
+        &actual,
+        &nominal,
+        &sensor,
+        1.0,
+        &setup(5, Vector3::zeros()),
+        &only_c,
+    )
+    .expect("trace");
+    let feats = ball_features(&samples, Vector3::zeros(), 0);
+    let tool = Tool::try_new(ToolKind::Flat, 6.0, 20.0).expect("tool");
+    let model = Model {
+        chain: &nominal,
+        ids: &[],
+        iso_terms: &terms,
+        tool: &tool,
+        features: &feats,
+        registration: Registration::Workpiece,
+    };
+    let r = identify(&model).expect("identifies");
+    assert_eq!(r.identifiability.no_data, ["EY0A", "EZ0A", "EB0A", "EC0A"]);
+    let alone: Vec<&str> = r.parameters.iter().map(|e| e.name.as_str()).collect();
+    assert_eq!(alone, ["EX0C", "EY0C", "EA0C", "EB0C"]);
+}
