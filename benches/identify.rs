@@ -112,9 +112,61 @@ fn benches(c: &mut Criterion) {
     g.finish();
 }
 
+/// `identify (rotary location …)`: the eight ISO 230-7 location errors of the trunnion A/C
+/// machine (`scenes/trunnion-ac.toml`) and its table's two unseen terms, with the sphere's
+/// position, from the default ISO 10791-6 test read by the ball sensor (46 ball centres):
+/// identifiability, Levenberg–Marquardt and uncertainties. Setup (the test on the twin) is
+/// not timed.
+fn rotary_location(c: &mut Criterion) {
+    use twinmill::calibration::calibrate::{IsoTerm, Model, Registration, ball_features, identify};
+    use twinmill::cutting::tool::{Tool, ToolKind};
+    use twinmill::metrology::ball_sensor::BallSensor;
+    use twinmill::metrology::rotary_test::{default_sweeps, sensor_test};
+    use twinmill::pipeline::default_setup;
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/trunnion-ac.toml");
+    let scene = Scene::load(&path).expect("scene");
+    let sweeps = default_sweeps(&scene.chain);
+    let setup = default_setup(1);
+    let samples = sensor_test(
+        &scene.chain,
+        &scene.model,
+        &BallSensor::seed003(8.0),
+        1.0,
+        &setup,
+        &sweeps,
+    )
+    .expect("trace");
+    let features = ball_features(&samples, setup.tool_offset, 0);
+    let terms: Vec<IsoTerm> = scene
+        .model
+        .rotary_location_terms()
+        .iter()
+        .map(|n| IsoTerm::parse(&scene.model, n).expect("term"))
+        .collect();
+    let tool = Tool::try_new(ToolKind::Ball, 1.0, 1.0).expect("tool");
+    let model = Model {
+        chain: &scene.model,
+        ids: &[],
+        iso_terms: &terms,
+        tool: &tool,
+        features: &features,
+        registration: Registration::Workpiece,
+    };
+    let mut g = c.benchmark_group("identify");
+    g.bench_function(
+        format!(
+            "identify (rotary location, {} terms, {} ball centres)",
+            terms.len(),
+            features.len()
+        ),
+        |b| b.iter(|| identify(black_box(&model)).expect("identifies")),
+    );
+    g.finish();
+}
+
 // criterion_group! generates an undocumented public function: keep it in a private module.
 mod group {
     use super::*;
-    criterion_group!(identify, benches);
+    criterion_group!(identify, benches, rotary_location);
 }
 criterion_main!(group::identify);

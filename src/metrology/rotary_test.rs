@@ -126,6 +126,115 @@ impl Sweep {
     }
 }
 
+/// The default test of a chain's rotary axes: the first rotary axis from the workpiece (a
+/// table, which turns fully) a full turn in 12 positions with the others at 0; for each
+/// further rotary axis (a cradle or head, which tilts) the first a full turn again with it
+/// at −30°, it swept −60…60° in 9 positions, and it swept −45…45° in 13 positions while the
+/// first turns 0…180° with it (two rotary and three linear axes at once).
+pub fn default_sweeps(chain: &Chain) -> Vec<Sweep> {
+    let rotary: Vec<AxisLetter> = chain
+        .axes()
+        .iter()
+        .filter(|a| a.kind == AxisKind::Rotary)
+        .map(|a| a.letter)
+        .collect();
+    let Some((&first, rest)) = rotary.split_first() else {
+        return Vec::new();
+    };
+    let turn = |at: AxisValues| Sweep {
+        axis: first,
+        from: 0.0,
+        to: 330.0,
+        positions: 12,
+        at,
+        also: Vec::new(),
+    };
+    let mut out = vec![turn(AxisValues::default())];
+    for &r in rest {
+        out.push(turn(AxisValues::default().with(r, -30.0)));
+        out.push(Sweep {
+            axis: r,
+            from: -60.0,
+            to: 60.0,
+            positions: 9,
+            at: AxisValues::default(),
+            also: Vec::new(),
+        });
+        out.push(Sweep {
+            axis: r,
+            from: -45.0,
+            to: 45.0,
+            positions: 13,
+            at: AxisValues::default(),
+            also: vec![(first, 0.0, 180.0)],
+        });
+    }
+    out
+}
+
+impl Sweep {
+    /// A sweep from its text form `AXIS:FROM:TO:N[+AXIS:FROM:TO…][@AXIS=VALUE,…]`, e.g.
+    /// `C:0:330:12@A=-30` or `A:-45:45:13+C:0:180` (degrees; `+` adds an axis moving with
+    /// it, `@` sets the other axes).
+    pub fn parse(text: &str) -> Result<Sweep, String> {
+        let bad = |why: &str| {
+            format!(
+                "sweep '{}': {why} (expected AXIS:FROM:TO:N[+AXIS:FROM:TO][@AXIS=VALUE,…], e.g. C:0:330:12@A=-30)",
+                text.escape_debug()
+            )
+        };
+        let (motion, at_text) = match text.split_once('@') {
+            Some((m, a)) => (m, Some(a)),
+            None => (text, None),
+        };
+        let axis = |t: &str| {
+            let mut cs = t.trim().chars();
+            match (cs.next().and_then(AxisLetter::from_char), cs.next()) {
+                (Some(l), None) => Ok(l),
+                _ => Err(bad(&format!("'{}' is not an axis letter", t.trim()))),
+            }
+        };
+        let number = |t: &str| match t.trim().parse::<Real>() {
+            Ok(v) if v.is_finite() => Ok(v),
+            _ => Err(bad(&format!("'{}' is not a finite number", t.trim()))),
+        };
+        let mut parts = motion.split('+');
+        let main: Vec<&str> = parts.next().unwrap_or("").split(':').collect();
+        let [a, from, to, n] = main[..] else {
+            return Err(bad("the swept axis needs AXIS:FROM:TO:N"));
+        };
+        let positions = match n.trim().parse::<usize>() {
+            Ok(v) if v >= 2 => v,
+            _ => return Err(bad("N must be a whole number of positions, at least 2")),
+        };
+        let mut also = Vec::new();
+        for p in parts {
+            let f: Vec<&str> = p.split(':').collect();
+            let [l, a0, a1] = f[..] else {
+                return Err(bad("an axis moving with it needs +AXIS:FROM:TO"));
+            };
+            also.push((axis(l)?, number(a0)?, number(a1)?));
+        }
+        let mut at = AxisValues::default();
+        if let Some(t) = at_text {
+            for kv in t.split(',') {
+                let Some((l, v)) = kv.split_once('=') else {
+                    return Err(bad("the other axes are set as AXIS=VALUE"));
+                };
+                at.set(axis(l)?, number(v)?);
+            }
+        }
+        Ok(Sweep {
+            axis: axis(a)?,
+            from: number(from)?,
+            to: number(to)?,
+            positions,
+            at,
+            also,
+        })
+    }
+}
+
 /// Where the balls are.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Setup {
@@ -541,6 +650,33 @@ mod tests {
         )
         .expect_err("out of range");
         assert!(err.to_string().starts_with("sweep 1, C = "), "{err}");
+    }
+
+    #[test]
+    fn sweeps_parse_from_text_and_refuse_nonsense() {
+        let s = Sweep::parse("A:-45:45:13+C:0:180@B=5").expect("parses");
+        assert_eq!(
+            (s.axis.as_char(), s.from, s.to, s.positions),
+            ('A', -45.0, 45.0, 13)
+        );
+        assert_eq!(s.also.len(), 1);
+        assert_eq!(
+            (s.also[0].0.as_char(), s.also[0].1, s.also[0].2),
+            ('C', 0.0, 180.0)
+        );
+        assert_eq!(s.at.get(AxisLetter::from_char('B').expect("B")), 5.0);
+        for bad in [
+            "",
+            "C:0:330",
+            "C:0:330:1",
+            "Q:0:1:3",
+            "C:0:nan:3",
+            "C:0:1:3@A",
+            "C:0:1:3+A:1",
+        ] {
+            let e = Sweep::parse(bad).expect_err(bad);
+            assert!(e.starts_with("sweep '"), "{e}");
+        }
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! program, or a cloud), returns everything it made — reports, clouds, pictures, meshes,
 //! corrected moves — and writes nothing ([`crate::output`] does). One module per command:
 //! [`simulate()`], [`run()`] (and [`scanner_study`]), [`fit_cloud`], [`correct()`],
-//! [`identify_scene`], [`design_scene`]; this file holds what they share: the stock, the
+//! [`identify_scene`], [`design_scene`], [`rotary_test()`]; this file holds what they share: the stock, the
 //! sweep of the program through the deviated machine, and the errors.
 //!
 //! May use every stage folder and [`crate::scene`]. **Invariant:** the same scene and
@@ -14,11 +14,16 @@ mod fit;
 mod correct;
 mod identify;
 mod design;
+mod rotary;
 
 pub use correct::{CorrectOutcome, correct, identified_model};
 pub use design::{DesignOutcome, MAX_DESIGN_ROUNDS, design_scene};
 pub use fit::{FitRequest, Selection, Shape, fit_cloud};
 pub use identify::{IdentifyOutcome, correction_loop, extract_features, identify_scene};
+pub use rotary::{
+    LocationReport, RotaryInstrument, RotaryOutcome, RotaryReport, RotaryRequest, TermReport,
+    default_setup, rotary_test,
+};
 pub use run::{Outcome, extract_faces, run, scanner_study};
 pub use simulate::{Simulation, simulate};
 
@@ -130,6 +135,14 @@ pub enum PipelineError {
         path: String,
         /// Why.
         source: RenderError,
+    },
+    /// A rotary-axis test could not be run or evaluated.
+    #[error("{path}: {message}")]
+    Rotary {
+        /// Scene file.
+        path: String,
+        /// What went wrong.
+        message: String,
     },
 }
 

@@ -11,12 +11,17 @@
 //! inside and outside, so the deviations are magnified as ball-bar software shows them; the
 //! scale, G of each direction and H are written under the title.
 //!
+//! **Rotary-axis trace:** the ISO 10791-6 deviation trace of a motion test, X (red), Y
+//! (blue) and Z (green) in µm against the sample number, the sweeps one after another with
+//! a grey line between them and each sweep's axis and range under the title.
+//!
 //! Drawing is sequential and deterministic: the same figures give the same pixels.
 
 use super::render::{RenderError, draw_text, nice_ceil};
 use crate::math::Real;
 use crate::metrology::circular::{CircularFigures, Sample, Turn};
 use crate::metrology::positioning::PositioningFigures;
+use crate::metrology::rotary_test::{Sample as RotarySample, SweepFigures};
 use image::{Rgb, RgbImage};
 
 const WHITE: Rgb<u8> = Rgb([255, 255, 255]);
@@ -320,6 +325,111 @@ pub fn polar_plot(
         SCALE,
         BLACK,
     );
+    Ok(img)
+}
+
+const GREEN: Rgb<u8> = Rgb([0x2c, 0xa0, 0x2c]);
+
+/// The deviation trace of a rotary-axis motion test (see the module documentation).
+pub fn rotary_trace_plot(
+    samples: &[RotarySample],
+    sweeps: &[SweepFigures],
+    title: &str,
+) -> Result<RgbImage, RenderError> {
+    if samples.is_empty() {
+        return Err(RenderError::NoPoints);
+    }
+    let (w, h) = (900u32, 560u32);
+    let mut header = vec![title.chars().take(70).collect::<String>()];
+    header.push("red: X, blue: Y, green: Z deviation of the ball (\u{b5}m)".to_string());
+    for f in sweeps.iter().take(6) {
+        header.push(format!(
+            "sweep {}: {} {} .. {} deg, ranges X {} Y {} Z {} \u{b5}m",
+            f.sweep,
+            f.axis,
+            f.range_deg[0],
+            f.range_deg[1],
+            um(f.deviation_range_mm[0]),
+            um(f.deviation_range_mm[1]),
+            um(f.deviation_range_mm[2])
+        ));
+    }
+    let top = 16 + header.len() as u32 * LINE_H + 8;
+    let (left, right, bottom) = (110u32, w - 30, h - 40);
+    let mut img = RgbImage::from_pixel(w, h, WHITE);
+    text_lines(&mut img, 16, 16, &header, BLACK);
+    let (mut lo, mut hi) = (Real::INFINITY, Real::NEG_INFINITY);
+    for s in samples {
+        for v in s.deviation_mm {
+            if !v.is_finite() {
+                return Err(RenderError::NonFinite);
+            }
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+    }
+    let step = nice_ceil(((hi - lo) * 1e3 / 6.0).max(1e-6));
+    let (y_lo, y_hi) = (
+        (lo * 1e3 / step).floor() * step,
+        (hi * 1e3 / step).ceil() * step,
+    );
+    let y_hi = if y_hi <= y_lo { y_lo + step } else { y_hi };
+    let n = samples.len().max(2) - 1;
+    let px = |i: usize| left as Real + i as Real / n as Real * (right - left) as Real;
+    let py =
+        |v_mm: Real| bottom as Real - (v_mm * 1e3 - y_lo) / (y_hi - y_lo) * (bottom - top) as Real;
+    let mut g = y_lo;
+    while g <= y_hi + 1e-9 * step {
+        let y = py(g * 1e-3);
+        line(&mut img, (left as Real, y), (right as Real, y), LIGHT, 1);
+        draw_text(
+            &mut img,
+            10,
+            (y as u32).saturating_sub(7),
+            &format!("{g:+.3}"),
+            SCALE,
+            BLACK,
+        );
+        g += step;
+    }
+    for (i, pair) in samples.windows(2).enumerate() {
+        if pair[0].sweep != pair[1].sweep {
+            let x = 0.5 * (px(i) + px(i + 1));
+            line(&mut img, (x, top as Real), (x, bottom as Real), GREY, 1);
+        }
+    }
+    line(
+        &mut img,
+        (left as Real, top as Real),
+        (left as Real, bottom as Real),
+        BLACK,
+        1,
+    );
+    line(
+        &mut img,
+        (left as Real, bottom as Real),
+        (right as Real, bottom as Real),
+        BLACK,
+        1,
+    );
+    draw_text(&mut img, left + 8, top + 4, "\u{b5}m", SCALE, BLACK);
+    for (c, k) in [(RED, 0), (BLUE, 1), (GREEN, 2)] {
+        for (i, pair) in samples.windows(2).enumerate() {
+            if pair[0].sweep == pair[1].sweep {
+                line(
+                    &mut img,
+                    (px(i), py(pair[0].deviation_mm[k])),
+                    (px(i + 1), py(pair[1].deviation_mm[k])),
+                    c,
+                    2,
+                );
+            }
+        }
+        for (i, s) in samples.iter().enumerate() {
+            let (x, y) = (px(i), py(s.deviation_mm[k]));
+            line(&mut img, (x - 2.0, y), (x + 2.0, y), c, 1);
+        }
+    }
     Ok(img)
 }
 

@@ -1,0 +1,243 @@
+//! `twinmill measure --instrument ball-sensor|probe`: a rotary-axis test on the scene's
+//! machine — the ISO 10791-6 motion test read by seed 003's ball sensor, or a calibration
+//! sphere probed at rotary indices — its per-sweep figures, and the identification of the
+//! rotary axes' ISO 230-7 location errors from it through `calibrate`, with what the test
+//! cannot determine named.
+//!
+//! The scene's `chain` is the machine that moves; its `model` (nominal plus the deviations
+//! known a priori) is what the controller computes with and what the identification starts
+//! from. The identified values are the location errors of the machine *relative to that
+//! model*.
+
+use super::PipelineError;
+use crate::calibration::calibrate::{
+    IsoTerm, Model, Registration, ball_features, identify as solve,
+};
+use crate::cutting::tool::{Tool, ToolKind};
+use crate::math::{Point3, Real, Vector3};
+use crate::metrology::ball_sensor::BallSensor;
+use crate::metrology::rotary_test::{
+    Sample, Setup, Sweep, SweepFigures, default_sweeps, figures, probe_test, sensor_test, trace_csv,
+};
+use crate::scene::Scene;
+use serde::Serialize;
+
+/// The instrument of a rotary-axis test.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RotaryInstrument {
+    /// Seed 003's sensor on the table, its master ball in the spindle, read `height_mm`
+    /// above the sheets of light.
+    BallSensor {
+        /// The sensor.
+        sensor: BallSensor,
+        /// The ball's nominal height above the sheets (mm).
+        height_mm: Real,
+    },
+    /// A touch probe finding a sphere's centre, repeatable to `sigma_mm` per axis.
+    Probe {
+        /// Repeatability (standard deviation per linear axis value, mm).
+        sigma_mm: Real,
+    },
+}
+
+/// What to run.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RotaryRequest {
+    /// The instrument.
+    pub instrument: RotaryInstrument,
+    /// The sweeps; empty: [`default_sweeps`] of the chain.
+    pub sweeps: Vec<Sweep>,
+    /// Where the balls are and the noise seed.
+    pub setup: Setup,
+    /// The terms to identify; empty: every rotary axis's location terms
+    /// ([`crate::machine::chain::Chain::rotary_location_terms`]); `None`: do not identify.
+    pub identify: Option<Vec<String>>,
+}
+
+/// One identified term.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TermReport {
+    /// ISO name (`EX0C`) or a combination of them.
+    pub name: String,
+    /// Value (mm or rad).
+    pub value: Real,
+    /// Standard uncertainty.
+    pub sigma: Real,
+    /// The value injected into the simulated machine by the scene, when it names this term.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub injected: Option<Real>,
+}
+
+/// The identification's account.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct LocationReport {
+    /// The terms solved for.
+    pub terms: Vec<String>,
+    /// Terms identified on their own.
+    pub identified: Vec<TermReport>,
+    /// Determined combinations of terms that are not single terms.
+    pub combinations: Vec<TermReport>,
+    /// Directions the test does not determine (named), held at the model's values.
+    pub not_determined: Vec<String>,
+    /// Terms no measurement depends on at all.
+    pub no_data: Vec<String>,
+    /// Singular values of the scaled, whitened Jacobian (descending).
+    pub singular_values: Vec<Real>,
+    /// The table-side point as estimated (workpiece frame, mm) and its uncertainty.
+    pub fixed_point_mm: [Real; 3],
+    /// Standard uncertainty of each coordinate (mm).
+    pub fixed_point_sigma_mm: [Real; 3],
+    /// Weighted sum of squared residuals after the solve, and its degrees of freedom.
+    pub chi2: Real,
+    /// Degrees of freedom.
+    pub dof: usize,
+}
+
+/// The report of a rotary-axis test.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RotaryReport {
+    /// Scene name.
+    pub scene: String,
+    /// `ball-sensor` or `probe`.
+    pub instrument: String,
+    /// Number of measurements.
+    pub samples: usize,
+    /// ISO 10791-6 figures per sweep (for the probe: zero, it finds the sphere instead).
+    pub sweeps: Vec<SweepFigures>,
+    /// The identification, when asked for.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub identification: Option<LocationReport>,
+}
+
+/// Everything a rotary-axis test made.
+#[derive(Clone, Debug)]
+pub struct RotaryOutcome {
+    /// The report.
+    pub report: RotaryReport,
+    /// The measurements.
+    pub samples: Vec<Sample>,
+    /// The trace as CSV.
+    pub trace_csv: String,
+}
+
+/// Runs the test of `req` on `scene`'s machine and identifies the location terms.
+pub fn rotary_test(scene: &Scene, req: &RotaryRequest) -> Result<RotaryOutcome, PipelineError> {
+    let err = |message: String| PipelineError::Rotary {
+        path: scene.path.display().to_string(),
+        message,
+    };
+    let sweeps = if req.sweeps.is_empty() {
+        default_sweeps(&scene.chain)
+    } else {
+        req.sweeps.clone()
+    };
+    if sweeps.is_empty() {
+        return Err(err(
+            "the machine has no rotary axis: a rotary-axis test needs one".into(),
+        ));
+    }
+    let (samples, instrument) = match req.instrument {
+        RotaryInstrument::BallSensor { sensor, height_mm } => (
+            sensor_test(
+                &scene.chain,
+                &scene.model,
+                &sensor,
+                height_mm,
+                &req.setup,
+                &sweeps,
+            ),
+            "ball-sensor",
+        ),
+        RotaryInstrument::Probe { sigma_mm } => (
+            probe_test(&scene.chain, sigma_mm, &req.setup, &sweeps),
+            "probe",
+        ),
+    };
+    let samples = samples.map_err(|e| err(e.to_string()))?;
+    let identification = match &req.identify {
+        None => None,
+        Some(names) => Some(identify_location(scene, names, &samples, &req.setup).map_err(err)?),
+    };
+    let report = RotaryReport {
+        scene: scene.name.clone(),
+        instrument: instrument.into(),
+        samples: samples.len(),
+        sweeps: figures(&samples),
+        identification,
+    };
+    Ok(RotaryOutcome {
+        trace_csv: trace_csv(&scene.chain, &samples),
+        report,
+        samples,
+    })
+}
+
+fn identify_location(
+    scene: &Scene,
+    names: &[String],
+    samples: &[Sample],
+    setup: &Setup,
+) -> Result<LocationReport, String> {
+    let names = if names.is_empty() {
+        scene.model.rotary_location_terms()
+    } else {
+        names.to_vec()
+    };
+    let terms = names
+        .iter()
+        .map(|n| IsoTerm::parse(&scene.model, n).map_err(|e| e.to_string()))
+        .collect::<Result<Vec<_>, _>>()?;
+    let features = ball_features(samples, setup.tool_offset, 0);
+    // Ball features do not use the tool; the model takes one for plane features.
+    let tool = Tool::try_new(ToolKind::Ball, 1.0, 1.0).map_err(|e| e.to_string())?;
+    let model = Model {
+        chain: &scene.model,
+        ids: &[],
+        iso_terms: &terms,
+        tool: &tool,
+        features: &features,
+        registration: Registration::Workpiece,
+    };
+    let r = solve(&model).map_err(|e| format!("identification: {e}"))?;
+    let injected = |n: &str| scene.injected.get(n).copied();
+    let term = |e: &crate::calibration::calibrate::Estimate| TermReport {
+        name: e.name.clone(),
+        value: e.value,
+        sigma: e.sigma,
+        injected: injected(&e.name),
+    };
+    let (p, s) = r
+        .anchors
+        .first()
+        .copied()
+        .unwrap_or((Point3::origin(), [Real::NAN; 3]));
+    let ident = &r.identifiability;
+    Ok(LocationReport {
+        terms: names,
+        identified: r.parameters.iter().map(term).collect(),
+        combinations: r.combinations.iter().map(term).collect(),
+        not_determined: ident
+            .undetermined_combinations
+            .iter()
+            .map(|c| c.name.clone())
+            .collect(),
+        no_data: ident.no_data.clone(),
+        singular_values: ident.singular_values.clone(),
+        fixed_point_mm: [p.x, p.y, p.z],
+        fixed_point_sigma_mm: s,
+        chi2: r.solver.chi2,
+        dof: r.solver.dof,
+    })
+}
+
+/// The default setup: the table-side point at (60, 0, 30) mm in the workpiece frame (off
+/// the rotary lines of the built-in machines, so their offsets and tilts show), mounted
+/// exactly, the ball at the tool point.
+pub fn default_setup(seed: u64) -> Setup {
+    Setup {
+        point_w: Point3::new(60.0, 0.0, 30.0),
+        mounting_mm: Vector3::zeros(),
+        tool_offset: Vector3::zeros(),
+        seed,
+    }
+}
