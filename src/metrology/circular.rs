@@ -275,6 +275,25 @@ pub fn parse_trace(text: &str, path: &Path) -> Result<Vec<Sample>, TraceError> {
     Ok(out)
 }
 
+/// The trace file of `samples` (see the module documentation): `comments` first, each as
+/// a `#` line, then the header `direction,angle[rad],deviation` and one sample a row, the
+/// angle in radians and the deviation in mm. Every number is written in its shortest exact
+/// form, so [`parse_trace`] reads back the same samples bit for bit.
+pub fn trace_csv(samples: &[Sample], comments: &[String]) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    for c in comments {
+        for line in c.lines() {
+            let _ = writeln!(s, "# {line}");
+        }
+    }
+    s.push_str("direction,angle[rad],deviation\n");
+    for x in samples {
+        let _ = writeln!(s, "{},{:?},{:?}", name(x.turn), x.angle_rad, x.deviation_mm);
+    }
+    s
+}
+
 /// Fewest samples per direction.
 const MIN_POINTS: usize = 8;
 

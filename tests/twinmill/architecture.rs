@@ -39,6 +39,8 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "positioning",
             "circular",
             "ball_sensor",
+            "interferometer",
+            "ballbar",
         ],
     ),
     (
