@@ -286,7 +286,7 @@ impl BallBarSetup {
             return Err(setup_error(
                 "points",
                 format!(
-                    "{} per revolution: {MIN_POINTS} to {MAX_POINTS} needed",
+                    "{} given; {MIN_POINTS} to {MAX_POINTS} points per revolution needed",
                     self.points
                 ),
             ));

@@ -107,7 +107,7 @@ impl Targets {
                 }
                 if !(2..=MAX_TARGETS).contains(count) {
                     return Err(bad(format!(
-                        "{count} targets: 2 to {MAX_TARGETS} needed (ISO 230-2 asks for at least 5)"
+                        "{count} given; 2 to {MAX_TARGETS} targets needed (ISO 230-2 asks for at least 5)"
                     )));
                 }
                 let n = *count - 1;
@@ -124,7 +124,7 @@ impl Targets {
             Targets::List(v) => {
                 if !(2..=MAX_TARGETS).contains(&v.len()) {
                     return Err(bad(format!(
-                        "{} targets: 2 to {MAX_TARGETS} needed (ISO 230-2 asks for at least 5)",
+                        "{} given; 2 to {MAX_TARGETS} targets needed (ISO 230-2 asks for at least 5)",
                         v.len()
                     )));
                 }
@@ -248,7 +248,7 @@ impl LaserSetup {
             return Err(setup_error(
                 "runs",
                 format!(
-                    "{} runs: 2 to {MAX_RUNS} needed for a standard uncertainty (ISO 230-2 asks for 5)",
+                    "{} given; 2 to {MAX_RUNS} runs needed for a standard uncertainty (ISO 230-2 asks for 5)",
                     self.runs
                 ),
             ));
