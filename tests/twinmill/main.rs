@@ -14,6 +14,7 @@ mod simulate;
 mod sweep;
 mod evaluate;
 mod error_motions;
+mod instruments;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};
