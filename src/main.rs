@@ -845,11 +845,12 @@ struct Measured {
     json: Result<String, serde_json::Error>,
 }
 
-/// The options of each instrument, by name, and whether they were given.
-fn instrument_options(a: &MeasureArgs) -> [(Instrument, &'static str, bool); 18] {
+/// The options of each instrument, by name, and whether they were given (a new instrument
+/// adds its own here, so that the others refuse them).
+fn instrument_options(a: &MeasureArgs) -> Vec<(Instrument, &'static str, bool)> {
     let (l, b) = (&a.laser, &a.ballbar);
     use Instrument::{Ballbar, Laser};
-    [
+    vec![
         (Laser, "--axis", l.axis.is_some()),
         (Laser, "--from", l.from.is_some()),
         (Laser, "--to", l.to.is_some()),
