@@ -5,8 +5,13 @@
 //! And of the ISO 230-4 evaluation (`metrology::circular`): a 360-point ball-bar circle in
 //! each direction with squareness, scale mismatch, backlash and noise.
 //!
+//! And of the virtual instruments on the chain of `scenes/xyz-error-motions.toml` (error
+//! motions, reversals, squareness): a 360-point ball-bar circle simulated and evaluated, and
+//! the laser interferometer's 5-run ISO 230-2 cycle with its evaluation.
+//!
 //! `cargo bench --bench evaluate`. Goals: ≤ 1 ms for the evaluation of 10,000 readings;
-//! ≤ 1 ms for a 360-point circle with its evaluation.
+//! ≤ 1 ms for a 360-point circle with its evaluation; ≤ 1 ms for a 360-point ball-bar circle
+//! simulated on the chain and evaluated.
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
@@ -105,8 +110,67 @@ fn bench_circular(c: &mut Criterion) {
     g.finish();
 }
 
+/// The virtual ball bar and laser on the scene's machine.
+fn bench_instruments(c: &mut Criterion) {
+    use twinmill::metrology::ballbar::{self, BallBarSetup, Plane, Turns};
+    use twinmill::metrology::interferometer::{self, LaserSetup, Targets};
+    use twinmill::nc::AxisLetter;
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/xyz-error-motions.toml");
+    let scene = twinmill::scene::Scene::load(&path).expect("the built-in scene loads");
+    let chain = &scene.chain;
+    let mut circle = BallBarSetup::new(Plane::Xy, scene.home, 100.0);
+    circle.turns = Turns::Ccw;
+    circle.noise_um = 0.1;
+    let opts = CircularOptions {
+        radius_mm: 100.0,
+        pitch_mm: None,
+    };
+    let both = BallBarSetup {
+        turns: Turns::Both,
+        ..circle.clone()
+    };
+    let file = Path::new("bench.csv");
+    let mut g = c.benchmark_group("ballbar");
+    g.throughput(Throughput::Elements(circle.points as u64));
+    g.bench_function(
+        "360-point circle simulated on the chain and evaluated",
+        |b| {
+            b.iter(|| {
+                let m = ballbar::measure(chain, black_box(&circle)).expect("measures");
+                circular::evaluate(&m.samples, &opts, file).expect("evaluates")
+            })
+        },
+    );
+    g.bench_function("360-point circle each way simulated and evaluated", |b| {
+        b.iter(|| {
+            let m = ballbar::measure(chain, black_box(&both)).expect("measures");
+            circular::evaluate(&m.samples, &opts, file).expect("evaluates")
+        })
+    });
+    g.finish();
+    let mut laser = LaserSetup::new(
+        AxisLetter::X,
+        Targets::Even {
+            start_mm: 0.0,
+            end_mm: 60.0,
+            count: 11,
+        },
+        scene.home,
+    );
+    laser.noise_um = 0.5;
+    let mut g = c.benchmark_group("laser");
+    g.throughput(Throughput::Elements(110));
+    g.bench_function("5-run cycle of 11 targets simulated and evaluated", |b| {
+        b.iter(|| {
+            let m = interferometer::measure(chain, black_box(&laser)).expect("measures");
+            evaluate(&m.readings, file).expect("complete")
+        })
+    });
+    g.finish();
+}
+
 mod group {
     use super::*;
-    criterion_group!(evaluate, bench, bench_circular);
+    criterion_group!(evaluate, bench, bench_circular, bench_instruments);
 }
 criterion_main!(group::evaluate);

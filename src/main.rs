@@ -11,7 +11,8 @@ use twinmill::calibration::correct::write_gcode;
 use twinmill::math::{Aabb, Point3};
 use twinmill::metrology::ball_sensor::{self, BallSensor};
 use twinmill::metrology::circular::{
-    CircularFigures, CircularOptions, Diagnosis, evaluate as evaluate_circular, parse_trace,
+    CircularFigures, CircularOptions, Diagnosis, TraceError, evaluate as evaluate_circular,
+    parse_trace,
 };
 use twinmill::metrology::cloud::read_cloud_file;
 use twinmill::metrology::positioning::{
@@ -19,7 +20,7 @@ use twinmill::metrology::positioning::{
 };
 use twinmill::metrology::scan::Surface;
 use twinmill::metrology::segment::{PlaneSegmentOptions, RansacOptions};
-use twinmill::nc::{Interpreter, LengthUnit, Program, write_jsonl};
+use twinmill::nc::{AxisLetter, Interpreter, LengthUnit, Program, write_jsonl};
 use twinmill::output::{
     MeshFormat, json_bytes, ply_bytes, write_files, write_outcome, write_simulation, write_streamed,
 };
@@ -211,6 +212,12 @@ enum Command {
         #[command(subcommand)]
         command: EvaluateCommand,
     },
+    /// Measure the scene's machine with a virtual instrument on its deviated chain (error
+    /// motions, reversals, squareness as the scene gives them): the laser interferometer's
+    /// ISO 230-2 test cycle of one linear axis, or the ball bar's ISO 230-4 circles; write
+    /// the readings or the trace (the file `evaluate` reads) and print its evaluation. Only
+    /// the scene's machine is used: no program, stock or scanner.
+    Measure(Box<MeasureArgs>),
     /// Fit shapes to any point cloud (PLY, XYZ/CSV, PTS): every planar face with the
     /// distance and angle between each pair (the default), or one plane, sphere, cylinder
     /// or circle, in all points, a box, or the planar region around a seed point.
@@ -342,6 +349,233 @@ enum EvaluateCommand {
     },
 }
 
+/// The virtual instruments of `measure`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Instrument {
+    /// Laser interferometer: ISO 230-2's test cycle of one linear axis.
+    Laser,
+    /// Telescoping ball bar: ISO 230-4's circular test in a plane.
+    Ballbar,
+    /// Seed 003's non-contact ball sensor on the table, its master ball in the spindle:
+    /// ISO 10791-6's simultaneous motion test of the rotary axes, and their location errors.
+    BallSensor,
+    /// A touch probe finding a calibration sphere at rotary indices, and the rotary axes'
+    /// location errors.
+    Probe,
+}
+
+impl Instrument {
+    /// The name in messages and file names.
+    fn name(self) -> &'static str {
+        match self {
+            Instrument::Laser => "laser",
+            Instrument::Ballbar => "ballbar",
+            Instrument::BallSensor => "ball-sensor",
+            Instrument::Probe => "probe",
+        }
+    }
+}
+
+/// `twinmill measure`: the scene, the instrument, what every instrument shares, and each
+/// instrument's own options (given only with that instrument).
+#[derive(clap::Args)]
+struct MeasureArgs {
+    /// The scene file (TOML); only its machine is used.
+    scene: PathBuf,
+    /// The instrument.
+    #[arg(long, value_enum)]
+    instrument: Instrument,
+    /// The readings or trace file to write (default: <scene name>-laser.csv or
+    /// <scene name>-ballbar.csv in the current folder).
+    #[arg(long, value_name = "FILE")]
+    out: Option<PathBuf>,
+    /// Print the figures as JSON (the keys of `evaluate`) instead of the summary.
+    #[arg(long)]
+    json: bool,
+    /// Also draw the standard's plot into this PNG file.
+    #[arg(long, value_name = "FILE")]
+    png: Option<PathBuf>,
+    /// Seed of the noise.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Gaussian noise of each reading or sample, σ (µm; default 0: the twin repeats exactly).
+    /// Ball sensor: the micrometers' accuracy bound ±a (µm, default 0.5, seed 003's), each
+    /// shadow edge read with σ = a/√3. Probe: σ of each found axis value (µm, default 0.5).
+    #[arg(long, allow_negative_numbers = true, value_name = "UM")]
+    noise: Option<f64>,
+    /// Laser: how far each run travels past the last target and below the first (mm,
+    /// default 5). Ball bar: the feed-in and feed-out arcs (degrees, default 180).
+    #[arg(long, allow_negative_numbers = true, value_name = "MM|DEG")]
+    overshoot: Option<f64>,
+    #[command(flatten)]
+    laser: LaserArgs,
+    #[command(flatten)]
+    ballbar: BallbarArgs,
+    #[command(flatten)]
+    rotary: RotaryArgs,
+}
+
+/// The rotary-axis tests' options.
+#[derive(clap::Args)]
+#[command(next_help_heading = "Rotary-axis tests (--instrument ball-sensor | probe)")]
+struct RotaryArgs {
+    /// A sweep AXIS:FROM:TO:N[+AXIS:FROM:TO][@AXIS=VALUE,…] (degrees), repeatable, e.g.
+    /// C:0:330:12@A=-30 or A:-45:45:13+C:0:180 (default: the first rotary axis a full turn;
+    /// each further one swept ±60°, with the first turning at −30° of it, and both together).
+    #[arg(long, value_name = "SWEEP", allow_hyphen_values = true)]
+    sweep: Vec<String>,
+    /// The table-side point (sensor's measuring point or sphere centre) in the workpiece
+    /// frame (mm; default 60,0,30).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        num_args = 1,
+        allow_hyphen_values = true,
+        value_name = "X,Y,Z"
+    )]
+    point: Option<Vec<f64>>,
+    /// Where the sensor or sphere actually is relative to --point (mm; default 0): unknown
+    /// to the controller and to the identification.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        num_args = 1,
+        allow_hyphen_values = true,
+        value_name = "DX,DY,DZ"
+    )]
+    mounting: Option<Vec<f64>>,
+    /// The spindle-side ball's (master ball's or stylus ball's) offset from the tool point,
+    /// in the tool frame (mm; default 0).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        num_args = 1,
+        allow_hyphen_values = true,
+        value_name = "DX,DY,DZ"
+    )]
+    stylus: Option<Vec<f64>>,
+    /// Ball sensor: the ball's height above the sheets of light (mm; default 1.0, inside
+    /// seed 003's 0.6–1.6 mm).
+    #[arg(long, allow_negative_numbers = true, value_name = "MM")]
+    height: Option<f64>,
+    /// Ball sensor: the width of each light band (mm; default 8).
+    #[arg(long, allow_negative_numbers = true, value_name = "MM")]
+    band: Option<f64>,
+    /// The terms to identify, comma separated (default: every rotary axis's ISO 230-7
+    /// location terms, e.g. EX0C,EY0C,EA0C,EB0C, and the table's two that no test sees).
+    #[arg(long, value_delimiter = ',', num_args = 1, value_name = "TERMS")]
+    identify: Option<Vec<String>>,
+    /// Only measure: do not identify.
+    #[arg(long, conflicts_with = "identify")]
+    no_identify: bool,
+}
+
+/// The laser interferometer's options.
+#[derive(clap::Args)]
+#[command(next_help_heading = "Laser interferometer (--instrument laser)")]
+struct LaserArgs {
+    /// The linear axis measured (a letter of the machine's axes).
+    #[arg(long)]
+    axis: Option<String>,
+    /// First target (mm).
+    #[arg(long, allow_negative_numbers = true, value_name = "MM")]
+    from: Option<f64>,
+    /// Last target (mm).
+    #[arg(long, allow_negative_numbers = true, value_name = "MM")]
+    to: Option<f64>,
+    /// Number of evenly spaced targets from --from to --to (default: 5 per metre, at least 5).
+    #[arg(long, value_name = "N")]
+    targets: Option<usize>,
+    /// The targets as a list instead of --from, --to, --targets (mm, comma separated, any
+    /// spacing).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        num_args = 1,
+        allow_hyphen_values = true,
+        value_name = "T1,T2,...",
+        conflicts_with_all = ["from", "to", "targets"]
+    )]
+    target_list: Option<Vec<f64>>,
+    /// Bidirectional runs (default 5, as ISO 230-2 asks; at least 2).
+    #[arg(long, value_name = "N")]
+    runs: Option<usize>,
+    /// The retroreflector's offset from the tool point, in the tool frame (mm; default 0).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        num_args = 1,
+        allow_hyphen_values = true,
+        value_name = "DX,DY,DZ"
+    )]
+    abbe: Option<Vec<f64>>,
+    /// Linear drift of the readings (µm per run; default 0).
+    #[arg(long, allow_negative_numbers = true, value_name = "UM")]
+    drift: Option<f64>,
+    /// The other axes' values during the test, e.g. Y=100,Z=50 (default: the scene's home).
+    #[arg(long, value_name = "AXIS=VALUE,...", allow_hyphen_values = true)]
+    at: Option<String>,
+}
+
+/// The ball bar's options.
+#[derive(clap::Args)]
+#[command(next_help_heading = "Ball bar (--instrument ballbar)")]
+struct BallbarArgs {
+    /// The plane of the circle by its machine axes, first then second: XY, YZ or ZX (default
+    /// XY).
+    #[arg(long)]
+    plane: Option<String>,
+    /// The centre command, e.g. X=0,Y=0,Z=50 (default: the scene's home for every axis not
+    /// given).
+    #[arg(long, value_name = "AXIS=VALUE,...", allow_hyphen_values = true)]
+    centre: Option<String>,
+    /// The radius: the bar's nominal length (mm; default 100).
+    #[arg(long, allow_negative_numbers = true, value_name = "MM")]
+    radius: Option<f64>,
+    /// The directions run: ccw, cw, or both (one ccw run, then one cw run; the default).
+    #[arg(long, value_enum)]
+    direction: Option<TurnsArg>,
+    /// The programmed feed (mm/min; recorded, the twin has no servo dynamics; default 1000).
+    #[arg(long, allow_negative_numbers = true, value_name = "MM_PER_MIN")]
+    feed: Option<f64>,
+    /// Samples per revolution (default 360).
+    #[arg(long, value_name = "N")]
+    points: Option<usize>,
+    /// The tool ball's offset from the tool point, in the tool frame (mm; default 0).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        num_args = 1,
+        allow_hyphen_values = true,
+        value_name = "DX,DY,DZ"
+    )]
+    tool_ball: Option<Vec<f64>>,
+    /// The centre ball's mounting offset from where the nominal machine puts the tool ball
+    /// at the centre command, in the workpiece frame (mm; default 0).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        num_args = 1,
+        allow_hyphen_values = true,
+        value_name = "DX,DY,DZ"
+    )]
+    mount: Option<Vec<f64>>,
+    /// Screw lead of the axes, for the cyclic-error terms of the evaluation (mm).
+    #[arg(long, allow_negative_numbers = true, value_name = "MM")]
+    pitch: Option<f64>,
+}
+
+/// `--direction` of the ball bar.
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum TurnsArg {
+    /// Counter-clockwise only.
+    Ccw,
+    /// Clockwise only.
+    Cw,
+    /// One counter-clockwise run, then one clockwise run.
+    Both,
+}
+
 /// Sets the thread count, loads the scene, checks that it has what `command` needs, and
 /// loads its program.
 fn prepare(
@@ -432,18 +666,27 @@ impl Progress for Bars {
     }
 }
 
-/// The ISO 230-2 figures as the CLI prints them (µm).
-fn positioning_summary(file: &Path, f: &PositioningFigures) -> String {
+/// Lines of a summary after its title: `(label, text)`, the label in the figures' column.
+fn labelled(lines: &[(&str, String)]) -> String {
+    lines
+        .iter()
+        .map(|(label, text)| format!("  {label:<13} {text}\n"))
+        .collect()
+}
+
+/// The ISO 230-2 figures as the CLI prints them (µm): `title`, then `extra` lines, then the
+/// figures.
+fn positioning_summary(title: &str, extra: &[(&str, String)], f: &PositioningFigures) -> String {
     use std::fmt::Write as _;
     let um = |x: f64| x * 1e3;
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "twinmill evaluate iso230-2: {} ({} targets, {} runs each way)",
-        file.display(),
+        "{title} ({} targets, {} runs each way)",
         f.targets.len(),
         f.runs
     );
+    s.push_str(&labelled(extra));
     let _ = writeln!(
         s,
         "  accuracy      A {:.4} µm (A↑ {:.4}, A↓ {:.4})",
@@ -493,8 +736,9 @@ fn positioning_summary(file: &Path, f: &PositioningFigures) -> String {
     s
 }
 
-/// The ISO 230-4 figures and diagnostics as the CLI prints them (µm).
-fn circular_summary(file: &Path, f: &CircularFigures) -> String {
+/// The ISO 230-4 figures and diagnostics as the CLI prints them (µm): `title`, then `extra`
+/// lines, then the figures.
+fn circular_summary(title: &str, extra: &[(&str, String)], f: &CircularFigures) -> String {
     use std::fmt::Write as _;
     let um = |x: f64| x * 1e3;
     let diag = |d: &Diagnosis, scale: f64, unit: &str| match d {
@@ -504,12 +748,8 @@ fn circular_summary(file: &Path, f: &CircularFigures) -> String {
         Diagnosis::NotDetermined { not_determined } => format!("not determined: {not_determined}"),
     };
     let mut s = String::new();
-    let _ = writeln!(
-        s,
-        "twinmill evaluate iso230-4: {} (radius {} mm)",
-        file.display(),
-        f.radius_mm
-    );
+    let _ = writeln!(s, "{title} (radius {} mm)", f.radius_mm);
+    s.push_str(&labelled(extra));
     for d in &f.directions {
         let _ = writeln!(
             s,
@@ -660,6 +900,536 @@ fn evaluate_ball_sensor(file: Option<&Path>, o: [f64; 6], json: bool) -> ExitCod
     )
 }
 
+/// What an instrument measured, evaluated and ready to write and print.
+struct Measured {
+    /// The readings or trace file's text.
+    text: String,
+    /// The standard's plot, when `--png` asks for it.
+    plot: Option<Result<image::RgbImage, twinmill::report::render::RenderError>>,
+    /// The summary the CLI prints.
+    summary: String,
+    /// The figures as `evaluate --json` prints them.
+    json: Result<String, serde_json::Error>,
+}
+
+/// The options of each instrument, by name, and whether they were given (a new instrument
+/// adds its own here, so that the others refuse them).
+fn instrument_options(a: &MeasureArgs) -> Vec<(Instrument, &'static str, bool)> {
+    let (l, b, r) = (&a.laser, &a.ballbar, &a.rotary);
+    use Instrument::{BallSensor, Ballbar, Laser, Probe};
+    vec![
+        (Laser, "--axis", l.axis.is_some()),
+        (Laser, "--from", l.from.is_some()),
+        (Laser, "--to", l.to.is_some()),
+        (Laser, "--targets", l.targets.is_some()),
+        (Laser, "--target-list", l.target_list.is_some()),
+        (Laser, "--runs", l.runs.is_some()),
+        (Laser, "--abbe", l.abbe.is_some()),
+        (Laser, "--drift", l.drift.is_some()),
+        (Laser, "--at", l.at.is_some()),
+        (Ballbar, "--plane", b.plane.is_some()),
+        (Ballbar, "--centre", b.centre.is_some()),
+        (Ballbar, "--radius", b.radius.is_some()),
+        (Ballbar, "--direction", b.direction.is_some()),
+        (Ballbar, "--feed", b.feed.is_some()),
+        (Ballbar, "--points", b.points.is_some()),
+        (Ballbar, "--tool-ball", b.tool_ball.is_some()),
+        (Ballbar, "--mount", b.mount.is_some()),
+        (Ballbar, "--pitch", b.pitch.is_some()),
+        (BallSensor, "--height", r.height.is_some()),
+        (BallSensor, "--band", r.band.is_some()),
+    ]
+    .into_iter()
+    .chain(
+        [
+            ("--sweep", !r.sweep.is_empty()),
+            ("--point", r.point.is_some()),
+            ("--mounting", r.mounting.is_some()),
+            ("--stylus", r.stylus.is_some()),
+            ("--identify", r.identify.is_some()),
+            ("--no-identify", r.no_identify),
+        ]
+        .into_iter()
+        .flat_map(|(o, given)| [(BallSensor, o, given), (Probe, o, given)]),
+    )
+    .collect()
+}
+
+/// `twinmill measure`: refuses another instrument's options, loads the scene's machine, runs
+/// the instrument on it, evaluates what it measured, writes the file (and the plot) and
+/// prints the figures. Nothing is written unless everything before succeeded.
+fn measure(a: MeasureArgs) -> ExitCode {
+    let options = instrument_options(&a);
+    if let Some((other, option, _)) = options.iter().copied().find(|(i, o, given)| {
+        *given
+            && *i != a.instrument
+            && !options.iter().any(|(j, p, _)| j == &a.instrument && p == o)
+    }) {
+        return fail(format!(
+            "{option} is an option of --instrument {}, not of --instrument {}",
+            other.name(),
+            a.instrument.name()
+        ));
+    }
+    // Only the machine is used: the program is not read and no stock is built, so the
+    // stock's memory budget does not apply.
+    let budget = MemoryBudget {
+        bytes: f64::INFINITY,
+        source: "measure builds no stock".into(),
+    };
+    let scene = match Scene::load_with(&a.scene, &budget) {
+        Ok(s) => s,
+        Err(e) => return fail(e),
+    };
+    if let Err(e) = scene.require("measure", &[]) {
+        return fail(e);
+    }
+    let file = a
+        .out
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("{}-{}.csv", scene.name, a.instrument.name())));
+    let measured = match a.instrument {
+        Instrument::Laser => measure_laser(&scene, &a, &file),
+        Instrument::Ballbar => measure_ballbar(&scene, &a, &file),
+        Instrument::BallSensor | Instrument::Probe => measure_rotary(&scene, &a),
+    };
+    let m = match measured {
+        Ok(m) => m,
+        Err(e) => return fail(e),
+    };
+    let png = match (&a.png, m.plot) {
+        (Some(png), Some(drawn)) => {
+            match drawn.and_then(|img| twinmill::report::render::encode_png(&img)) {
+                Ok(bytes) => Some((png, bytes)),
+                Err(e) => return fail(format!("{}: {e}", png.display())),
+            }
+        }
+        _ => None,
+    };
+    if let Err(e) = twinmill::output::write_file(&file, m.text.as_bytes()) {
+        return fail(e);
+    }
+    if let Some((png, bytes)) = png
+        && let Err(e) = twinmill::output::write_file(png, &bytes)
+    {
+        return fail(e);
+    }
+    print_out(|| m.summary, a.json.then_some(m.json))
+}
+
+/// Axis values `X=1,Y=-2.5` for axes of `chain`, as the option `option` gives them.
+fn axis_values(
+    option: &str,
+    text: &str,
+    chain: &twinmill::machine::chain::Chain,
+) -> Result<Vec<(AxisLetter, f64)>, String> {
+    let axes: Vec<String> = chain
+        .axes()
+        .iter()
+        .map(|a| a.letter.as_char().to_string())
+        .collect();
+    let mut out: Vec<(AxisLetter, f64)> = Vec::new();
+    for item in text.split(',').map(str::trim) {
+        let (name, value) = item
+            .split_once('=')
+            .map(|(n, v)| (n.trim(), v.trim()))
+            .ok_or_else(|| format!("{option}: '{item}': expected AXIS=VALUE, e.g. Y=100"))?;
+        let mut chars = name.chars();
+        let letter = match (chars.next(), chars.next()) {
+            (Some(c), None) => AxisLetter::from_char(c).filter(|l| chain.has_axis(*l)),
+            _ => None,
+        }
+        .ok_or_else(|| {
+            format!(
+                "{option}: '{name}' is not an axis of this machine (axes: {})",
+                axes.join(" ")
+            )
+        })?;
+        let v: f64 = match value.parse::<f64>() {
+            Ok(v) if v.is_finite() => v,
+            Ok(v) => return Err(format!("{option}: {name} = {v} is not finite")),
+            Err(_) => return Err(format!("{option}: {name} = '{value}' is not a number")),
+        };
+        if out.iter().any(|(l, _)| *l == letter) {
+            return Err(format!("{option}: {name} is given twice"));
+        }
+        out.push((letter, v));
+    }
+    Ok(out)
+}
+
+/// A vector given as `DX,DY,DZ` (mm) by `option`.
+fn offset3(option: &str, v: &[f64]) -> Result<twinmill::math::Vector3, String> {
+    match v {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => {
+            Ok(twinmill::math::Vector3::new(*x, *y, *z))
+        }
+        [_, _, _] => Err(format!("{option}: {v:?} must be finite numbers (mm)")),
+        _ => Err(format!(
+            "{option} needs three numbers DX,DY,DZ (mm), got {}",
+            v.len()
+        )),
+    }
+}
+
+/// `measure --instrument ball-sensor | probe`: the rotary-axis test, its ISO 10791-6
+/// figures, and the location errors identified from it.
+fn measure_rotary(scene: &Scene, a: &MeasureArgs) -> Result<Measured, String> {
+    use std::fmt::Write as _;
+    use twinmill::metrology::ball_sensor::BallSensor;
+    use twinmill::metrology::rotary_test::Sweep;
+    use twinmill::pipeline::{RotaryInstrument, RotaryRequest, default_setup, rotary_test};
+    let r = &a.rotary;
+    if a.overshoot.is_some() {
+        return Err(format!(
+            "--overshoot is not an option of --instrument {}",
+            a.instrument.name()
+        ));
+    }
+    let sweeps = r
+        .sweep
+        .iter()
+        .map(|t| Sweep::parse(t).map_err(|e| format!("--{e}")))
+        .collect::<Result<Vec<_>, _>>()?;
+    let mut setup = default_setup(a.seed);
+    if let Some(v) = &r.point {
+        setup.point_w = offset3("--point", v)?.into();
+    }
+    if let Some(v) = &r.mounting {
+        setup.mounting_mm = offset3("--mounting", v)?;
+    }
+    if let Some(v) = &r.stylus {
+        setup.tool_offset = offset3("--stylus", v)?;
+    }
+    let noise_um = a.noise.unwrap_or(0.5);
+    if !(noise_um.is_finite() && noise_um > 0.0) {
+        return Err(format!(
+            "--noise: must be a positive number of µm, got {noise_um}"
+        ));
+    }
+    let instrument = match a.instrument {
+        Instrument::Probe => RotaryInstrument::Probe {
+            sigma_mm: noise_um * 1e-3,
+        },
+        _ => {
+            let band = r.band.unwrap_or(8.0);
+            if !(band.is_finite() && band >= 6.0) {
+                return Err(format!(
+                    "--band: the light band must be at least the 6 mm measuring range, got {band}"
+                ));
+            }
+            let mut sensor = BallSensor::seed003(band);
+            sensor.accuracy_mm = noise_um * 1e-3;
+            RotaryInstrument::BallSensor {
+                sensor,
+                height_mm: r.height.unwrap_or(1.0),
+            }
+        }
+    };
+    let req = RotaryRequest {
+        instrument,
+        sweeps,
+        setup,
+        identify: if r.no_identify {
+            None
+        } else {
+            Some(r.identify.clone().unwrap_or_default())
+        },
+    };
+    let out = rotary_test(scene, &req).map_err(|e| e.to_string())?;
+    let rep = &out.report;
+    let plot = a.png.as_ref().map(|_| {
+        twinmill::report::plots::rotary_trace_plot(
+            &out.samples,
+            &rep.sweeps,
+            &format!("ISO 10791-6 {} - {}", rep.instrument, rep.scene),
+        )
+    });
+    let mut s = String::new();
+    let _ = writeln!(s, "scene         {}", rep.scene);
+    let _ = writeln!(
+        s,
+        "instrument    {} ({} measurements)",
+        rep.instrument, rep.samples
+    );
+    if matches!(a.instrument, Instrument::BallSensor) {
+        let _ = writeln!(s, "ISO 10791-6   deviation ranges of the ball (µm):");
+        for f in &rep.sweeps {
+            let _ = writeln!(
+                s,
+                "  sweep {}: {} {} … {}°  X {:.3}  Y {:.3}  Z {:.3}  (max distance {:.3})",
+                f.sweep,
+                f.axis,
+                f.range_deg[0],
+                f.range_deg[1],
+                f.deviation_range_mm[0] * 1e3,
+                f.deviation_range_mm[1] * 1e3,
+                f.deviation_range_mm[2] * 1e3,
+                f.max_distance_mm * 1e3
+            );
+        }
+    }
+    if let Some(id) = &rep.identification {
+        let _ = writeln!(
+            s,
+            "identified    location errors (offsets µm, tilts µrad; ± one standard uncertainty):"
+        );
+        let show = |t: &twinmill::pipeline::TermReport| {
+            let k = if is_angle_term(&t.name) { 1e6 } else { 1e3 };
+            let inj = t.injected.map_or(String::new(), |v| {
+                format!("   (scene injects {:+.3})", v * k)
+            });
+            format!(
+                "  {:<24} {:+10.3} ± {:.3}{inj}",
+                t.name,
+                t.value * k,
+                t.sigma * k
+            )
+        };
+        for t in id.identified.iter().chain(&id.combinations) {
+            let _ = writeln!(s, "{}", show(t));
+        }
+        if !id.not_determined.is_empty() {
+            let _ = writeln!(
+                s,
+                "not determined {} (held at the model's values; a table-side point cannot see them)",
+                id.not_determined.join(", ")
+            );
+        }
+        if !id.no_data.is_empty() {
+            let _ = writeln!(
+                s,
+                "no data       {} (no measurement depends on them: add sweeps of their axis)",
+                id.no_data.join(", ")
+            );
+        }
+        let _ = writeln!(
+            s,
+            "fit           chi² {:.1} for {} degrees of freedom; the point at ({:.4}, {:.4}, {:.4}) mm",
+            id.chi2, id.dof, id.fixed_point_mm[0], id.fixed_point_mm[1], id.fixed_point_mm[2]
+        );
+    }
+    Ok(Measured {
+        text: out.trace_csv.clone(),
+        plot,
+        summary: s,
+        json: serde_json::to_string_pretty(rep),
+    })
+}
+
+/// Whether an ISO term (or a combination led by one) is a tilt: `E<A|B|C>0…`.
+fn is_angle_term(name: &str) -> bool {
+    matches!(name.as_bytes().get(1), Some(b'A' | b'B' | b'C'))
+}
+
+/// `measure --instrument laser`.
+fn measure_laser(scene: &Scene, a: &MeasureArgs, file: &Path) -> Result<Measured, String> {
+    use twinmill::metrology::interferometer::{self, LaserError, LaserSetup, Targets};
+    let l = &a.laser;
+    let chain = &scene.chain;
+    let linear: Vec<String> = chain
+        .axes()
+        .iter()
+        .filter(|x| x.kind == twinmill::machine::chain::AxisKind::Linear)
+        .map(|x| x.letter.as_char().to_string())
+        .collect();
+    let name = l.axis.as_deref().ok_or_else(|| {
+        format!(
+            "--instrument laser needs --axis (a linear axis of the machine: {})",
+            linear.join(" ")
+        )
+    })?;
+    let mut chars = name.trim().chars();
+    let axis = match (chars.next(), chars.next()) {
+        (Some(c), None) => AxisLetter::from_char(c),
+        _ => None,
+    }
+    .ok_or_else(|| {
+        format!(
+            "--axis: '{name}' is not an axis letter (the machine's linear axes: {})",
+            linear.join(" ")
+        )
+    })?;
+    let targets = match (&l.target_list, l.from, l.to) {
+        (Some(list), _, _) => Targets::List(list.clone()),
+        (None, Some(from), Some(to)) => {
+            // ISO 230-2: at least 5 targets per metre of travel, and 5 in all.
+            let length = (to - from).abs();
+            let count = l.targets.unwrap_or(if length.is_finite() {
+                ((length / 1000.0 * 5.0).ceil() as usize).max(5)
+            } else {
+                5
+            });
+            Targets::Even {
+                start_mm: from,
+                end_mm: to,
+                count,
+            }
+        }
+        _ => {
+            return Err(
+                "--instrument laser needs --from and --to (the first and last target, \
+                        mm), or --target-list"
+                    .into(),
+            );
+        }
+    };
+    let mut held = scene.home;
+    if let Some(at) = &l.at {
+        for (letter, v) in axis_values("--at", at, chain)? {
+            if letter == axis {
+                return Err(format!(
+                    "--at: {} is the measured axis (--from and --to give its targets)",
+                    letter.as_char()
+                ));
+            }
+            held.set(letter, v);
+        }
+    }
+    let mut setup = LaserSetup::new(axis, targets, held);
+    setup.runs = l.runs.unwrap_or(setup.runs);
+    setup.overshoot_mm = a.overshoot.unwrap_or(setup.overshoot_mm);
+    if let Some(v) = &l.abbe {
+        setup.abbe_offset_mm = offset3("--abbe", v)?;
+    }
+    setup.noise_um = a.noise.unwrap_or(0.0);
+    setup.drift_um_per_run = l.drift.unwrap_or(0.0);
+    setup.seed = a.seed;
+    let m = interferometer::measure(chain, &setup).map_err(|e| match e {
+        LaserError::Axis(m) => format!("--axis {}: {m}", axis.as_char()),
+        LaserError::Setup { name, message } => format!("--{name}: {message}"),
+    })?;
+    let figures = evaluate_positioning(&m.readings, file).map_err(|e| e.to_string())?;
+    let described = setup.describe(chain);
+    let u = m.beam;
+    let mut comments = vec![
+        format!(
+            "twinmill measure {} --instrument laser ({})",
+            scene.path.display(),
+            scene.machine_name
+        ),
+        described.clone(),
+        format!(
+            "beam along ({:?}, {:?}, {:?}) in the workpiece frame",
+            u.x, u.y, u.z
+        ),
+        "deviation = position reached - target (mm), along the axis's commanded direction"
+            .to_string(),
+    ];
+    comments.extend(m.notes.iter().map(|n| format!("note: {n}")));
+    let title = format!(
+        "twinmill measure: {} laser on {}",
+        scene.path.display(),
+        axis.as_char()
+    );
+    let mut extra = vec![("set-up", described)];
+    extra.extend(m.notes.iter().map(|n| ("note", n.clone())));
+    extra.push(("wrote", file.display().to_string()));
+    Ok(Measured {
+        text: m.csv(&comments),
+        plot: a.png.as_ref().map(|_| {
+            let t = format!("ISO 230-2: {} {}", scene.name, axis.as_char());
+            twinmill::report::plots::positioning_plot(&figures, &t)
+        }),
+        summary: positioning_summary(&title, &extra, &figures),
+        json: serde_json::to_string_pretty(&figures),
+    })
+}
+
+/// `measure --instrument ballbar`.
+fn measure_ballbar(scene: &Scene, a: &MeasureArgs, file: &Path) -> Result<Measured, String> {
+    use twinmill::metrology::ballbar::{self, BallBarError, BallBarSetup, Plane, Turns};
+    let b = &a.ballbar;
+    let chain = &scene.chain;
+    let plane = match &b.plane {
+        None => Plane::Xy,
+        Some(p) => {
+            Plane::from_name(p).ok_or_else(|| format!("--plane: '{p}': expected XY, YZ or ZX"))?
+        }
+    };
+    let mut centre = scene.home;
+    if let Some(c) = &b.centre {
+        for (letter, v) in axis_values("--centre", c, chain)? {
+            centre.set(letter, v);
+        }
+    }
+    if let Some(p) = b.pitch
+        && !(p.is_finite() && p > 0.0)
+    {
+        return Err(format!("--pitch: must be a positive lead (mm), got {p}"));
+    }
+    let mut setup = BallBarSetup::new(plane, centre, b.radius.unwrap_or(100.0));
+    setup.turns = match b.direction {
+        None | Some(TurnsArg::Both) => Turns::Both,
+        Some(TurnsArg::Ccw) => Turns::Ccw,
+        Some(TurnsArg::Cw) => Turns::Cw,
+    };
+    setup.feed_mm_per_min = b.feed.unwrap_or(setup.feed_mm_per_min);
+    setup.points = b.points.unwrap_or(setup.points);
+    setup.overshoot_deg = a.overshoot.unwrap_or(setup.overshoot_deg);
+    if let Some(v) = &b.tool_ball {
+        setup.tool_ball_mm = offset3("--tool-ball", v)?;
+    }
+    if let Some(v) = &b.mount {
+        setup.mount_offset_mm = offset3("--mount", v)?;
+    }
+    setup.noise_um = a.noise.unwrap_or(0.0);
+    setup.seed = a.seed;
+    let m = ballbar::measure(chain, &setup).map_err(|e| match e {
+        BallBarError::Plane { plane, message } => format!("--plane {plane}: {message}"),
+        BallBarError::Setup { name, message } => {
+            format!("--{}: {message}", name.replace('_', "-"))
+        }
+    })?;
+    let opts = CircularOptions {
+        radius_mm: setup.radius_mm,
+        pitch_mm: b.pitch,
+    };
+    let figures = evaluate_circular(&m.samples, &opts, file).map_err(|e| match e {
+        TraceError::Unusable { message, .. } => {
+            format!("the measured trace cannot be evaluated (ISO 230-4): {message}")
+        }
+        other => other.to_string(),
+    })?;
+    let described = setup.describe(chain);
+    let c = m.centre_ball;
+    let comments = vec![
+        format!(
+            "twinmill measure {} --instrument ballbar ({})",
+            scene.path.display(),
+            scene.machine_name
+        ),
+        described.clone(),
+        format!(
+            "centre ball at ({:?}, {:?}, {:?}) in the workpiece frame",
+            c.x, c.y, c.z
+        ),
+        format!(
+            "deviation = bar length - {} mm; angle from {} towards {}; evaluate with \
+             --radius {}",
+            setup.radius_mm,
+            plane.axes().0.as_char(),
+            plane.axes().1.as_char(),
+            setup.radius_mm
+        ),
+    ];
+    let title = format!(
+        "twinmill measure: {} ball bar in {}",
+        scene.path.display(),
+        plane.name()
+    );
+    let extra = vec![("set-up", described), ("wrote", file.display().to_string())];
+    Ok(Measured {
+        text: m.csv(&comments),
+        plot: a.png.as_ref().map(|_| {
+            let t = format!("ISO 230-4: {} {}", scene.name, plane.name());
+            twinmill::report::plots::polar_plot(&m.samples, &figures, &t)
+        }),
+        summary: circular_summary(&title, &extra, &figures),
+        json: serde_json::to_string_pretty(&figures),
+    })
+}
+
 /// Encodes a drawn plot and writes it whole to `png`, or says why not.
 fn write_plot(
     png: &Path,
@@ -702,7 +1472,10 @@ fn main() -> ExitCode {
                 }
             }
             print_out(
-                || positioning_summary(&file, &figures),
+                || {
+                    let title = format!("twinmill evaluate iso230-2: {}", file.display());
+                    positioning_summary(&title, &[], &figures)
+                },
                 json.then(|| serde_json::to_string_pretty(&figures)),
             )
         }
@@ -742,7 +1515,10 @@ fn main() -> ExitCode {
                 }
             }
             print_out(
-                || circular_summary(&file, &figures),
+                || {
+                    let title = format!("twinmill evaluate iso230-4: {}", file.display());
+                    circular_summary(&title, &[], &figures)
+                },
                 json.then(|| serde_json::to_string_pretty(&figures)),
             )
         }
@@ -770,6 +1546,7 @@ fn main() -> ExitCode {
             ],
             json,
         ),
+        Command::Measure(args) => measure(*args),
         Command::Nc {
             command: NcCommand::BenchProgram { blocks },
         } => {

@@ -41,7 +41,9 @@
 //! both directions the sin 2θ term splits into squareness (the part both directions share)
 //! and servo mismatch (the part that changes sign with the direction); from one direction it
 //! cannot be split, and the report says so. A lost motion b (the table lagging b/2 behind the
-//! command after a reversal) shows as a step of +b at the reversal.
+//! command after a reversal) shows as a step of +b at the reversal. A sample taken at a
+//! reversal itself (θ on an axis, as a trace sampled at whole degrees has) carries the state
+//! it arrived with.
 //!
 //! **Invariant:** only finite traces of at least 8 points per direction, covering at least
 //! 90° of the circle, are evaluated; a term the trace cannot separate (an arc that does not
@@ -275,11 +277,36 @@ pub fn parse_trace(text: &str, path: &Path) -> Result<Vec<Sample>, TraceError> {
     Ok(out)
 }
 
+/// The trace file of `samples` (see the module documentation): `comments` first, each as
+/// a `#` line, then the header `direction,angle[rad],deviation` and one sample a row, the
+/// angle in radians and the deviation in mm. Every number is written in its shortest exact
+/// form, so [`parse_trace`] reads back the same samples bit for bit.
+pub fn trace_csv(samples: &[Sample], comments: &[String]) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    for c in comments {
+        for line in c.lines() {
+            let _ = writeln!(s, "# {line}");
+        }
+    }
+    s.push_str("direction,angle[rad],deviation\n");
+    for x in samples {
+        let _ = writeln!(s, "{},{:?},{:?}", name(x.turn), x.angle_rad, x.deviation_mm);
+    }
+    s
+}
+
 /// Fewest samples per direction.
 const MIN_POINTS: usize = 8;
 
 /// Shortest arc a direction must cover (rad): a quarter circle.
 const MIN_SPAN: Real = std::f64::consts::FRAC_PI_2;
+
+/// A sample whose angle is within this of an axis (rad: |sin θ| or |cos θ| below it) is at
+/// that axis's reversal: 1e-9 rad is 0.1 nm of arc on a 100 mm circle, far inside the travel
+/// over which any lost motion is taken up, and far above the rounding of an angle given in
+/// degrees (sin of π in f64 is 1.2e-16, not 0).
+const AT_REVERSAL: Real = 1e-9;
 
 /// A diagnostic basis column is used only when its values span at least this fraction of
 /// its largest possible magnitude over the samples (an arc that never reaches an axis's
@@ -320,18 +347,24 @@ fn lsc(pts: &[(Real, Real)], r0: Real) -> (Real, Real, Real) {
 /// The diagnostic basis at θ for a direction; cyclic columns (two each) only with a pitch.
 fn basis(turn: Turn, t: Real, r: Real, pitch: Option<Real>) -> Vec<Real> {
     let (s, c) = t.sin_cos();
-    let sgn = |v: Real| {
-        if v > 0.0 {
-            1.0
-        } else if v < 0.0 {
-            -1.0
-        } else {
-            0.0
-        }
-    };
+    let sgn = |v: Real| if v > 0.0 { 1.0 } else { -1.0 };
     let dir = match turn {
         Turn::Ccw => 1.0,
         Turn::Cw => -1.0,
+    };
+    // The side of each axis's reversal a sample is on: that of sin θ (axis 1) and cos θ
+    // (axis 2); a sample at the reversal itself carries the state it arrived with, the side
+    // of the angles just before it in the direction of travel (sin(θ − dir·δ) ≈ −dir·δ·cos θ,
+    // cos(θ − dir·δ) ≈ dir·δ·sin θ).
+    let side_1 = if s.abs() > AT_REVERSAL {
+        sgn(s)
+    } else {
+        sgn(-dir * c)
+    };
+    let side_2 = if c.abs() > AT_REVERSAL {
+        sgn(c)
+    } else {
+        sgn(dir * s)
     };
     let mut b = vec![
         1.0,
@@ -339,8 +372,8 @@ fn basis(turn: Turn, t: Real, r: Real, pitch: Option<Real>) -> Vec<Real> {
         s,
         (2.0 * t).cos(),
         (2.0 * t).sin(),
-        dir * 0.5 * sgn(s) * c,
-        -dir * 0.5 * sgn(c) * s,
+        dir * 0.5 * side_1 * c,
+        -dir * 0.5 * side_2 * s,
         c * c * s,
         s * s * c,
     ];
@@ -798,6 +831,42 @@ mod tests {
             Diagnosis::NotDetermined { .. }
         ));
         assert!(f.h.is_none());
+    }
+
+    /// A trace sampled at whole degrees has samples on the axes, where each axis reverses:
+    /// there the machine still carries the state it arrived with. Read with a zero or
+    /// rounding-signed column (sin π is +1.2e-16 in f64), the cw trace's reversal came out
+    /// 4 % short while the ccw one was right.
+    #[test]
+    fn samples_at_the_reversals_carry_the_state_they_arrived_with() {
+        let b = 4e-3;
+        let r = 100.0;
+        let mut s = Vec::new();
+        for (turn, dir) in [(Turn::Ccw, 1.0), (Turn::Cw, -1.0)] {
+            for k in 0..360 {
+                let deg = (dir * k as Real).rem_euclid(360.0);
+                let t = deg.to_radians();
+                // X's last motion: against sin θ (ccw), with it (cw); on the axis, the way
+                // it arrived: + at 0°, − at 180°.
+                let vx = match deg {
+                    0.0 => 1.0,
+                    180.0 => -1.0,
+                    _ => -dir * t.sin().signum(),
+                };
+                let x = r * t.cos() - 0.5 * b * vx;
+                s.push(Sample {
+                    turn,
+                    angle_rad: t,
+                    deviation_mm: x.hypot(r * t.sin()) - r,
+                });
+            }
+        }
+        let f = eval(&s, r);
+        for d in &f.directions {
+            let b1 = val(&d.reversal_1_mm);
+            assert!((b1 - b).abs() < 1e-6, "{:?}: {b1}", d.direction);
+            assert!(d.residual_rms_mm < 1e-6, "{:?}", d.direction);
+        }
     }
 
     #[test]

@@ -310,6 +310,32 @@ pub fn parse_readings(text: &str, path: &Path) -> Result<Vec<Reading>, ReadingsE
     Ok(out)
 }
 
+/// The long readings file of `readings` (see the module documentation): `comments` first,
+/// each as a `#` line, then the header `target,direction,run,deviation` and one reading a
+/// row, in mm. Every number is written in its shortest exact form, so [`parse_readings`]
+/// reads back the same values bit for bit.
+pub fn readings_csv(readings: &[Reading], comments: &[String]) -> String {
+    use std::fmt::Write as _;
+    let mut s = String::new();
+    for c in comments {
+        for line in c.lines() {
+            let _ = writeln!(s, "# {line}");
+        }
+    }
+    s.push_str("target,direction,run,deviation\n");
+    for r in readings {
+        let _ = writeln!(
+            s,
+            "{:?},{},{},{:?}",
+            r.target_mm,
+            r.direction.sign(),
+            r.run,
+            r.deviation_mm
+        );
+    }
+    s
+}
+
 /// The deviations of one target in one direction, by run.
 type Runs = BTreeMap<u32, Real>;
 

@@ -39,6 +39,8 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "positioning",
             "circular",
             "ball_sensor",
+            "interferometer",
+            "ballbar",
             "rotary_test",
         ],
     ),
@@ -64,7 +66,9 @@ const LAYOUT: &[(&str, &[&str])] = &[
     ("scene", &[]),
     (
         "pipeline",
-        &["simulate", "run", "fit", "correct", "identify", "design"],
+        &[
+            "simulate", "run", "fit", "correct", "identify", "design", "rotary",
+        ],
     ),
     ("output", &[]),
 ];

@@ -14,6 +14,7 @@ mod simulate;
 mod sweep;
 mod evaluate;
 mod error_motions;
+mod instruments;
 mod rotary_location;
 
 use nalgebra::{Matrix4, Vector4};

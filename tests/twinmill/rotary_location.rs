@@ -251,3 +251,126 @@ fn a_test_that_never_tilts_a_names_its_terms_as_without_data() {
     let alone: Vec<&str> = r.parameters.iter().map(|e| e.name.as_str()).collect();
     assert_eq!(alone, ["EX0C", "EY0C", "EA0C", "EB0C"]);
 }
+
+#[test]
+fn measure_ball_sensor_identifies_the_scene_s_location_errors_and_writes_the_trace() {
+    let sb = crate::Sandbox::new("measure-rotary");
+    sb.write("trunnion-ac.toml", builtin("trunnion-ac.toml").as_bytes());
+    for instrument in ["ball-sensor", "probe"] {
+        let (code, stdout, stderr) = sb.run(&[
+            "measure",
+            "trunnion-ac.toml",
+            "--instrument",
+            instrument,
+            "--out",
+            "t.csv",
+            "--png",
+            "t.png",
+            "--json",
+        ]);
+        assert_eq!(code, 0, "{stderr}");
+        let v: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+        assert_eq!(v["instrument"], instrument);
+        let id = &v["identification"];
+        let mut unseen: Vec<&str> = id["not_determined"]
+            .as_array()
+            .expect("list")
+            .iter()
+            .filter_map(|x| x.as_str())
+            .collect();
+        unseen.sort();
+        assert_eq!(unseen, ["EC0C", "EZ0C"]);
+        let identified = id["identified"].as_array().expect("list");
+        assert_eq!(identified.len(), 8);
+        // Each injected term recovered within 4 of its uncertainties (one seed: a single
+        // 3σ miss among 16 would not be a fault).
+        for t in identified {
+            let (value, sigma) = (
+                t["value"].as_f64().expect("v"),
+                t["sigma"].as_f64().expect("s"),
+            );
+            let injected = t["injected"]
+                .as_f64()
+                .expect("the scene injects every term");
+            assert!(
+                (value - injected).abs() <= 4.0 * sigma,
+                "{instrument} {}: {value} vs {injected} ± {sigma}",
+                t["name"]
+            );
+        }
+        let csv = std::fs::read_to_string(sb.dir.join("t.csv")).expect("trace");
+        // Header plus the default test's 12 + 12 + 9 + 13 positions.
+        assert_eq!(csv.lines().count(), 1 + 46);
+        assert!(csv.starts_with("sweep,axis,angle_deg,C_deg,A_deg,Y_mm,X_mm,Z_mm,dx_mm"));
+        assert!(sb.dir.join("t.png").exists());
+    }
+}
+
+#[test]
+fn measure_rotary_refuses_bad_input_naming_the_problem_and_writes_nothing() {
+    let sb = crate::Sandbox::new("measure-rotary-bad");
+    sb.write("trunnion-ac.toml", builtin("trunnion-ac.toml").as_bytes());
+    sb.write("xyz.toml", builtin("xyz-error-motions.toml").as_bytes());
+    let cases: &[(&str, &[&str], &str)] = &[
+        (
+            "trunnion-ac.toml",
+            &["--sweep", "X:0:90:4"],
+            "axis X is not a rotary axis",
+        ),
+        ("trunnion-ac.toml", &["--sweep", "C:0:90:1"], "at least 2"),
+        (
+            "trunnion-ac.toml",
+            &["--sweep", "C:0:nan:4"],
+            "not a finite number",
+        ),
+        (
+            "trunnion-ac.toml",
+            &["--height", "3"],
+            "height above the sheets",
+        ),
+        ("trunnion-ac.toml", &["--band", "2"], "--band"),
+        ("trunnion-ac.toml", &["--mounting", "5,0,0"], "micrometer"),
+        (
+            "trunnion-ac.toml",
+            &["--point", "1,2"],
+            "--point needs three numbers",
+        ),
+        ("trunnion-ac.toml", &["--noise", "0"], "--noise"),
+        (
+            "trunnion-ac.toml",
+            &["--identify", "EQ0C"],
+            "unknown location",
+        ),
+        (
+            "trunnion-ac.toml",
+            &["--radius", "100"],
+            "--radius is an option of",
+        ),
+        ("xyz.toml", &[], "no rotary axis"),
+    ];
+    for (scene, extra, want) in cases {
+        let mut args = vec!["measure", scene, "--instrument", "ball-sensor"];
+        args.extend(extra.iter().copied());
+        args.extend(["--out", "t.csv", "--png", "p.png"]);
+        let (code, stdout, stderr) = sb.run(&args);
+        assert_ne!(code, 0, "{args:?}");
+        assert!(stdout.is_empty(), "{args:?}: {stdout}");
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+        assert_eq!(stderr.trim_end().lines().count(), 1, "{args:?}: {stderr}");
+        assert!(stderr.contains(want), "{args:?}: '{want}' not in {stderr}");
+        assert!(!sb.dir.join("t.csv").exists() && !sb.dir.join("p.png").exists());
+    }
+    let (code, _, stderr) = sb.run(&[
+        "measure",
+        "trunnion-ac.toml",
+        "--instrument",
+        "probe",
+        "--band",
+        "8",
+    ]);
+    assert_ne!(code, 0);
+    assert!(
+        stderr.contains("--band is an option of --instrument ball-sensor"),
+        "{stderr}"
+    );
+}
