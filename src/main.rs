@@ -1595,7 +1595,7 @@ fn main() -> ExitCode {
             };
             let stdout = std::io::stdout();
             let mut out = std::io::BufWriter::with_capacity(1 << 16, stdout.lock());
-            let r = write_jsonl(interp, events, |s| out.write_all(s.as_bytes()));
+            let r = write_jsonl(interp, events, |s| out.write_all(s));
             let _ = out.flush();
             match r {
                 Ok(Ok(())) => ExitCode::SUCCESS,

@@ -619,10 +619,11 @@ pub fn parse_program(text: &str, path: &Path, start: AxisValues) -> Result<Progr
 pub fn write_jsonl(
     interp: Interpreter,
     events: bool,
-    mut sink: impl FnMut(&str) -> std::io::Result<()>,
+    mut sink: impl FnMut(&[u8]) -> std::io::Result<()>,
 ) -> Result<Result<(), NcError>, std::io::Error> {
     let mut seq = 0;
-    let mut line = String::with_capacity(512);
+    let mut line = Vec::with_capacity(512);
+    let mut memo = output::PointMemo::default();
     for rec in interp {
         let rec = match rec {
             Ok(r) => r,
@@ -632,8 +633,8 @@ pub fn write_jsonl(
             continue;
         }
         line.clear();
-        output::write_json(&mut line, seq, &rec);
-        line.push('\n');
+        output::write_json_with(&mut line, seq, &rec, &mut memo);
+        line.push(b'\n');
         seq += 1;
         sink(&line)?;
     }

@@ -7,7 +7,7 @@
 //! `turns`, `rotation`, `normal`, `radius`, `radius_end`, `sweep_deg`), plus `line` and
 //! `file` (the source line of the block).
 
-use std::fmt::Write as _;
+use std::io::Write as _;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -158,65 +158,172 @@ fn r6(v: Real) -> Real {
     if r == 0.0 { 0.0 } else { r }
 }
 
-fn num(out: &mut String, v: Real) {
+fn num(out: &mut Vec<u8>, v: Real) {
+    let x = v * 1e6;
+    if x.abs() < FAST_LIMIT_MICRO {
+        fixed6(out, x);
+        return;
+    }
     let v = r6(v);
-    if v.is_finite() {
-        if v.fract() == 0.0 && v.abs() < 1e15 {
-            let _ = write!(out, "{v:.1}");
-        } else {
-            let _ = write!(out, "{v}");
-        }
+    if !v.is_finite() {
+        out.extend_from_slice("null".as_bytes());
+    } else if v.fract() == 0.0 && v.abs() < 1e15 {
+        let _ = write!(out, "{v:.1}");
     } else {
-        out.push_str("null");
+        let _ = write!(out, "{v}");
     }
 }
 
-fn point6(out: &mut String, p: &AxisValues) {
-    let a = p.to_array();
-    out.push('{');
-    for (i, name) in ["x", "y", "z", "a", "b", "c"].iter().enumerate() {
-        if i > 0 {
-            out.push_str(", ");
+/// Below this magnitude (in micrometres, 1e9 mm) a value rounded to 6 decimals is written by
+/// [`fixed6`]: doubles there are spaced by less than 1e-6 / 2, so every multiple of 1e-6 is
+/// its own double and its shortest round-trip form is the multiple's decimal with trailing
+/// zeros dropped — exactly what `{}` prints for [`r6`]'s value (and `{:.1}` for whole
+/// numbers).
+const FAST_LIMIT_MICRO: Real = 1e15;
+
+/// Writes `x / 1e6` rounded to 6 decimals (half away from zero, as [`r6`]) as `{}` would,
+/// `{:.1}` for whole numbers: integer digits, then the fraction's digits without trailing
+/// zeros; zero, and what rounds to it, is `0.0`.
+fn fixed6(out: &mut Vec<u8>, x: Real) {
+    let a = x.abs();
+    // round(a) without a libm call: floor(a + 0.5), undone where the addition rounded up
+    // across an integer (a just below a half).
+    let mut micro = (a + 0.5) as u64;
+    if micro as Real - a > 0.5 {
+        micro -= 1;
+    }
+    if micro == 0 {
+        out.extend_from_slice("0.0".as_bytes());
+        return;
+    }
+    if x < 0.0 {
+        out.push(b'-');
+    }
+    let (int, mut frac) = (micro / 1_000_000, micro % 1_000_000);
+    digits(out, int);
+    out.push(b'.');
+    if frac == 0 {
+        out.push(b'0');
+        return;
+    }
+    let mut width = 6;
+    while frac % 10 == 0 {
+        frac /= 10;
+        width -= 1;
+    }
+    let mut buf = [b'0'; 6];
+    for slot in buf[..width].iter_mut().rev() {
+        *slot = b'0' + (frac % 10) as u8;
+        frac /= 10;
+    }
+    for &b in &buf[..width] {
+        out.push(b);
+    }
+}
+
+/// Writes the decimal digits of `n`.
+fn digits(out: &mut Vec<u8>, mut n: u64) {
+    let mut buf = [0u8; 20];
+    let mut i = buf.len();
+    loop {
+        i -= 1;
+        buf[i] = b'0' + (n % 10) as u8;
+        n /= 10;
+        if n == 0 {
+            break;
         }
-        let _ = write!(out, "\"{name}\": ");
+    }
+    for &b in &buf[i..] {
+        out.push(b);
+    }
+}
+
+fn point6(out: &mut Vec<u8>, p: &AxisValues) {
+    let a = p.to_array();
+    out.push(b'{');
+    for (i, key) in [
+        "\"x\": ",
+        ", \"y\": ",
+        ", \"z\": ",
+        ", \"a\": ",
+        ", \"b\": ",
+        ", \"c\": ",
+    ]
+    .iter()
+    .enumerate()
+    {
+        out.extend_from_slice(key.as_bytes());
         num(out, a[i]);
     }
-    out.push('}');
+    out.push(b'}');
 }
 
-fn json_string(out: &mut String, s: &str) {
-    out.push('"');
+fn json_string(out: &mut Vec<u8>, s: &str) {
+    out.push(b'"');
     for ch in s.chars() {
         match ch {
-            '"' => out.push_str("\\\""),
-            '\\' => out.push_str("\\\\"),
-            '\n' => out.push_str("\\n"),
+            '"' => out.extend_from_slice("\\\"".as_bytes()),
+            '\\' => out.extend_from_slice("\\\\".as_bytes()),
+            '\n' => out.extend_from_slice("\\n".as_bytes()),
             c if (c as u32) < 0x20 => {
                 let _ = write!(out, "\\u{:04x}", c as u32);
             }
-            c => out.push(c),
+            c => {
+                let mut buf = [0u8; 4];
+                out.extend_from_slice(c.encode_utf8(&mut buf).as_bytes());
+            }
         }
     }
-    out.push('"');
+    out.push(b'"');
 }
 
 /// Appends the JSON line (without newline) of `rec` with sequence number `seq` to `out`.
-pub fn write_json(out: &mut String, seq: usize, rec: &Record) {
-    let _ = write!(out, "{{\"seq\": {seq}, ");
+pub fn write_json(out: &mut Vec<u8>, seq: usize, rec: &Record) {
+    write_json_with(out, seq, rec, &mut PointMemo::default());
+}
+
+/// The text of the last end point written, so that the next record's start — the same
+/// point whenever motion is continuous — is copied rather than formatted again.
+#[derive(Clone, Debug, Default)]
+pub struct PointMemo {
+    point: Option<[u64; 6]>,
+    text: Vec<u8>,
+}
+
+impl PointMemo {
+    fn write(&mut self, out: &mut Vec<u8>, p: &AxisValues) {
+        let bits = p.to_array().map(Real::to_bits);
+        if self.point != Some(bits) {
+            self.text.clear();
+            point6(&mut self.text, p);
+            self.point = Some(bits);
+        }
+        out.extend_from_slice(&self.text);
+    }
+}
+
+/// [`write_json`] with a [`PointMemo`] carried from one record to the next (the same
+/// bytes, fewer numbers formatted).
+pub fn write_json_with(out: &mut Vec<u8>, seq: usize, rec: &Record, memo: &mut PointMemo) {
+    out.extend_from_slice("{\"seq\": ".as_bytes());
+    digits(out, seq as u64);
+    out.extend_from_slice(", ".as_bytes());
     match &rec.body {
         RecordBody::Motion(m) => {
-            let _ = write!(out, "\"kind\": \"{}\", ", m.kind.name());
+            out.extend_from_slice("\"kind\": \"".as_bytes());
+            out.extend_from_slice(m.kind.name().as_bytes());
+            out.extend_from_slice("\", ".as_bytes());
             write_n(out, rec.n);
-            out.push_str(", \"start\": ");
-            point6(out, &m.start);
-            out.push_str(", \"end\": ");
-            point6(out, &m.end);
+            out.extend_from_slice(", \"start\": ".as_bytes());
+            memo.write(out, &m.start);
+            out.extend_from_slice(", \"end\": ".as_bytes());
+            memo.write(out, &m.end);
             if let Some(a) = &m.arc {
-                out.push_str(", \"center\": {\"x\": ");
+                out.extend_from_slice(", \"center\": {\"x\": ".as_bytes());
                 num(out, a.center.x);
-                out.push_str(", \"y\": ");
+                out.extend_from_slice(", \"y\": ".as_bytes());
                 num(out, a.center.y);
-                out.push_str(", \"z\": ");
+                out.extend_from_slice(", \"z\": ".as_bytes());
                 num(out, a.center.z);
                 let dir = if a.rotation > 0 { "ccw" } else { "cw" };
                 let _ = write!(
@@ -228,56 +335,141 @@ pub fn write_json(out: &mut String, seq: usize, rec: &Record) {
                 );
                 for (i, c) in a.normal.iter().enumerate() {
                     if i > 0 {
-                        out.push_str(", ");
+                        out.extend_from_slice(", ".as_bytes());
                     }
                     num(out, *c);
                 }
-                out.push(']');
+                out.push(b']');
             }
-            out.push_str(", \"feed\": ");
+            out.extend_from_slice(", \"feed\": ".as_bytes());
             match m.feed {
                 Some(f) => num(out, f),
-                None => out.push_str("null"),
+                None => out.extend_from_slice("null".as_bytes()),
             }
             if m.feed_per_rev {
-                out.push_str(", \"feed_unit\": \"mm/rev\"");
+                out.extend_from_slice(", \"feed_unit\": \"mm/rev\"".as_bytes());
             }
             if let Some(a) = &m.arc {
-                out.push_str(", \"radius\": ");
+                out.extend_from_slice(", \"radius\": ".as_bytes());
                 num(out, a.radius);
-                out.push_str(", \"radius_end\": ");
+                out.extend_from_slice(", \"radius_end\": ".as_bytes());
                 num(out, a.radius_end);
-                out.push_str(", \"sweep_deg\": ");
+                out.extend_from_slice(", \"sweep_deg\": ".as_bytes());
                 num(out, a.sweep_deg);
             }
         }
         RecordBody::Event(e) => {
-            out.push_str("\"kind\": \"event\", ");
+            out.extend_from_slice("\"kind\": \"event\", ".as_bytes());
             write_n(out, rec.n);
             let _ = write!(out, ", \"call\": \"{}\", \"args\": [", e.call);
             for (i, a) in e.args.iter().enumerate() {
                 if i > 0 {
-                    out.push_str(", ");
+                    out.extend_from_slice(", ".as_bytes());
                 }
                 match a {
                     EventArg::Num(v) => num(out, *v),
                     EventArg::Text(t) => json_string(out, t),
                 }
             }
-            out.push(']');
+            out.push(b']');
         }
     }
-    let _ = write!(out, ", \"line\": {}", rec.line);
-    out.push('}');
+    out.extend_from_slice(", \"line\": ".as_bytes());
+    digits(out, rec.line as u64);
+    out.push(b'}');
 }
 
-fn write_n(out: &mut String, n: Option<Real>) {
-    out.push_str("\"n\": ");
+fn write_n(out: &mut Vec<u8>, n: Option<Real>) {
+    out.extend_from_slice("\"n\": ".as_bytes());
     match n {
         Some(v) if v.fract() == 0.0 && v.abs() < 1e15 => {
-            let _ = write!(out, "{}", v as i64);
+            if v < 0.0 {
+                out.push(b'-');
+            }
+            digits(out, v.abs() as u64);
         }
         Some(v) => num(out, v),
-        None => out.push_str("null"),
+        None => out.extend_from_slice("null".as_bytes()),
+    }
+}
+
+#[cfg(test)]
+mod format_tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// What the writer printed before the fast path: std's shortest round-trip `{}`, with
+    /// `{:.1}` for whole numbers (the oracle).
+    fn std_num(v: Real) -> String {
+        let v = r6(v);
+        if !v.is_finite() {
+            "null".into()
+        } else if v.fract() == 0.0 && v.abs() < 1e15 {
+            format!("{v:.1}")
+        } else {
+            format!("{v}")
+        }
+    }
+
+    fn fast(v: Real) -> String {
+        let mut s = Vec::new();
+        num(&mut s, v);
+        String::from_utf8(s).expect("ASCII")
+    }
+
+    #[test]
+    fn numbers_print_as_std_prints_them_at_the_edges() {
+        for v in [
+            0.0,
+            -0.0,
+            1e-7,
+            -4e-7,
+            5e-7,
+            1e-6,
+            -1e-6,
+            0.25,
+            -0.1,
+            0.3,
+            1.0 / 3.0,
+            2.0 / 3.0,
+            123.4565,
+            123.4575,
+            999_999_999.999_999,
+            -999_999_999.999_999,
+            1e9,
+            1e9 + 0.5,
+            -1e12,
+            1e15,
+            1e17,
+            12_345.678_901_5,
+            0.000_000_5,
+            99.999_999_6,
+        ] {
+            assert_eq!(fast(v), std_num(v), "{v:e}");
+        }
+        assert_eq!(fast(Real::NAN), "null");
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(20_000))]
+        #[test]
+        fn numbers_print_as_std_prints_them(m in -1e10f64..1e10, e in -8i32..4) {
+            let v = m * 10f64.powi(e - 6);
+            prop_assert_eq!(fast(v), std_num(v));
+        }
+
+        #[test]
+        fn values_near_half_a_micrometre_print_as_std_prints_them(k in -1_000_000_000_000i64..1_000_000_000_000, ulps in -3i64..4) {
+            // x·1e6 within a few ulps of k + ½: where the rounding is decided.
+            let half = (k as Real + 0.5) / 1e6;
+            let v = Real::from_bits((half.to_bits() as i64 + ulps) as u64);
+            prop_assert_eq!(fast(v), std_num(v));
+        }
+
+        #[test]
+        fn multiples_of_a_micrometre_print_as_std_prints_them(k in -1_000_000_000_000_000i64..1_000_000_000_000_000) {
+            let v = k as Real / 1e6;
+            prop_assert_eq!(fast(v), std_num(v));
+        }
     }
 }
