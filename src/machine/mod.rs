@@ -11,6 +11,7 @@
 
 pub mod error_motion;
 pub mod chain;
+pub mod hexapod;
 
 /// The six components of a deviation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
