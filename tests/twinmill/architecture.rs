@@ -21,7 +21,10 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "synthetic",
         ],
     ),
-    ("machine", &["error_motion", "chain"]),
+    (
+        "machine",
+        &["error_motion", "chain", "hexapod", "hexapod_accuracy"],
+    ),
     (
         "cutting",
         &[
@@ -59,12 +62,16 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "correct",
             "identify",
             "design",
+            "hexapod",
         ],
     ),
     ("scene", &[]),
+    ("hexapod_scene", &[]),
     (
         "pipeline",
-        &["simulate", "run", "fit", "correct", "identify", "design"],
+        &[
+            "simulate", "run", "fit", "correct", "identify", "design", "hexapod",
+        ],
     ),
     ("output", &[]),
 ];

@@ -15,6 +15,7 @@ mod sweep;
 mod evaluate;
 mod error_motions;
 mod rotary_location;
+mod hexapod;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};
