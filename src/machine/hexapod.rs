@@ -762,6 +762,13 @@ impl Hexapod {
                 break;
             }
             residual = r;
+            if r <= tol::STRUT_ROUNDING {
+                return Ok(FkSolution {
+                    pose,
+                    iterations: it,
+                    residual_mm: r,
+                });
+            }
             let lu = j.lu();
             let dx = well_conditioned(&lu)
                 .then(|| lu.solve(&res))
