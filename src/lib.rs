@@ -20,5 +20,6 @@ pub mod calibration;
 pub mod report;
 
 pub mod scene;
+pub mod hexapod_scene;
 pub mod pipeline;
 pub mod output;

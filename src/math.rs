@@ -60,6 +60,19 @@ pub mod tol {
     /// depart from the true tool motion: 0.1 µm, five times below the 0.5 µm accuracy the
     /// face tests demand.
     pub const ROTARY_STEP_BOUND: Real = 1e-4;
+
+    /// Forward kinematics of a hexapod has converged when every strut length of the pose
+    /// is within this of the given one (mm): 1 pm, genhexkins' tolerance (1e-9), a
+    /// millionth of the µm scale and still far above rounding of lengths up to 10 m.
+    pub const STRUT_RESIDUAL: Real = 1e-9;
+
+    /// A strut residual below this (mm) is rounding: another Newton step cannot improve the
+    /// pose (f64 spacing at strut lengths up to 4 m is below 1e-12 mm).
+    pub const STRUT_ROUNDING: Real = 1e-12;
+
+    /// A 6×6 kinematic Jacobian whose smallest LU pivot is below this fraction of its
+    /// largest is singular: a strut change of 1 nm would move the pose by metres there.
+    pub const JACOBIAN_CONDITION: Real = 1e-10;
 }
 
 /// Degrees to radians.

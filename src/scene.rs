@@ -65,6 +65,13 @@ pub enum SceneError {
         /// The sections it needs, and what they hold.
         what: String,
     },
+    /// The scene describes a hexapod (`[machine] kind = "hexapod"`), not a serial chain:
+    /// load it with [`crate::hexapod_scene::HexapodScene`].
+    #[error("{}: a hexapod scene ([machine] kind = \"hexapod\"): only the `twinmill hexapod` commands drive it", path.display())]
+    Hexapod {
+        /// The scene file.
+        path: PathBuf,
+    },
 }
 
 /// A part of a scene that a command needs beyond `[machine]`, `[tool]`, `[stock]` and the
@@ -185,6 +192,9 @@ struct StudyFile {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct MachineFile {
+    /// "serial" (the default); "hexapod" scenes are loaded by `hexapod_scene`.
+    #[serde(default)]
+    kind: Option<Spanned<String>>,
     #[serde(default)]
     name: String,
     axes: Spanned<Vec<AxisFile>>,
@@ -192,6 +202,20 @@ struct MachineFile {
     spindle: String,
     #[serde(default)]
     home: BTreeMap<String, Spanned<Real>>,
+}
+
+/// `[machine] kind` of a scene text, if it has one (read leniently: the full parse reports
+/// any other problem).
+pub fn machine_kind(text: &str) -> Option<String> {
+    #[derive(Deserialize)]
+    struct Peek {
+        machine: Option<KindPeek>,
+    }
+    #[derive(Deserialize)]
+    struct KindPeek {
+        kind: Option<String>,
+    }
+    toml::from_str::<Peek>(text).ok()?.machine?.kind
 }
 
 fn default_spindle() -> String {
@@ -883,7 +907,7 @@ fn scanner_config(ctx: &Ctx, s: &ScannerFile) -> Result<ScannerConfig, SceneErro
 }
 
 /// 1-based line and column (in characters) of byte offset `at`.
-fn line_col(text: &str, at: usize) -> (usize, usize) {
+pub fn line_col(text: &str, at: usize) -> (usize, usize) {
     let at = at.min(text.len());
     let before = text.get(..at).unwrap_or(text);
     let line = before.matches('\n').count() + 1;
@@ -891,7 +915,8 @@ fn line_col(text: &str, at: usize) -> (usize, usize) {
     (line, col)
 }
 
-fn read_text(path: &Path) -> Result<String, SceneError> {
+/// Reads a scene file as UTF-8 text.
+pub fn read_text(path: &Path) -> Result<String, SceneError> {
     let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
         path: path.to_path_buf(),
         source,
@@ -1209,12 +1234,28 @@ impl Scene {
     /// Parses and validates scene text; the stock must fit in `memory`.
     pub fn parse_with(text: &str, path: &Path, memory: &MemoryBudget) -> Result<Scene, SceneError> {
         let ctx = Ctx { path, text };
+        if machine_kind(text).as_deref() == Some("hexapod") {
+            return Err(SceneError::Hexapod {
+                path: path.to_path_buf(),
+            });
+        }
         let file: SceneFile = toml::from_str(text).map_err(|e| {
             let span = e.span().unwrap_or(0..0);
             ctx.err(span, e.message().trim().to_string())
         })?;
         let name = scene_name(&ctx, file.name.as_ref())?;
         // Machine.
+        if let Some(k) = &file.machine.kind
+            && k.get_ref() != "serial"
+        {
+            return Err(ctx.err(
+                k.span(),
+                format!(
+                    "machine kind must be 'serial' or 'hexapod', got '{}'",
+                    k.get_ref()
+                ),
+            ));
+        }
         let mut axes = Vec::new();
         for a in file.machine.axes.get_ref() {
             let mut chars = a.name.get_ref().chars();

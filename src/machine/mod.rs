@@ -1,16 +1,22 @@
-//! **The machine**: what turns axis values into tool poses. A machine is a kinematic chain
-//! of linear and rotary axes from the workpiece to the tool, with an exact rigid deviation
-//! at every joint ([`chain`]) and, optionally, error motions of each axis as functions of
-//! its position ([`error_motion`]); a scene describes it as data, never as code.
+//! **The machine**: what turns axis values into tool poses. A serial machine is a kinematic
+//! chain of linear and rotary axes from the workpiece to the tool, with an exact rigid
+//! deviation at every joint ([`chain`]) and, optionally, error motions of each axis as
+//! functions of its position ([`error_motion`]); a parallel machine is a hexapod (Stewart
+//! platform) of six struts with its 42 kinematic parameters ([`hexapod`]), and seed 001's
+//! accuracy measures on it ([`hexapod_accuracy`]). A scene describes either as data, never
+//! as code.
 //!
 //! Owns the chain, the deviation names (`dy_AY`, `gamma_YX`, …), the six components of a
 //! deviation ([`Component`]), the error-motion names (`EXX`, `EBX`, …) and their exact
-//! transforms.
+//! transforms; the hexapod, its parameter names (`bx_1`, `ax_1`, `l0_1`, …) and
+//! kinematics.
 //! May use [`crate::math`] and [`crate::nc`] (axis letters and values). Knows nothing of
 //! tools, stock, measurements or files.
 
 pub mod error_motion;
 pub mod chain;
+pub mod hexapod;
+pub mod hexapod_accuracy;
 
 /// The six components of a deviation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]

@@ -15,6 +15,7 @@ mod correct;
 mod identify;
 mod design;
 mod rotary;
+pub mod hexapod;
 
 pub use correct::{CorrectOutcome, correct, identified_model};
 pub use design::{DesignOutcome, MAX_DESIGN_ROUNDS, design_scene};

@@ -20,6 +20,7 @@ mod fit;
 mod correct;
 mod identify;
 mod design;
+pub mod hexapod;
 
 pub use correct::{CorrectIteration, CorrectReport, UncorrectableReport};
 pub use design::DesignReport;

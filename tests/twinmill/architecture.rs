@@ -21,7 +21,10 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "synthetic",
         ],
     ),
-    ("machine", &["error_motion", "chain"]),
+    (
+        "machine",
+        &["error_motion", "chain", "hexapod", "hexapod_accuracy"],
+    ),
     (
         "cutting",
         &[
@@ -61,13 +64,15 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "correct",
             "identify",
             "design",
+            "hexapod",
         ],
     ),
     ("scene", &[]),
+    ("hexapod_scene", &[]),
     (
         "pipeline",
         &[
-            "simulate", "run", "fit", "correct", "identify", "design", "rotary",
+            "simulate", "run", "fit", "correct", "identify", "design", "rotary", "hexapod",
         ],
     ),
     ("output", &[]),
