@@ -23,3 +23,4 @@ pub mod scene;
 pub mod hexapod_scene;
 pub mod pipeline;
 pub mod output;
+pub mod study;

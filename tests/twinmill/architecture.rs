@@ -76,6 +76,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
         ],
     ),
     ("output", &[]),
+    ("study", &[]),
 ];
 
 /// Every `.rs` file at or below `path` (a file or a folder), sorted.

@@ -16,6 +16,7 @@ mod evaluate;
 mod error_motions;
 mod instruments;
 mod rotary_location;
+mod study;
 mod hexapod;
 
 use nalgebra::{Matrix4, Vector4};
