@@ -54,7 +54,9 @@ function render() {
 controls.addEventListener('change', render);
 
 function layerName(name) {
-  return name.startsWith('plane') ? 'planes' : name;
+  if (name.startsWith('plane')) return 'planes';
+  if (name.startsWith('cloud')) return 'cloud';
+  return name;
 }
 
 function addToLayer(name, obj) {

@@ -11,17 +11,30 @@
 //! the budget, a second pass collapses to the budget and the error it needed is reported
 //! ([`DisplayMesh::error_mm`]).
 //!
-//! **Deviations** are computed at the display vertices ([`deviations`]): each an exact
-//! signed distance to the reference part (the design model, or the part the same program
-//! cuts on the nominal machine); between vertices the picture and the view interpolate.
+//! **Deviations** ([`deviations`]) are measured for each display triangle at its three
+//! corners, along the triangle's normal: from a point just inside the corner (1 % of the way
+//! to the centroid), the nearest crossing of the normal line with the reference surface
+//! (the design model, or the part the same program cuts on the nominal machine), signed +
+//! where the part lies outside the reference (material left) and − inside (a gouge). Per
+//! triangle, not per vertex, because a vertex on an edge of the part belongs to faces with
+//! different deviations (a face cut 0.5 mm too deep meets an uncut face along an edge that
+//! lies on the reference); along the normal, not to the closest point, because near an edge
+//! the closest point of the reference is on the neighbouring face, and a large display
+//! triangle would spread that edge value over the whole face. Both corners of a triangle then
+//! lie on one face, and for planar faces the deviation is linear across it, so the colours
+//! interpolated between the corners are exact. A face with no counterpart in the reference
+//! (a ledge the nominal part does not have) has no crossing near it along its normal: where
+//! the crossing is more than twice as far (plus 1 µm) as the reference is from the
+//! triangle's centroid, or missing, the corner takes the centroid's closest-point distance
+//! instead.
 //!
 //! **Invariant:** deterministic (meshoptimizer is sequential; distances run in fixed chunks
 //! joined in order); reads meshes and clouds, never changes them.
 
 use crate::cutting::mesh::TriMesh;
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3};
-use crate::report::deviation_map::DesignModel;
 use crate::report::render::nice_ceil;
+use parry3d_f64::query::{PointQuery, Ray, RayCast};
 use rayon::prelude::*;
 
 /// Largest display mesh (triangles): about 3 MB of GLB, 4 MB in the page.
@@ -33,8 +46,14 @@ pub const MAX_POINTS: usize = 40_000;
 /// even for collapses within a plane, to let flat faces collapse (at 1e-4 mm it stalls with
 /// most of a flat face's triangles left).
 pub const FIRST_PASS_ERROR_MM: Real = 0.01;
-/// Points per parallel chunk of the distance queries.
+/// Triangles per parallel chunk of the deviation queries.
 const CHUNK: usize = 1024;
+/// How far towards the centroid a corner's deviation is measured from (fraction).
+const CORNER_PULL: Real = 0.01;
+/// Slack of the counterpart test (mm): a crossing along the normal counts as the face's
+/// counterpart within twice the centroid's closest distance plus this (1 µm, so faces that
+/// lie on the reference keep their along-normal value).
+const COUNTERPART_SLACK_MM: Real = 1e-3;
 
 /// A part's surface for display.
 #[derive(Clone, Debug, PartialEq)]
@@ -126,18 +145,114 @@ pub fn simplify(mesh: &TriMesh, max_triangles: usize) -> DisplayMesh {
     }
 }
 
-/// Signed distance (mm) of each point to `reference`: + outside it (material left on a
-/// part), − inside (a gouge).
-pub fn deviations(points: &[Point3], reference: &DesignModel) -> Vec<Real> {
+/// A surface deviations are measured from: a triangle mesh (mm, W) indexed for ray casts.
+pub struct ReferenceSurface {
+    shape: parry3d_f64::shape::TriMesh,
+    reach: Real,
+}
+
+impl std::fmt::Debug for ReferenceSurface {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ReferenceSurface")
+            .field("triangles", &self.shape.num_triangles())
+            .finish()
+    }
+}
+
+impl ReferenceSurface {
+    /// The surface of a triangle mesh; `None` if it has no triangles or parry refuses it.
+    pub fn new(vertices: Vec<Point3>, triangles: Vec<[u32; 3]>) -> Option<Self> {
+        let mut b = Aabb::empty();
+        for p in &vertices {
+            b.grow(p);
+        }
+        let shape = parry3d_f64::shape::TriMesh::new(vertices, triangles).ok()?;
+        Some(Self {
+            shape,
+            reach: (b.max - b.min).norm().max(1.0),
+        })
+    }
+
+    /// The signed deviation of the surface point `p` with outward normal `n` (see the
+    /// module docs): + material left, − gouge, NaN without a crossing within reach.
+    pub fn deviation_along(&self, p: &Point3, n: &UnitVector3) -> Real {
+        let cast = |dir: Vector3| {
+            self.shape
+                .cast_local_ray(&Ray::new(*p, dir), self.reach, false)
+        };
+        match (cast(n.into_inner()), cast(-n.into_inner())) {
+            // The reference lies further out: the part is short of it (a gouge).
+            (Some(out), Some(back)) if out <= back => -out,
+            (Some(_), Some(back)) | (None, Some(back)) => back,
+            (Some(out), None) => -out,
+            (None, None) => Real::NAN,
+        }
+    }
+}
+
+impl ReferenceSurface {
+    /// Distance of `p` from the surface (mm), signed by the outward normal of the nearest
+    /// triangle when the nearest point lies inside one (+ outside), unsigned at its edges
+    /// and corners.
+    pub fn signed_distance(&self, p: &Point3) -> Real {
+        let (proj, feature) = self.shape.project_local_point_and_get_feature(p);
+        let d = (p - proj.point).norm();
+        match feature {
+            parry3d_f64::shape::FeatureId::Face(i) => {
+                let n = self.shape.num_triangles() as u32;
+                let t = self.shape.triangle(i % n.max(1));
+                let normal = (t.b - t.a).cross(&(t.c - t.a));
+                if (p - proj.point).dot(&normal) < 0.0 {
+                    -d
+                } else {
+                    d
+                }
+            }
+            _ => d,
+        }
+    }
+}
+
+/// The signed distance of each point from `reference` (mm, see
+/// [`ReferenceSurface::signed_distance`]).
+pub fn distances(points: &[Point3], reference: &ReferenceSurface) -> Vec<Real> {
     points
         .par_chunks(CHUNK)
         .flat_map_iter(|c| c.iter().map(|p| reference.signed_distance(p)))
         .collect()
 }
 
+/// The deviation at each corner of each display triangle from `reference` (mm; see the
+/// module docs); NaN for a degenerate triangle or without a crossing.
+pub fn deviations(mesh: &DisplayMesh, reference: &ReferenceSurface) -> Vec<[Real; 3]> {
+    mesh.triangles
+        .par_chunks(CHUNK)
+        .flat_map_iter(|c| {
+            c.iter().map(|t| {
+                let p = t.map(|i| mesh.vertices[i as usize]);
+                let n = (p[1] - p[0]).cross(&(p[2] - p[0]));
+                if n.norm() == 0.0 || !n.norm().is_finite() {
+                    return [Real::NAN; 3];
+                }
+                let n = UnitVector3::new_normalize(n);
+                let centre = Point3::from((p[0].coords + p[1].coords + p[2].coords) / 3.0);
+                let nearest = reference.signed_distance(&centre);
+                p.map(|q| {
+                    let d = reference.deviation_along(&(q + (centre - q) * CORNER_PULL), &n);
+                    if d.abs() <= 2.0 * nearest.abs() + COUNTERPART_SLACK_MM {
+                        d
+                    } else {
+                        nearest
+                    }
+                })
+            })
+        })
+        .collect()
+}
+
 /// A symmetric colour range (mm) for `values`: the 99.5th percentile of |value| rounded up
-/// to a 1-2-5 step in µm, so a few edge points do not wash out the rest; 1 µm when all are
-/// zero or none is finite.
+/// to a 1-2-5 step in µm (at least 1 µm), so a few edge points do not wash out the rest;
+/// 1 µm when none is finite.
 pub fn colour_range_mm(values: &[Real]) -> Real {
     let mut a: Vec<Real> = values
         .iter()
@@ -148,8 +263,41 @@ pub fn colour_range_mm(values: &[Real]) -> Real {
         return 1e-3;
     }
     a.sort_by(Real::total_cmp);
-    let q = a[(a.len() - 1) * 995 / 1000];
+    // Within 1 ppm of a step counts as the step (a 0.5 mm deviation computed as
+    // 0.5000001 mm keeps the ±500 µm scale).
+    let q = a[(a.len() - 1) * 995 / 1000] * (1.0 - 1e-6);
     nice_ceil(q.max(1.0)) * 1e-3
+}
+
+/// The colour range (mm) of a display mesh's corner deviations: as [`colour_range_mm`],
+/// but the percentile weighs each corner by a third of its triangle's area, so the slivers
+/// along edges and ledges (many corners, little surface) do not set the scale.
+pub fn area_colour_range_mm(mesh: &DisplayMesh, deviations: &[[Real; 3]]) -> Real {
+    let mut w: Vec<(Real, Real)> = Vec::new();
+    for (t, d) in mesh.triangles.iter().zip(deviations) {
+        let p = t.map(|i| mesh.vertices[i as usize]);
+        let area = (p[1] - p[0]).cross(&(p[2] - p[0])).norm() / 6.0;
+        w.extend(
+            d.iter()
+                .filter(|x| x.is_finite())
+                .map(|x| (x.abs() * 1e3, area)),
+        );
+    }
+    let total: Real = w.iter().map(|x| x.1).sum();
+    if w.is_empty() || total <= 0.0 || !total.is_finite() {
+        return colour_range_mm(&deviations.iter().flatten().copied().collect::<Vec<_>>());
+    }
+    w.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut acc = 0.0;
+    let mut q = w[w.len() - 1].0;
+    for (v, a) in &w {
+        acc += a;
+        if acc >= 0.995 * total {
+            q = *v;
+            break;
+        }
+    }
+    nice_ceil((q * (1.0 - 1e-6)).max(1.0)) * 1e-3
 }
 
 /// Whether the triangle lies on a face of `b` (within 1 nm): part of the stock as it was.
@@ -277,6 +425,51 @@ mod tests {
         assert!(d.triangles.len() <= 500);
         assert!(d.error_mm > FIRST_PASS_ERROR_MM);
         assert_eq!(d.source_triangles, 19200);
+    }
+
+    #[test]
+    fn deviations_are_measured_along_each_face_normal_not_to_the_nearest_face() {
+        // Reference: the cube [−10, 10]³. Part: the same cube with its −y face 0.5 mm
+        // further in (a gouge) — shown by its −y face and its −z face.
+        let r = cube(4);
+        let reference = ReferenceSurface::new(r.vertices.clone(), r.triangles.clone()).unwrap();
+        let d = DisplayMesh {
+            vertices: vec![
+                Point3::new(-10.0, -9.5, -10.0),
+                Point3::new(10.0, -9.5, -10.0),
+                Point3::new(10.0, -9.5, 10.0),
+                Point3::new(10.0, 10.0, -10.0),
+            ],
+            // The −y face (normal −y) and a piece of the −z face (normal −z), sharing the
+            // edge y = −9.5, z = −10, which lies on the reference's −z face.
+            triangles: vec![[0, 1, 2], [0, 3, 1]],
+            source_triangles: 2,
+            error_mm: 0.0,
+        };
+        let dev = deviations(&d, &reference);
+        for c in dev[0] {
+            assert!((c + 0.5).abs() < 1e-9, "{c}");
+        }
+        for c in dev[1] {
+            assert!(c.abs() < 1e-9, "{c}");
+        }
+        // A ledge facing −z at z = 0, 0.4 mm outside the −y face: no counterpart along −z
+        // (the reference's −z face is 10 mm away), so the distance from its centroid.
+        let ledge = DisplayMesh {
+            vertices: vec![
+                Point3::new(-5.0, -10.4, 0.0),
+                Point3::new(5.0, -10.4, 0.0),
+                Point3::new(5.0, -10.3, 0.0),
+            ],
+            triangles: vec![[0, 2, 1]],
+            source_triangles: 1,
+            error_mm: 0.0,
+        };
+        let dev = deviations(&ledge, &reference);
+        let expected = 10.4 - 1.0 / 3.0 * 0.1 - 10.0;
+        for c in dev[0] {
+            assert!((c - expected).abs() < 1e-9, "{c} vs {expected}");
+        }
     }
 
     #[test]

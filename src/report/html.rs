@@ -83,9 +83,9 @@ table { border-collapse: collapse; margin: 6px 0 12px; } td, th { border: 1px so
 th { background: #f2f2f2; } td.n { text-align: right; font-variant-numeric: tabular-nums; }
 #view { position: relative; height: 560px; border: 1px solid #ccc; background: #fff; }
 #view canvas { display: block; }
-#legend { position: absolute; right: 10px; top: 10px; background: rgba(255,255,255,.9); padding: 6px 8px; font-size: 12px; border: 1px solid #ddd; }
-#legend .bar { width: 18px; height: 200px; display: inline-block; vertical-align: top; }
-#legend .ticks { display: inline-block; height: 200px; position: relative; width: 64px; margin-left: 4px; }
+#legend { position: absolute; right: 10px; top: 10px; max-width: 180px; background: rgba(255,255,255,.9); padding: 6px 8px; font-size: 12px; border: 1px solid #ddd; }
+#legend .bar { width: 18px; height: 200px; display: inline-block; vertical-align: top; margin-top: 10px; }
+#legend .ticks { display: inline-block; height: 200px; position: relative; width: 64px; margin-left: 4px; margin-top: 10px; }
 #legend .ticks span { position: absolute; left: 0; transform: translateY(-50%); }
 #layers { position: absolute; left: 10px; top: 10px; background: rgba(255,255,255,.9); padding: 6px 8px; font-size: 12px; border: 1px solid #ddd; }
 #pick { position: absolute; left: 10px; bottom: 10px; background: rgba(255,255,255,.92); padding: 4px 8px; font-size: 12px; border: 1px solid #ddd; min-height: 1em; }

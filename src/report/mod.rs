@@ -27,6 +27,7 @@ mod fit;
 mod correct;
 mod identify;
 mod design;
+pub mod pages;
 
 pub use correct::{CorrectIteration, CorrectReport, UncorrectableReport};
 pub use design::DesignReport;

@@ -4,7 +4,7 @@
 //! An orthographic view of a [`DisplayMesh`] along `eye` (from the part towards the viewer,
 //! see [`crate::report::display::view_direction`]), rasterised with a depth buffer: each
 //! visible triangle is lit by its own flat normal (Lambert, a light over the viewer's
-//! shoulder, plus ambient), its colour interpolated between its vertices' deviations in the
+//! shoulder, plus ambient), its colour interpolated between its corners' deviations in the
 //! diverging colours of [`crate::report::render`] with a colour bar (µm, or mm from 1 mm),
 //! or light grey where no deviation is known. A title above, the view and the display
 //! mesh's size and error below.
@@ -56,10 +56,11 @@ fn tick(x: Real) -> String {
     format!("{}{s}", if x > 0.0 { '+' } else { '-' })
 }
 
-/// Renders `mesh` (see the module docs); `deviations` (mm), one per vertex, colour it.
+/// Renders `mesh` (see the module docs); `deviations` (mm), one per corner of each triangle
+/// (NaN: not known, drawn grey), colour it.
 pub fn render_part_view(
     mesh: &DisplayMesh,
-    deviations: Option<&[Real]>,
+    deviations: Option<&[[Real; 3]]>,
     opts: &PartViewOptions,
 ) -> Result<RgbImage, RenderError> {
     if mesh.triangles.is_empty() {
@@ -69,10 +70,10 @@ pub fn render_part_view(
         .vertices
         .iter()
         .all(|p| p.coords.iter().all(|c| c.is_finite()))
-        && deviations.is_none_or(|d| d.iter().all(|x| x.is_finite()))
+        && deviations.is_none_or(|d| d.iter().flatten().all(|x| !x.is_infinite()))
         && opts.range_mm.is_finite()
         && opts.up.iter().all(|c| c.is_finite());
-    if !finite || deviations.is_some_and(|d| d.len() != mesh.vertices.len()) {
+    if !finite || deviations.is_some_and(|d| d.len() != mesh.triangles.len()) {
         return Err(RenderError::NonFinite);
     }
     let (w, h) = (
@@ -122,7 +123,7 @@ pub fn render_part_view(
     let mut img = RgbImage::from_pixel(w, h, WHITE);
     let mut depth = vec![Real::NEG_INFINITY; (w * h) as usize];
     let light = (eye + up * 0.5 - right * 0.3).normalize();
-    for t in &mesh.triangles {
+    for (k, t) in mesh.triangles.iter().enumerate() {
         let p = t.map(|i| mesh.vertices[i as usize]);
         let n = (p[1] - p[0]).cross(&(p[2] - p[0]));
         if n.norm() == 0.0 || n.dot(&eye) <= 0.0 {
@@ -134,7 +135,7 @@ pub fn render_part_view(
             let (px, py) = to_px(x, y);
             (px, py, z)
         });
-        let dev = deviations.map(|d| t.map(|i| d[i as usize]));
+        let dev = deviations.map(|d| d[k]);
         let area = (v[1].0 - v[0].0) * (v[2].1 - v[0].1) - (v[2].0 - v[0].0) * (v[1].1 - v[0].1);
         if area.abs() < 1e-12 {
             continue;
@@ -180,12 +181,12 @@ pub fn render_part_view(
                 }
                 depth[k] = z;
                 let base = match dev {
-                    Some(d) => {
+                    Some(d) if d.iter().all(|x| x.is_finite()) => {
                         let Rgb(c) =
                             diverging_colour((l0 * d[0] + l1 * d[1] + l2 * d[2]) / opts.range_mm);
                         c.map(Real::from)
                     }
-                    None => GREY,
+                    _ => GREY,
                 };
                 let c = base.map(|b| (b * shade).round().clamp(0.0, 255.0) as u8);
                 img.put_pixel(px, py, Rgb(c));
@@ -290,7 +291,7 @@ mod tests {
     #[test]
     fn faces_of_opposite_deviation_show_red_and_blue() {
         let m = two_faces();
-        let dev = [-0.5, -0.5, -0.5, -0.5, 0.5, 0.5, 0.5, 0.5];
+        let dev = [[-0.5; 3], [-0.5; 3], [0.5; 3], [0.5; 3]];
         let img = render_part_view(&m, Some(&dev), &opts()).unwrap();
         // Left half of the plot: blue (gouge); right half: red.
         let y = img.height() / 2;
@@ -314,7 +315,7 @@ mod tests {
     #[test]
     fn bad_input_is_an_error() {
         let mut m = two_faces();
-        assert!(render_part_view(&m, Some(&[0.0; 3]), &opts()).is_err());
+        assert!(render_part_view(&m, Some(&[[0.0; 3]; 3]), &opts()).is_err());
         m.vertices[0].x = Real::NAN;
         assert!(render_part_view(&m, None, &opts()).is_err());
         m.triangles.clear();

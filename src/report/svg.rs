@@ -163,27 +163,29 @@ pub fn deviation_map_svg(
     Ok(s)
 }
 
-/// The identifiability spectrum: singular values (relative to the largest) as bars on a log
-/// axis, each named direction's bar dark when it is determined (≥ `threshold` of the
-/// largest) and light when not, with the threshold as a line.
-pub fn spectrum_svg(values: &[Real], threshold: Real, title: &str) -> Result<String, SvgError> {
+/// The identifiability spectrum: the singular values, largest first, as bars on a log axis;
+/// with a `threshold` of determination, a bar is dark when its direction is determined
+/// (σᵢ ≥ threshold) and light when not, and the threshold is drawn as a line.
+pub fn spectrum_svg(
+    values: &[Real],
+    threshold: Option<Real>,
+    title: &str,
+) -> Result<String, SvgError> {
     if values.is_empty() {
         return Err(SvgError::NoPoints);
     }
-    if !values.iter().all(|v| v.is_finite() && *v >= 0.0) || !threshold.is_finite() {
+    if !values.iter().all(|v| v.is_finite() && *v >= 0.0)
+        || threshold.is_some_and(|t| !(t.is_finite() && t > 0.0))
+    {
         return Err(SvgError::NonFinite);
     }
-    let max = values.iter().copied().fold(0.0, Real::max);
-    let rel: Vec<Real> = values
-        .iter()
-        .map(|v| if max > 0.0 { v / max } else { 0.0 })
-        .collect();
-    let floor = rel
-        .iter()
-        .copied()
-        .filter(|v| *v > 0.0)
-        .fold(threshold.max(1e-12), Real::min);
-    let lo = nice_ceil(floor) / 100.0;
+    let positive = values.iter().copied().filter(|v| *v > 0.0);
+    let hi = positive
+        .clone()
+        .chain(threshold)
+        .fold(Real::MIN_POSITIVE, Real::max);
+    let lo = positive.chain(threshold).fold(hi, Real::min);
+    let (lo, hi) = (nice_ceil(lo) / 100.0, nice_ceil(hi) * 2.0);
     let mut s = String::new();
     {
         let root = SVGBackend::with_string(&mut s, (640, 360)).into_drawing_area();
@@ -194,7 +196,7 @@ pub fn spectrum_svg(values: &[Real], threshold: Real, title: &str) -> Result<Str
             .margin(10)
             .x_label_area_size(40)
             .y_label_area_size(64)
-            .build_cartesian_2d(0.0..n as Real, (lo..1.5).log_scale())
+            .build_cartesian_2d(0.0..n as Real, (lo..hi).log_scale())
             .map_err(draw_err)?;
         chart
             .configure_mesh()
@@ -202,31 +204,44 @@ pub fn spectrum_svg(values: &[Real], threshold: Real, title: &str) -> Result<Str
             .x_labels(n.min(12))
             .x_label_formatter(&|x| format!("{}", x.floor() as usize + 1))
             .x_desc("singular value, largest first")
-            .y_desc("σᵢ / σ₁")
+            .y_desc("singular value")
             .draw()
             .map_err(draw_err)?;
         let dark = RGBColor(0x21, 0x66, 0xac);
         let light = RGBColor(0xd1, 0xe5, 0xf0);
         chart
-            .draw_series(rel.iter().enumerate().map(|(i, &v)| {
-                let c = if v >= threshold { dark } else { light };
-                let top = v.max(lo);
+            .draw_series(values.iter().enumerate().map(|(i, &v)| {
+                let c = if threshold.is_none_or(|t| v >= t) {
+                    dark
+                } else {
+                    light
+                };
                 Rectangle::new(
-                    [(i as Real + 0.15, lo), (i as Real + 0.85, top)],
+                    [(i as Real + 0.15, lo), (i as Real + 0.85, v.max(lo))],
                     c.filled(),
                 )
             }))
             .map_err(draw_err)?
             .label("determined")
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 10, y + 5)], dark.filled()));
-        chart
-            .draw_series(LineSeries::new(
-                [(0.0, threshold), (n as Real, threshold)],
-                RGBColor(0xb2, 0x18, 0x2b).stroke_width(2),
-            ))
-            .map_err(draw_err)?
-            .label(format!("threshold {threshold}"))
-            .legend(|(x, y)| PathElement::new([(x, y), (x + 12, y)], RGBColor(0xb2, 0x18, 0x2b)));
+        if let Some(t) = threshold {
+            chart
+                .draw_series([Rectangle::new([(0.0, lo), (0.0, lo)], light.filled())])
+                .map_err(draw_err)?
+                .label("not determined")
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 5), (x + 10, y + 5)], light.filled())
+                });
+            let red = RGBColor(0xb2, 0x18, 0x2b);
+            chart
+                .draw_series(LineSeries::new(
+                    [(0.0, t), (n as Real, t)],
+                    red.stroke_width(2),
+                ))
+                .map_err(draw_err)?
+                .label(format!("threshold of determination {t}"))
+                .legend(move |(x, y)| PathElement::new([(x, y), (x + 12, y)], red));
+        }
         chart
             .configure_series_labels()
             .background_style(WHITE.mix(0.8))
@@ -469,10 +484,12 @@ mod tests {
 
     #[test]
     fn the_spectrum_marks_what_is_determined() {
-        let s = spectrum_svg(&[2.0, 1.0, 1e-9], 1e-3, "spectrum").unwrap();
+        let s = spectrum_svg(&[200.0, 40.0, 1e-3], Some(10.0), "spectrum").unwrap();
         assert!(s.contains("#2166AC") || s.contains("#2166ac"));
         assert!(s.contains("#D1E5F0") || s.contains("#d1e5f0"));
         assert!(s.contains("determined"));
-        assert!(spectrum_svg(&[Real::NAN], 1e-3, "x").is_err());
+        assert!(s.contains("not determined"));
+        assert!(spectrum_svg(&[Real::NAN], None, "x").is_err());
+        assert!(spectrum_svg(&[1.0], Some(0.0), "x").is_err());
     }
 }

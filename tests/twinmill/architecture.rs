@@ -64,12 +64,15 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "correct",
             "identify",
             "design",
+            "pages",
         ],
     ),
     ("scene", &[]),
     (
         "pipeline",
-        &["simulate", "run", "fit", "correct", "identify", "design"],
+        &[
+            "pages", "simulate", "run", "fit", "correct", "identify", "design",
+        ],
     ),
     ("output", &[]),
 ];
