@@ -88,6 +88,7 @@ th { background: #f2f2f2; } td.n { text-align: right; font-variant-numeric: tabu
 #legend .ticks { display: inline-block; height: 200px; position: relative; width: 64px; margin-left: 4px; margin-top: 10px; }
 #legend .ticks span { position: absolute; left: 0; transform: translateY(-50%); }
 #layers { position: absolute; left: 10px; top: 10px; background: rgba(255,255,255,.9); padding: 6px 8px; font-size: 12px; border: 1px solid #ddd; }
+#pick:empty { display: none; }
 #pick { position: absolute; left: 10px; bottom: 10px; background: rgba(255,255,255,.92); padding: 4px 8px; font-size: 12px; border: 1px solid #ddd; min-height: 1em; }
 #view-status { position: absolute; left: 50%; top: 45%; transform: translate(-50%, -50%); color: #666; }
 .marker { position: absolute; font-size: 11px; color: #b2182b; background: rgba(255,255,255,.85); padding: 0 3px; pointer-events: none; white-space: nowrap; }

@@ -205,11 +205,18 @@ pub fn part_view3d(parts: &View3dParts<'_>) -> Result<View3d, GlbError> {
                 material: None,
             });
         }
+        let stride = cloud.len().div_ceil(keep.len().max(1));
+        let which = if stride == 1 {
+            format!("All {} scanned points", cloud.len())
+        } else {
+            format!(
+                "{} of the {} scanned points (every {stride}th)",
+                keep.len(),
+                cloud.len()
+            )
+        };
         notes.push(format!(
-            "Cloud: {} of the {} scanned points (every {}th), coloured by their distance from {from}, ±{:.1} µm full scale; points without one are grey. Shown with the 'cloud' switch.",
-            keep.len(),
-            cloud.len(),
-            cloud.len().div_ceil(keep.len().max(1)),
+            "Cloud: {which}, coloured by their distance from {from}, ±{:.1} µm full scale; points without one are grey. Shown with the 'cloud' switch.",
             range * 1e3
         ));
         if parts.part.is_none() {
