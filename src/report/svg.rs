@@ -482,6 +482,87 @@ mod tests {
         ));
     }
 
+    /// The points of every polyline of more than two points drawn in `colour` (plotters
+    /// writes `stroke="#RRGGBB"`; the legend's two-point samples are left out).
+    fn polylines(svg: &str, colour: &str) -> Vec<(f64, f64)> {
+        svg.split("<polyline")
+            .skip(1)
+            .filter(|e| e.to_uppercase().contains(&format!("STROKE=\"{colour}\"")))
+            .filter_map(|e| e.split("points=\"").nth(1)?.split('"').next())
+            .map(|pts| {
+                pts.split_whitespace()
+                    .filter_map(|xy| {
+                        let (x, y) = xy.split_once(',')?;
+                        Some((x.parse().ok()?, y.parse().ok()?))
+                    })
+                    .collect::<Vec<(f64, f64)>>()
+            })
+            .filter(|line| line.len() > 2)
+            .flatten()
+            .collect()
+    }
+
+    #[test]
+    fn the_positioning_svg_draws_forward_above_backward() {
+        use crate::metrology::positioning::{Direction, Reading, evaluate};
+        let mut r = Vec::new();
+        for i in 0..5 {
+            for run in 1..=5u32 {
+                for (d, off) in [(Direction::Forward, 1e-3), (Direction::Backward, -1e-3)] {
+                    r.push(Reading {
+                        target_mm: 10.0 * i as Real,
+                        direction: d,
+                        run,
+                        deviation_mm: off + 1e-4 * run as Real,
+                    });
+                }
+            }
+        }
+        let f = evaluate(&r, std::path::Path::new("t")).expect("complete");
+        let s = positioning_svg(&f, "X axis").expect("draws");
+        let (red, blue) = (polylines(&s, "#B2182B"), polylines(&s, "#2166AC"));
+        assert!(red.len() >= 5 && blue.len() >= 5);
+        let mean_y = |v: &[(f64, f64)]| v.iter().map(|p| p.1).sum::<f64>() / v.len() as f64;
+        // SVG y runs down: the forward mean (2 µm higher) is drawn above the backward one.
+        assert!(mean_y(&red) < mean_y(&blue));
+        assert_eq!(s, positioning_svg(&f, "X axis").unwrap());
+    }
+
+    #[test]
+    fn the_polar_svg_puts_a_bulge_where_the_trace_has_it() {
+        use crate::metrology::circular::{CircularOptions, Turn, evaluate};
+        let s: Vec<Sample> = (0..720)
+            .map(|i| {
+                let t = (i as Real * 0.5).to_radians();
+                Sample {
+                    turn: if i % 2 == 0 { Turn::Ccw } else { Turn::Cw },
+                    angle_rad: t,
+                    deviation_mm: if i % 2 == 0 {
+                        5e-3 * t.cos().max(0.0).powi(8)
+                    } else {
+                        0.0
+                    },
+                }
+            })
+            .collect();
+        let opts = CircularOptions {
+            radius_mm: 100.0,
+            pitch_mm: None,
+        };
+        let f = evaluate(&s, &opts, std::path::Path::new("t")).expect("evaluates");
+        let svg = polar_svg(&s, &f, "XY").expect("draws");
+        // East of the centre the ccw trace (red) reaches further out than the cw one.
+        let east = |v: &[(f64, f64)]| v.iter().map(|p| p.0).fold(f64::MIN, f64::max);
+        let (red, blue) = (polylines(&svg, "#B2182B"), polylines(&svg, "#2166AC"));
+        assert!(
+            east(&red) > east(&blue) + 5.0,
+            "{} vs {}",
+            east(&red),
+            east(&blue)
+        );
+        assert!(polar_svg(&[], &f, "XY").is_err());
+    }
+
     #[test]
     fn the_spectrum_marks_what_is_determined() {
         let s = spectrum_svg(&[200.0, 40.0, 1e-3], Some(10.0), "spectrum").unwrap();
