@@ -26,7 +26,9 @@
 //! (a ledge the nominal part does not have) has no crossing near it along its normal: where
 //! the crossing is more than twice as far (plus 1 µm) as the reference is from the
 //! triangle's centroid, or missing, the corner takes the centroid's closest-point distance
-//! instead.
+//! instead. The crossing is looked for on the side the reference lies: ahead along the
+//! outward normal when the triangle's centroid is inside the reference, behind it when
+//! outside, either when on it.
 //!
 //! **Invariant:** deterministic (meshoptimizer is sequential; distances run in fixed chunks
 //! joined in order); reads meshes and clouds, never changes them.
@@ -174,18 +176,26 @@ impl ReferenceSurface {
     }
 
     /// The signed deviation of the surface point `p` with outward normal `n` (see the
-    /// module docs): + material left, − gouge, NaN without a crossing within reach.
-    pub fn deviation_along(&self, p: &Point3, n: &UnitVector3) -> Real {
+    /// module docs): + material left, − gouge, `None` without a crossing within reach.
+    /// `side` is which side of the reference the face lies on (− inside, + outside, 0 on
+    /// it or unknown): inside, the counterpart lies ahead along `n`; outside, behind; on
+    /// it, whichever is nearer.
+    pub fn deviation_along(&self, p: &Point3, n: &UnitVector3, side: Real) -> Option<Real> {
         let cast = |dir: Vector3| {
             self.shape
                 .cast_local_ray(&Ray::new(*p, dir), self.reach, false)
         };
-        match (cast(n.into_inner()), cast(-n.into_inner())) {
-            // The reference lies further out: the part is short of it (a gouge).
-            (Some(out), Some(back)) if out <= back => -out,
-            (Some(_), Some(back)) | (None, Some(back)) => back,
-            (Some(out), None) => -out,
-            (None, None) => Real::NAN,
+        let ahead = || cast(n.into_inner()).map(|t| -t);
+        let behind = || cast(-n.into_inner());
+        if side < 0.0 {
+            ahead()
+        } else if side > 0.0 {
+            behind()
+        } else {
+            match (ahead(), behind()) {
+                (Some(a), Some(b)) => Some(if -a <= b { a } else { b }),
+                (a, b) => a.or(b),
+            }
         }
     }
 }
@@ -223,7 +233,7 @@ pub fn distances(points: &[Point3], reference: &ReferenceSurface) -> Vec<Real> {
 }
 
 /// The deviation at each corner of each display triangle from `reference` (mm; see the
-/// module docs); NaN for a degenerate triangle or without a crossing.
+/// module docs); NaN for a degenerate triangle.
 pub fn deviations(mesh: &DisplayMesh, reference: &ReferenceSurface) -> Vec<[Real; 3]> {
     mesh.triangles
         .par_chunks(CHUNK)
@@ -237,12 +247,16 @@ pub fn deviations(mesh: &DisplayMesh, reference: &ReferenceSurface) -> Vec<[Real
                 let n = UnitVector3::new_normalize(n);
                 let centre = Point3::from((p[0].coords + p[1].coords + p[2].coords) / 3.0);
                 let nearest = reference.signed_distance(&centre);
+                let side = if nearest.abs() <= COUNTERPART_SLACK_MM {
+                    0.0
+                } else {
+                    nearest
+                };
                 p.map(|q| {
-                    let d = reference.deviation_along(&(q + (centre - q) * CORNER_PULL), &n);
-                    if d.abs() <= 2.0 * nearest.abs() + COUNTERPART_SLACK_MM {
-                        d
-                    } else {
-                        nearest
+                    let pulled = q + (centre - q) * CORNER_PULL;
+                    match reference.deviation_along(&pulled, &n, side) {
+                        Some(d) if d.abs() <= 2.0 * nearest.abs() + COUNTERPART_SLACK_MM => d,
+                        _ => nearest,
                     }
                 })
             })

@@ -145,10 +145,15 @@ pub fn part_view3d(parts: &View3dParts<'_>) -> Result<View3d, GlbError> {
             material: None,
         });
         notes.push(format!(
-            "Part: the cut surface simplified for display by meshoptimizer to {} of its {} triangles; every display vertex is a vertex of the cut surface and the display surface lies within {:.1e} mm of it. Colours: the deviation at each triangle's corners, measured along the triangle's normal, interpolated between them.",
+            "Part: the cut surface simplified for display by meshoptimizer to {} of its {} triangles; every display vertex is a vertex of the cut surface and the display surface lies within {:.1e} mm of it.{}",
             m.triangles.len(),
             m.source_triangles,
-            m.error_mm
+            m.error_mm,
+            if part.deviations.is_some() {
+                " Colours: the deviation at each triangle's corners, measured along the triangle's normal, interpolated between them."
+            } else {
+                ""
+            }
         ));
     }
     if let Some(cloud) = parts.cloud
