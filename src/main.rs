@@ -24,6 +24,7 @@ use twinmill::nc::{AxisLetter, Interpreter, LengthUnit, Program, write_jsonl};
 use twinmill::output::{
     MeshFormat, json_bytes, ply_bytes, write_files, write_outcome, write_simulation, write_streamed,
 };
+use twinmill::pipeline::pages::{correct_page, design_page, identify_page, run_page, scan_page};
 use twinmill::pipeline::{
     FitRequest, Selection, Shape, correct, design_scene, fit_cloud, identified_model,
     identify_scene, machine_part, run, scanner_study, simulate,
@@ -174,13 +175,15 @@ enum Command {
         command: HexapodCommand,
     },
     /// Simulate a scene's program on its deviated machine, scan the part, fit the faces and
-    /// identify the deviations; write report.json, cloud.ply and faces.png.
+    /// identify the deviations; write report.json, cloud.ply, faces.png and report.html (a
+    /// self-contained page with the part in 3-D).
     Run {
         #[command(flatten)]
         args: SceneArgs,
     },
     /// Cut the scene's program into its stock on the deviated machine (no scan): write the
-    /// part's surface mesh, a picture of it from +z, and report.json with the removed volume,
+    /// part's surface mesh, a shaded picture of it (part.png, coloured by deviation where
+    /// known), report.html (the page, with the part in 3-D) and report.json with the removed volume,
     /// the sweep's approximation bounds and the collisions (rapids through material, shank or
     /// holder in the stock, fixtures hit); with a [design] mesh, also its deviation map
     /// (deviation.png, max/min/RMS in report.json).
@@ -1836,13 +1839,17 @@ fn main() -> ExitCode {
                 Err(e) => return fail(e),
             };
             let dir = out.join(&scene.name);
-            if let Err(e) = write_outcome(&outcome, &dir) {
+            let html = match run_page(&scene, &program, &outcome) {
+                Ok(h) => h,
+                Err(e) => return fail(e),
+            };
+            if let Err(e) = write_outcome(&outcome, &html, &dir) {
                 return fail(e);
             }
             print_out(
                 || {
                     format!(
-                        "{}  wrote         {}/{{report.json, cloud.ply, faces.png}}\n",
+                        "{}  wrote         {}/{{report.json, cloud.ply, faces.png, report.html}}\n",
                         outcome.report.summary(),
                         dir.display()
                     )
@@ -1883,7 +1890,7 @@ fn main() -> ExitCode {
             if let Err(e) = write_simulation(&sim, &formats, &dir) {
                 return fail(e);
             }
-            let names: Vec<&str> = ["report.json", "part.png"]
+            let names: Vec<&str> = ["report.json", "part.png", "report.html"]
                 .into_iter()
                 .chain(sim.deviation_png.as_ref().map(|_| "deviation.png"))
                 .chain(formats.iter().map(|f| f.file_name()))
@@ -1961,14 +1968,18 @@ fn main() -> ExitCode {
                 study: cases,
             };
             let dir = out.join(format!("{}-scan", scene.name));
-            let files = write_report_and_cloud(&dir, "scan.json", &report, &scanned.cloud);
+            let html = match scan_page(&scene, &report, &part.stock, &scanned.cloud.points) {
+                Ok(h) => h,
+                Err(e) => return fail(e),
+            };
+            let files = write_report_and_cloud(&dir, "scan.json", &report, &scanned.cloud, html);
             if let Err(e) = files {
                 return fail(e);
             }
             print_out(
                 || {
                     format!(
-                        "{}  wrote         {}/{{scan.json, cloud.ply}}\n",
+                        "{}  wrote         {}/{{scan.json, cloud.ply, report.html}}\n",
                         report.summary(),
                         dir.display()
                     )
@@ -2028,6 +2039,11 @@ fn main() -> ExitCode {
             let report = &outcome.report;
             let ngc = report.corrected_program.clone();
             let json_name = format!("{}-correct.json", scene.name);
+            let html_name = format!("{}-correct.html", scene.name);
+            let html = match correct_page(&scene, &program, report, &outcome.corrected.moves) {
+                Ok(h) => h,
+                Err(e) => return fail(e),
+            };
             let report_bytes = match json_bytes(report, &out.join(&json_name)) {
                 Ok(b) => b,
                 Err(e) => return fail(e),
@@ -2043,6 +2059,10 @@ fn main() -> ExitCode {
                     json_name.clone(),
                     Box::new(move |w: &mut dyn Write| w.write_all(&report_bytes)),
                 ),
+                (
+                    html_name.clone(),
+                    Box::new(move |w: &mut dyn Write| w.write_all(html.as_bytes())),
+                ),
             ];
             if let Err(e) = write_streamed(&out, files) {
                 return fail(e);
@@ -2050,7 +2070,7 @@ fn main() -> ExitCode {
             let code = print_out(
                 || {
                     format!(
-                        "{}  wrote         {}/{{{ngc}, {json_name}}}\n",
+                        "{}  wrote         {}/{{{ngc}, {json_name}, {html_name}}}\n",
                         report.summary(),
                         out.display()
                     )
@@ -2116,15 +2136,29 @@ fn main() -> ExitCode {
                 Err(e) => return fail(e),
             };
             let dir = out.join(format!("{}-identify", scene.name));
-            let files =
-                write_report_and_cloud(&dir, "identify.json", &outcome.report, &outcome.cloud);
+            let html = match identify_page(
+                &scene,
+                &outcome.report,
+                &outcome.cloud.points,
+                &outcome.features,
+            ) {
+                Ok(h) => h,
+                Err(e) => return fail(e),
+            };
+            let files = write_report_and_cloud(
+                &dir,
+                "identify.json",
+                &outcome.report,
+                &outcome.cloud,
+                html,
+            );
             if let Err(e) = files {
                 return fail(e);
             }
             let code = print_out(
                 || {
                     format!(
-                        "{}  wrote         {}/{{identify.json, cloud.ply}}\n",
+                        "{}  wrote         {}/{{identify.json, cloud.ply, report.html}}\n",
                         outcome.report.summary(),
                         dir.display()
                     )
@@ -2186,12 +2220,17 @@ fn main() -> ExitCode {
             };
             let report = &outcome.report;
             let dir = out.join(&name);
+            let html = match design_page(&scene, report, &outcome.verified) {
+                Ok(h) => h,
+                Err(e) => return fail(e),
+            };
             let files = json_bytes(report, &dir.join("design.json"))
                 .map(|j| {
                     vec![
                         ("design.json", j),
                         ("design.ngc", outcome.design.program.clone().into_bytes()),
                         ("design.toml", outcome.scene_toml.clone().into_bytes()),
+                        ("report.html", html.into_bytes()),
                     ]
                 })
                 .and_then(|files| write_files(&dir, &files));
@@ -2201,7 +2240,7 @@ fn main() -> ExitCode {
             print_out(
                 || {
                     format!(
-                        "{}  wrote         {}/{{design.ngc, design.toml, design.json}}\n",
+                        "{}  wrote         {}/{{design.ngc, design.toml, design.json, report.html}}\n",
                         report.summary(),
                         dir.display()
                     )
@@ -2308,16 +2347,19 @@ fn bars(json: bool) -> Bars {
     }
 }
 
-/// Writes a JSON report and the point cloud (`cloud.ply`) into `dir`, all or nothing.
+/// Writes a JSON report, the point cloud (`cloud.ply`) and the page (`report.html`) into
+/// `dir`, all or nothing.
 fn write_report_and_cloud(
     dir: &Path,
     report_name: &str,
     report: &impl serde::Serialize,
     cloud: &twinmill::metrology::cloud::PointCloud,
+    html: String,
 ) -> Result<PathBuf, twinmill::output::OutputError> {
     let files = vec![
         (report_name, json_bytes(report, &dir.join(report_name))?),
         ("cloud.ply", ply_bytes(cloud, &dir.join("cloud.ply"))?),
+        ("report.html", html.into_bytes()),
     ];
     write_files(dir, &files)
 }

@@ -1,9 +1,10 @@
-//! Writing outputs into a folder, all or nothing: `run` writes `report.json`, `cloud.ply`
-//! and `faces.png` into `<out>/<scene-name>/`; `simulate` writes `report.json`, `part.png`,
-//! `deviation.png` (with a design model) and the part's mesh into
-//! `<out>/<scene-name>-simulate/`; `scan` writes `cloud.ply` and `scan.json`
-//! into `<out>/<scene-name>-scan/`; `correct` writes `<scene-name>-corrected.ngc` and
-//! `<scene-name>-correct.json` into `<out>/` ([`write_streamed`], file by file).
+//! Writing outputs into a folder, all or nothing: `run` writes `report.json`, `cloud.ply`,
+//! `faces.png` and `report.html` into `<out>/<scene-name>/`; `simulate` writes
+//! `report.json`, `part.png`, `report.html`, `deviation.png` (with a design model) and the
+//! part's mesh into `<out>/<scene-name>-simulate/`; `scan` writes `cloud.ply`, `scan.json`
+//! and `report.html` into `<out>/<scene-name>-scan/`; `correct` writes
+//! `<scene-name>-corrected.ngc`, `<scene-name>-correct.json` and `<scene-name>-correct.html`
+//! into `<out>/` ([`write_streamed`], file by file).
 //!
 //! Files are written into a fresh staging folder beside the target, which replaces the
 //! target only when every file is complete; a failure leaves the previous outputs (if any)
@@ -110,8 +111,8 @@ pub fn ply_bytes(cloud: &PointCloud, path: &Path) -> Result<Vec<u8>, OutputError
     Ok(buf)
 }
 
-/// Writes the outcome of `run` into `dir`: report.json, cloud.ply, faces.png.
-pub fn write_outcome(outcome: &Outcome, dir: &Path) -> Result<PathBuf, OutputError> {
+/// Writes the outcome of `run` into `dir`: report.json, cloud.ply, faces.png, report.html.
+pub fn write_outcome(outcome: &Outcome, html: &str, dir: &Path) -> Result<PathBuf, OutputError> {
     let files = [
         (
             "report.json",
@@ -122,6 +123,7 @@ pub fn write_outcome(outcome: &Outcome, dir: &Path) -> Result<PathBuf, OutputErr
             ply_bytes(&outcome.cloud, &dir.join("cloud.ply"))?,
         ),
         ("faces.png", outcome.heat_map_png.clone()),
+        ("report.html", html.as_bytes().to_vec()),
     ];
     write_files(dir, &files)
 }
@@ -148,8 +150,8 @@ impl MeshFormat {
     }
 }
 
-/// Writes the outcome of `simulate` into `dir`: report.json, part.png, deviation.png (when
-/// the scene has a design model) and the mesh in each of `formats`.
+/// Writes the outcome of `simulate` into `dir`: report.json, part.png, report.html,
+/// deviation.png (when the scene has a design model) and the mesh in each of `formats`.
 pub fn write_simulation(
     sim: &Simulation,
     formats: &[MeshFormat],
@@ -160,7 +162,8 @@ pub fn write_simulation(
             "report.json",
             json_bytes(&sim.report, &dir.join("report.json"))?,
         ),
-        ("part.png", sim.top_view_png.clone()),
+        ("part.png", sim.part_png.clone()),
+        ("report.html", sim.html.clone().into_bytes()),
     ];
     if let Some(png) = &sim.deviation_png {
         files.push(("deviation.png", png.clone()));

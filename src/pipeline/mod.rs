@@ -2,12 +2,15 @@
 //! program, or a cloud), returns everything it made — reports, clouds, pictures, meshes,
 //! corrected moves — and writes nothing ([`crate::output`] does). One module per command:
 //! [`simulate()`], [`run()`] (and [`scanner_study`]), [`fit_cloud`], [`correct()`],
-//! [`identify_scene`], [`design_scene`], [`rotary_test()`]; this file holds what they share: the stock, the
-//! sweep of the program through the deviated machine, and the errors.
+//! [`identify_scene`], [`design_scene`], [`rotary_test()`]; [`pages`] makes what their
+//! `report.html` and `part.png` need (the reference part, the display mesh, the 3-D view);
+//! this file holds what they share: the stock, the sweep of the program through the deviated
+//! machine, and the errors.
 //!
 //! May use every stage folder and [`crate::scene`]. **Invariant:** the same scene and
 //! program give the same outcome (except the timings) for any thread count.
 
+pub mod pages;
 mod simulate;
 mod run;
 mod fit;
@@ -129,6 +132,14 @@ pub enum PipelineError {
     /// The scene lacks a section the command needs.
     #[error("{0}")]
     Scene(#[from] SceneError),
+    /// The report page could not be made.
+    #[error("{path}: report.html: {message}")]
+    Page {
+        /// Scene file.
+        path: String,
+        /// Why.
+        message: String,
+    },
     /// The heat map could not be drawn.
     #[error("{path}: heat map: {source}")]
     Render {

@@ -1,6 +1,8 @@
 //! `run`: the 0°/180° experiment on a scene — the part cut on the deviated machine,
-//! scanned, its two faces fitted, the deviations identified, the faces' heat map drawn — and
-//! the scanner-effects study of `scan --study`.
+//! scanned, its two faces fitted, the deviations identified, the faces' heat map drawn, what
+//! the page needs kept (the cut stock, the fitted faces, the faces' map as SVG; the page
+//! itself is made by [`super::pages::run_page`], so library callers that want only the
+//! figures do not pay for it) — and the scanner-effects study of `scan --study`.
 
 use super::{PipelineError, machine_part};
 use crate::calibration::identify::{self, Face};
@@ -11,7 +13,10 @@ use crate::metrology::fit::Plane;
 use crate::metrology::scan::{Misregistration, StudyOptions, Surface, scan};
 use crate::nc::Program;
 use crate::progress::Progress;
+
+use crate::report::pages::FittedPlane;
 use crate::report::render::{HeatMapOptions, encode_png, nice_ceil, render_heat_map};
+use crate::report::svg::{MapLabels, deviation_map_svg};
 use crate::report::{FaceReport, Report, ScanReport, SolverReport, StockReport, StudyCase};
 use crate::scene::{Need, Scene};
 use std::collections::BTreeMap;
@@ -26,6 +31,12 @@ pub struct Outcome {
     pub cloud: PointCloud,
     /// The heat map of the scanned faces, PNG-encoded.
     pub heat_map_png: Vec<u8>,
+    /// The cut stock.
+    pub stock: TriDexel,
+    /// The two fitted faces as planes over their points in the cloud.
+    pub planes: Vec<FittedPlane>,
+    /// The scanned faces' map (faces.png as SVG).
+    pub faces_svg: String,
 }
 
 fn face_report(f: &Face, line: usize) -> FaceReport {
@@ -168,18 +179,19 @@ pub fn run(
         "{}: scanned faces, distance from nominal plane (step {:+.4} mm)",
         scene.name, ident.step_mm
     );
+    let range_um = colour_range_um(&face_points, &nominal.plane);
     let img = render_heat_map(
         &face_points,
         &nominal.plane,
         &nominal.u,
         &nominal.v,
         &HeatMapOptions {
-            title,
+            title: title.clone(),
             width_px: 800,
             // Seen obliquely, points on a face lie further apart than the nominal pitch:
             // dots 1.5 pitches wide close the gaps.
             point_pitch_mm: 1.5 * scanner.pitch_mm,
-            range_um: Some(colour_range_um(&face_points, &nominal.plane)),
+            range_um: Some(range_um),
         },
     )
     .and_then(|img| encode_png(&img))
@@ -187,6 +199,36 @@ pub fn run(
         path: spath.clone(),
         source,
     })?;
+
+    // What the page needs: the faces as planes and their map as SVG.
+    let planes = faces
+        .iter()
+        .map(|f| FittedPlane {
+            name: f.name.clone(),
+            plane: f.fit.plane,
+            points: f.indices.clone(),
+        })
+        .collect();
+    let xyd: Vec<_> = face_points
+        .iter()
+        .map(|p| {
+            (
+                nominal.u.dot(&p.coords),
+                nominal.v.dot(&p.coords),
+                nominal.plane.signed_distance(p),
+            )
+        })
+        .collect();
+    let labels = MapLabels {
+        title: title.clone(),
+        x: "along the cut (mm)".into(),
+        y: "along the tool axis (mm)".into(),
+    };
+    let faces_svg =
+        deviation_map_svg(&xyd, range_um * 1e-3, &labels).map_err(|e| PipelineError::Page {
+            path: spath.clone(),
+            message: e.to_string(),
+        })?;
     lap("render", &mut timings);
 
     let mut identified = BTreeMap::new();
@@ -233,6 +275,9 @@ pub fn run(
         report,
         cloud: scanned.cloud,
         heat_map_png: img,
+        stock,
+        planes,
+        faces_svg,
     })
 }
 

@@ -1,7 +1,9 @@
 //! `simulate`: the program cut into the scene's stock on the deviated machine with the
-//! collision checks, the part's surface mesh and top view, and the deviation map against
-//! the design model.
+//! collision checks, the part's surface mesh, its picture and page coloured by deviation
+//! (from the design model, or from the part the nominal machine cuts), and the deviation
+//! map against the design model.
 
+use super::pages::{display_part, part_png, reference_part, view};
 use super::{PipelineError, make_stock, sweep_failed};
 use crate::cutting::collide::sweep_with_checks;
 use crate::cutting::mesh::{TriMesh, mesh_stock};
@@ -9,7 +11,9 @@ use crate::math::Real;
 use crate::nc::Program;
 use crate::progress::Progress;
 use crate::report::deviation_map::{DeviationImageOptions, deviation_map, render_deviation_map};
-use crate::report::render::{encode_png, render_top_view};
+use crate::report::html::{Marker, Plot, render_page};
+use crate::report::render::encode_png;
+use crate::report::svg::{MapLabels, deviation_map_svg};
 use crate::report::{CollisionEvent, DeviationSummary};
 use crate::report::{MeshSummary, SimulationReport, StockReport};
 use crate::scene::Scene;
@@ -23,8 +27,11 @@ pub struct Simulation {
     pub report: SimulationReport,
     /// The cut stock's surface (workpiece frame, mm).
     pub mesh: TriMesh,
-    /// PNG of the part seen from +z.
-    pub top_view_png: Vec<u8>,
+    /// PNG of the part, shaded from a direction that shows its machined faces, coloured by
+    /// deviation where known.
+    pub part_png: Vec<u8>,
+    /// The page (`report.html`).
+    pub html: String,
     /// PNG of the deviation map against the scene's design model, if it has one.
     pub deviation_png: Option<Vec<u8>>,
 }
@@ -71,10 +78,10 @@ pub fn simulate(
         path: path.clone(),
         source,
     };
-    let title = format!("{}: cut part seen from +z", scene.name);
-    let img = render_top_view(&stock, &title).map_err(render_err)?;
-    let top_view_png = encode_png(&img).map_err(render_err)?;
+    let shown = display_part(scene, &mesh, || reference_part(scene, &program.moves))?;
+    let part_png = part_png(scene, &shown)?;
     timings.insert("render".into(), clock.elapsed().as_secs_f64());
+    let mut plots = Vec::new();
     let (deviation, deviation_png) = match &scene.design {
         Some((design_path, design)) => {
             let clock = Instant::now();
@@ -98,6 +105,26 @@ pub fn simulate(
             };
             let img = render_deviation_map(&points, &opts).map_err(render_err)?;
             let png = encode_png(&img).map_err(render_err)?;
+            let range = crate::report::display::colour_range_mm(
+                &points.iter().map(|p| p.distance_mm).collect::<Vec<_>>(),
+            );
+            let xyd: Vec<_> = points
+                .iter()
+                .map(|p| (p.point.x, p.point.y, p.distance_mm))
+                .collect();
+            let labels = MapLabels {
+                title: opts.title.clone(),
+                x: "x (mm)".into(),
+                y: "y (mm)".into(),
+            };
+            let svg = deviation_map_svg(&xyd, range, &labels).map_err(|e| PipelineError::Page {
+                path: path.clone(),
+                message: e.to_string(),
+            })?;
+            plots.push(Plot {
+                caption: "Deviation map, top view: each cell shows the crossing of largest |deviation| in its column of the part.".into(),
+                svg,
+            });
             timings.insert("deviation".into(), clock.elapsed().as_secs_f64());
             (
                 Some(DeviationSummary {
@@ -109,6 +136,20 @@ pub fn simulate(
         }
         None => (None, None),
     };
+    let clock = Instant::now();
+    let markers = checked
+        .events
+        .iter()
+        .map(|e| {
+            let c = CollisionEvent::of(e);
+            Marker {
+                position: c.point_mm,
+                label: format!("line {}: {}", c.line, c.kind.replace('_', " ")),
+            }
+        })
+        .collect();
+    let view3d = view(scene, Some(&shown), None, Vec::new(), None, markers)?;
+    timings.insert("page".into(), clock.elapsed().as_secs_f64());
     let report = SimulationReport {
         scene: scene.name.clone(),
         program: program.path.display().to_string(),
@@ -126,10 +167,16 @@ pub fn simulate(
         deviation,
         timings_s: timings,
     };
+    let html = render_page(&crate::report::pages::simulate_page(
+        &report,
+        Some(view3d),
+        plots,
+    ));
     Ok(Simulation {
         report,
         mesh,
-        top_view_png,
+        part_png,
+        html,
         deviation_png,
     })
 }

@@ -60,6 +60,11 @@ impl DesignModel {
         Ok(Self { mesh, shape })
     }
 
+    /// The design's closed mesh.
+    pub fn mesh(&self) -> &ClosedMesh {
+        &self.mesh
+    }
+
     /// Signed distance of `p` to the design surface (mm): positive outside (material left
     /// on a part), negative inside (a gouge).
     pub fn signed_distance(&self, p: &Point3) -> Real {

@@ -1,7 +1,9 @@
 //! **Reports**: what the commands tell the user. PNG heat maps with a colour bar
 //! ([`render`]), the standards' plots (ISO 230-2 bidirectional, ISO 230-4 polar:
 //! [`plots`]), the deviation map of a cut part against its design model
-//! ([`deviation_map`]), and the serialisable report of every command with the summary text
+//! ([`deviation_map`]), the self-contained HTML page ([`html`]: a GLB of the display
+//! geometry from [`glb`] and [`display`], SVG plots from [`svg`]), the shaded part picture
+//! ([`part_view`]), and the serialisable report of every command with the summary text
 //! the CLI prints: one private module per command (`simulate`, `scan`, `run`, `fit`,
 //! `correct`, `identify`, `design`), their types re-exported here ([`Report`],
 //! [`SimulationReport`], [`CorrectReport`], …).
@@ -13,6 +15,11 @@
 pub mod render;
 pub mod deviation_map;
 pub mod plots;
+pub mod glb;
+pub mod display;
+pub mod part_view;
+pub mod svg;
+pub mod html;
 mod simulate;
 mod scan;
 mod run;
@@ -21,6 +28,7 @@ mod correct;
 mod identify;
 mod design;
 pub mod hexapod;
+pub mod pages;
 
 pub use correct::{CorrectIteration, CorrectReport, UncorrectableReport};
 pub use design::DesignReport;

@@ -57,6 +57,11 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "render",
             "deviation_map",
             "plots",
+            "glb",
+            "display",
+            "part_view",
+            "svg",
+            "html",
             "simulate",
             "scan",
             "run",
@@ -65,6 +70,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "identify",
             "design",
             "hexapod",
+            "pages",
         ],
     ),
     ("scene", &[]),
@@ -72,7 +78,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
     (
         "pipeline",
         &[
-            "simulate", "run", "fit", "correct", "identify", "design", "rotary", "hexapod",
+            "pages", "simulate", "run", "fit", "correct", "identify", "design", "rotary", "hexapod",
         ],
     ),
     ("output", &[]),

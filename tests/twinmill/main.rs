@@ -18,6 +18,7 @@ mod instruments;
 mod rotary_location;
 mod study;
 mod hexapod;
+mod html;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};
@@ -27,6 +28,8 @@ use twinmill::metrology::scan::ScannerConfig;
 use twinmill::pipeline::{Outcome, run};
 use twinmill::progress::NoProgress;
 use twinmill::scene::Scene;
+// `crate::math` and `crate::nc` for the shared P1 benchmark support (`html`).
+use twinmill::{math, nc};
 
 const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/mdx50-step.toml");
 

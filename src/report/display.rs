@@ -1,0 +1,526 @@
+//! Display geometry: what the report's picture and 3-D view show of a part and a cloud.
+//!
+//! **The display mesh.** The cut part's surface mesh ([`crate::cutting::mesh`]) has two
+//! triangles per dexel cell of surface: a million for a 40 mm part at 0.1 mm, far more than
+//! a page should carry. [`simplify`] reduces it with meshoptimizer's edge-collapse
+//! simplifier (`meshopt`), which keeps a subset of the original vertices — every display
+//! vertex is an exact vertex of the cut surface — and reports how far the simplified surface
+//! may lie from the original. First pass: only collapses that move the surface less than
+//! [`FIRST_PASS_ERROR_MM`] by meshoptimizer's (conservative) measure: flat faces shrink to a
+//! few triangles, curved ones keep most of their dexel resolution; if that leaves more than
+//! the budget, a second pass collapses to the budget and the error it needed is reported
+//! ([`DisplayMesh::error_mm`]).
+//!
+//! **Deviations** ([`deviations`]) are measured for each display triangle at its three
+//! corners, along the triangle's normal: from a point just inside the corner (1 % of the way
+//! to the centroid), the nearest crossing of the normal line with the reference surface
+//! (the design model, or the part the same program cuts on the nominal machine), signed +
+//! where the part lies outside the reference (material left) and − inside (a gouge). Per
+//! triangle, not per vertex, because a vertex on an edge of the part belongs to faces with
+//! different deviations (a face cut 0.5 mm too deep meets an uncut face along an edge that
+//! lies on the reference); along the normal, not to the closest point, because near an edge
+//! the closest point of the reference is on the neighbouring face, and a large display
+//! triangle would spread that edge value over the whole face. Both corners of a triangle then
+//! lie on one face, and for planar faces the deviation is linear across it, so the colours
+//! interpolated between the corners are exact. A face with no counterpart in the reference
+//! (a ledge the nominal part does not have) has no crossing near it along its normal: where
+//! the crossing is more than twice as far (plus 1 µm) as the reference is from the
+//! triangle's centroid, or missing, the corner takes the centroid's closest-point distance
+//! instead. The crossing is looked for on the side the reference lies: ahead along the
+//! outward normal when the triangle's centroid is inside the reference, behind it when
+//! outside, either when on it.
+//!
+//! **Invariant:** deterministic (meshoptimizer is sequential; distances run in fixed chunks
+//! joined in order); reads meshes and clouds, never changes them.
+
+use crate::cutting::mesh::TriMesh;
+use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3};
+use crate::report::render::nice_ceil;
+use parry3d_f64::query::{PointQuery, Ray, RayCast};
+use rayon::prelude::*;
+
+/// Largest display mesh (triangles): about 3 MB of GLB, 4 MB in the page.
+pub const MAX_TRIANGLES: usize = 120_000;
+/// Largest displayed cloud (points).
+pub const MAX_POINTS: usize = 40_000;
+/// The first pass's bound (mm): far below a pixel of a part tens of millimetres across
+/// (0.05 mm or more), and large enough for meshoptimizer's error measure, which is not zero
+/// even for collapses within a plane, to let flat faces collapse (at 1e-4 mm it stalls with
+/// most of a flat face's triangles left).
+pub const FIRST_PASS_ERROR_MM: Real = 0.01;
+/// Triangles per parallel chunk of the deviation queries.
+const CHUNK: usize = 1024;
+/// How far towards the centroid a corner's deviation is measured from (fraction).
+const CORNER_PULL: Real = 0.01;
+/// Slack of the counterpart test (mm): a crossing along the normal counts as the face's
+/// counterpart within twice the centroid's closest distance plus this (1 µm, so faces that
+/// lie on the reference keep their along-normal value).
+const COUNTERPART_SLACK_MM: Real = 1e-3;
+
+/// A part's surface for display.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DisplayMesh {
+    /// Vertices (mm, W): a subset of the source mesh's.
+    pub vertices: Vec<Point3>,
+    /// Triangles, counter-clockwise seen from outside.
+    pub triangles: Vec<[u32; 3]>,
+    /// Triangles of the source mesh.
+    pub source_triangles: usize,
+    /// How far the display surface may lie from the source surface (mm), as meshoptimizer
+    /// measures it.
+    pub error_mm: Real,
+}
+
+/// The display mesh of `mesh`, at most `max_triangles` (see the module docs). An empty mesh
+/// stays empty.
+pub fn simplify(mesh: &TriMesh, max_triangles: usize) -> DisplayMesh {
+    let source_triangles = mesh.triangles.len();
+    if mesh.vertices.is_empty() || mesh.triangles.is_empty() {
+        return DisplayMesh {
+            vertices: Vec::new(),
+            triangles: Vec::new(),
+            source_triangles,
+            error_mm: 0.0,
+        };
+    }
+    let mut b = Aabb::empty();
+    for p in &mesh.vertices {
+        b.grow(p);
+    }
+    let centre = nalgebra::center(&b.min, &b.max);
+    // f32 about the centre: meshoptimizer's input; the output keeps the f64 originals.
+    let positions: Vec<[f32; 3]> = mesh
+        .vertices
+        .iter()
+        .map(|p| {
+            let d = p - centre;
+            [d.x as f32, d.y as f32, d.z as f32]
+        })
+        .collect();
+    let indices: Vec<u32> = mesh.triangles.iter().flatten().copied().collect();
+    let abs = meshopt::SimplifyOptions::ErrorAbsolute;
+    let mut err = 0.0f32;
+    let mut out = meshopt::simplify_decoder(
+        &indices,
+        &positions,
+        0,
+        FIRST_PASS_ERROR_MM as f32,
+        abs,
+        Some(&mut err),
+    );
+    let mut error_mm = Real::from(err);
+    if out.len() / 3 > max_triangles {
+        let diagonal = (b.max - b.min).norm() as f32;
+        let mut err2 = 0.0f32;
+        out = meshopt::simplify_decoder(
+            &out,
+            &positions,
+            max_triangles * 3,
+            diagonal,
+            abs,
+            Some(&mut err2),
+        );
+        error_mm = error_mm.max(Real::from(err2));
+    }
+    // Compact: used vertices in index order.
+    let mut map = vec![u32::MAX; mesh.vertices.len()];
+    let mut used: Vec<u32> = out.clone();
+    used.sort_unstable();
+    used.dedup();
+    let vertices: Vec<Point3> = used
+        .iter()
+        .enumerate()
+        .map(|(k, &i)| {
+            map[i as usize] = k as u32;
+            mesh.vertices[i as usize]
+        })
+        .collect();
+    let triangles = out
+        .chunks_exact(3)
+        .map(|t| [map[t[0] as usize], map[t[1] as usize], map[t[2] as usize]])
+        .collect();
+    DisplayMesh {
+        vertices,
+        triangles,
+        source_triangles,
+        error_mm,
+    }
+}
+
+/// A surface deviations are measured from: a triangle mesh (mm, W) indexed for ray casts.
+pub struct ReferenceSurface {
+    shape: parry3d_f64::shape::TriMesh,
+    reach: Real,
+}
+
+impl std::fmt::Debug for ReferenceSurface {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ReferenceSurface")
+            .field("triangles", &self.shape.num_triangles())
+            .finish()
+    }
+}
+
+impl ReferenceSurface {
+    /// The surface of a triangle mesh; `None` if it has no triangles or parry refuses it.
+    pub fn new(vertices: Vec<Point3>, triangles: Vec<[u32; 3]>) -> Option<Self> {
+        let mut b = Aabb::empty();
+        for p in &vertices {
+            b.grow(p);
+        }
+        let shape = parry3d_f64::shape::TriMesh::new(vertices, triangles).ok()?;
+        Some(Self {
+            shape,
+            reach: (b.max - b.min).norm().max(1.0),
+        })
+    }
+
+    /// The signed deviation of the surface point `p` with outward normal `n` (see the
+    /// module docs): + material left, − gouge, `None` without a crossing within reach.
+    /// `side` is which side of the reference the face lies on (− inside, + outside, 0 on
+    /// it or unknown): inside, the counterpart lies ahead along `n`; outside, behind; on
+    /// it, whichever is nearer.
+    pub fn deviation_along(&self, p: &Point3, n: &UnitVector3, side: Real) -> Option<Real> {
+        let cast = |dir: Vector3| {
+            self.shape
+                .cast_local_ray(&Ray::new(*p, dir), self.reach, false)
+        };
+        let ahead = || cast(n.into_inner()).map(|t| -t);
+        let behind = || cast(-n.into_inner());
+        if side < 0.0 {
+            ahead()
+        } else if side > 0.0 {
+            behind()
+        } else {
+            match (ahead(), behind()) {
+                (Some(a), Some(b)) => Some(if -a <= b { a } else { b }),
+                (a, b) => a.or(b),
+            }
+        }
+    }
+}
+
+impl ReferenceSurface {
+    /// Distance of `p` from the surface (mm), signed by the outward normal of the nearest
+    /// triangle when the nearest point lies inside one (+ outside), unsigned at its edges
+    /// and corners.
+    pub fn signed_distance(&self, p: &Point3) -> Real {
+        let (proj, feature) = self.shape.project_local_point_and_get_feature(p);
+        let d = (p - proj.point).norm();
+        match feature {
+            parry3d_f64::shape::FeatureId::Face(i) => {
+                let n = self.shape.num_triangles() as u32;
+                let t = self.shape.triangle(i % n.max(1));
+                let normal = (t.b - t.a).cross(&(t.c - t.a));
+                if (p - proj.point).dot(&normal) < 0.0 {
+                    -d
+                } else {
+                    d
+                }
+            }
+            _ => d,
+        }
+    }
+}
+
+/// The signed distance of each point from `reference` (mm, see
+/// [`ReferenceSurface::signed_distance`]).
+pub fn distances(points: &[Point3], reference: &ReferenceSurface) -> Vec<Real> {
+    points
+        .par_chunks(CHUNK)
+        .flat_map_iter(|c| c.iter().map(|p| reference.signed_distance(p)))
+        .collect()
+}
+
+/// The deviation at each corner of each display triangle from `reference` (mm; see the
+/// module docs); NaN for a degenerate triangle.
+pub fn deviations(mesh: &DisplayMesh, reference: &ReferenceSurface) -> Vec<[Real; 3]> {
+    mesh.triangles
+        .par_chunks(CHUNK)
+        .flat_map_iter(|c| {
+            c.iter().map(|t| {
+                let p = t.map(|i| mesh.vertices[i as usize]);
+                let n = (p[1] - p[0]).cross(&(p[2] - p[0]));
+                if n.norm() == 0.0 || !n.norm().is_finite() {
+                    return [Real::NAN; 3];
+                }
+                let n = UnitVector3::new_normalize(n);
+                let centre = Point3::from((p[0].coords + p[1].coords + p[2].coords) / 3.0);
+                let nearest = reference.signed_distance(&centre);
+                let side = if nearest.abs() <= COUNTERPART_SLACK_MM {
+                    0.0
+                } else {
+                    nearest
+                };
+                p.map(|q| {
+                    let pulled = q + (centre - q) * CORNER_PULL;
+                    match reference.deviation_along(&pulled, &n, side) {
+                        Some(d) if d.abs() <= 2.0 * nearest.abs() + COUNTERPART_SLACK_MM => d,
+                        _ => nearest,
+                    }
+                })
+            })
+        })
+        .collect()
+}
+
+/// A symmetric colour range (mm) for `values`: the 99.5th percentile of |value| rounded up
+/// to a 1-2-5 step in µm (at least 1 µm), so a few edge points do not wash out the rest;
+/// 1 µm when none is finite.
+pub fn colour_range_mm(values: &[Real]) -> Real {
+    let mut a: Vec<Real> = values
+        .iter()
+        .filter(|v| v.is_finite())
+        .map(|v| v.abs() * 1e3)
+        .collect();
+    if a.is_empty() {
+        return 1e-3;
+    }
+    a.sort_by(Real::total_cmp);
+    // Within 1 ppm of a step counts as the step (a 0.5 mm deviation computed as
+    // 0.5000001 mm keeps the ±500 µm scale).
+    let q = a[(a.len() - 1) * 995 / 1000] * (1.0 - 1e-6);
+    nice_ceil(q.max(1.0)) * 1e-3
+}
+
+/// The colour range (mm) of a display mesh's corner deviations: as [`colour_range_mm`],
+/// but the percentile weighs each corner by a third of its triangle's area, so the slivers
+/// along edges and ledges (many corners, little surface) do not set the scale.
+pub fn area_colour_range_mm(mesh: &DisplayMesh, deviations: &[[Real; 3]]) -> Real {
+    let mut w: Vec<(Real, Real)> = Vec::new();
+    for (t, d) in mesh.triangles.iter().zip(deviations) {
+        let p = t.map(|i| mesh.vertices[i as usize]);
+        let area = (p[1] - p[0]).cross(&(p[2] - p[0])).norm() / 6.0;
+        w.extend(
+            d.iter()
+                .filter(|x| x.is_finite())
+                .map(|x| (x.abs() * 1e3, area)),
+        );
+    }
+    let total: Real = w.iter().map(|x| x.1).sum();
+    if w.is_empty() || total <= 0.0 || !total.is_finite() {
+        return colour_range_mm(&deviations.iter().flatten().copied().collect::<Vec<_>>());
+    }
+    w.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut acc = 0.0;
+    let mut q = w[w.len() - 1].0;
+    for (v, a) in &w {
+        acc += a;
+        if acc >= 0.995 * total {
+            q = *v;
+            break;
+        }
+    }
+    nice_ceil((q * (1.0 - 1e-6)).max(1.0)) * 1e-3
+}
+
+/// Whether the triangle lies on a face of `b` (within 1 nm): part of the stock as it was.
+fn on_box(t: [Point3; 3], b: &Aabb) -> bool {
+    const EPS: Real = 1e-6;
+    (0..3).any(|k| {
+        t.iter().all(|p| (p[k] - b.min[k]).abs() < EPS)
+            || t.iter().all(|p| (p[k] - b.max[k]).abs() < EPS)
+    })
+}
+
+/// The direction the part is best seen from (from the part towards the eye) and the
+/// screen's up: the area-weighted mean outward normal of the machined surface (triangles
+/// not on a face of `stock_box`), tilted 30° towards +z (or −y when it looks down) and a
+/// little sideways so the walls beside a face show too. Without machined surface, or when
+/// its normals cancel, an isometric view from (1, −1, 1).
+pub fn view_direction(mesh: &DisplayMesh, stock_box: &Aabb) -> (UnitVector3, Vector3) {
+    let mut sum = Vector3::zeros();
+    let mut area = 0.0;
+    for t in &mesh.triangles {
+        let p = t.map(|i| mesh.vertices[i as usize]);
+        if on_box(p, stock_box) {
+            continue;
+        }
+        let n = (p[1] - p[0]).cross(&(p[2] - p[0])) * 0.5;
+        sum += n;
+        area += n.norm();
+    }
+    let z = Vector3::z();
+    let d = if area > 0.0 && sum.norm() > 0.05 * area {
+        sum.normalize()
+    } else {
+        return (UnitVector3::new_normalize(Vector3::new(1.0, -1.0, 1.0)), z);
+    };
+    // Tilt towards the screen's up, and a little sideways.
+    let (up, tilt_to) = if d.z.abs() > 0.9 {
+        (Vector3::y(), -Vector3::y() * d.z.signum())
+    } else {
+        (z, z)
+    };
+    let lift = (tilt_to - d * tilt_to.dot(&d)).normalize();
+    let side = lift.cross(&d).normalize();
+    let eye = UnitVector3::new_normalize(d + lift * 0.577 + side * 0.3);
+    (eye, up)
+}
+
+/// Indices of at most `max` of `n` items, evenly strided (deterministic).
+pub fn decimate(n: usize, max: usize) -> Vec<usize> {
+    if max == 0 {
+        return Vec::new();
+    }
+    if n <= max {
+        return (0..n).collect();
+    }
+    let stride = n.div_ceil(max);
+    (0..n).step_by(stride).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The closed surface of the cube [−10, 10]³ with an n × n grid on each face, two
+    /// triangles per square, outward.
+    fn cube(n: i32) -> TriMesh {
+        let mut m = TriMesh::default();
+        let mut ids = std::collections::HashMap::new();
+        let h = 20.0 / Real::from(n);
+        let mut id = |p: [i32; 3], m: &mut TriMesh| {
+            *ids.entry(p).or_insert_with(|| {
+                let c = |k: usize| Real::from(p[k]) * h - 10.0;
+                m.vertices.push(Point3::new(c(0), c(1), c(2)));
+                (m.vertices.len() - 1) as u32
+            })
+        };
+        for axis in 0..3 {
+            for side in [0, n] {
+                let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+                for a in 0..n {
+                    for b in 0..n {
+                        let q = |da: i32, db: i32| {
+                            let mut p = [0; 3];
+                            p[axis] = side;
+                            p[u] = a + da;
+                            p[v] = b + db;
+                            p
+                        };
+                        let t = [q(0, 0), q(1, 0), q(1, 1), q(0, 1)].map(|p| id(p, &mut m));
+                        if side == n {
+                            m.triangles.extend([[t[0], t[1], t[2]], [t[0], t[2], t[3]]]);
+                        } else {
+                            m.triangles.extend([[t[0], t[2], t[1]], [t[0], t[3], t[2]]]);
+                        }
+                    }
+                }
+            }
+        }
+        m
+    }
+
+    #[test]
+    fn a_cube_of_small_triangles_simplifies_to_a_few_exact_ones() {
+        let m = cube(40);
+        assert_eq!(m.signed_volume().round(), 8000.0);
+        let d = simplify(&m, MAX_TRIANGLES);
+        assert!(d.triangles.len() <= 24, "{} triangles", d.triangles.len());
+        assert!(d.error_mm <= FIRST_PASS_ERROR_MM);
+        // Every display vertex is a source vertex; the solid is kept.
+        assert!(d.vertices.iter().all(|p| m.vertices.contains(p)));
+        let shown = TriMesh {
+            vertices: d.vertices.clone(),
+            triangles: d.triangles.clone(),
+        };
+        assert!((shown.signed_volume() - 8000.0).abs() < 1e-6);
+        assert_eq!(d, simplify(&m, MAX_TRIANGLES));
+    }
+
+    #[test]
+    fn a_bumpy_surface_is_cut_to_the_budget_and_says_how_far_it_moved() {
+        let mut m = cube(40);
+        for (k, p) in m.vertices.iter_mut().enumerate() {
+            p.coords *= 1.0 + 0.01 * ((k * 7919) % 13) as Real;
+        }
+        let d = simplify(&m, 500);
+        assert!(d.triangles.len() <= 500);
+        assert!(d.error_mm > FIRST_PASS_ERROR_MM);
+        assert_eq!(d.source_triangles, 19200);
+    }
+
+    #[test]
+    fn deviations_are_measured_along_each_face_normal_not_to_the_nearest_face() {
+        // Reference: the cube [−10, 10]³. Part: the same cube with its −y face 0.5 mm
+        // further in (a gouge) — shown by its −y face and its −z face.
+        let r = cube(4);
+        let reference = ReferenceSurface::new(r.vertices.clone(), r.triangles.clone()).unwrap();
+        let d = DisplayMesh {
+            vertices: vec![
+                Point3::new(-10.0, -9.5, -10.0),
+                Point3::new(10.0, -9.5, -10.0),
+                Point3::new(10.0, -9.5, 10.0),
+                Point3::new(10.0, 10.0, -10.0),
+            ],
+            // The −y face (normal −y) and a piece of the −z face (normal −z), sharing the
+            // edge y = −9.5, z = −10, which lies on the reference's −z face.
+            triangles: vec![[0, 1, 2], [0, 3, 1]],
+            source_triangles: 2,
+            error_mm: 0.0,
+        };
+        let dev = deviations(&d, &reference);
+        for c in dev[0] {
+            assert!((c + 0.5).abs() < 1e-9, "{c}");
+        }
+        for c in dev[1] {
+            assert!(c.abs() < 1e-9, "{c}");
+        }
+        // A ledge facing −z at z = 0, 0.4 mm outside the −y face: no counterpart along −z
+        // (the reference's −z face is 10 mm away), so the distance from its centroid.
+        let ledge = DisplayMesh {
+            vertices: vec![
+                Point3::new(-5.0, -10.4, 0.0),
+                Point3::new(5.0, -10.4, 0.0),
+                Point3::new(5.0, -10.3, 0.0),
+            ],
+            triangles: vec![[0, 2, 1]],
+            source_triangles: 1,
+            error_mm: 0.0,
+        };
+        let dev = deviations(&ledge, &reference);
+        let expected = 10.4 - 1.0 / 3.0 * 0.1 - 10.0;
+        for c in dev[0] {
+            assert!((c - expected).abs() < 1e-9, "{c} vs {expected}");
+        }
+    }
+
+    #[test]
+    fn the_colour_range_ignores_a_few_outliers() {
+        let mut v = vec![0.004; 1000];
+        v[3] = 0.9;
+        assert!((colour_range_mm(&v) - 0.005).abs() < 1e-15);
+        assert_eq!(colour_range_mm(&[0.0; 4]), 1e-3);
+        assert_eq!(colour_range_mm(&[]), 1e-3);
+    }
+
+    #[test]
+    fn decimation_strides_evenly() {
+        assert_eq!(decimate(5, 10), vec![0, 1, 2, 3, 4]);
+        assert_eq!(decimate(10, 4), vec![0, 3, 6, 9]);
+        assert!(decimate(10, 0).is_empty());
+    }
+
+    #[test]
+    fn the_view_looks_at_the_machined_face() {
+        // A face at y = -1 (normal -y) machined into a box [-2, 2]³: seen from -y, above.
+        let b = Aabb {
+            min: Point3::new(-2.0, -2.0, -2.0),
+            max: Point3::new(2.0, 2.0, 2.0),
+        };
+        let d = DisplayMesh {
+            vertices: vec![
+                Point3::new(-1.0, -1.0, -1.0),
+                Point3::new(1.0, -1.0, -1.0),
+                Point3::new(1.0, -1.0, 1.0),
+            ],
+            triangles: vec![[0, 1, 2]],
+            source_triangles: 1,
+            error_mm: 0.0,
+        };
+        let (eye, up) = view_direction(&d, &b);
+        assert!(eye.y < -0.7 && eye.z > 0.3, "{eye:?}");
+        assert_eq!(up, Vector3::z());
+    }
+}
