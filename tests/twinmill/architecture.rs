@@ -45,11 +45,18 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "interferometer",
             "ballbar",
             "rotary_test",
+            "hexapod_dbb",
         ],
     ),
     (
         "calibration",
-        &["identify", "calibrate", "design", "correct"],
+        &[
+            "identify",
+            "calibrate",
+            "design",
+            "correct",
+            "hexapod_calibrate",
+        ],
     ),
     (
         "report",
@@ -72,7 +79,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
     (
         "pipeline",
         &[
-            "simulate", "run", "fit", "correct", "identify", "design", "rotary", "hexapod",
+            "simulate", "run", "fit", "correct", "identify", "design", "rotary", "hexapod", "dbb",
         ],
     ),
     ("output", &[]),

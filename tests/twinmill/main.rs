@@ -17,6 +17,7 @@ mod error_motions;
 mod instruments;
 mod rotary_location;
 mod hexapod;
+mod hexapod_calibration;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};
