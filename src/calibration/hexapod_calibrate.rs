@@ -518,12 +518,14 @@ pub fn calibrate(
     let mut iterations = 0;
     let mut ss;
     let mut eig;
+    let mut last_a;
     loop {
         let (a, g, s) = normal(&x, true)?;
         ss = s;
         if !a.iter().all(|v| v.is_finite()) {
             return Err(HexapodCalibrationError::Degenerate);
         }
+        last_a = a.clone();
         eig = a.symmetric_eigen();
         let threshold = eig.eigenvalues.amax().max(0.0).sqrt() * RANK_TOLERANCE;
         // Step in the determined subspace: −Σ v·vᵀ·g / λ.
@@ -686,8 +688,8 @@ pub fn calibrate(
         .collect();
     // What removing the centre offsets costs: the same circles with the centres known.
     let centre_removal_cost = if nb > 0 {
-        let a = normal(&x, true)?.0;
-        let sub = a
+        // The normal matrix of the last iteration (its step is below the noise).
+        let sub = last_a
             .view((0, 0), (SOLVED, SOLVED))
             .into_owned()
             .symmetric_eigen();
