@@ -8,6 +8,8 @@
 //! - **FK, from home**: the same targets solved from the home pose (the cold start).
 //! - **FK, batch on all threads**: the servo-cycle batch split over rayon's pool in fixed
 //!   chunks; solves per second on every core.
+//! - **DBB calibration**: seed 000's identification from 15 circles × 360 readings
+//!   (jig-free) and 7 × 360 (ball plate), readings measured once beforehand.
 
 use criterion::criterion_main;
 
@@ -104,7 +106,52 @@ mod group {
         g.finish();
     }
 
-    criterion_group!(benches, kinematics);
+    /// Seed 000's jig-free calibration: 15 circles × 360 readings measured once on the
+    /// deviated machine (σ 0.5 µm), then identified (24 parameters + 45 table-ball
+    /// coordinates) per iteration; and the 7-circle ball-plate one.
+    fn dbb_calibration(c: &mut Criterion) {
+        use twinmill::calibration::hexapod_calibrate::{
+            CircleReadings, DEFAULT_POINTS, Procedure, calibrate, default_plan,
+        };
+        use twinmill::metrology::hexapod_dbb::{DbbInstrument, measure};
+        let scene = HexapodScene::load(Path::new(SCENE)).expect("scene loads");
+        let ws = scene.workspace.expect("the scene has a workspace");
+        let mut g = c.benchmark_group("hexapod dbb calibration");
+        g.sample_size(10);
+        for procedure in [Procedure::JigFree, Procedure::BallPlate] {
+            let plan = default_plan(procedure, &ws, DEFAULT_POINTS);
+            let readings: Vec<CircleReadings> = plan
+                .circles
+                .iter()
+                .enumerate()
+                .map(|(j, circle)| {
+                    let inst = DbbInstrument {
+                        mount_mm: twinmill::math::Vector3::zeros(),
+                        noise_sigma_mm: 0.5e-3,
+                        seed: 1,
+                        stream: (j as u64) << 32,
+                    };
+                    let m =
+                        measure(&scene.nominal, &scene.actual, circle, &inst).expect("measurable");
+                    CircleReadings {
+                        lengths_mm: m.lengths_mm(circle.radius_mm),
+                        commands: m.commands,
+                    }
+                })
+                .collect();
+            g.throughput(Throughput::Elements(plan.readings() as u64));
+            g.bench_function(procedure.name(), |b| {
+                b.iter(|| {
+                    calibrate(&scene.nominal, &scene.actual, &plan, &readings, 0.5e-3)
+                        .expect("solves")
+                        .iterations
+                })
+            });
+        }
+        g.finish();
+    }
+
+    criterion_group!(benches, kinematics, dbb_calibration);
 }
 
 criterion_main!(group::benches);

@@ -174,6 +174,12 @@ enum Command {
         #[command(subcommand)]
         command: HexapodCommand,
     },
+    /// A hexapod scene's virtual double ball bar: one circle on the deviated machine, its
+    /// radial deviation trace (CSV, polar plot) and ISO 230-4 figures (docs/hexapod.md).
+    Ballbar(DbbArgs),
+    /// Seed 000's double-ball-bar calibration of a hexapod scene on the twin: measure,
+    /// identify with what is not determined, pose errors before and after (docs/hexapod.md).
+    Calibrate(CalibrateArgs),
     /// Simulate a scene's program on its deviated machine, scan the part, fit the faces and
     /// identify the deviations; write report.json, cloud.ply, faces.png and report.html (a
     /// self-contained page with the part in 3-D).
@@ -1654,6 +1660,8 @@ fn main() -> ExitCode {
     match cli.command {
         Command::Hexapod { command } => hexapod_command(command),
         Command::Study { command } => study_command(command),
+        Command::Ballbar(a) => dbb_command(dbb_ballbar(a)),
+        Command::Calibrate(a) => dbb_command(dbb_calibrate(a)),
         Command::Evaluate {
             command: EvaluateCommand::Iso230_2 { file, json, png },
         } => {
@@ -2652,4 +2660,168 @@ fn hexapod_run(command: HexapodCommand) -> Result<ExitCode, String> {
             )
         }
     })
+}
+
+#[derive(clap::Args)]
+struct DbbArgs {
+    /// The hexapod scene file.
+    scene: PathBuf,
+    /// The table ball's nominal centre X,Y,Z (mm); default the home tool point less the bar.
+    #[arg(long, allow_hyphen_values = true)]
+    centre: Option<String>,
+    /// The bar length R (mm); default 100.
+    #[arg(long, allow_hyphen_values = true)]
+    radius: Option<String>,
+    /// The plane: XY, YZ or ZX; default XY.
+    #[arg(long)]
+    plane: Option<String>,
+    /// The bar's elevation out of the plane (degrees); default 0.
+    #[arg(long, allow_hyphen_values = true)]
+    tilt: Option<String>,
+    /// The platform's orientation A,B,C during the circle (degrees); default level.
+    #[arg(long, allow_hyphen_values = true)]
+    orientation: Option<String>,
+    /// The platform's swing along the bar while the circle runs (degrees); default 0.
+    #[arg(long, allow_hyphen_values = true)]
+    swing: Option<String>,
+    /// ccw, cw or both; default both.
+    #[arg(long)]
+    direction: Option<String>,
+    /// Samples per revolution; default 360.
+    #[arg(long, allow_hyphen_values = true)]
+    points: Option<String>,
+    /// The table ball's mounting error X,Y,Z (mm); default 0.
+    #[arg(long, allow_hyphen_values = true)]
+    mount: Option<String>,
+    /// Length noise σ (µm); default 0.5.
+    #[arg(long, allow_hyphen_values = true)]
+    noise: Option<String>,
+    /// Noise seed; default 1.
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Write the trace (direction,angle,deviation CSV) here.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Draw the polar plot into this PNG file.
+    #[arg(long)]
+    png: Option<PathBuf>,
+    /// Print the figures as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(clap::Args)]
+struct CalibrateArgs {
+    /// The hexapod scene file (needs [workspace]).
+    scene: PathBuf,
+    /// jig-free (15 circles, 18 parameters) or ball-plate (7 circles, 24); default
+    /// ball-plate.
+    #[arg(long)]
+    procedure: Option<String>,
+    /// Also run this many seeded trials of random deviations (joints ±0.5 mm, struts
+    /// ±0.2 mm).
+    #[arg(long, default_value_t = 0)]
+    trials: usize,
+    /// Print the outcome as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+fn dbb_command(r: Result<ExitCode, String>) -> ExitCode {
+    r.unwrap_or_else(fail)
+}
+
+fn one_number(text: &Option<String>, what: &str, default: f64) -> Result<f64, String> {
+    match text {
+        None => Ok(default),
+        Some(t) => Ok(numbers(t, 1, what)?[0]),
+    }
+}
+
+fn dbb_ballbar(a: DbbArgs) -> Result<ExitCode, String> {
+    use twinmill::hexapod_scene::HexapodScene;
+    use twinmill::math::Vector3;
+    use twinmill::metrology::ballbar::Turns;
+    use twinmill::metrology::hexapod_dbb::{DbbCircle, DbbInstrument, DbbPlane};
+    let s = HexapodScene::load(&a.scene).map_err(|e| e.to_string())?;
+    let radius = one_number(&a.radius, "radius", 100.0)?;
+    let tilt = one_number(&a.tilt, "tilt", 0.0)?;
+    let plane = match &a.plane {
+        None => DbbPlane::XY,
+        Some(p) => DbbPlane::from_name(p)
+            .ok_or_else(|| format!("--plane must be XY, YZ or ZX, got '{p}'"))?,
+    };
+    let turns = match a.direction.as_deref() {
+        None | Some("both") => Turns::Both,
+        Some("ccw") => Turns::Ccw,
+        Some("cw") => Turns::Cw,
+        Some(d) => return Err(format!("--direction must be ccw, cw or both, got '{d}'")),
+    };
+    let v3 = |t: &Option<String>, what: &str, d: Vector3| -> Result<Vector3, String> {
+        match t {
+            None => Ok(d),
+            Some(t) => {
+                let v = numbers(t, 3, what)?;
+                Ok(Vector3::new(v[0], v[1], v[2]))
+            }
+        }
+    };
+    let (e1, _, n) = plane.basis();
+    let _ = e1;
+    let lift = radius * tilt.to_radians().sin();
+    let centre = v3(&a.centre, "centre", s.home.position - lift * n)?;
+    let o = v3(&a.orientation, "orientation", Vector3::zeros())?;
+    let points = match &a.points {
+        None => 360,
+        Some(p) => p
+            .trim()
+            .parse::<usize>()
+            .map_err(|_| format!("--points needs a whole number, got '{p}'"))?,
+    };
+    let noise_um = one_number(&a.noise, "noise", 0.5)?;
+    let circle = DbbCircle {
+        centre_mm: centre,
+        radius_mm: radius,
+        plane,
+        tilt_deg: tilt,
+        orientation_deg: [o.x, o.y, o.z],
+        swing_deg: one_number(&a.swing, "swing", 0.0)?,
+        turns,
+        points,
+    };
+    let instrument = DbbInstrument {
+        mount_mm: v3(&a.mount, "mount", Vector3::zeros())?,
+        noise_sigma_mm: noise_um * 1e-3,
+        seed: a.seed.unwrap_or(1),
+        stream: 0,
+    };
+    let o =
+        twinmill::pipeline::dbb::ballbar(&s, &circle, &instrument).map_err(|e| e.to_string())?;
+    if let Some(out) = &a.out {
+        twinmill::output::write_file(out, o.csv.as_bytes()).map_err(|e| e.to_string())?;
+    }
+    if let Some(png) = &a.png {
+        twinmill::output::write_file(png, &o.png).map_err(|e| e.to_string())?;
+    }
+    Ok(print_out(
+        || o.summary.clone(),
+        a.json.then(|| serde_json::to_string_pretty(&o)),
+    ))
+}
+
+fn dbb_calibrate(a: CalibrateArgs) -> Result<ExitCode, String> {
+    use twinmill::calibration::hexapod_calibrate::Procedure;
+    use twinmill::hexapod_scene::HexapodScene;
+    let procedure = match a.procedure.as_deref() {
+        None => Procedure::BallPlate,
+        Some(p) => Procedure::from_name(p)
+            .ok_or_else(|| format!("--procedure must be jig-free or ball-plate, got '{p}'"))?,
+    };
+    let s = HexapodScene::load(&a.scene).map_err(|e| e.to_string())?;
+    let o = twinmill::pipeline::dbb::calibrate_scene(&s, procedure, a.trials)
+        .map_err(|e| e.to_string())?;
+    Ok(print_out(
+        || o.summary.clone(),
+        a.json.then(|| serde_json::to_string_pretty(&o)),
+    ))
 }

@@ -1,7 +1,8 @@
 //! **Calibration**: from measurements back to the machine, and from the machine to a
 //! corrected program. The 0°/180° step experiment ([`identify`]), general identification
 //! of any set of deviations with its identifiability report ([`calibrate`]), test-cut design
-//! ([`design`]) and NC-program correction with its verification ([`correct`]).
+//! ([`design`]) and NC-program correction with its verification ([`correct`]), and a hexapod's kinematic
+//! parameters from double-ball-bar lengths ([`hexapod_calibrate`]).
 //!
 //! May use everything below it: [`crate::math`], [`crate::nc`], [`crate::machine`],
 //! [`crate::cutting`] (the verification sweeps the corrected program) and
@@ -12,3 +13,4 @@ pub mod identify;
 pub mod calibrate;
 pub mod design;
 pub mod correct;
+pub mod hexapod_calibrate;

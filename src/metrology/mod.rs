@@ -9,7 +9,7 @@
 //! the laser interferometer's ISO 230-2 test cycle ([`interferometer`]) and the ball bar's
 //! ISO 230-4 circles ([`ballbar`]), whose readings and traces those evaluations take as they
 //! are, and the ISO 10791-6 motion test read by the ball sensor with probed sphere positions
-//! at rotary indices ([`rotary_test`]).
+//! at rotary indices ([`rotary_test`]); the double ball bar on a hexapod ([`hexapod_dbb`]).
 //!
 //! May use [`crate::math`], [`crate::progress`], [`crate::nc`] (axis letters and values),
 //! [`crate::machine`] (the instruments read the chain) and [`crate::cutting`] (the scanner
@@ -27,3 +27,4 @@ pub mod ball_sensor;
 pub mod interferometer;
 pub mod ballbar;
 pub mod rotary_test;
+pub mod hexapod_dbb;

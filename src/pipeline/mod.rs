@@ -19,6 +19,7 @@ mod identify;
 mod design;
 mod rotary;
 pub mod hexapod;
+pub mod dbb;
 
 pub use correct::{CorrectOutcome, correct, identified_model};
 pub use design::{DesignOutcome, MAX_DESIGN_ROUNDS, design_scene};

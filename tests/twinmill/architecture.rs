@@ -45,11 +45,18 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "interferometer",
             "ballbar",
             "rotary_test",
+            "hexapod_dbb",
         ],
     ),
     (
         "calibration",
-        &["identify", "calibrate", "design", "correct"],
+        &[
+            "identify",
+            "calibrate",
+            "design",
+            "correct",
+            "hexapod_calibrate",
+        ],
     ),
     (
         "report",
@@ -78,7 +85,8 @@ const LAYOUT: &[(&str, &[&str])] = &[
     (
         "pipeline",
         &[
-            "pages", "simulate", "run", "fit", "correct", "identify", "design", "rotary", "hexapod",
+            "pages", "simulate", "run", "fit", "correct", "identify", "design", "rotary",
+            "hexapod", "dbb",
         ],
     ),
     ("output", &[]),

@@ -19,6 +19,7 @@ mod rotary_location;
 mod study;
 mod hexapod;
 mod html;
+mod hexapod_calibration;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};

@@ -1,0 +1,887 @@
+//! Calibration of a hexapod's kinematic parameters from double-ball-bar lengths (seed 000,
+//! eq. 1–4): `r_k = f(P, T_k)`, linearised `ΔR = A·ΔP`, solved by Gauss–Newton.
+//!
+//! # Model
+//!
+//! Reading `k` is the bar length between the tool ball (the tool point of the pose
+//! `FK_P(IK_nominal(T_k))`: the controller's readings on the machine with parameters `P`)
+//! and its circle's table ball `c_j`: `f = |p_k(P) − c_j|`. Its row of `A` is
+//! `∂f/∂P = uᵀ·∂p/∂P` (`u` the bar's unit vector, `∂p/∂P` the position rows of
+//! [`Hexapod::pose_parameter_jacobian`]) and `∂f/∂c_j = −uᵀ`. Residuals are whitened by the
+//! length noise σ; columns are scaled by realistic magnitudes (joints 0.5 mm, reference
+//! lengths 0.2 mm, ball centres 0.5 mm).
+//!
+//! **Solved:** the 18 base-joint coordinates and the 6 reference lengths (24). The 18
+//! platform-joint coordinates are taken as known (measured on a CMM, as in seed 000 §2-1).
+//!
+//! **Procedures.** *Jig-free* (seed 000 §3): each circle has its own table ball whose centre
+//! is not known (its mounting error shows as a centre offset), so its three coordinates are
+//! estimated with the parameters (the offset "removed in the calculation"). A DBB reads
+//! lengths only: moving every base joint and every table ball by one rigid motion leaves
+//! every reading unchanged, so the base frame's six degrees of freedom are not observable —
+//! the normal matrix has rank (parameters − 6), its null space exactly those six named gauge
+//! directions. The 24 parameters are reported in the gauge where the base joints' deviations
+//! carry no rigid motion (the base joints best-fitted to the nominal ones): 18 determined
+//! combinations; the rigid part is what seed 000's separate table calibration fixes.
+//! *Ball plate* (seed 000 §4): the 7 balls' centres are known in the table frame, so no
+//! centre is estimated and the table frame fixes the gauge: all 24 parameters determined.
+//!
+//! **Identifiability.** The eigen-decomposition of the scaled, whitened normal matrix: a
+//! direction whose singular value is below [`RANK_TOLERANCE`] of the largest is not
+//! determined (without a jig exactly the six gauge directions) and is held at the prior
+//! (nominal) value, never given a value; the solve runs in the rest. Directions the readings
+//! see only weakly — standard uncertainty above [`DETERMINED_FRACTION`] of the magnitude,
+//! typically a base joint moved along its strut against that strut's reference length,
+//! which the strut directions' small variation over the workspace barely separates — are
+//! named as *weak*; they are solved and their large σ carried into the parameters'.
+//!
+//! **Invariant:** reads readings and hexapods; never touches files; a parameter direction
+//! the readings do not determine is named, never valued.
+
+use crate::calibration::calibrate::DETERMINED_FRACTION;
+use crate::machine::hexapod::{Hexapod, HexapodError, PARAMETERS, ParameterId, Pose, twin_pose};
+use crate::machine::hexapod_accuracy::{Workspace, level_positioning, pivot_test};
+use crate::math::{Matrix3, Real, Vector3};
+use crate::metrology::ballbar::Turns;
+use crate::metrology::hexapod_dbb::{DbbCircle, DbbPlane};
+use nalgebra::{DMatrix, DVector};
+use serde::Serialize;
+
+/// Realistic magnitude of a joint coordinate's deviation (mm): the scale of its column.
+pub const JOINT_MAGNITUDE_MM: Real = 0.5;
+/// Realistic magnitude of a reference length's deviation (mm).
+pub const STRUT_MAGNITUDE_MM: Real = 0.2;
+/// Realistic magnitude of a table ball's mounting error (mm).
+pub const BALL_MAGNITUDE_MM: Real = 0.5;
+/// Relative singular value below which a direction of the scaled, whitened Jacobian is
+/// numerically null (not determined at all): far above the rounding of the lengths'
+/// Jacobian (FK to 1e-9 mm on 1e3 mm struts), far below any direction a circle sees.
+pub const RANK_TOLERANCE: Real = 1e-7;
+/// Gauss–Newton stops when a step lowers the whitened sum of squares by less than this
+/// fraction: what is left is the lengths' rounding (FK to 1e-9 mm) seen through the weak
+/// directions.
+const COST_TOLERANCE: Real = 1e-9;
+/// Gauss–Newton iterations at most.
+pub const MAX_ITERATIONS: usize = 20;
+/// Gauss–Newton stops when the scaled step is below this (a thousandth of a nanometre on a
+/// 0.5 mm scale: far below any σ).
+const STEP_TOLERANCE: Real = 1e-9;
+
+/// The 24 solved parameters: base joints (0–17) and reference lengths (36–41).
+pub fn solved_parameters() -> Vec<ParameterId> {
+    (0..18)
+        .chain(36..PARAMETERS)
+        .filter_map(ParameterId::new)
+        .collect()
+}
+
+/// Number of solved parameters.
+pub const SOLVED: usize = 24;
+
+/// The two procedures of seed 000.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Procedure {
+    /// 15 circles, each about its own table ball of unknown centre (§3).
+    JigFree,
+    /// 7 circles about the balls of a plate whose centres are known in the table frame (§4).
+    BallPlate,
+}
+
+impl Procedure {
+    /// `jig-free` or `ball-plate`.
+    pub fn from_name(name: &str) -> Option<Procedure> {
+        match name {
+            "jig-free" => Some(Procedure::JigFree),
+            "ball-plate" => Some(Procedure::BallPlate),
+            _ => None,
+        }
+    }
+
+    /// The name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Procedure::JigFree => "jig-free",
+            Procedure::BallPlate => "ball-plate",
+        }
+    }
+}
+
+/// A calibration's circles: each circle's table ball (nominal centre: `circle.centre_mm`),
+/// and whether the balls' centres are known.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Plan {
+    /// The procedure.
+    pub procedure: Procedure,
+    /// The circles, one table ball each.
+    pub circles: Vec<DbbCircle>,
+}
+
+impl Plan {
+    /// Whether the table balls' centres are known (the ball plate).
+    pub fn balls_known(&self) -> bool {
+        self.procedure == Procedure::BallPlate
+    }
+
+    /// Readings in all.
+    pub fn readings(&self) -> usize {
+        self.circles
+            .iter()
+            .map(|c| c.points * c.turns.runs().len())
+            .sum()
+    }
+}
+
+/// Samples per circle of the default plans (one a degree).
+pub const DEFAULT_POINTS: usize = 360;
+
+/// Seed 000's plans on a workspace: `jig-free` 15 circles (five positions in x–y — the
+/// centre and ±0.4 of the half-widths — at three
+/// heights, the platform level, tilted about x and tilted about y, the bar at 20°, 30° and
+/// 45° so that every table ball's z is seen), `ball-plate` 7 circles about a plate's centre ball and six balls on a hexagon, the
+/// bar tilted 45° for z sensitivity, the platform level at the centre and tilted ±t about x
+/// and y at the others. Radius 100 mm (less on a small workspace); t = 0.6 × the
+/// workspace's tilt.
+pub fn default_plan(procedure: Procedure, ws: &Workspace, points: usize) -> Plan {
+    let (xc, yc) = (0.5 * (ws.x_mm.0 + ws.x_mm.1), 0.5 * (ws.y_mm.0 + ws.y_mm.1));
+    let (hx, hy) = (0.5 * (ws.x_mm.1 - ws.x_mm.0), 0.5 * (ws.y_mm.1 - ws.y_mm.0));
+    let (z0, z1) = ws.z_mm;
+    let r = (0.4 * hx.min(hy)).clamp(1.0, 100.0);
+    let t = 0.6 * ws.tilt_deg;
+    let circle = |x: Real, y: Real, z: Real, tilt: Real, o: [Real; 3], swing: Real| {
+        let lift = r * tilt.to_radians().sin();
+        DbbCircle {
+            centre_mm: Vector3::new(x, y, z - lift),
+            radius_mm: r,
+            plane: DbbPlane::XY,
+            tilt_deg: tilt,
+            orientation_deg: o,
+            swing_deg: swing,
+            turns: Turns::Ccw,
+            points,
+        }
+    };
+    let mut circles = Vec::new();
+    match procedure {
+        Procedure::JigFree => {
+            let layers = [
+                (z0 + 0.25 * (z1 - z0), 20.0, [0.0, 0.0, 0.0]),
+                (0.5 * (z0 + z1), 30.0, [0.5 * t, 0.0, 0.0]),
+                (z0 + 0.7 * (z1 - z0), 45.0, [0.0, -0.5 * t, 0.0]),
+            ];
+            for (z, tilt, o) in layers {
+                for (fx, fy) in [
+                    (0.0, 0.0),
+                    (0.4, 0.4),
+                    (-0.4, 0.4),
+                    (-0.4, -0.4),
+                    (0.4, -0.4),
+                ] {
+                    circles.push(circle(xc + fx * hx, yc + fy * hy, z, tilt, o, 0.6 * t));
+                }
+            }
+        }
+        Procedure::BallPlate => {
+            let z = z0 + 0.25 * (z1 - z0);
+            circles.push(circle(xc, yc, z, 45.0, [0.0; 3], 0.0));
+            let orient = [
+                [t, 0.0, 0.0],
+                [0.0, t, 0.0],
+                [-t, 0.0, 0.0],
+                [0.0, -t, 0.0],
+                [t, t, 0.0],
+                [-t, -t, 0.0],
+            ];
+            for (k, o) in orient.iter().enumerate() {
+                let ang = std::f64::consts::TAU * k as Real / 6.0;
+                let (x, y) = (xc + 0.6 * hx * ang.cos(), yc + 0.6 * hy * ang.sin());
+                circles.push(circle(x, y, z, 45.0, *o, 0.0));
+            }
+        }
+    }
+    Plan { procedure, circles }
+}
+
+/// The measured lengths of one circle.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CircleReadings {
+    /// The commanded poses.
+    pub commands: Vec<Pose>,
+    /// The bar lengths read (mm).
+    pub lengths_mm: Vec<Real>,
+}
+
+/// Errors of the calibration.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum HexapodCalibrationError {
+    /// The readings do not match the plan, or a value is not finite.
+    #[error("calibration: {0}")]
+    Input(String),
+    /// The kinematics failed at a reading during the solve.
+    #[error("calibration: circle {circle}, reading {reading}: {source}")]
+    Kinematics {
+        /// 1-based circle.
+        circle: usize,
+        /// 0-based reading.
+        reading: usize,
+        /// Why.
+        source: HexapodError,
+    },
+    /// The normal matrix is not finite.
+    #[error("calibration: the normal equations are not finite")]
+    Degenerate,
+}
+
+/// One solved parameter in the report's gauge.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ParameterEstimate {
+    /// Name (`bx_1`, `l0_3`, …).
+    pub name: String,
+    /// Identified deviation from nominal (mm).
+    pub value_mm: Real,
+    /// Its standard uncertainty (mm).
+    pub sigma_mm: Real,
+}
+
+/// What the readings determine.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HexapodIdentifiability {
+    /// Unknowns: the 24 parameters and, without a jig, three per table ball.
+    pub unknowns: usize,
+    /// Table-ball coordinates among them.
+    pub ball_unknowns: usize,
+    /// Dimension of the determined subspace.
+    pub rank: usize,
+    /// Rank of the 24 parameters' part in the report's gauge (18 without a jig, 24 with
+    /// the plate).
+    pub parameters_determined: usize,
+    /// Singular values of the scaled, whitened Jacobian (descending).
+    pub singular_values: Vec<Real>,
+    /// Condition number within the determined subspace.
+    pub condition_number: Real,
+    /// The named gauge directions (the base frame's rigid motions), when the table balls
+    /// are estimated.
+    pub gauge: Vec<String>,
+    /// The largest part of an undetermined direction outside the gauge span (0: the
+    /// undetermined subspace is exactly the named gauge).
+    pub undetermined_outside_gauge: Real,
+    /// Directions the readings determine only weakly: standard uncertainty above
+    /// [`DETERMINED_FRACTION`] of the magnitude (named by their largest terms, scaled
+    /// units). Solved, with their large σ carried into the parameters'.
+    pub weak: Vec<String>,
+}
+
+/// The outcome of a calibration.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HexapodCalibration {
+    /// The procedure.
+    pub procedure: Procedure,
+    /// What is determined.
+    pub identifiability: HexapodIdentifiability,
+    /// The 24 parameters: deviations from nominal, in the gauge where the base joints'
+    /// deviations carry no rigid motion (jig-free) or in the table frame (ball plate).
+    pub estimates: Vec<ParameterEstimate>,
+    /// The full parameter vector identified (platform joints as given), before any gauge.
+    #[serde(skip)]
+    pub parameters: [Real; PARAMETERS],
+    /// RMS of the length residuals (mm).
+    pub residual_rms_mm: Real,
+    /// σ used for the uncertainties: the residuals' (mm).
+    pub sigma_mm: Real,
+    /// Gauss–Newton iterations.
+    pub iterations: usize,
+    /// Jig-free: RMS σ of the 24 parameters with the ball centres estimated over the same
+    /// with them known (what removing the centre offsets costs).
+    pub centre_removal_cost: Option<Real>,
+}
+
+/// The six rigid motions of the base (translations x, y, z; rotations about x, y, z through
+/// the origin) as displacement fields of the points `pts`: 6 columns, 3 rows per point.
+fn rigid_fields(pts: &[Vector3]) -> DMatrix<Real> {
+    let mut g = DMatrix::zeros(3 * pts.len(), 6);
+    for (i, p) in pts.iter().enumerate() {
+        for k in 0..3 {
+            g[(3 * i + k, k)] = 1.0;
+            let e = Vector3::ith(k, 1.0);
+            let w = e.cross(p);
+            for r in 0..3 {
+                g[(3 * i + r, 3 + k)] = w[r];
+            }
+        }
+    }
+    g
+}
+
+/// The names of the six gauge directions.
+pub fn gauge_names() -> Vec<String> {
+    [
+        "translation x",
+        "translation y",
+        "translation z",
+        "rotation about x",
+        "rotation about y",
+        "rotation about z",
+    ]
+    .iter()
+    .map(|s| format!("base frame {s} (every base joint and table ball moved together)"))
+    .collect()
+}
+
+/// The rotation and translation best fitting `from` onto `to` (least squares, Kabsch):
+/// `to_i ≈ q·from_i + t`.
+pub fn best_fit(from: &[Vector3], to: &[Vector3]) -> (Matrix3, Vector3) {
+    let n = from.len().max(1) as Real;
+    let cf = from.iter().sum::<Vector3>() / n;
+    let ct = to.iter().sum::<Vector3>() / n;
+    let mut h = Matrix3::zeros();
+    for (f, t) in from.iter().zip(to) {
+        h += (f - cf) * (t - ct).transpose();
+    }
+    let svd = h.svd(true, true);
+    let (Some(u), Some(vt)) = (svd.u, svd.v_t) else {
+        return (Matrix3::identity(), ct - cf);
+    };
+    let v = vt.transpose();
+    let d = (v * u.transpose()).determinant().signum();
+    let q = v * Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, d)) * u.transpose();
+    (q, ct - q * cf)
+}
+
+/// The base joints of `p` moved by the rigid motion that best fits them to `onto`.
+pub fn aligned_base(p: &[Real; PARAMETERS], onto: &[Vector3]) -> [Real; PARAMETERS] {
+    let b: Vec<Vector3> = (0..6)
+        .map(|i| Vector3::new(p[3 * i], p[3 * i + 1], p[3 * i + 2]))
+        .collect();
+    let (q, t) = best_fit(&b, onto);
+    let mut out = *p;
+    for (i, bi) in b.iter().enumerate() {
+        let m = q * bi + t;
+        out[3 * i..3 * i + 3].copy_from_slice(m.as_slice());
+    }
+    out
+}
+
+fn base_of(h: &Hexapod) -> Vec<Vector3> {
+    h.base_joints().to_vec()
+}
+
+/// Identifies the 24 parameters from `readings` of `plan` (one entry per circle), the
+/// controller computing on `nominal`, the platform joints taken from `known` (CMM),
+/// `sigma_mm` the length noise assumed for the design.
+pub fn calibrate(
+    nominal: &Hexapod,
+    known: &Hexapod,
+    plan: &Plan,
+    readings: &[CircleReadings],
+    sigma_mm: Real,
+) -> Result<HexapodCalibration, HexapodCalibrationError> {
+    let input = |m: String| Err(HexapodCalibrationError::Input(m));
+    if readings.len() != plan.circles.len() {
+        return input(format!(
+            "{} circles of readings for a plan of {}",
+            readings.len(),
+            plan.circles.len()
+        ));
+    }
+    if !(sigma_mm.is_finite() && sigma_mm > 0.0) {
+        return input(format!("the noise σ {sigma_mm} mm must be positive"));
+    }
+    for (j, r) in readings.iter().enumerate() {
+        if r.commands.len() != r.lengths_mm.len() || r.commands.is_empty() {
+            return input(format!(
+                "circle {}: {} poses and {} lengths",
+                j + 1,
+                r.commands.len(),
+                r.lengths_mm.len()
+            ));
+        }
+        if let Some(k) = r.lengths_mm.iter().position(|l| !l.is_finite()) {
+            return input(format!("circle {}: length {} is not finite", j + 1, k + 1));
+        }
+    }
+    let ids = solved_parameters();
+    let nb = if plan.balls_known() {
+        0
+    } else {
+        plan.circles.len()
+    };
+    let n = SOLVED + 3 * nb;
+    let scale: Vec<Real> = (0..n)
+        .map(|c| match c {
+            0..18 => JOINT_MAGNITUDE_MM,
+            18..SOLVED => STRUT_MAGNITUDE_MM,
+            _ => BALL_MAGNITUDE_MM,
+        })
+        .collect();
+    // Start: nominal base joints and reference lengths, the known platform joints.
+    let mut p0 = known.parameters();
+    let pn = nominal.parameters();
+    for id in &ids {
+        p0[id.index()] = pn[id.index()];
+    }
+    let model_at = |x: &DVector<Real>| -> Result<(Hexapod, Vec<Vector3>), HexapodError> {
+        let mut p = p0;
+        for (c, id) in ids.iter().enumerate() {
+            p[id.index()] += x[c] * scale[c];
+        }
+        let balls = plan
+            .circles
+            .iter()
+            .enumerate()
+            .map(|(j, c)| {
+                if nb == 0 {
+                    c.centre_mm
+                } else {
+                    c.centre_mm
+                        + Vector3::new(
+                            x[SOLVED + 3 * j],
+                            x[SOLVED + 3 * j + 1],
+                            x[SOLVED + 3 * j + 2],
+                        ) * BALL_MAGNITUDE_MM
+                }
+            })
+            .collect();
+        Ok((known.with_parameters(&p)?, balls))
+    };
+    let kin = |circle: usize, reading: usize| {
+        move |source| HexapodCalibrationError::Kinematics {
+            circle: circle + 1,
+            reading,
+            source,
+        }
+    };
+    // Normal equations (scaled, whitened) and the sum of squares at x.
+    let normal = |x: &DVector<Real>,
+                  with_jacobian: bool|
+     -> Result<(DMatrix<Real>, DVector<Real>, Real), HexapodCalibrationError> {
+        let (model, balls) = model_at(x).map_err(kin(0, 0))?;
+        let mut a = DMatrix::zeros(if with_jacobian { n } else { 0 }, n);
+        let mut g = DVector::zeros(n);
+        let mut ss = 0.0;
+        let mut row = DVector::zeros(n);
+        let idx: Vec<usize> = ids.iter().map(|id| id.index()).collect();
+        for (j, r) in readings.iter().enumerate() {
+            for (k, (cmd, len)) in r.commands.iter().zip(&r.lengths_mm).enumerate() {
+                let reached = twin_pose(nominal, &model, cmd).map_err(kin(j, k))?;
+                let d = reached.position - balls[j];
+                let l = d.norm();
+                let res = (l - len) / sigma_mm;
+                ss += res * res;
+                if !with_jacobian {
+                    continue;
+                }
+                let u = d / l;
+                let jp = model.pose_parameter_jacobian(&reached).map_err(kin(j, k))?;
+                row.fill(0.0);
+                for (c, &pi) in idx.iter().enumerate() {
+                    let v = u.x * jp[(0, pi)] + u.y * jp[(1, pi)] + u.z * jp[(2, pi)];
+                    row[c] = v * scale[c] / sigma_mm;
+                }
+                if nb > 0 {
+                    for q in 0..3 {
+                        row[SOLVED + 3 * j + q] = -u[q] * BALL_MAGNITUDE_MM / sigma_mm;
+                    }
+                }
+                // Rank-one update of the normal matrix (upper triangle; mirrored below).
+                let nz: Vec<usize> = (0..SOLVED)
+                    .chain(if nb > 0 {
+                        SOLVED + 3 * j..SOLVED + 3 * j + 3
+                    } else {
+                        0..0
+                    })
+                    .collect();
+                for &p in &nz {
+                    let rp = row[p];
+                    if rp == 0.0 {
+                        continue;
+                    }
+                    g[p] += rp * res;
+                    for &q in &nz {
+                        if q >= p {
+                            a[(p, q)] += rp * row[q];
+                        }
+                    }
+                }
+            }
+        }
+        if with_jacobian {
+            for p in 0..n {
+                for q in 0..p {
+                    a[(p, q)] = a[(q, p)];
+                }
+            }
+        }
+        Ok((a, g, ss))
+    };
+    let weak_below = 1.0 / DETERMINED_FRACTION;
+    let mut x = DVector::zeros(n);
+    let mut iterations = 0;
+    let mut ss;
+    let mut eig;
+    let mut last_a;
+    loop {
+        let (a, g, s) = normal(&x, true)?;
+        ss = s;
+        if !a.iter().all(|v| v.is_finite()) {
+            return Err(HexapodCalibrationError::Degenerate);
+        }
+        last_a = a.clone();
+        eig = a.symmetric_eigen();
+        let threshold = eig.eigenvalues.amax().max(0.0).sqrt() * RANK_TOLERANCE;
+        // Step in the determined subspace: −Σ v·vᵀ·g / λ.
+        let mut dx = DVector::zeros(n);
+        for (k, &lam) in eig.eigenvalues.iter().enumerate() {
+            if lam.max(0.0).sqrt() > threshold {
+                let v = eig.eigenvectors.column(k);
+                dx -= v * (v.dot(&g) / lam);
+            }
+        }
+        // Halve the step while it worsens the fit.
+        let mut step = 1.0;
+        let mut accepted = false;
+        let before = ss;
+        for _ in 0..6 {
+            let trial = &x + &dx * step;
+            if let Ok((_, _, st)) = normal(&trial, false)
+                && st <= ss * (1.0 + 1e-12)
+            {
+                x = trial;
+                ss = st;
+                accepted = true;
+                break;
+            }
+            step *= 0.5;
+        }
+        iterations += 1;
+        let settled = before - ss <= COST_TOLERANCE * before.max(1.0);
+        if !accepted || settled || dx.amax() * step < STEP_TOLERANCE || iterations >= MAX_ITERATIONS
+        {
+            break;
+        }
+    }
+    // Identifiability at the solution.
+    let mut sv: Vec<(Real, usize)> = eig
+        .eigenvalues
+        .iter()
+        .enumerate()
+        .map(|(k, l)| (l.max(0.0).sqrt(), k))
+        .collect();
+    sv.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let threshold = sv.first().map_or(0.0, |s| s.0) * RANK_TOLERANCE;
+    let determined: Vec<usize> = sv
+        .iter()
+        .filter(|(s, _)| *s > threshold)
+        .map(|&(_, k)| k)
+        .collect();
+    let rank = determined.len();
+    let names: Vec<String> = ids
+        .iter()
+        .map(|id| id.name())
+        .chain((0..nb).flat_map(|j| ["x", "y", "z"].map(|c| format!("ball{}_{c}", j + 1))))
+        .collect();
+    let weak: Vec<String> = sv
+        .iter()
+        .filter(|(s, _)| *s > threshold && *s <= weak_below)
+        .map(|&(s, k)| {
+            let v = eig.eigenvectors.column(k);
+            let big = v.amax();
+            let mut terms: Vec<(Real, usize)> = (0..n)
+                .filter(|&c| v[c].abs() >= 0.2 * big)
+                .map(|c| (v[c], c))
+                .collect();
+            terms.sort_by(|a, b| b.0.abs().total_cmp(&a.0.abs()));
+            let t: Vec<String> = terms
+                .iter()
+                .take(4)
+                .map(|(x, c)| format!("{:+.2}·{}", x / scale[*c] * scale[0], names[*c]))
+                .collect();
+            format!("{} (σ {:.3} mm)", t.join(" "), JOINT_MAGNITUDE_MM / s)
+        })
+        .collect();
+    let m = readings.iter().map(|r| r.lengths_mm.len()).sum::<usize>();
+    let dof = m.saturating_sub(rank).max(1);
+    let residual_rms_mm = (ss / m as Real).sqrt() * sigma_mm;
+    let sigma_post = (ss / dof as Real).sqrt() * sigma_mm;
+    // Covariance (physical units) of the 24 parameters.
+    let cov_of = |dirs: &[usize], vecs: &DMatrix<Real>, vals: &DVector<Real>, cols: usize| {
+        let mut c = DMatrix::zeros(SOLVED, SOLVED);
+        for &k in dirs {
+            let v = vecs.column(k);
+            let w = (sigma_post / sigma_mm).powi(2) / vals[k];
+            for p in 0..SOLVED {
+                for q in 0..SOLVED {
+                    c[(p, q)] += w * v[p] * v[q] * scale[p] * scale[q];
+                }
+            }
+        }
+        let _ = cols;
+        c
+    };
+    let cov = cov_of(&determined, &eig.eigenvectors, &eig.eigenvalues, n);
+    // The report's gauge: without a jig, project the base joints' rigid motion out.
+    let nominal_base = base_of(nominal);
+    let mut proj = DMatrix::<Real>::identity(SOLVED, SOLVED);
+    let mut gauge = Vec::new();
+    let mut outside: Real = 0.0;
+    if nb > 0 {
+        let gb = rigid_fields(&nominal_base);
+        let qr = gb.clone().qr();
+        let q = qr.q();
+        let pb = DMatrix::<Real>::identity(18, 18) - &q * q.transpose();
+        proj.view_mut((0, 0), (18, 18)).copy_from(&pb);
+        gauge = gauge_names();
+        // The full gauge in the scaled unknowns: base joints and balls.
+        let (m, balls) = model_at(&x).map_err(kin(0, 0))?;
+        let mut pts = base_of(&m);
+        pts.extend(balls);
+        let gf = rigid_fields(&pts);
+        let mut gs = DMatrix::zeros(n, 6);
+        for k in 0..6 {
+            for r in 0..18 {
+                gs[(r, k)] = gf[(r, k)] / JOINT_MAGNITUDE_MM;
+            }
+            for r in 18..gf.nrows() {
+                gs[(SOLVED + r - 18, k)] = gf[(r, k)] / BALL_MAGNITUDE_MM;
+            }
+        }
+        let qg = gs.qr().q();
+        for &(s, k) in &sv {
+            if s > threshold {
+                continue;
+            }
+            let v = eig.eigenvectors.column(k).into_owned();
+            let out = &v - &qg * (qg.transpose() * &v);
+            outside = outside.max(out.norm());
+        }
+    } else {
+        for &(s, k) in &sv {
+            if s <= threshold {
+                let v = eig.eigenvectors.column(k).into_owned();
+                outside = outside.max(v.norm());
+            }
+        }
+    }
+    let cov_g = &proj * &cov * proj.transpose();
+    let parameters_determined = {
+        let e = cov_g.clone().symmetric_eigen();
+        let big = e.eigenvalues.amax();
+        e.eigenvalues
+            .iter()
+            .filter(|l| **l > big * 1e-12 && big > 0.0)
+            .count()
+    };
+    let (model, _) = model_at(&x).map_err(kin(0, 0))?;
+    let parameters = model.parameters();
+    let shown = if nb > 0 {
+        aligned_base(&parameters, &nominal_base)
+    } else {
+        parameters
+    };
+    let estimates = ids
+        .iter()
+        .enumerate()
+        .map(|(c, id)| ParameterEstimate {
+            name: id.name(),
+            value_mm: shown[id.index()] - pn[id.index()],
+            sigma_mm: cov_g[(c, c)].max(0.0).sqrt(),
+        })
+        .collect();
+    // What removing the centre offsets costs: the same circles with the centres known.
+    let centre_removal_cost = if nb > 0 {
+        // The normal matrix of the last iteration (its step is below the noise).
+        let sub = last_a
+            .view((0, 0), (SOLVED, SOLVED))
+            .into_owned()
+            .symmetric_eigen();
+        let dirs: Vec<usize> = (0..SOLVED)
+            .filter(|&k| {
+                sub.eigenvalues[k].max(0.0).sqrt()
+                    > threshold.max(sub.eigenvalues.amax().max(0.0).sqrt() * RANK_TOLERANCE)
+            })
+            .collect();
+        let ck =
+            &proj * cov_of(&dirs, &sub.eigenvectors, &sub.eigenvalues, SOLVED) * proj.transpose();
+        let rms = |c: &DMatrix<Real>| (c.trace() / SOLVED as Real).sqrt();
+        let known_rms = rms(&ck);
+        (known_rms > 0.0).then(|| rms(&cov_g) / known_rms)
+    } else {
+        None
+    };
+    let smax = sv.first().map_or(0.0, |s| s.0);
+    let smin = determined
+        .iter()
+        .map(|&k| eig.eigenvalues[k].max(0.0).sqrt())
+        .fold(Real::INFINITY, Real::min);
+    Ok(HexapodCalibration {
+        procedure: plan.procedure,
+        identifiability: HexapodIdentifiability {
+            unknowns: n,
+            ball_unknowns: 3 * nb,
+            rank,
+            parameters_determined,
+            singular_values: sv.iter().map(|s| s.0).collect(),
+            condition_number: smax / smin,
+            gauge,
+            undetermined_outside_gauge: outside,
+            weak,
+        },
+        estimates,
+        parameters,
+        residual_rms_mm,
+        sigma_mm: sigma_post,
+        iterations,
+        centre_removal_cost,
+    })
+}
+
+/// The true deviations of the 24 parameters in the report's gauge (jig-free: the actual
+/// base joints best-fitted to the nominal ones; ball plate: as they are), by name (mm).
+pub fn true_deviations(
+    nominal: &Hexapod,
+    actual: &Hexapod,
+    procedure: Procedure,
+) -> Vec<(String, Real)> {
+    let pn = nominal.parameters();
+    let pa = match procedure {
+        Procedure::JigFree => aligned_base(&actual.parameters(), &base_of(nominal)),
+        Procedure::BallPlate => actual.parameters(),
+    };
+    solved_parameters()
+        .iter()
+        .map(|id| (id.name(), pa[id.index()] - pn[id.index()]))
+        .collect()
+}
+
+/// The controller's model after calibration: the identified parameters; jig-free, with the
+/// base frame then placed by an exact table calibration (the identified base joints
+/// best-fitted onto the actual ones: the six rigid degrees of freedom the DBB cannot see).
+/// Also returns that table calibration's rotation (rad) and translation (mm) magnitudes.
+pub fn calibrated_model(
+    identified: &HexapodCalibration,
+    known: &Hexapod,
+    actual: &Hexapod,
+) -> Result<(Hexapod, Option<(Real, Real)>), HexapodError> {
+    match identified.procedure {
+        Procedure::BallPlate => Ok((known.with_parameters(&identified.parameters)?, None)),
+        Procedure::JigFree => {
+            let p = &identified.parameters;
+            let b: Vec<Vector3> = (0..6)
+                .map(|i| Vector3::new(p[3 * i], p[3 * i + 1], p[3 * i + 2]))
+                .collect();
+            let (q, t) = best_fit(&b, &base_of(actual));
+            let angle = nalgebra::Rotation3::from_matrix_unchecked(q).angle();
+            let aligned = aligned_base(p, &base_of(actual));
+            Ok((known.with_parameters(&aligned)?, Some((angle, t.norm()))))
+        }
+    }
+}
+
+/// The pose errors a controller model leaves on the actual machine.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct PoseErrors {
+    /// The largest level positioning error over a 5 × 5 × 5 grid of the workspace (mm).
+    pub position_mm: Real,
+    /// The largest pivot error at five points (the workspace's centre and four points half
+    /// way to its corners, mid height), a and b over ±min(tilt, 15°) (mm).
+    pub pivot_mm: Real,
+}
+
+/// Pivot tilt of the survey at most (degrees): seed 001's pivot check.
+pub const PIVOT_TILT_DEG: Real = 15.0;
+
+/// The pose errors of the `actual` machine commanded through `controller` over `ws`.
+pub fn pose_errors(
+    controller: &Hexapod,
+    actual: &Hexapod,
+    ws: &Workspace,
+) -> Result<PoseErrors, HexapodError> {
+    let position_mm =
+        level_positioning(controller, actual, ws, [5, 5, 5])?.map_or(Real::NAN, |l| l.max_error_mm);
+    let (xc, yc) = (0.5 * (ws.x_mm.0 + ws.x_mm.1), 0.5 * (ws.y_mm.0 + ws.y_mm.1));
+    let (hx, hy) = (0.5 * (ws.x_mm.1 - ws.x_mm.0), 0.5 * (ws.y_mm.1 - ws.y_mm.0));
+    let z = 0.5 * (ws.z_mm.0 + ws.z_mm.1);
+    let tilt = ws.tilt_deg.min(PIVOT_TILT_DEG);
+    let mut pivot_mm: Real = 0.0;
+    for (fx, fy) in [
+        (0.0, 0.0),
+        (0.5, 0.5),
+        (-0.5, 0.5),
+        (-0.5, -0.5),
+        (0.5, -0.5),
+    ] {
+        let pt = Vector3::new(xc + fx * hx, yc + fy * hy, z);
+        let r = pivot_test(controller, actual, &pt, tilt, 5)?;
+        pivot_mm = pivot_mm.max(r.pivot_error_mm);
+    }
+    Ok(PoseErrors {
+        position_mm,
+        pivot_mm,
+    })
+}
+
+/// Assumptions of the working-time estimate (minutes and mm/min).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct WorkAssumptions {
+    /// Jig-free: mounting and centring a table ball and fitting the bar, per circle (min).
+    pub jig_free_setup_per_circle_min: Real,
+    /// Jig-free: the table calibration afterwards (dial gauge over the table, min).
+    pub table_calibration_min: Real,
+    /// Ball plate: placing the plate against its stoppers, once (min).
+    pub plate_setup_min: Real,
+    /// Ball plate: moving the bar to the next ball and setting its tilt (min).
+    pub plate_per_circle_min: Real,
+    /// Feed of the circles (mm/min).
+    pub feed_mm_per_min: Real,
+}
+
+/// The assumptions the reports use: a DBB set-up of a centre ball on a magnetic base is
+/// about 8 min; a dial-gauge table calibration an hour; placing the plate 30 min and moving
+/// the bar between its balls about 6 min; DBB circles at 1000 mm/min.
+pub const WORK: WorkAssumptions = WorkAssumptions {
+    jig_free_setup_per_circle_min: 8.0,
+    table_calibration_min: 60.0,
+    plate_setup_min: 30.0,
+    plate_per_circle_min: 6.0,
+    feed_mm_per_min: 1000.0,
+};
+
+/// A procedure's measurement count and working time.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct WorkTime {
+    /// The procedure.
+    pub procedure: Procedure,
+    /// Circles (set-ups of the bar).
+    pub circles: usize,
+    /// Readings.
+    pub readings: usize,
+    /// Path length of the circles (mm).
+    pub path_mm: Real,
+    /// Set-up time (min).
+    pub setup_min: Real,
+    /// Measuring time at the feed (min).
+    pub measuring_min: Real,
+    /// The total (min).
+    pub total_min: Real,
+}
+
+/// The working time of `plan` under `w`.
+pub fn work_time(plan: &Plan, w: &WorkAssumptions) -> WorkTime {
+    let circles = plan.circles.len();
+    let path_mm: Real = plan.circles.iter().map(|c| c.path_length_mm()).sum();
+    let setup_min = match plan.procedure {
+        Procedure::JigFree => {
+            circles as Real * w.jig_free_setup_per_circle_min + w.table_calibration_min
+        }
+        Procedure::BallPlate => w.plate_setup_min + circles as Real * w.plate_per_circle_min,
+    };
+    let measuring_min = path_mm / w.feed_mm_per_min;
+    WorkTime {
+        procedure: plan.procedure,
+        circles,
+        readings: plan.readings(),
+        path_mm,
+        setup_min,
+        measuring_min,
+        total_min: setup_min + measuring_min,
+    }
+}

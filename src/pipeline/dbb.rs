@@ -1,0 +1,482 @@
+//! `twinmill ballbar` and `twinmill calibrate` on a hexapod scene: the virtual double ball
+//! bar's circle with its ISO 230-4 figures, and seed 000's calibration run on the twin
+//! (measure, identify, compare with what the scene injected, pose errors before and after),
+//! optionally over seeded trials of random deviations. Nothing is written here.
+
+use super::hexapod::HexapodCommandError;
+use crate::calibration::hexapod_calibrate::{
+    CircleReadings, DEFAULT_POINTS, HexapodCalibration, PoseErrors, Procedure, WORK, WorkTime,
+    calibrate, calibrated_model, default_plan, pose_errors, true_deviations, work_time,
+};
+use crate::hexapod_scene::HexapodScene;
+use crate::machine::hexapod::{Hexapod, ParameterId};
+use crate::machine::hexapod_accuracy::Workspace;
+use crate::math::{CounterRng, Real, Vector3};
+use crate::metrology::circular::{CircularFigures, CircularOptions, evaluate};
+use crate::metrology::hexapod_dbb::{DbbCircle, DbbInstrument, measure};
+use crate::report::plots::polar_plot;
+use serde::Serialize;
+
+fn error(scene: &HexapodScene, message: impl Into<String>) -> HexapodCommandError {
+    HexapodCommandError {
+        path: scene.path.display().to_string(),
+        message: message.into(),
+    }
+}
+
+/// What `twinmill ballbar` made.
+#[derive(Clone, Debug, Serialize)]
+pub struct BallbarOutcome {
+    /// The ISO 230-4 figures of the trace.
+    pub figures: CircularFigures,
+    /// The trace file (`circular`'s CSV).
+    #[serde(skip)]
+    pub csv: String,
+    /// The polar plot (PNG bytes).
+    #[serde(skip)]
+    pub png: Vec<u8>,
+    /// The summary text.
+    #[serde(skip)]
+    pub summary: String,
+}
+
+/// Runs `circle` with `instrument` on the scene's machine (controller on the nominal
+/// parameters, the machine on the actual ones) and evaluates the trace.
+pub fn ballbar(
+    scene: &HexapodScene,
+    circle: &DbbCircle,
+    instrument: &DbbInstrument,
+) -> Result<BallbarOutcome, HexapodCommandError> {
+    let m = measure(&scene.nominal, &scene.actual, circle, instrument)
+        .map_err(|e| error(scene, e.to_string()))?;
+    let opts = CircularOptions {
+        radius_mm: circle.radius_mm,
+        pitch_mm: None,
+    };
+    let figures =
+        evaluate(&m.samples, &opts, &scene.path).map_err(|e| error(scene, e.to_string()))?;
+    let title = format!("{}: DBB {}", scene.name, circle.plane.name());
+    let img = polar_plot(&m.samples, &figures, &title).map_err(|e| error(scene, e.to_string()))?;
+    let mut png = Vec::new();
+    img.write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .map_err(|e| error(scene, format!("PNG: {e}")))?;
+    let comments = vec![
+        format!("twinmill ballbar on {}", scene.name),
+        circle.describe(),
+        format!(
+            "table ball at ({:.4}, {:.4}, {:.4}) mm; noise σ {} mm, seed {}",
+            m.table_ball_mm.x,
+            m.table_ball_mm.y,
+            m.table_ball_mm.z,
+            instrument.noise_sigma_mm,
+            instrument.seed
+        ),
+    ];
+    let summary = ballbar_summary(&scene.name, circle, &figures);
+    Ok(BallbarOutcome {
+        figures,
+        csv: m.csv(&comments),
+        png,
+        summary,
+    })
+}
+
+/// Length noise σ of the calibration's DBB (mm): the ±0.5 µm class.
+pub const CALIBRATION_NOISE_MM: Real = 0.5e-3;
+/// Largest table-ball mounting error of the jig-free set-ups (mm, uniform per coordinate).
+pub const MOUNT_ERROR_MM: Real = 0.05;
+/// Random deviations of the trials: base joints uniform in ± this (mm).
+pub const TRIAL_JOINT_MM: Real = 0.5;
+/// Random deviations of the trials: reference lengths uniform in ± this (mm).
+pub const TRIAL_STRUT_MM: Real = 0.2;
+/// Most trials a command runs.
+pub const MAX_TRIALS: usize = 10_000;
+
+/// One parameter: identified, σ, and the truth in the same gauge.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct ParameterRow {
+    /// Name.
+    pub name: String,
+    /// Injected deviation in the report's gauge (mm).
+    pub injected_mm: Real,
+    /// Identified deviation (mm).
+    pub identified_mm: Real,
+    /// Standard uncertainty (mm).
+    pub sigma_mm: Real,
+}
+
+/// One calibration on the twin.
+#[derive(Clone, Debug, Serialize)]
+pub struct CalibrationRun {
+    /// The identification.
+    pub calibration: HexapodCalibration,
+    /// Per parameter, identified beside injected.
+    pub parameters: Vec<ParameterRow>,
+    /// The largest |identified − injected| / σ.
+    pub worst_normalised_error: Real,
+    /// Pose errors with the nominal controller.
+    pub before: PoseErrors,
+    /// Pose errors with the calibrated controller.
+    pub after: PoseErrors,
+    /// Jig-free: the table calibration's rotation (µrad) and translation (mm).
+    pub table_alignment: Option<(Real, Real)>,
+}
+
+/// Measures the plan's circles on `actual`, identifies, and evaluates before and after.
+pub fn calibration_run(
+    scene: &HexapodScene,
+    actual: &Hexapod,
+    procedure: Procedure,
+    ws: &Workspace,
+    seed: u64,
+) -> Result<CalibrationRun, HexapodCommandError> {
+    let plan = default_plan(procedure, ws, DEFAULT_POINTS);
+    let rng = CounterRng::new(seed ^ 0x006d_6f75_6e74);
+    let mut readings = Vec::with_capacity(plan.circles.len());
+    for (j, c) in plan.circles.iter().enumerate() {
+        let mount = if plan.balls_known() {
+            Vector3::zeros()
+        } else {
+            Vector3::from_fn(|k, _| MOUNT_ERROR_MM * (2.0 * rng.uniform(j as u64, k as u64) - 1.0))
+        };
+        let inst = DbbInstrument {
+            mount_mm: mount,
+            noise_sigma_mm: CALIBRATION_NOISE_MM,
+            seed,
+            stream: (j as u64) << 32,
+        };
+        let m = measure(&scene.nominal, actual, c, &inst)
+            .map_err(|e| error(scene, format!("circle {}: {e}", j + 1)))?;
+        readings.push(CircleReadings {
+            lengths_mm: m.lengths_mm(c.radius_mm),
+            commands: m.commands,
+        });
+    }
+    let cal = calibrate(
+        &scene.nominal,
+        actual,
+        &plan,
+        &readings,
+        CALIBRATION_NOISE_MM,
+    )
+    .map_err(|e| error(scene, e.to_string()))?;
+    let truth = true_deviations(&scene.nominal, actual, procedure);
+    let parameters: Vec<ParameterRow> = cal
+        .estimates
+        .iter()
+        .zip(&truth)
+        .map(|(e, (_, t))| ParameterRow {
+            name: e.name.clone(),
+            injected_mm: *t,
+            identified_mm: e.value_mm,
+            sigma_mm: e.sigma_mm,
+        })
+        .collect();
+    let worst_normalised_error = parameters
+        .iter()
+        .filter(|p| p.sigma_mm > 0.0)
+        .map(|p| (p.identified_mm - p.injected_mm).abs() / p.sigma_mm)
+        .fold(0.0, Real::max);
+    let (model, table_alignment) =
+        calibrated_model(&cal, actual, actual).map_err(|e| error(scene, e.to_string()))?;
+    let before = pose_errors(&scene.nominal, actual, ws)
+        .map_err(|e| error(scene, format!("pose errors before: {e}")))?;
+    let after = pose_errors(&model, actual, ws)
+        .map_err(|e| error(scene, format!("pose errors after: {e}")))?;
+    Ok(CalibrationRun {
+        calibration: cal,
+        parameters,
+        worst_normalised_error,
+        before,
+        after,
+        table_alignment: table_alignment.map(|(a, t)| (a * 1e6, t)),
+    })
+}
+
+/// The actual machine of trial `seed`: the scene's nominal machine with its platform
+/// joints as the scene has them (known from a CMM) and random base-joint and
+/// reference-length deviations (uniform ±[`TRIAL_JOINT_MM`], ±[`TRIAL_STRUT_MM`]).
+pub fn trial_machine(scene: &HexapodScene, seed: u64) -> Result<Hexapod, HexapodCommandError> {
+    let rng = CounterRng::new(seed);
+    let mut p = scene.actual.parameters();
+    let pn = scene.nominal.parameters();
+    for id in (0..18).chain(36..42).filter_map(ParameterId::new) {
+        let k = id.index();
+        let span = if k < 18 {
+            TRIAL_JOINT_MM
+        } else {
+            TRIAL_STRUT_MM
+        };
+        p[k] = pn[k] + span * (2.0 * rng.uniform(k as u64, 0) - 1.0);
+    }
+    scene
+        .actual
+        .with_parameters(&p)
+        .map_err(|e| error(scene, e.to_string()))
+}
+
+/// Figures over seeded trials.
+#[derive(Clone, Debug, Serialize)]
+pub struct TrialSummary {
+    /// Trials run.
+    pub trials: usize,
+    /// Parameters compared in all (trials × 24).
+    pub compared: usize,
+    /// Fraction of them within 3σ of the truth.
+    pub within_3_sigma: Real,
+    /// Fraction of trials with every parameter within 3σ.
+    pub trials_all_within_3_sigma: Real,
+    /// Largest position error before, over the trials (mm).
+    pub before_position_mm: Real,
+    /// Largest pivot error before (mm).
+    pub before_pivot_mm: Real,
+    /// Largest position error after (mm).
+    pub after_position_mm: Real,
+    /// Largest pivot error after (mm).
+    pub after_pivot_mm: Real,
+}
+
+/// `twinmill calibrate`'s outcome.
+#[derive(Clone, Debug, Serialize)]
+pub struct CalibrateOutcome {
+    /// The procedure.
+    pub procedure: Procedure,
+    /// The calibration of the scene's machine.
+    pub run: CalibrationRun,
+    /// Working time of both procedures.
+    pub work: [WorkTime; 2],
+    /// With trials: their figures.
+    pub trials: Option<TrialSummary>,
+    /// The summary text.
+    #[serde(skip)]
+    pub summary: String,
+}
+
+/// Summarises seeded trials `1..=n` of `procedure`.
+pub fn calibration_trials(
+    scene: &HexapodScene,
+    procedure: Procedure,
+    ws: &Workspace,
+    n: usize,
+) -> Result<TrialSummary, HexapodCommandError> {
+    let mut s = TrialSummary {
+        trials: n,
+        compared: 0,
+        within_3_sigma: 0.0,
+        trials_all_within_3_sigma: 0.0,
+        before_position_mm: 0.0,
+        before_pivot_mm: 0.0,
+        after_position_mm: 0.0,
+        after_pivot_mm: 0.0,
+    };
+    let (mut within, mut all) = (0usize, 0usize);
+    for t in 1..=n as u64 {
+        let actual = trial_machine(scene, t)?;
+        let r = calibration_run(scene, &actual, procedure, ws, 1000 + t)?;
+        for p in &r.parameters {
+            s.compared += 1;
+            if (p.identified_mm - p.injected_mm).abs() <= 3.0 * p.sigma_mm {
+                within += 1;
+            }
+        }
+        if r.worst_normalised_error <= 3.0 {
+            all += 1;
+        }
+        s.before_position_mm = s.before_position_mm.max(r.before.position_mm);
+        s.before_pivot_mm = s.before_pivot_mm.max(r.before.pivot_mm);
+        s.after_position_mm = s.after_position_mm.max(r.after.position_mm);
+        s.after_pivot_mm = s.after_pivot_mm.max(r.after.pivot_mm);
+    }
+    s.within_3_sigma = within as Real / s.compared.max(1) as Real;
+    s.trials_all_within_3_sigma = all as Real / n.max(1) as Real;
+    Ok(s)
+}
+
+/// Seed 000's calibration of the scene's machine by `procedure`, and `trials` seeded
+/// trials of random deviations.
+pub fn calibrate_scene(
+    scene: &HexapodScene,
+    procedure: Procedure,
+    trials: usize,
+) -> Result<CalibrateOutcome, HexapodCommandError> {
+    let ws = scene.workspace.ok_or_else(|| {
+        error(
+            scene,
+            "calibrate needs [workspace] (where to place the circles)",
+        )
+    })?;
+    if trials > MAX_TRIALS {
+        return Err(error(
+            scene,
+            format!("--trials {trials} must lie in 0..={MAX_TRIALS}"),
+        ));
+    }
+    let run = calibration_run(scene, &scene.actual, procedure, &ws, 1)?;
+    let work = [Procedure::JigFree, Procedure::BallPlate]
+        .map(|p| work_time(&default_plan(p, &ws, DEFAULT_POINTS), &WORK));
+    let trials = if trials > 0 {
+        Some(calibration_trials(scene, procedure, &ws, trials)?)
+    } else {
+        None
+    };
+    let summary = calibration_summary(&scene.name, procedure, &run, &work, trials.as_ref());
+    Ok(CalibrateOutcome {
+        procedure,
+        run,
+        work,
+        trials,
+        summary,
+    })
+}
+
+fn ballbar_summary(scene: &str, circle: &DbbCircle, f: &CircularFigures) -> String {
+    use std::fmt::Write as _;
+    let mut t = format!(
+        "twinmill: ballbar on {scene}\n  circle        {}\n",
+        circle.describe()
+    );
+    for d in &f.directions {
+        let _ = writeln!(
+            t,
+            "  {:<13} G {:.4} mm, F {:+.4} … {:+.4} mm, centre ({:+.4}, {:+.4}) mm, radius {:+.4} mm",
+            format!("{:?}", d.direction).to_lowercase(),
+            d.g,
+            d.f_min,
+            d.f_max,
+            d.centre_mm[0],
+            d.centre_mm[1],
+            d.radius_deviation_mm
+        );
+    }
+    if let Some(h) = f.h {
+        let _ = writeln!(t, "  hysteresis    H {h:.4} mm");
+    }
+    t
+}
+
+fn calibration_summary(
+    scene: &str,
+    procedure: Procedure,
+    run: &CalibrationRun,
+    work: &[WorkTime; 2],
+    trials: Option<&TrialSummary>,
+) -> String {
+    use std::fmt::Write as _;
+    let c = &run.calibration;
+    let id = &c.identifiability;
+    let mut t = format!(
+        "twinmill: calibrate on {scene} ({}: {} circles, {} readings, σ {:.2} µm)\n",
+        procedure.name(),
+        work[usize::from(procedure == Procedure::BallPlate)].circles,
+        work[usize::from(procedure == Procedure::BallPlate)].readings,
+        CALIBRATION_NOISE_MM * 1e3
+    );
+    let _ = writeln!(
+        t,
+        "  unknowns      {} (24 parameters{}), rank {}, condition {:.3e}",
+        id.unknowns,
+        if id.ball_unknowns > 0 {
+            format!(" + {} table-ball coordinates", id.ball_unknowns)
+        } else {
+            String::new()
+        },
+        id.rank,
+        id.condition_number
+    );
+    let _ = writeln!(
+        t,
+        "  determined    {} of the 24 parameters; platform joints taken from the CMM",
+        id.parameters_determined
+    );
+    if id.gauge.is_empty() {
+        let _ = writeln!(
+            t,
+            "  gauge         none: the plate's balls fix the table frame"
+        );
+    } else {
+        let _ = writeln!(
+            t,
+            "  not determined  the base frame's 6 rigid motions (lengths only; {:.1e} outside them):",
+            id.undetermined_outside_gauge
+        );
+        for g in &id.gauge {
+            let _ = writeln!(t, "                {g}");
+        }
+        let _ = writeln!(
+            t,
+            "  gauge         base joints reported with their rigid motion removed (best fit to nominal)"
+        );
+        if let Some(k) = c.centre_removal_cost {
+            let _ = writeln!(
+                t,
+                "  centre offsets  estimated per circle: σ of the parameters ×{k:.2} against known centres"
+            );
+        }
+    }
+    for w in &id.weak {
+        let _ = writeln!(t, "  weak          {w}");
+    }
+    let _ = writeln!(
+        t,
+        "  residual      rms {:.3} µm after {} Gauss–Newton steps",
+        c.residual_rms_mm * 1e3,
+        c.iterations
+    );
+    let _ = writeln!(t, "  parameter     injected mm  identified mm   σ µm");
+    for p in &run.parameters {
+        let _ = writeln!(
+            t,
+            "  {:<12} {:+12.5} {:+14.5} {:7.3}",
+            p.name,
+            p.injected_mm,
+            p.identified_mm,
+            p.sigma_mm * 1e3
+        );
+    }
+    let _ = writeln!(
+        t,
+        "  worst         |identified − injected| = {:.2} σ",
+        run.worst_normalised_error
+    );
+    if let Some((rot, tr)) = run.table_alignment {
+        let _ = writeln!(
+            t,
+            "  table calibration  corrects {rot:.1} µrad and {tr:.4} mm of the base frame (taken as exact)"
+        );
+    }
+    let _ = writeln!(
+        t,
+        "  pose error    before: position {:.4} mm, pivot {:.4} mm; after: {:.2} µm, {:.2} µm",
+        run.before.position_mm,
+        run.before.pivot_mm,
+        run.after.position_mm * 1e3,
+        run.after.pivot_mm * 1e3
+    );
+    for w in work {
+        let _ = writeln!(
+            t,
+            "  work {:<10} {} circles, {} readings, {:.0} mm of path: {:.0} min set-up + {:.1} min measuring = {:.0} min",
+            w.procedure.name(),
+            w.circles,
+            w.readings,
+            w.path_mm,
+            w.setup_min,
+            w.measuring_min,
+            w.total_min
+        );
+    }
+    if let Some(s) = trials {
+        let _ = writeln!(
+            t,
+            "  trials        {}: {:.1} % of parameters within 3σ, {:.0} % of trials all within; worst before {:.3} / {:.3} mm, after {:.2} / {:.2} µm (position / pivot)",
+            s.trials,
+            100.0 * s.within_3_sigma,
+            100.0 * s.trials_all_within_3_sigma,
+            s.before_position_mm,
+            s.before_pivot_mm,
+            s.after_position_mm * 1e3,
+            s.after_pivot_mm * 1e3
+        );
+    }
+    t
+}
