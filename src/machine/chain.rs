@@ -664,6 +664,27 @@ pub(crate) fn mdx50_for_tests() -> Chain {
     .expect("valid chain")
 }
 
+/// A 3-axis mill, X, Y, Z from the workpiece (spindle S), nominal: the chain the
+/// instruments' unit tests build on.
+#[cfg(test)]
+pub(crate) fn xyz_for_tests() -> Chain {
+    let ax = |letter, d: Vector3| Axis {
+        letter,
+        kind: AxisKind::Linear,
+        direction: UnitVector3::new_normalize(d),
+        origin: Point3::origin(),
+    };
+    Chain::new(
+        vec![
+            ax(AxisLetter::X, Vector3::x()),
+            ax(AxisLetter::Y, Vector3::y()),
+            ax(AxisLetter::Z, Vector3::z()),
+        ],
+        "S",
+    )
+    .expect("valid chain")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

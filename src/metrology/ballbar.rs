@@ -454,26 +454,10 @@ pub fn measure(chain: &Chain, setup: &BallBarSetup) -> Result<BallBarMeasurement
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::machine::chain::Axis;
     use crate::machine::error_motion::AxisErrorMotions;
-    use crate::math::UnitVector3;
 
     fn xyz() -> Chain {
-        let ax = |letter, d: Vector3| Axis {
-            letter,
-            kind: AxisKind::Linear,
-            direction: UnitVector3::new_normalize(d),
-            origin: Point3::origin(),
-        };
-        Chain::new(
-            vec![
-                ax(AxisLetter::X, Vector3::x()),
-                ax(AxisLetter::Y, Vector3::y()),
-                ax(AxisLetter::Z, Vector3::z()),
-            ],
-            "S",
-        )
-        .expect("valid chain")
+        crate::machine::chain::xyz_for_tests()
     }
 
     #[test]

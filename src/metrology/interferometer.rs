@@ -390,27 +390,12 @@ pub fn measure(chain: &Chain, setup: &LaserSetup) -> Result<LaserMeasurement, La
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::machine::chain::Axis;
     use crate::machine::error_motion::{AxisErrorMotions, Term};
     use crate::metrology::positioning::evaluate;
     use std::path::Path;
 
     fn xyz() -> Chain {
-        let ax = |letter, d: Vector3| Axis {
-            letter,
-            kind: AxisKind::Linear,
-            direction: UnitVector3::new_normalize(d),
-            origin: Point3::origin(),
-        };
-        Chain::new(
-            vec![
-                ax(AxisLetter::X, Vector3::x()),
-                ax(AxisLetter::Y, Vector3::y()),
-                ax(AxisLetter::Z, Vector3::z()),
-            ],
-            "S",
-        )
-        .expect("valid chain")
+        crate::machine::chain::xyz_for_tests()
     }
 
     #[test]
