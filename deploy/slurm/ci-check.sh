@@ -80,7 +80,7 @@ mem=$(awk '/MemTotal/ { print int($2 / 1024 * 0.9) }' /proc/meminfo)
 cpus=$(nproc)
 cat >"$t/slurm.conf" <<EOF
 ClusterName=twinmillci
-SlurmctldHost=$host
+SlurmctldHost=$host(127.0.0.1)
 SlurmUser=$user
 SlurmdUser=$user
 SlurmctldPort=$ctl_port
