@@ -938,55 +938,53 @@ fn evaluate_ball_sensor(
         "centres": centres,
     });
     let summary = {
-        {
-            let mut s = String::new();
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "twinmill evaluate ball-sensor: ball Ø {ball} mm, micrometers ±{:.3} µm",
+            accuracy * 1e3
+        );
+        match window {
+            Some(w) => {
+                let _ = writeln!(
+                    s,
+                    "  working window Z {:.3} … {:.3} mm (Z error ≤ {:.3} µm)",
+                    w.z_min_mm,
+                    w.z_max_mm,
+                    tolerance * 1e3
+                );
+            }
+            None => {
+                let _ = writeln!(
+                    s,
+                    "  no working window: no height keeps the Z error within {:.3} µm",
+                    tolerance * 1e3
+                );
+            }
+        }
+        let _ = writeln!(s, "  Z (mm)   chord short  chord long (Z error, µm)");
+        for e in &curve {
             let _ = writeln!(
                 s,
-                "twinmill evaluate ball-sensor: ball Ø {ball} mm, micrometers ±{:.3} µm",
-                accuracy * 1e3
+                "  {:6.3}   {:+10.3}  {:+10.3}",
+                e.z_mm,
+                e.chord_short_mm * 1e3,
+                e.chord_long_mm * 1e3
             );
-            match window {
-                Some(w) => {
-                    let _ = writeln!(
-                        s,
-                        "  working window Z {:.3} … {:.3} mm (Z error ≤ {:.3} µm)",
-                        w.z_min_mm,
-                        w.z_max_mm,
-                        tolerance * 1e3
-                    );
-                }
-                None => {
-                    let _ = writeln!(
-                        s,
-                        "  no working window: no height keeps the Z error within {:.3} µm",
-                        tolerance * 1e3
-                    );
-                }
-            }
-            let _ = writeln!(s, "  Z (mm)   chord short  chord long (Z error, µm)");
-            for e in &curve {
-                let _ = writeln!(
-                    s,
-                    "  {:6.3}   {:+10.3}  {:+10.3}",
-                    e.z_mm,
-                    e.chord_short_mm * 1e3,
-                    e.chord_long_mm * 1e3
-                );
-            }
-            for (i, c) in centres.iter().enumerate() {
-                let [x, y, z] = c.centre_mm;
-                let inside = window.is_some_and(|w| (w.z_min_mm..=w.z_max_mm).contains(&z));
-                let _ = writeln!(
-                    s,
-                    "  {:>4}: X {x:+.4} Y {y:+.4} Z {z:.4} mm (±{:.3} µm{}); Z from B {:.4}",
-                    i + 1,
-                    c.z_error_bound_mm * 1e3,
-                    if inside { "" } else { ", outside the window" },
-                    c.z_from_b_mm
-                );
-            }
-            s
         }
+        for (i, c) in centres.iter().enumerate() {
+            let [x, y, z] = c.centre_mm;
+            let inside = window.is_some_and(|w| (w.z_min_mm..=w.z_max_mm).contains(&z));
+            let _ = writeln!(
+                s,
+                "  {:>4}: X {x:+.4} Y {y:+.4} Z {z:.4} mm (±{:.3} µm{}); Z from B {:.4}",
+                i + 1,
+                c.z_error_bound_mm * 1e3,
+                if inside { "" } else { ", outside the window" },
+                c.z_from_b_mm
+            );
+        }
+        s
     };
     if let Some(html) = html {
         let title = match file {

@@ -777,6 +777,81 @@ mod tests {
     }
 
     #[test]
+    fn the_rotary_trace_draws_each_coordinate_where_its_values_are() {
+        // Two sweeps: X rises 0 → 10 µm, Y stays 0, Z stays −5 µm.
+        let s: Vec<RotarySample> = (0..20)
+            .map(|i| RotarySample {
+                sweep: 1 + i / 10,
+                axis: 'C',
+                angle_deg: (i % 10) as Real * 30.0,
+                q: Default::default(),
+                deviation_mm: [i as Real * 10e-3 / 19.0, 0.0, -5e-3],
+                sigma_mm: [1e-4; 3],
+            })
+            .collect();
+        let svg = rotary_trace_svg(&s, "trace").expect("draws");
+        let (x, y, z) = (
+            polylines(&svg, "#B2182B"),
+            polylines(&svg, "#2166AC"),
+            polylines(&svg, "#2CA02C"),
+        );
+        // One line per sweep and coordinate: 10 points each.
+        assert_eq!((x.len(), y.len(), z.len()), (20, 20, 20));
+        let mean_y = |v: &[(f64, f64)]| v.iter().map(|p| p.1).sum::<f64>() / v.len() as f64;
+        // SVG y runs down: Z (−5 µm) below Y (0), X's last point (10 µm) above its first.
+        assert!(mean_y(&z) > mean_y(&y) + 10.0);
+        assert!(x[19].1 < x[0].1 - 50.0, "{:?} {:?}", x[0], x[19]);
+        assert_eq!(svg, rotary_trace_svg(&s, "trace").unwrap());
+        assert!(rotary_trace_svg(&[], "t").is_err());
+    }
+
+    #[test]
+    fn the_amplification_maps_grey_the_unreachable_cells() {
+        use crate::machine::hexapod::Amplification;
+        use crate::machine::hexapod_accuracy::{MapSample, Workspace};
+        let samples: Vec<MapSample> = (0..6)
+            .map(|k| MapSample {
+                pose: [k as Real, 0.0, 0.0, 0.0, 0.0, 0.0],
+                factors: (k != 5).then_some(Amplification {
+                    position_mm_per_mm: 1.0 + k as Real,
+                    angle_deg_per_mm: 0.5,
+                }),
+                unreachable: (k == 5).then(|| "stroke".to_string()),
+            })
+            .collect();
+        let map = AmplificationMap {
+            workspace: Workspace {
+                x_mm: (0.0, 20.0),
+                y_mm: (0.0, 10.0),
+                z_mm: (0.0, 0.0),
+                tilt_deg: 0.0,
+            },
+            steps: [3, 2, 1],
+            samples,
+            position_level: None,
+            angle_level: None,
+            position_tilted: None,
+            angle_tilted: None,
+            unreachable: 1,
+        };
+        let svg = amplification_svg(&map, "K").expect("draws");
+        // The unreachable cell is grey in both maps; the K_p map's ends are the height
+        // colours of 0 and 1.
+        assert_eq!(
+            svg.to_uppercase().matches("FILL=\"#BEBEBE\"").count(),
+            2,
+            "grey cells"
+        );
+        for end in [height_colour(0.0), height_colour(1.0)] {
+            let hex = format!("#{:02X}{:02X}{:02X}", end[0], end[1], end[2]);
+            assert!(svg.to_uppercase().contains(&hex), "{hex}");
+        }
+        let mut bad = map.clone();
+        bad.samples.clear();
+        assert!(amplification_svg(&bad, "K").is_err());
+    }
+
+    #[test]
     fn the_spectrum_marks_what_is_determined() {
         let s = spectrum_svg(&[200.0, 40.0, 1e-3], Some(10.0), "spectrum").unwrap();
         assert!(s.contains("#2166AC") || s.contains("#2166ac"));
