@@ -208,6 +208,7 @@ pub fn spectrum_svg(
             .x_labels(n.min(12))
             .x_label_formatter(&|x| format!("{}", x.floor() as usize + 1))
             .x_desc("singular value, largest first")
+            .y_label_formatter(&|y| format!("{y:.0e}"))
             .y_desc("singular value")
             .draw()
             .map_err(draw_err)?;
