@@ -392,6 +392,18 @@ fn html_page_of_the_ball_bar_draws_the_polar_trace_in_chromium() {
     );
     // The nominal circle (black) and the two traces (ccw red, cw blue), as drawn.
     let lines = probe["lines"].as_array().expect("polylines");
+    let points = |stroke: &str| -> Vec<(f64, f64)> {
+        let l = lines
+            .iter()
+            .find(|l| l["stroke"] == stroke)
+            .unwrap_or_else(|| panic!("no {stroke} line: {lines:?}"));
+        l["pts"]
+            .as_array()
+            .expect("points")
+            .iter()
+            .map(|p| (p[0].as_f64().unwrap(), p[1].as_f64().unwrap()))
+            .collect::<Vec<_>>()
+    };
     let centroid = |stroke: &str| -> (f64, f64) {
         let l = lines
             .iter()
@@ -412,9 +424,15 @@ fn html_page_of_the_ball_bar_draws_the_polar_trace_in_chromium() {
     for trace in ["#B2182B", "#2166AC"] {
         let c = centroid(trace);
         assert!(
-            c.1 > nominal.1 + 20.0,
+            c.1 > nominal.1 + 5.0,
             "{trace} at {c:?}, nominal {nominal:?}"
         );
+        // Magnified about the nominal circle, the trace reaches further below its centre
+        // than above it.
+        let pts = points(trace);
+        let low = pts.iter().map(|p| p.1).fold(f64::MIN, f64::max) - nominal.1;
+        let high = nominal.1 - pts.iter().map(|p| p.1).fold(f64::MAX, f64::min);
+        assert!(low > high + 10.0, "{trace}: {low} below, {high} above");
         assert!((c.0 - nominal.0).abs() < 3.0, "{trace} at {c:?}");
     }
     let figures: Value = serde_json::from_str(&stdout).expect("figures");
