@@ -30,6 +30,8 @@ use twinmill::pipeline::{
     identify_scene, machine_part, run, scanner_study, simulate,
 };
 use twinmill::progress::Progress;
+use twinmill::report::html::render_page;
+use twinmill::report::pages;
 use twinmill::report::{ScanFileReport, ScanReport};
 use twinmill::scene::{MemoryBudget, Need, Scene, SceneError};
 
@@ -357,6 +359,10 @@ enum EvaluateCommand {
         /// Also draw the standard's bidirectional plot into this PNG file.
         #[arg(long)]
         png: Option<PathBuf>,
+        /// Also write the page (self-contained HTML: the summary, the figures, the plot as
+        /// SVG) into this file.
+        #[arg(long, value_name = "FILE")]
+        html: Option<PathBuf>,
     },
     /// ISO 230-4 circular test (ball bar) from a radial-deviation trace: CSV
     /// `direction,angle,deviation` (`ccw`/`cw`, degrees, mm; `deviation[um]`, `angle[rad]`
@@ -379,6 +385,10 @@ enum EvaluateCommand {
         /// Also draw the polar plot into this PNG file.
         #[arg(long)]
         png: Option<PathBuf>,
+        /// Also write the page (self-contained HTML: the summary, the figures, the plot as
+        /// SVG) into this file.
+        #[arg(long, value_name = "FILE")]
+        html: Option<PathBuf>,
     },
     /// Seed 003's non-contact ball sensor: ball centres from the two micrometers' readings
     /// (CSV `Lx1,Lx2,Ly1,Ly2`, mm; `[um]` after a name sets its unit) by eq. (1)–(3), each
@@ -408,6 +418,10 @@ enum EvaluateCommand {
         /// Print the figures as JSON.
         #[arg(long)]
         json: bool,
+        /// Also write the page (self-contained HTML: the summary and the figures in tables)
+        /// into this file.
+        #[arg(long, value_name = "FILE")]
+        html: Option<PathBuf>,
     },
 }
 
@@ -457,6 +471,10 @@ struct MeasureArgs {
     /// Also draw the standard's plot into this PNG file.
     #[arg(long, value_name = "FILE")]
     png: Option<PathBuf>,
+    /// The page (self-contained HTML: the summary, the figures, the standard's plot as SVG,
+    /// the identification; default: the readings file's name with `.html`).
+    #[arg(long, value_name = "FILE")]
+    html: Option<PathBuf>,
     /// Seed of the noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -864,7 +882,12 @@ fn circular_summary(title: &str, extra: &[(&str, String)], f: &CircularFigures) 
 
 /// `evaluate ball-sensor`: the sensor from the options `[band_x, band_y, ball, accuracy,
 /// tolerance, min_chord]` (mm), the window, and the centres of a readings file if one is given.
-fn evaluate_ball_sensor(file: Option<&Path>, o: [f64; 6], json: bool) -> ExitCode {
+fn evaluate_ball_sensor(
+    file: Option<&Path>,
+    o: [f64; 6],
+    json: bool,
+    html: Option<&Path>,
+) -> ExitCode {
     use std::fmt::Write as _;
     let [band_x, band_y, ball, accuracy, tolerance, min_chord] = o;
     let checks = [
@@ -914,56 +937,67 @@ fn evaluate_ball_sensor(file: Option<&Path>, o: [f64; 6], json: bool) -> ExitCod
         "z_error_curve": curve,
         "centres": centres,
     });
-    print_out(
-        || {
-            let mut s = String::new();
+    let summary = {
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "twinmill evaluate ball-sensor: ball Ø {ball} mm, micrometers ±{:.3} µm",
+            accuracy * 1e3
+        );
+        match window {
+            Some(w) => {
+                let _ = writeln!(
+                    s,
+                    "  working window Z {:.3} … {:.3} mm (Z error ≤ {:.3} µm)",
+                    w.z_min_mm,
+                    w.z_max_mm,
+                    tolerance * 1e3
+                );
+            }
+            None => {
+                let _ = writeln!(
+                    s,
+                    "  no working window: no height keeps the Z error within {:.3} µm",
+                    tolerance * 1e3
+                );
+            }
+        }
+        let _ = writeln!(s, "  Z (mm)   chord short  chord long (Z error, µm)");
+        for e in &curve {
             let _ = writeln!(
                 s,
-                "twinmill evaluate ball-sensor: ball Ø {ball} mm, micrometers ±{:.3} µm",
-                accuracy * 1e3
+                "  {:6.3}   {:+10.3}  {:+10.3}",
+                e.z_mm,
+                e.chord_short_mm * 1e3,
+                e.chord_long_mm * 1e3
             );
-            match window {
-                Some(w) => {
-                    let _ = writeln!(
-                        s,
-                        "  working window Z {:.3} … {:.3} mm (Z error ≤ {:.3} µm)",
-                        w.z_min_mm,
-                        w.z_max_mm,
-                        tolerance * 1e3
-                    );
-                }
-                None => {
-                    let _ = writeln!(
-                        s,
-                        "  no working window: no height keeps the Z error within {:.3} µm",
-                        tolerance * 1e3
-                    );
-                }
-            }
-            let _ = writeln!(s, "  Z (mm)   chord short  chord long (Z error, µm)");
-            for e in &curve {
-                let _ = writeln!(
-                    s,
-                    "  {:6.3}   {:+10.3}  {:+10.3}",
-                    e.z_mm,
-                    e.chord_short_mm * 1e3,
-                    e.chord_long_mm * 1e3
-                );
-            }
-            for (i, c) in centres.iter().enumerate() {
-                let [x, y, z] = c.centre_mm;
-                let inside = window.is_some_and(|w| (w.z_min_mm..=w.z_max_mm).contains(&z));
-                let _ = writeln!(
-                    s,
-                    "  {:>4}: X {x:+.4} Y {y:+.4} Z {z:.4} mm (±{:.3} µm{}); Z from B {:.4}",
-                    i + 1,
-                    c.z_error_bound_mm * 1e3,
-                    if inside { "" } else { ", outside the window" },
-                    c.z_from_b_mm
-                );
-            }
-            s
-        },
+        }
+        for (i, c) in centres.iter().enumerate() {
+            let [x, y, z] = c.centre_mm;
+            let inside = window.is_some_and(|w| (w.z_min_mm..=w.z_max_mm).contains(&z));
+            let _ = writeln!(
+                s,
+                "  {:>4}: X {x:+.4} Y {y:+.4} Z {z:.4} mm (±{:.3} µm{}); Z from B {:.4}",
+                i + 1,
+                c.z_error_bound_mm * 1e3,
+                if inside { "" } else { ", outside the window" },
+                c.z_from_b_mm
+            );
+        }
+        s
+    };
+    if let Some(html) = html {
+        let title = match file {
+            Some(f) => format!("twinmill evaluate ball-sensor: {}", f.display()),
+            None => "twinmill evaluate ball-sensor".to_string(),
+        };
+        let page = pages::ball_sensor_page(&title, &summary, figures.clone());
+        if let Err(e) = twinmill::output::write_file(html, render_page(&page).as_bytes()) {
+            return fail(e);
+        }
+    }
+    print_out(
+        || summary,
         json.then(|| serde_json::to_string_pretty(&figures)),
     )
 }
@@ -978,6 +1012,8 @@ struct Measured {
     summary: String,
     /// The figures as `evaluate --json` prints them.
     json: Result<String, serde_json::Error>,
+    /// The page.
+    html: String,
 }
 
 /// The options of each instrument, by name, and whether they were given (a new instrument
@@ -1065,6 +1101,16 @@ fn measure(a: MeasureArgs) -> ExitCode {
         Ok(m) => m,
         Err(e) => return fail(e),
     };
+    let html = a
+        .html
+        .clone()
+        .unwrap_or_else(|| file.with_extension("html"));
+    if html == file {
+        return fail(format!(
+            "{}: the page would overwrite the readings file: give --out or --html another name",
+            html.display()
+        ));
+    }
     let png = match (&a.png, m.plot) {
         (Some(png), Some(drawn)) => {
             match drawn.and_then(|img| twinmill::report::render::encode_png(&img)) {
@@ -1075,6 +1121,9 @@ fn measure(a: MeasureArgs) -> ExitCode {
         _ => None,
     };
     if let Err(e) = twinmill::output::write_file(&file, m.text.as_bytes()) {
+        return fail(e);
+    }
+    if let Err(e) = twinmill::output::write_file(&html, m.html.as_bytes()) {
         return fail(e);
     }
     if let Some((png, bytes)) = png
@@ -1243,7 +1292,11 @@ fn measure_rotary(scene: &Scene, a: &MeasureArgs) -> Result<Measured, String> {
             "identified    location errors (offsets µm, tilts µrad; ± one standard uncertainty):"
         );
         let show = |t: &twinmill::pipeline::TermReport| {
-            let k = if is_angle_term(&t.name) { 1e6 } else { 1e3 };
+            let k = if twinmill::pipeline::is_angle_term(&t.name) {
+                1e6
+            } else {
+                1e3
+            };
             let inj = t.injected.map_or(String::new(), |v| {
                 format!("   (scene injects {:+.3})", v * k)
             });
@@ -1280,14 +1333,10 @@ fn measure_rotary(scene: &Scene, a: &MeasureArgs) -> Result<Measured, String> {
     Ok(Measured {
         text: out.trace_csv.clone(),
         plot,
+        html: twinmill::pipeline::pages::rotary_page(&out, &s),
         summary: s,
         json: serde_json::to_string_pretty(rep),
     })
-}
-
-/// Whether an ISO term (or a combination led by one) is a tilt: `E<A|B|C>0…`.
-fn is_angle_term(name: &str) -> bool {
-    matches!(name.as_bytes().get(1), Some(b'A' | b'B' | b'C'))
 }
 
 /// `measure --instrument laser`.
@@ -1393,13 +1442,21 @@ fn measure_laser(scene: &Scene, a: &MeasureArgs, file: &Path) -> Result<Measured
     let mut extra = vec![("set-up", described)];
     extra.extend(m.notes.iter().map(|n| ("note", n.clone())));
     extra.push(("wrote", file.display().to_string()));
+    let plot_title = format!("ISO 230-2: {} {}", scene.name, axis.as_char());
+    let summary = positioning_summary(&title, &extra, &figures);
     Ok(Measured {
         text: m.csv(&comments),
-        plot: a.png.as_ref().map(|_| {
-            let t = format!("ISO 230-2: {} {}", scene.name, axis.as_char());
-            twinmill::report::plots::positioning_plot(&figures, &t)
-        }),
-        summary: positioning_summary(&title, &extra, &figures),
+        plot: a
+            .png
+            .as_ref()
+            .map(|_| twinmill::report::plots::positioning_plot(&figures, &plot_title)),
+        html: render_page(&pages::positioning_page(
+            &title,
+            &summary,
+            &figures,
+            &plot_title,
+        )),
+        summary,
         json: serde_json::to_string_pretty(&figures),
     })
 }
@@ -1487,13 +1544,23 @@ fn measure_ballbar(scene: &Scene, a: &MeasureArgs, file: &Path) -> Result<Measur
         plane.name()
     );
     let extra = vec![("set-up", described), ("wrote", file.display().to_string())];
+    let plot_title = format!("ISO 230-4: {} {}", scene.name, plane.name());
+    let summary = circular_summary(&title, &extra, &figures);
     Ok(Measured {
         text: m.csv(&comments),
-        plot: a.png.as_ref().map(|_| {
-            let t = format!("ISO 230-4: {} {}", scene.name, plane.name());
-            twinmill::report::plots::polar_plot(&m.samples, &figures, &t)
-        }),
-        summary: circular_summary(&title, &extra, &figures),
+        plot: a
+            .png
+            .as_ref()
+            .map(|_| twinmill::report::plots::polar_plot(&m.samples, &figures, &plot_title)),
+        html: render_page(&pages::circular_page(
+            &title,
+            &summary,
+            &m.samples,
+            &figures,
+            &plot_title,
+            pages::json(&figures),
+        )),
+        summary,
         json: serde_json::to_string_pretty(&figures),
     })
 }
@@ -1663,7 +1730,13 @@ fn main() -> ExitCode {
         Command::Ballbar(a) => dbb_command(dbb_ballbar(a)),
         Command::Calibrate(a) => dbb_command(dbb_calibrate(a)),
         Command::Evaluate {
-            command: EvaluateCommand::Iso230_2 { file, json, png },
+            command:
+                EvaluateCommand::Iso230_2 {
+                    file,
+                    json,
+                    png,
+                    html,
+                },
         } => {
             let text = match std::fs::read_to_string(&file) {
                 Ok(t) => t,
@@ -1675,20 +1748,25 @@ fn main() -> ExitCode {
                 Ok(f) => f,
                 Err(e) => return fail(e),
             };
-            if let Some(png) = &png {
-                let title = format!("ISO 230-2: {}", file.display());
-                if let Err(e) = write_plot(
+            let plot_title = format!("ISO 230-2: {}", file.display());
+            let title = format!("twinmill evaluate iso230-2: {}", file.display());
+            let summary = positioning_summary(&title, &[], &figures);
+            if let Some(png) = &png
+                && let Err(e) = write_plot(
                     png,
-                    twinmill::report::plots::positioning_plot(&figures, &title),
-                ) {
+                    twinmill::report::plots::positioning_plot(&figures, &plot_title),
+                )
+            {
+                return fail(e);
+            }
+            if let Some(html) = &html {
+                let page = pages::positioning_page(&title, &summary, &figures, &plot_title);
+                if let Err(e) = twinmill::output::write_file(html, render_page(&page).as_bytes()) {
                     return fail(e);
                 }
             }
             print_out(
-                || {
-                    let title = format!("twinmill evaluate iso230-2: {}", file.display());
-                    positioning_summary(&title, &[], &figures)
-                },
+                || summary,
                 json.then(|| serde_json::to_string_pretty(&figures)),
             )
         }
@@ -1700,6 +1778,7 @@ fn main() -> ExitCode {
                     pitch,
                     json,
                     png,
+                    html,
                 },
         } => {
             let text = match std::fs::read_to_string(&file) {
@@ -1718,20 +1797,32 @@ fn main() -> ExitCode {
                 Ok(f) => f,
                 Err(e) => return fail(e),
             };
-            if let Some(png) = &png {
-                let title = format!("ISO 230-4: {}", file.display());
-                if let Err(e) = write_plot(
+            let plot_title = format!("ISO 230-4: {}", file.display());
+            let title = format!("twinmill evaluate iso230-4: {}", file.display());
+            let summary = circular_summary(&title, &[], &figures);
+            if let Some(png) = &png
+                && let Err(e) = write_plot(
                     png,
-                    twinmill::report::plots::polar_plot(&samples, &figures, &title),
-                ) {
+                    twinmill::report::plots::polar_plot(&samples, &figures, &plot_title),
+                )
+            {
+                return fail(e);
+            }
+            if let Some(html) = &html {
+                let page = pages::circular_page(
+                    &title,
+                    &summary,
+                    &samples,
+                    &figures,
+                    &plot_title,
+                    pages::json(&figures),
+                );
+                if let Err(e) = twinmill::output::write_file(html, render_page(&page).as_bytes()) {
                     return fail(e);
                 }
             }
             print_out(
-                || {
-                    let title = format!("twinmill evaluate iso230-4: {}", file.display());
-                    circular_summary(&title, &[], &figures)
-                },
+                || summary,
                 json.then(|| serde_json::to_string_pretty(&figures)),
             )
         }
@@ -1746,6 +1837,7 @@ fn main() -> ExitCode {
                     tolerance,
                     min_chord,
                     json,
+                    html,
                 },
         } => evaluate_ball_sensor(
             file.as_deref(),
@@ -1758,6 +1850,7 @@ fn main() -> ExitCode {
                 min_chord,
             ],
             json,
+            html.as_deref(),
         ),
         Command::Measure(args) => measure(*args),
         Command::Nc {
@@ -2419,6 +2512,10 @@ enum HexapodCommand {
         /// Draw the K_p and K_a maps into this PNG file.
         #[arg(long)]
         png: Option<PathBuf>,
+        /// Write the page (self-contained HTML: the summary, the factors' ranges, the maps
+        /// as SVG) into this file.
+        #[arg(long, value_name = "FILE")]
+        html: Option<PathBuf>,
         /// x range MIN,MAX (mm); with --y and --z, instead of the scene's [workspace].
         #[arg(long, allow_hyphen_values = true)]
         x: Option<String>,
@@ -2577,6 +2674,7 @@ fn hexapod_run(command: HexapodCommand) -> Result<ExitCode, String> {
             scene,
             out,
             png,
+            html,
             x,
             y,
             z,
@@ -2618,6 +2716,16 @@ fn hexapod_run(command: HexapodCommand) -> Result<ExitCode, String> {
             }
             if let Some(png) = &png {
                 twinmill::output::write_file(png, &o.png).map_err(|e| e.to_string())?;
+            }
+            if let Some(html) = &html {
+                let page = pages::amplification_page(
+                    &format!("twinmill hexapod amplification: {}", s.name),
+                    &o.summary,
+                    &o.map,
+                    pages::json(&o),
+                );
+                twinmill::output::write_file(html, render_page(&page).as_bytes())
+                    .map_err(|e| e.to_string())?;
             }
             print_out(
                 || o.summary.clone(),
@@ -2705,6 +2813,10 @@ struct DbbArgs {
     /// Draw the polar plot into this PNG file.
     #[arg(long)]
     png: Option<PathBuf>,
+    /// Write the page (self-contained HTML: the summary, the ISO 230-4 figures and
+    /// diagnostics, the polar plot as SVG) into this file.
+    #[arg(long, value_name = "FILE")]
+    html: Option<PathBuf>,
     /// Print the figures as JSON.
     #[arg(long)]
     json: bool,
@@ -2725,6 +2837,11 @@ struct CalibrateArgs {
     /// Print the outcome as JSON.
     #[arg(long)]
     json: bool,
+    /// Write the page (self-contained HTML: the identified parameters with σ, the singular
+    /// values, what is not determined and why, the pose errors before and after) into this
+    /// file.
+    #[arg(long, value_name = "FILE")]
+    html: Option<PathBuf>,
 }
 
 fn dbb_command(r: Result<ExitCode, String>) -> ExitCode {
@@ -2803,6 +2920,10 @@ fn dbb_ballbar(a: DbbArgs) -> Result<ExitCode, String> {
     if let Some(png) = &a.png {
         twinmill::output::write_file(png, &o.png).map_err(|e| e.to_string())?;
     }
+    if let Some(html) = &a.html {
+        let page = twinmill::pipeline::pages::hexapod_ballbar_page(&s.name, &o);
+        twinmill::output::write_file(html, page.as_bytes()).map_err(|e| e.to_string())?;
+    }
     Ok(print_out(
         || o.summary.clone(),
         a.json.then(|| serde_json::to_string_pretty(&o)),
@@ -2820,6 +2941,10 @@ fn dbb_calibrate(a: CalibrateArgs) -> Result<ExitCode, String> {
     let s = HexapodScene::load(&a.scene).map_err(|e| e.to_string())?;
     let o = twinmill::pipeline::dbb::calibrate_scene(&s, procedure, a.trials)
         .map_err(|e| e.to_string())?;
+    if let Some(html) = &a.html {
+        let page = twinmill::pipeline::pages::calibrate_page(&s.name, &o);
+        twinmill::output::write_file(html, page.as_bytes()).map_err(|e| e.to_string())?;
+    }
     Ok(print_out(
         || o.summary.clone(),
         a.json.then(|| serde_json::to_string_pretty(&o)),

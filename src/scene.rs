@@ -115,6 +115,17 @@ struct SceneFile {
     fixtures: Vec<MeshFile>,
     #[serde(default)]
     design: Option<MeshFile>,
+    #[serde(default)]
+    report: Option<ReportFile>,
+}
+
+/// `[report]`: how the pages and pictures show the part.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ReportFile {
+    /// `"faces"`, `"iso"`, `"+x"` … `"-z"`, or `[dx, dy, dz]`.
+    #[serde(default)]
+    view: Option<Spanned<toml::Value>>,
 }
 
 /// One `[error_motions]` entry: a sum of a table, a polynomial and periodic terms.
@@ -504,6 +515,58 @@ pub struct Scene {
     pub face_options: FaceOptions,
     /// The scanner-effects study (`twinmill scan --study`).
     pub study: StudyOptions,
+    /// The direction from the part towards the eye of `part.png` and of the pages' 3-D
+    /// view (`[report] view`); `None`: the direction the machined faces face
+    /// ([`crate::report::display::view_direction`]).
+    pub view: Option<UnitVector3>,
+}
+
+/// `[report] view`: `"faces"` (the default: `None`), `"iso"` (from +x, −y, +z), an axis
+/// direction `"+x"` … `"-z"`, or a vector `[dx, dy, dz]` — always from the part towards
+/// the eye.
+fn report_view(ctx: &Ctx<'_>, v: &Spanned<toml::Value>) -> Result<Option<UnitVector3>, SceneError> {
+    let bad = |got: String| {
+        ctx.err(
+            v.span(),
+            format!(
+                "report view must be \"faces\", \"iso\", \"+x\", \"-x\", \"+y\", \"-y\", \"+z\", \"-z\" or a direction [dx, dy, dz] (from the part towards the eye), got {got}"
+            ),
+        )
+    };
+    let d = match v.get_ref() {
+        toml::Value::String(s) => match s.as_str() {
+            "faces" => return Ok(None),
+            "iso" => Vector3::new(1.0, -1.0, 1.0),
+            "+x" => Vector3::x(),
+            "-x" => -Vector3::x(),
+            "+y" => Vector3::y(),
+            "-y" => -Vector3::y(),
+            "+z" => Vector3::z(),
+            "-z" => -Vector3::z(),
+            other => return Err(bad(format!("\"{other}\""))),
+        },
+        toml::Value::Array(a) => {
+            let c: Vec<Real> = a
+                .iter()
+                .filter_map(|x| match x {
+                    toml::Value::Float(f) => Some(*f),
+                    toml::Value::Integer(i) => Some(*i as Real),
+                    _ => None,
+                })
+                .collect();
+            match c[..] {
+                [x, y, z] if c.len() == a.len() && c.iter().all(|x| x.is_finite()) => {
+                    Vector3::new(x, y, z)
+                }
+                _ => return Err(bad(format!("{}", v.get_ref()))),
+            }
+        }
+        other => return Err(bad(format!("{other}"))),
+    };
+    if d.norm() < 1e-9 {
+        return Err(ctx.err(v.span(), "report view [0, 0, 0] has no direction"));
+    }
+    Ok(Some(UnitVector3::new_normalize(d)))
 }
 
 struct Ctx<'a> {
@@ -1679,6 +1742,10 @@ impl Scene {
                 )?,
             }
         };
+        let view = match file.report.as_ref().and_then(|r| r.view.as_ref()) {
+            Some(v) => report_view(&ctx, v)?,
+            None => None,
+        };
         let identify = match &file.identify {
             Some(f) => identify_setup(&ctx, &chain, f)?,
             None => IdentifySetup::none(),
@@ -1748,6 +1815,7 @@ impl Scene {
             loop_tolerance_mm: identify.loop_tolerance_mm,
             study,
             face_options: identify.face_options,
+            view,
         })
     }
 

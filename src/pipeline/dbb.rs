@@ -32,6 +32,9 @@ pub struct BallbarOutcome {
     /// The trace file (`circular`'s CSV).
     #[serde(skip)]
     pub csv: String,
+    /// The trace.
+    #[serde(skip)]
+    pub samples: Vec<crate::metrology::circular::Sample>,
     /// The polar plot (PNG bytes).
     #[serde(skip)]
     pub png: Vec<u8>,
@@ -76,6 +79,7 @@ pub fn ballbar(
     Ok(BallbarOutcome {
         figures,
         csv: m.csv(&comments),
+        samples: m.samples,
         png,
         summary,
     })

@@ -40,6 +40,12 @@ pub enum RotaryInstrument {
     },
 }
 
+/// Whether an ISO term (or a combination led by one) is a tilt (rad): `E<A|B|C>0…`; else
+/// an offset (mm).
+pub fn is_angle_term(name: &str) -> bool {
+    matches!(name.as_bytes().get(1), Some(b'A' | b'B' | b'C'))
+}
+
 /// What to run.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RotaryRequest {

@@ -358,6 +358,16 @@ pub fn view_direction(mesh: &DisplayMesh, stock_box: &Aabb) -> (UnitVector3, Vec
     (eye, up)
 }
 
+/// The screen's up for a view from `eye` (from the part towards the eye): +z, or +y when
+/// the view looks along z (within about 25°).
+pub fn view_up(eye: &UnitVector3) -> Vector3 {
+    if eye.z.abs() > 0.9 {
+        Vector3::y()
+    } else {
+        Vector3::z()
+    }
+}
+
 /// Indices of at most `max` of `n` items, evenly strided (deterministic).
 pub fn decimate(n: usize, max: usize) -> Vec<usize> {
     if max == 0 {

@@ -10,18 +10,27 @@
 //!   [`correct_page`]: the summary, the identified values with σ, what is and is not
 //!   determined, the singular values (and their plot), timings, the command's other tables
 //!   and plots, and the whole JSON report.
+//! - The instruments' and evaluations' pages, without a 3-D view: [`positioning_page`]
+//!   (ISO 230-2: figures, targets, the bidirectional plot), [`circular_page`] (ISO 230-4:
+//!   figures and diagnostics per direction, the polar plot), [`ball_sensor_page`] (the
+//!   sensor's window, Z error curve and ball centres), [`amplification_page`] (a hexapod's
+//!   K_p and K_a maps), and [`instrument_page`] for the pages `pipeline::pages` assembles
+//!   (the rotary-axis tests, the hexapod's calibration).
 //!
 //! **Invariant:** builds pages from reports and geometry; computes nothing but display
 //! colours, extents and formatting.
 
 use crate::calibration::calibrate::DETERMINED_FRACTION;
+use crate::machine::hexapod_accuracy::AmplificationMap;
 use crate::math::{Point3, Real, UnitVector3, Vector3};
+use crate::metrology::circular::{CircularFigures, Diagnosis, Sample};
 use crate::metrology::fit::Plane;
+use crate::metrology::positioning::PositioningFigures;
 use crate::report::display::{self, DisplayMesh};
 use crate::report::glb::{GlbError, MeshData, Mode, write_glb};
 use crate::report::html::{Legend, Marker, Page, Plot, Section, View3d};
 use crate::report::render::diverging_colour;
-use crate::report::svg::spectrum_svg;
+use crate::report::svg::{amplification_svg, polar_svg, positioning_svg, spectrum_svg};
 use crate::report::{
     CorrectReport, DesignReport, IdentifyReport, Report, ScanFileReport, SimulationReport,
 };
@@ -325,7 +334,8 @@ fn timings(t: &[(String, Real)]) -> Section {
     }
 }
 
-fn list_section(heading: &str, intro: &str, items: &[String]) -> Option<Section> {
+/// A one-column table of `items` under `heading`, or nothing when there are none.
+pub fn list_section(heading: &str, intro: &str, items: &[String]) -> Option<Section> {
     (!items.is_empty()).then(|| Section {
         heading: heading.into(),
         intro: intro.into(),
@@ -334,7 +344,8 @@ fn list_section(heading: &str, intro: &str, items: &[String]) -> Option<Section>
     })
 }
 
-fn spectrum_plot(values: &[Real], threshold: Option<Real>, caption: &str) -> Option<Plot> {
+/// The identifiability spectrum's plot with `caption`, or nothing if it cannot be drawn.
+pub fn spectrum_plot(values: &[Real], threshold: Option<Real>, caption: &str) -> Option<Plot> {
     spectrum_svg(values, threshold, "identifiability spectrum")
         .ok()
         .map(|svg| Plot {
@@ -343,7 +354,8 @@ fn spectrum_plot(values: &[Real], threshold: Option<Real>, caption: &str) -> Opt
         })
 }
 
-fn json(v: &impl serde::Serialize) -> serde_json::Value {
+/// `v` as a JSON value (null if it cannot be one).
+pub fn json(v: &impl serde::Serialize) -> serde_json::Value {
     serde_json::to_value(v).unwrap_or(serde_json::Value::Null)
 }
 
@@ -832,4 +844,315 @@ pub fn correct_page(r: &CorrectReport, view: Option<View3d>) -> Page {
         plots: Vec::new(),
         report: json(r),
     }
+}
+
+/// A page without a 3-D view: an instrument's or an evaluation's.
+pub fn instrument_page(
+    title: String,
+    summary: String,
+    sections: Vec<Section>,
+    plots: Vec<Plot>,
+    report: serde_json::Value,
+) -> Page {
+    Page {
+        title,
+        summary,
+        view: None,
+        sections,
+        plots,
+        report,
+    }
+}
+
+/// A plot, or a sentence saying why it is missing (a caption without a drawing).
+fn plot_or_note(drawn: Result<String, crate::report::svg::SvgError>, caption: &str) -> Plot {
+    match drawn {
+        Ok(svg) => Plot {
+            caption: caption.into(),
+            svg,
+        },
+        Err(e) => Plot {
+            caption: format!("{caption} — not drawn: {e}."),
+            svg: String::new(),
+        },
+    }
+}
+
+fn um(x: Real) -> String {
+    format!("{:.4}", x * 1e3)
+}
+
+/// ISO 230-2's page: `summary` (what the CLI prints), the figures and each target's
+/// statistics in µm, the bidirectional plot titled `plot_title`, and `f` as JSON.
+pub fn positioning_page(
+    title: &str,
+    summary: &str,
+    f: &PositioningFigures,
+    plot_title: &str,
+) -> Page {
+    let figures = [
+        ("A", "accuracy, bidirectional", f.a),
+        ("A↑", "accuracy, forward", f.a_fwd),
+        ("A↓", "accuracy, backward", f.a_bwd),
+        ("R", "repeatability, bidirectional", f.r),
+        ("R↑", "repeatability, forward", f.r_fwd),
+        ("R↓", "repeatability, backward", f.r_bwd),
+        ("E", "systematic deviation, bidirectional", f.e),
+        ("E↑", "systematic deviation, forward", f.e_fwd),
+        ("E↓", "systematic deviation, backward", f.e_bwd),
+        ("M", "mean bidirectional positional deviation", f.m),
+        ("B", "largest reversal value", f.b),
+        ("B̄", "mean reversal value", f.b_mean),
+    ];
+    let sections = vec![
+        Section {
+            heading: "ISO 230-2 figures".into(),
+            intro: format!(
+                "{} targets, {} runs in each direction.",
+                f.targets.len(),
+                f.runs
+            ),
+            columns: vec!["figure".into(), "meaning".into(), "µm".into()],
+            rows: figures
+                .iter()
+                .map(|(k, what, v)| vec![(*k).into(), (*what).into(), um(*v)])
+                .collect(),
+        },
+        Section {
+            heading: "Targets".into(),
+            intro: "Each target's mean deviations x̄, reversal value B, standard deviations s and repeatabilities R (µm).".into(),
+            columns: [
+                "target (mm)", "x̄↑", "x̄↓", "x̄", "B", "s↑", "s↓", "R↑", "R↓", "R",
+            ]
+            .map(String::from)
+            .to_vec(),
+            rows: f
+                .targets
+                .iter()
+                .map(|t| {
+                    vec![
+                        format!("{:.4}", t.target),
+                        um(t.mean_fwd),
+                        um(t.mean_bwd),
+                        um(t.mean),
+                        um(t.b),
+                        um(t.s_fwd),
+                        um(t.s_bwd),
+                        um(t.r_fwd),
+                        um(t.r_bwd),
+                        um(t.r),
+                    ]
+                })
+                .collect(),
+        },
+    ];
+    let plots = vec![plot_or_note(
+        positioning_svg(f, plot_title),
+        "ISO 230-2's bidirectional plot: the mean positional deviations of each direction and their ±2s bands.",
+    )];
+    instrument_page(title.into(), summary.into(), sections, plots, json(f))
+}
+
+/// A diagnostic as text: value ± σ in `unit` (scaled by `k`), or why it is not determined.
+fn diagnosis(d: &Diagnosis, k: Real, unit: &str) -> String {
+    match d {
+        Diagnosis::Value { value, sigma } => {
+            format!("{:+.4} ± {:.4} {unit}", value * k, sigma * k)
+        }
+        Diagnosis::NotDetermined { not_determined } => {
+            format!("not determined: {not_determined}")
+        }
+    }
+}
+
+/// The ISO 230-4 tables of `f`: each direction's figures and diagnostics, and what both
+/// directions give together.
+pub fn circular_sections(f: &CircularFigures) -> Vec<Section> {
+    let mut out = Vec::new();
+    let dirs: Vec<String> = f
+        .directions
+        .iter()
+        .map(|d| format!("{:?}", d.direction).to_lowercase())
+        .collect();
+    let mut columns = vec!["figure".to_string()];
+    columns.extend(dirs.iter().cloned());
+    let row = |name: &str, g: &dyn Fn(&crate::metrology::circular::DirectionFigures) -> String| {
+        let mut r = vec![name.to_string()];
+        r.extend(f.directions.iter().map(g));
+        r
+    };
+    out.push(Section {
+        heading: "ISO 230-4 figures".into(),
+        intro: format!(
+            "Nominal radius {} mm. G about the least-squares centre, F about the centre ball (µm).",
+            f.radius_mm
+        ),
+        columns: columns.clone(),
+        rows: vec![
+            row("points", &|d| d.points.to_string()),
+            row("span (°)", &|d| format!("{:.1}", d.span_deg)),
+            row("circular deviation G (µm)", &|d| um(d.g)),
+            row("radial deviation F max (µm)", &|d| {
+                format!("{:+.4}", d.f_max * 1e3)
+            }),
+            row("radial deviation F min (µm)", &|d| {
+                format!("{:+.4}", d.f_min * 1e3)
+            }),
+            row("centre, axis 1 (µm)", &|d| {
+                format!("{:+.4}", d.centre_mm[0] * 1e3)
+            }),
+            row("centre, axis 2 (µm)", &|d| {
+                format!("{:+.4}", d.centre_mm[1] * 1e3)
+            }),
+            row("radius − nominal (µm)", &|d| {
+                format!("{:+.4}", d.radius_deviation_mm * 1e3)
+            }),
+            row("residual rms (µm)", &|d| um(d.residual_rms_mm)),
+        ],
+    });
+    out.push(Section {
+        heading: "Diagnostics".into(),
+        intro: "Each term fitted to the trace with its standard uncertainty from the residuals, or why the trace cannot determine it.".into(),
+        columns,
+        rows: vec![
+            row("scale mismatch", &|d| diagnosis(&d.scale_mismatch_um_per_m, 1.0, "µm/m")),
+            row("sin 2θ term (squareness + servo)", &|d| diagnosis(&d.sin2_term_urad, 1.0, "µrad")),
+            row("reversal, axis 1", &|d| diagnosis(&d.reversal_1_mm, 1e3, "µm")),
+            row("reversal, axis 2", &|d| diagnosis(&d.reversal_2_mm, 1e3, "µm")),
+            row("straightness, axis 1", &|d| diagnosis(&d.straightness_1_mm, 1e3, "µm")),
+            row("straightness, axis 2", &|d| diagnosis(&d.straightness_2_mm, 1e3, "µm")),
+            row("cyclic error, axis 1", &|d| diagnosis(&d.cyclic_1_mm, 1e3, "µm")),
+            row("cyclic error, axis 2", &|d| diagnosis(&d.cyclic_2_mm, 1e3, "µm")),
+        ],
+    });
+    let mut both = vec![
+        vec![
+            "squareness".into(),
+            diagnosis(&f.squareness_urad, 1.0, "µrad (µm/m)"),
+        ],
+        vec![
+            "servo mismatch".into(),
+            diagnosis(&f.servo_mismatch_urad, 1.0, "µrad (µm/m)"),
+        ],
+    ];
+    if let Some(h) = f.h {
+        both.insert(0, vec!["hysteresis H".into(), format!("{} µm", um(h))]);
+    }
+    out.push(Section {
+        heading: "Both directions".into(),
+        intro: "What the two directions give together (with one direction, squareness is not separable from servo mismatch).".into(),
+        columns: vec!["figure".into(), "value".into()],
+        rows: both,
+    });
+    out
+}
+
+/// ISO 230-4's page: `summary`, the figures and diagnostics, the polar plot of `samples`
+/// titled `plot_title`, and `report` (the JSON the command prints).
+pub fn circular_page(
+    title: &str,
+    summary: &str,
+    samples: &[Sample],
+    f: &CircularFigures,
+    plot_title: &str,
+    report: serde_json::Value,
+) -> Page {
+    let plots = vec![plot_or_note(
+        polar_svg(samples, f, plot_title),
+        "ISO 230-4's polar plot: the radial deviation of each direction, magnified about the nominal circle (black); grey circles ±2 divisions.",
+    )];
+    instrument_page(
+        title.into(),
+        summary.into(),
+        circular_sections(f),
+        plots,
+        report,
+    )
+}
+
+/// `evaluate ball-sensor`'s page: the summary (the window, the Z error curve and the
+/// centres as the CLI prints them) and `figures` (its JSON) in tables.
+pub fn ball_sensor_page(title: &str, summary: &str, figures: serde_json::Value) -> Page {
+    let f =
+        |v: &serde_json::Value, k: &str| v[k].as_f64().map_or("—".into(), |x| format!("{x:.4}"));
+    let mut sections = Vec::new();
+    if let Some(curve) = figures["z_error_curve"].as_array() {
+        sections.push(Section {
+            heading: "Z error".into(),
+            intro: "The bound of the Z error at each height of the ball above the sheets of light, for the short and the long chord (mm).".into(),
+            columns: vec!["Z (mm)".into(), "short chord".into(), "long chord".into()],
+            rows: curve
+                .iter()
+                .map(|e| vec![f(e, "z_mm"), f(e, "chord_short_mm"), f(e, "chord_long_mm")])
+                .collect(),
+        });
+    }
+    if let Some(c) = figures["centres"].as_array().filter(|c| !c.is_empty()) {
+        sections.push(Section {
+            heading: "Ball centres".into(),
+            intro: "Each reading's ball centre (mm) by the sensor's equations, with the bound of its Z error and Z from micrometer B alone.".into(),
+            columns: ["#", "X", "Y", "Z", "Z error bound", "Z from B"].map(String::from).to_vec(),
+            rows: c
+                .iter()
+                .enumerate()
+                .map(|(i, c)| {
+                    let p = |k: usize| c["centre_mm"][k].as_f64().map_or("—".into(), |x| format!("{x:+.4}"));
+                    vec![
+                        (i + 1).to_string(),
+                        p(0),
+                        p(1),
+                        p(2),
+                        f(c, "z_error_bound_mm"),
+                        f(c, "z_from_b_mm"),
+                    ]
+                })
+                .collect(),
+        });
+    }
+    instrument_page(title.into(), summary.into(), sections, Vec::new(), figures)
+}
+
+/// `hexapod amplification`'s page: `summary`, the ranges of K_p and K_a, the maps, and
+/// `report` (the JSON the command prints).
+pub fn amplification_page(
+    title: &str,
+    summary: &str,
+    map: &AmplificationMap,
+    report: serde_json::Value,
+) -> Page {
+    let range = |r: Option<crate::machine::hexapod_accuracy::Range>| {
+        r.map_or(("—".to_string(), "no reachable pose".to_string()), |r| {
+            (format!("{:.4}", r.min), format!("{:.4}", r.max))
+        })
+    };
+    let rows = [
+        ("K_p level (mm/mm)", map.position_level),
+        ("K_a level (°/mm)", map.angle_level),
+        ("K_p tilted (mm/mm)", map.position_tilted),
+        ("K_a tilted (°/mm)", map.angle_tilted),
+    ]
+    .into_iter()
+    .map(|(n, r)| {
+        let (lo, hi) = range(r);
+        vec![n.to_string(), lo, hi]
+    })
+    .collect();
+    let sections = vec![Section {
+        heading: "Amplification factors".into(),
+        intro: format!(
+            "Over {} poses ({} × {} × {} positions and the tilts); {} outside the workspace.",
+            map.samples.len(),
+            map.steps[0],
+            map.steps[1],
+            map.steps[2],
+            map.unreachable
+        ),
+        columns: vec!["factor".into(), "min".into(), "max".into()],
+        rows,
+    }];
+    let plots = vec![plot_or_note(
+        amplification_svg(map, "resolution amplification"),
+        "K_p and K_a over the x–y grid: each cell the largest over z and the orientations; grey where no pose is reachable.",
+    )];
+    instrument_page(title.into(), summary.into(), sections, plots, report)
 }

@@ -3,8 +3,10 @@
 //! coordinates; its naive font metrics need no font files): the deviation map of a face or
 //! a part ([`deviation_map_svg`]), the identifiability spectrum ([`spectrum_svg`]), and the
 //! standards' plots, ISO 230-2's bidirectional positioning plot ([`positioning_svg`]) and
-//! ISO 230-4's polar plot ([`polar_svg`]) — the vector counterparts of
-//! [`crate::report::plots`].
+//! ISO 230-4's polar plot ([`polar_svg`]), ISO 10791-6's deviation trace of a rotary-axis
+//! test ([`rotary_trace_svg`]) and a hexapod's resolution amplification maps
+//! ([`amplification_svg`]) — the vector counterparts of [`crate::report::plots`] and
+//! [`crate::report::hexapod`].
 //!
 //! A deviation map bins its points into at most [`MAX_CELLS`] × [`MAX_CELLS`] cells, each
 //! showing the point of largest |deviation| in it (as the PNG maps do), so an SVG stays
@@ -13,10 +15,12 @@
 //! **Invariant:** deterministic text for the same input; non-finite input is an error,
 //! never a drawing.
 
+use crate::machine::hexapod_accuracy::AmplificationMap;
 use crate::math::Real;
 use crate::metrology::circular::{CircularFigures, Sample};
 use crate::metrology::positioning::PositioningFigures;
-use crate::report::render::{diverging_colour, nice_ceil};
+use crate::metrology::rotary_test::Sample as RotarySample;
+use crate::report::render::{diverging_colour, height_colour, nice_ceil};
 use plotters::prelude::*;
 
 /// Cells along the longer side of a deviation map.
@@ -204,6 +208,7 @@ pub fn spectrum_svg(
             .x_labels(n.min(12))
             .x_label_formatter(&|x| format!("{}", x.floor() as usize + 1))
             .x_desc("singular value, largest first")
+            .y_label_formatter(&|y| format!("{y:.0e}"))
             .y_desc("singular value")
             .draw()
             .map_err(draw_err)?;
@@ -448,6 +453,215 @@ pub fn polar_svg(samples: &[Sample], f: &CircularFigures, title: &str) -> Result
     Ok(s)
 }
 
+/// ISO 10791-6's deviation trace of a rotary-axis test as SVG: the X, Y and Z deviation of
+/// the ball (µm) against the measurement's number, one line per sweep and coordinate,
+/// sweeps separated by grey lines (the counterpart of
+/// [`crate::report::plots::rotary_trace_plot`]).
+pub fn rotary_trace_svg(samples: &[RotarySample], title: &str) -> Result<String, SvgError> {
+    if samples.is_empty() {
+        return Err(SvgError::NoPoints);
+    }
+    let (mut lo, mut hi) = (Real::INFINITY, Real::NEG_INFINITY);
+    for s in samples {
+        for v in s.deviation_mm {
+            if !v.is_finite() {
+                return Err(SvgError::NonFinite);
+            }
+            lo = lo.min(v * 1e3);
+            hi = hi.max(v * 1e3);
+        }
+    }
+    let pad = ((hi - lo) * 0.08).max(0.05);
+    let n = samples.len() as Real;
+    let mut s = String::new();
+    {
+        let root = SVGBackend::with_string(&mut s, (760, 440)).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_err)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 16))
+            .margin(10)
+            .x_label_area_size(40)
+            .y_label_area_size(64)
+            .build_cartesian_2d(0.0..(n - 1.0).max(1.0), lo - pad..hi + pad)
+            .map_err(draw_err)?;
+        chart
+            .configure_mesh()
+            .x_desc("measurement (in the order taken; grey lines separate the sweeps)")
+            .y_desc("deviation of the ball (µm)")
+            .draw()
+            .map_err(draw_err)?;
+        let grey = RGBColor(150, 150, 150);
+        for (i, pair) in samples.windows(2).enumerate() {
+            if pair[0].sweep != pair[1].sweep {
+                let x = i as Real + 0.5;
+                chart
+                    .draw_series(LineSeries::new([(x, lo - pad), (x, hi + pad)], grey))
+                    .map_err(draw_err)?;
+            }
+        }
+        let colours = [
+            (RGBColor(0xb2, 0x18, 0x2b), "X"),
+            (RGBColor(0x21, 0x66, 0xac), "Y"),
+            (RGBColor(0x2c, 0xa0, 0x2c), "Z"),
+        ];
+        for (k, (colour, name)) in colours.into_iter().enumerate() {
+            let mut start = 0;
+            let mut first = true;
+            while start < samples.len() {
+                let sweep = samples[start].sweep;
+                let end = samples[start..]
+                    .iter()
+                    .position(|x| x.sweep != sweep)
+                    .map_or(samples.len(), |p| start + p);
+                let pts: Vec<(Real, Real)> = (start..end)
+                    .map(|i| (i as Real, samples[i].deviation_mm[k] * 1e3))
+                    .collect();
+                let drawn = chart
+                    .draw_series(LineSeries::new(pts, colour.stroke_width(2)))
+                    .map_err(draw_err)?;
+                if first {
+                    drawn
+                        .label(name)
+                        .legend(move |(x, y)| PathElement::new([(x, y), (x + 12, y)], colour));
+                    first = false;
+                }
+                start = end;
+            }
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(draw_err)?;
+        root.present().map_err(draw_err)?;
+    }
+    Ok(s)
+}
+
+/// A hexapod's resolution amplification maps as SVG: K_p (mm/mm) and K_a (°/mm) over the
+/// x–y grid, each cell the largest value over z and the orientations, grey where no pose
+/// is reachable, with a colour bar each (the counterpart of
+/// [`crate::report::hexapod::amplification_png`]).
+pub fn amplification_svg(map: &AmplificationMap, title: &str) -> Result<String, SvgError> {
+    let [nx, ny, _] = map.steps;
+    if map.samples.is_empty() || nx == 0 || ny == 0 {
+        return Err(SvgError::NoPoints);
+    }
+    let mut cells = vec![[None::<Real>; 2]; nx * ny];
+    for (k, smp) in map.samples.iter().enumerate() {
+        if let Some(f) = smp.factors {
+            for (slot, v) in cells[k % (nx * ny)]
+                .iter_mut()
+                .zip([f.position_mm_per_mm, f.angle_deg_per_mm])
+            {
+                if !v.is_finite() {
+                    return Err(SvgError::NonFinite);
+                }
+                *slot = Some(slot.map_or(v, |o: Real| o.max(v)));
+            }
+        }
+    }
+    let ws = &map.workspace;
+    let (x0, x1, y0, y1) = (ws.x_mm.0, ws.x_mm.1, ws.y_mm.0, ws.y_mm.1);
+    let dx = if nx > 1 {
+        (x1 - x0) / (nx - 1) as Real
+    } else {
+        1.0
+    };
+    let dy = if ny > 1 {
+        (y1 - y0) / (ny - 1) as Real
+    } else {
+        1.0
+    };
+    if !(dx.is_finite() && dy.is_finite()) || dx <= 0.0 || dy <= 0.0 {
+        return Err(SvgError::NonFinite);
+    }
+    let mut s = String::new();
+    {
+        let root = SVGBackend::with_string(&mut s, (900, 480)).into_drawing_area();
+        root.fill(&WHITE).map_err(draw_err)?;
+        let root = root.titled(title, ("sans-serif", 16)).map_err(draw_err)?;
+        let panels = root.split_evenly((1, 2));
+        for (panel, (area, (label, unit))) in panels
+            .iter()
+            .zip([("K_p", "mm/mm"), ("K_a", "°/mm")])
+            .enumerate()
+        {
+            let values: Vec<Real> = cells.iter().filter_map(|c| c[panel]).collect();
+            let lo = values.iter().copied().fold(Real::INFINITY, Real::min);
+            let hi = values.iter().copied().fold(Real::NEG_INFINITY, Real::max);
+            let (lo, hi) = if values.is_empty() {
+                (0.0, 1.0)
+            } else {
+                (lo, hi)
+            };
+            let span = if hi > lo { hi - lo } else { 1.0 };
+            let (map_area, bar_area) = area.split_horizontally(area.dim_in_pixel().0 - 90);
+            let caption = if values.is_empty() {
+                format!("{label}: no reachable pose")
+            } else {
+                format!("{label} ({unit}), largest over z and tilt")
+            };
+            let mut chart = ChartBuilder::on(&map_area)
+                .caption(caption, ("sans-serif", 14))
+                .margin(8)
+                .x_label_area_size(36)
+                .y_label_area_size(50)
+                .build_cartesian_2d(x0 - dx / 2.0..x1 + dx / 2.0, y0 - dy / 2.0..y1 + dy / 2.0)
+                .map_err(draw_err)?;
+            chart
+                .configure_mesh()
+                .disable_mesh()
+                .x_desc("x (mm)")
+                .y_desc("y (mm)")
+                .draw()
+                .map_err(draw_err)?;
+            chart
+                .draw_series(cells.iter().enumerate().map(|(k, c)| {
+                    let (i, j) = ((k % nx) as Real, (k / nx) as Real);
+                    let (cx, cy) = (x0 + i * dx, y0 + j * dy);
+                    let colour = c[panel].map_or(RGBColor(190, 190, 190), |v| {
+                        rgb(height_colour((v - lo) / span))
+                    });
+                    Rectangle::new(
+                        [
+                            (cx - dx / 2.0, cy - dy / 2.0),
+                            (cx + dx / 2.0, cy + dy / 2.0),
+                        ],
+                        colour.filled(),
+                    )
+                }))
+                .map_err(draw_err)?;
+            let mut bar = ChartBuilder::on(&bar_area)
+                .margin_top(40)
+                .margin_bottom(44)
+                .margin_right(8)
+                .right_y_label_area_size(60)
+                .build_cartesian_2d(0.0..1.0, lo..lo + span)
+                .map_err(draw_err)?;
+            bar.configure_mesh()
+                .disable_mesh()
+                .disable_x_axis()
+                .y_labels(5)
+                .draw()
+                .map_err(draw_err)?;
+            let steps = 48;
+            bar.draw_series((0..steps).map(|k| {
+                let f = (k as Real + 0.5) / steps as Real;
+                let (a, b) = (
+                    lo + span * k as Real / steps as Real,
+                    lo + span * (k + 1) as Real / steps as Real,
+                );
+                Rectangle::new([(0.0, a), (1.0, b)], rgb(height_colour(f)).filled())
+            }))
+            .map_err(draw_err)?;
+        }
+        root.present().map_err(draw_err)?;
+    }
+    Ok(s)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -561,6 +775,81 @@ mod tests {
             east(&blue)
         );
         assert!(polar_svg(&[], &f, "XY").is_err());
+    }
+
+    #[test]
+    fn the_rotary_trace_draws_each_coordinate_where_its_values_are() {
+        // Two sweeps: X rises 0 → 10 µm, Y stays 0, Z stays −5 µm.
+        let s: Vec<RotarySample> = (0..20)
+            .map(|i| RotarySample {
+                sweep: 1 + i / 10,
+                axis: 'C',
+                angle_deg: (i % 10) as Real * 30.0,
+                q: Default::default(),
+                deviation_mm: [i as Real * 10e-3 / 19.0, 0.0, -5e-3],
+                sigma_mm: [1e-4; 3],
+            })
+            .collect();
+        let svg = rotary_trace_svg(&s, "trace").expect("draws");
+        let (x, y, z) = (
+            polylines(&svg, "#B2182B"),
+            polylines(&svg, "#2166AC"),
+            polylines(&svg, "#2CA02C"),
+        );
+        // One line per sweep and coordinate: 10 points each.
+        assert_eq!((x.len(), y.len(), z.len()), (20, 20, 20));
+        let mean_y = |v: &[(f64, f64)]| v.iter().map(|p| p.1).sum::<f64>() / v.len() as f64;
+        // SVG y runs down: Z (−5 µm) below Y (0), X's last point (10 µm) above its first.
+        assert!(mean_y(&z) > mean_y(&y) + 10.0);
+        assert!(x[19].1 < x[0].1 - 50.0, "{:?} {:?}", x[0], x[19]);
+        assert_eq!(svg, rotary_trace_svg(&s, "trace").unwrap());
+        assert!(rotary_trace_svg(&[], "t").is_err());
+    }
+
+    #[test]
+    fn the_amplification_maps_grey_the_unreachable_cells() {
+        use crate::machine::hexapod::Amplification;
+        use crate::machine::hexapod_accuracy::{MapSample, Workspace};
+        let samples: Vec<MapSample> = (0..6)
+            .map(|k| MapSample {
+                pose: [k as Real, 0.0, 0.0, 0.0, 0.0, 0.0],
+                factors: (k != 5).then_some(Amplification {
+                    position_mm_per_mm: 1.0 + k as Real,
+                    angle_deg_per_mm: 0.5,
+                }),
+                unreachable: (k == 5).then(|| "stroke".to_string()),
+            })
+            .collect();
+        let map = AmplificationMap {
+            workspace: Workspace {
+                x_mm: (0.0, 20.0),
+                y_mm: (0.0, 10.0),
+                z_mm: (0.0, 0.0),
+                tilt_deg: 0.0,
+            },
+            steps: [3, 2, 1],
+            samples,
+            position_level: None,
+            angle_level: None,
+            position_tilted: None,
+            angle_tilted: None,
+            unreachable: 1,
+        };
+        let svg = amplification_svg(&map, "K").expect("draws");
+        // The unreachable cell is grey in both maps; the K_p map's ends are the height
+        // colours of 0 and 1.
+        assert_eq!(
+            svg.to_uppercase().matches("FILL=\"#BEBEBE\"").count(),
+            2,
+            "grey cells"
+        );
+        for end in [height_colour(0.0), height_colour(1.0)] {
+            let hex = format!("#{:02X}{:02X}{:02X}", end[0], end[1], end[2]);
+            assert!(svg.to_uppercase().contains(&hex), "{hex}");
+        }
+        let mut bad = map.clone();
+        bad.samples.clear();
+        assert!(amplification_svg(&bad, "K").is_err());
     }
 
     #[test]

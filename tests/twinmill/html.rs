@@ -11,7 +11,7 @@
 //! there (`TWINMILL_NO_CHROMIUM`, the reason). `TWINMILL_UPDATE_SCREENSHOT=1` copies the
 //! built-in scene's screenshot to `docs/images/report-html.png`.
 
-use crate::{Sandbox, builtin};
+use crate::{Sandbox, builtin, files_in};
 use image::RgbImage;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -288,4 +288,397 @@ fn the_browser_check_sees_a_network_request_and_a_console_error() {
             .any(|m| m["level"] == "error" && m["text"] == "boom"),
         "{console:?}"
     );
+}
+
+// ---------------------------------------------------------------------------------------
+// The instruments' and evaluations' pages: every command that measures or evaluates writes
+// a page holding every number its JSON output has.
+
+/// The numbers of a JSON text, each as it is written there.
+fn json_numbers(text: &str) -> Vec<String> {
+    text.split(|c: char| !(c.is_ascii_digit() || "+-.eE".contains(c)))
+        .filter(|t| t.parse::<f64>().is_ok())
+        .map(String::from)
+        .collect()
+}
+
+/// Every number of `json` (a command's `--json` output) and every string value of
+/// `names` (JSON pointers to arrays of names) appear on `page`.
+fn page_holds(page: &Path, json: &str, names: &[&str]) -> String {
+    let html = std::fs::read_to_string(page).expect("page written");
+    assert!(html.starts_with("<!DOCTYPE html>"), "{}", page.display());
+    let tokens: std::collections::HashSet<&str> = html
+        .split(|c: char| !(c.is_ascii_digit() || "+-.eE".contains(c)))
+        .collect();
+    let numbers = json_numbers(json);
+    assert!(!numbers.is_empty());
+    for n in &numbers {
+        assert!(
+            tokens.contains(n.as_str()) || html.contains(n.as_str()),
+            "{n} of the JSON output is not on {}",
+            page.display()
+        );
+    }
+    let v: Value = serde_json::from_str(json).expect("JSON output");
+    for p in names {
+        for n in v.pointer(p).and_then(Value::as_array).expect(p) {
+            let n = n.as_str().expect("a name");
+            assert!(html.contains(n), "{p}: {n} is not on {}", page.display());
+        }
+    }
+    // Self-contained: no script, style or image is fetched from anywhere.
+    for bad in ["src=\"http", "href=\"http", "url(http", "<link"] {
+        assert!(!html.contains(bad), "{bad} on {}", page.display());
+    }
+    html
+}
+
+fn scene_file(name: &str) -> String {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes")
+        .join(name)
+        .display()
+        .to_string()
+}
+
+#[test]
+fn html_page_of_the_ball_bar_draws_the_polar_trace_in_chromium() {
+    let Some(browser) = browser() else { return };
+    let sb = Sandbox::new("html-ballbar");
+    let scene = scene_file("mdx50-step.toml");
+    let (code, stdout, stderr) = sb.run(&[
+        "measure",
+        &scene,
+        "--instrument",
+        "ballbar",
+        "--out",
+        "bb.csv",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let page = sb.dir.join("bb.html");
+    let html = page_holds(&page, &stdout, &[]);
+    assert!(!html.contains("three.js"), "no 3-D view, so no three.js");
+    let probe = "(() => { const lines = [...document.querySelectorAll('figure svg polyline')]\
+        .map(l => ({stroke: (l.getAttribute('stroke') || '').toUpperCase(), \
+                    pts: l.getAttribute('points').trim().split(/\\s+/).map(p => p.split(',').map(Number))}))\
+        .filter(l => l.pts.length > 100); \
+        return {lines, shown: [...document.querySelectorAll('figure svg')].map(s => s.getBoundingClientRect().width)}; })()";
+    let seen = {
+        let shot = page.with_extension("png");
+        let tool = Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/browser_check.py");
+        let out = Command::new(&browser.1)
+            .arg(tool)
+            .arg(&page)
+            .args(["--screenshot", shot.to_str().expect("utf-8 path")])
+            .args(["--ready", "document.readyState === 'complete' && 1"])
+            .args(["--probe", probe, "--timeout", "30"])
+            .arg("--chromium")
+            .arg(&browser.0)
+            .output()
+            .expect("the browser driver runs");
+        let json: Value = serde_json::from_slice(&out.stdout).expect("driver JSON");
+        assert!(out.status.success(), "{json:#}");
+        Seen {
+            json,
+            shot: image::open(&shot).expect("screenshot").to_rgb8(),
+        }
+    };
+    check_clean(&seen, &page);
+    let probe = &seen.json["probe"];
+    assert!(
+        probe["shown"][0].as_f64().expect("an SVG on the page") > 300.0,
+        "{probe}"
+    );
+    // The nominal circle (black) and the two traces (ccw red, cw blue), as drawn.
+    let lines = probe["lines"].as_array().expect("polylines");
+    let points = |stroke: &str| -> Vec<(f64, f64)> {
+        let l = lines
+            .iter()
+            .find(|l| l["stroke"] == stroke)
+            .unwrap_or_else(|| panic!("no {stroke} line: {lines:?}"));
+        l["pts"]
+            .as_array()
+            .expect("points")
+            .iter()
+            .map(|p| (p[0].as_f64().unwrap(), p[1].as_f64().unwrap()))
+            .collect::<Vec<_>>()
+    };
+    let centroid = |stroke: &str| -> (f64, f64) {
+        let l = lines
+            .iter()
+            .find(|l| l["stroke"] == stroke)
+            .unwrap_or_else(|| panic!("no {stroke} line: {lines:?}"));
+        let pts = l["pts"].as_array().expect("points");
+        let n = pts.len() as f64;
+        let s = pts.iter().fold((0.0, 0.0), |a, p| {
+            (a.0 + p[0].as_f64().unwrap(), a.1 + p[1].as_f64().unwrap())
+        });
+        (s.0 / n, s.1 / n)
+    };
+    let nominal = centroid("#000000");
+    // The scene moves the A axis (and the table and centre ball on it) by dy_AY = −0.5 mm:
+    // the circle the tool ball runs about the commanded centre is 0.5 mm off the centre
+    // ball towards +Y, so about the ball the trace's centre lies at −Y — drawn below the
+    // nominal circle (SVG y runs down), in both directions, and not sideways.
+    for trace in ["#B2182B", "#2166AC"] {
+        let c = centroid(trace);
+        assert!(
+            c.1 > nominal.1 + 5.0,
+            "{trace} at {c:?}, nominal {nominal:?}"
+        );
+        // Magnified about the nominal circle, the trace reaches further below its centre
+        // than above it.
+        let pts = points(trace);
+        let low = pts.iter().map(|p| p.1).fold(f64::MIN, f64::max) - nominal.1;
+        let high = nominal.1 - pts.iter().map(|p| p.1).fold(f64::MAX, f64::min);
+        assert!(low > high + 10.0, "{trace}: {low} below, {high} above");
+        assert!((c.0 - nominal.0).abs() < 3.0, "{trace} at {c:?}");
+    }
+    let figures: Value = serde_json::from_str(&stdout).expect("figures");
+    for d in figures["directions"].as_array().expect("directions") {
+        let y = d["centre_mm"][1].as_f64().expect("centre");
+        assert!((y + 0.5).abs() < 1e-3, "centre y {y}");
+    }
+}
+
+#[test]
+fn measure_writes_a_page_with_every_number_of_its_figures() {
+    let sb = Sandbox::new("html-measure");
+    let mdx = scene_file("mdx50-step.toml");
+    let trunnion = scene_file("trunnion-ac.toml");
+    // Laser: the page beside the readings, named after them; the ISO 230-2 plot.
+    let (code, stdout, stderr) = sb.run(&[
+        "measure",
+        &mdx,
+        "--instrument",
+        "laser",
+        "--axis",
+        "X",
+        "--from",
+        "-20",
+        "--to",
+        "20",
+        "--noise",
+        "0.3",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let html = page_holds(&sb.dir.join("mdx50-step-laser.html"), &stdout, &[]);
+    assert!(html.contains("ISO 230-2 figures") && html.contains("<svg"));
+    assert!(sb.dir.join("mdx50-step-laser.csv").is_file());
+    // Ball sensor and probe: ISO 10791-6's ranges, the identified terms with σ, what is not
+    // determined, the singular values.
+    for (instrument, file) in [("ball-sensor", "bs.csv"), ("probe", "pr.csv")] {
+        let (code, stdout, stderr) = sb.run(&[
+            "measure",
+            &trunnion,
+            "--instrument",
+            instrument,
+            "--out",
+            file,
+            "--json",
+        ]);
+        assert_eq!(code, 0, "{stderr}");
+        let page = sb.dir.join(file).with_extension("html");
+        let html = page_holds(
+            &page,
+            &stdout,
+            &["/identification/not_determined", "/identification/terms"],
+        );
+        let v: Value = serde_json::from_str(&stdout).expect("report");
+        let id = &v["identification"];
+        assert!(!id["not_determined"].as_array().expect("list").is_empty());
+        assert!(html.contains("Not determined") && html.contains("Identifiability"));
+        for t in id["identified"].as_array().expect("identified") {
+            assert!(html.contains(t["name"].as_str().expect("name")));
+        }
+        assert!(html.contains("ISO 10791-6"), "{instrument}");
+    }
+    // A page that would overwrite the readings is refused, and nothing is written.
+    let (code, _, stderr) = sb.run(&[
+        "measure",
+        &mdx,
+        "--instrument",
+        "ballbar",
+        "--out",
+        "x.html",
+    ]);
+    assert_ne!(code, 0);
+    assert!(
+        stderr.contains("x.html") && stderr.contains("overwrite"),
+        "{stderr}"
+    );
+    assert!(!sb.dir.join("x.html").exists());
+}
+
+#[test]
+fn evaluate_writes_a_page_with_every_number_of_its_figures() {
+    let sb = Sandbox::new("html-evaluate");
+    let mdx = scene_file("mdx50-step.toml");
+    let (code, _, stderr) = sb.run(&[
+        "measure",
+        &mdx,
+        "--instrument",
+        "laser",
+        "--axis",
+        "X",
+        "--from",
+        "-20",
+        "--to",
+        "20",
+        "--noise",
+        "0.3",
+        "--out",
+        "laser.csv",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let (code, _, stderr) = sb.run(&[
+        "measure",
+        &mdx,
+        "--instrument",
+        "ballbar",
+        "--noise",
+        "0.2",
+        "--out",
+        "bb.csv",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let (code, stdout, stderr) = sb.run(&[
+        "evaluate",
+        "iso230-2",
+        "laser.csv",
+        "--json",
+        "--html",
+        "e2.html",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    page_holds(&sb.dir.join("e2.html"), &stdout, &[]);
+    let (code, stdout, stderr) = sb.run(&[
+        "evaluate", "iso230-4", "bb.csv", "--radius", "100", "--json", "--html", "e4.html",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let html = page_holds(&sb.dir.join("e4.html"), &stdout, &[]);
+    assert!(html.contains("polyline"), "the polar plot");
+    sb.write(
+        "readings.csv",
+        b"Lx1,Lx2,Ly1,Ly2\n3.1,3.8,3.1,3.8\n3.0,3.6,3.2,3.6\n",
+    );
+    let (code, stdout, stderr) = sb.run(&[
+        "evaluate",
+        "ball-sensor",
+        "readings.csv",
+        "--json",
+        "--html",
+        "ebs.html",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let html = page_holds(&sb.dir.join("ebs.html"), &stdout, &[]);
+    assert!(html.contains("Ball centres"));
+    // Without --html, evaluate writes no page.
+    let before = files_in(&sb.dir).len();
+    let (code, _, _) = sb.run(&["evaluate", "iso230-2", "laser.csv"]);
+    assert_eq!(code, 0);
+    assert_eq!(files_in(&sb.dir).len(), before);
+}
+
+#[test]
+fn the_hexapod_commands_write_a_page_with_every_number_of_their_output() {
+    let sb = Sandbox::new("html-hexapod");
+    let hex = scene_file("hexapod-machining-centre.toml");
+    let (code, stdout, stderr) = sb.run(&["ballbar", &hex, "--json", "--html", "bb.html"]);
+    assert_eq!(code, 0, "{stderr}");
+    let html = page_holds(&sb.dir.join("bb.html"), &stdout, &[]);
+    assert!(html.contains("polyline"), "the polar plot");
+    // Calibration without a jig: the base frame's six rigid motions are not determined,
+    // and the page says so and why, beside the parameters with σ and the spectrum.
+    let (code, stdout, stderr) = sb.run(&[
+        "calibrate",
+        &hex,
+        "--procedure",
+        "jig-free",
+        "--json",
+        "--html",
+        "cal.html",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let html = page_holds(
+        &sb.dir.join("cal.html"),
+        &stdout,
+        &["/run/calibration/identifiability/gauge"],
+    );
+    let v: Value = serde_json::from_str(&stdout).expect("outcome");
+    assert_eq!(
+        v["run"]["calibration"]["identifiability"]["gauge"]
+            .as_array()
+            .map(Vec::len),
+        Some(6),
+        "a bar measures lengths only: six rigid motions of the base are free"
+    );
+    assert!(html.contains("Not determined (the gauge)") && html.contains("lengths only"));
+    assert!(html.contains("Before and after") && html.contains("Singular values"));
+    for p in v["run"]["parameters"].as_array().expect("parameters") {
+        assert!(html.contains(p["name"].as_str().expect("name")));
+    }
+    let (code, stdout, stderr) = sb.run(&[
+        "hexapod",
+        "amplification",
+        &hex,
+        "--steps",
+        "5",
+        "--z-steps",
+        "2",
+        "--json",
+        "--html",
+        "amp.html",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let html = page_holds(&sb.dir.join("amp.html"), &stdout, &[]);
+    assert!(html.contains("K_p") && html.contains("<rect"), "the maps");
+}
+
+#[test]
+fn a_scene_names_the_view_of_its_part() {
+    let sb = Sandbox::new("html-view");
+    let ngc = builtin("mdx50-step.ngc");
+    sb.write("mdx50-step.ngc", ngc.as_bytes());
+    let base = builtin("mdx50-step.toml");
+    // A bad view: one clear error at the value, nothing written.
+    sb.write(
+        "bad.toml",
+        format!("{base}\n[report]\nview = \"top\"\n").as_bytes(),
+    );
+    let (code, _, stderr) = sb.run(&["simulate", "bad.toml"]);
+    assert_ne!(code, 0);
+    let line = base.lines().count() + 3;
+    assert!(
+        stderr.contains(&format!("bad.toml:{line}:")) && stderr.contains("report view must be"),
+        "{stderr}"
+    );
+    sb.write(
+        "zero.toml",
+        format!("{base}\n[report]\nview = [0, 0, 0]\n").as_bytes(),
+    );
+    let (code, _, stderr) = sb.run(&["simulate", "zero.toml"]);
+    assert_ne!(code, 0);
+    assert!(stderr.contains("no direction"), "{stderr}");
+    assert!(!sb.dir.join("out").exists());
+    // From +x: the page's camera looks from +x with z up (part.png is drawn from the same
+    // direction).
+    sb.write(
+        "side.toml",
+        format!("{base}\n[report]\nview = \"+x\"\n").as_bytes(),
+    );
+    let (code, _, stderr) = sb.run(&["simulate", "side.toml"]);
+    assert_eq!(code, 0, "{stderr}");
+    let html =
+        std::fs::read_to_string(sb.dir.join("out/mdx50-step-simulate/report.html")).expect("page");
+    let meta = html
+        .split("id=\"twinmill-view\">")
+        .nth(1)
+        .and_then(|s| s.split("</script>").next())
+        .expect("view metadata");
+    let meta: Value = serde_json::from_str(meta).expect("JSON");
+    assert_eq!(meta["eye"], serde_json::json!([1.0, 0.0, 0.0]), "{meta}");
+    assert_eq!(meta["up"], serde_json::json!([0.0, 0.0, 1.0]), "{meta}");
 }
