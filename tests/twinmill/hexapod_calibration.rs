@@ -199,7 +199,8 @@ fn the_ball_plate_determines_all_24_parameters() {
 /// errors (worst over the trials) after calibration within `after` (position, pivot; mm).
 fn round_trip(procedure: Procedure, trials: usize, after: (Real, Real)) {
     let s = centre();
-    let t = calibration_trials(&s, procedure, &workspace(&s), trials).expect("trials run");
+    let plan = default_plan(procedure, &workspace(&s), DEFAULT_POINTS);
+    let t = calibration_trials(&s, &plan, &workspace(&s), trials).expect("trials run");
     assert!(
         t.within_3_sigma >= 0.95,
         "{:.3} of parameters within 3σ: {t:?}",
