@@ -924,6 +924,42 @@ mod tests {
         assert!(s.residual_mm <= tol::STRUT_RESIDUAL);
     }
 
+    /// The batch returns, in order, exactly what one-by-one solves return (a failing one
+    /// included), on one thread as on two.
+    #[test]
+    fn fk_batch_equals_the_solves_one_by_one_on_any_thread_count() {
+        let h = genhexkins();
+        let home = Pose::from_mm_deg([0.0, 0.0, 25.0, 0.0, 0.0, 0.0]);
+        let mut jobs: Vec<(Struts, Pose)> = (0..1000)
+            .map(|k| {
+                let f = k as Real / 1000.0;
+                let t = Pose::from_mm_deg([
+                    3.0 * f - 1.5,
+                    2.0 - 4.0 * f,
+                    24.0 + 2.0 * f,
+                    5.0 * f,
+                    -3.0 * f,
+                    4.0 - 8.0 * f,
+                ]);
+                (h.strut_lengths(&t), home)
+            })
+            .collect();
+        jobs[500].0[2] = Real::NAN;
+        let one_by_one: Vec<_> = jobs
+            .iter()
+            .map(|(l, n)| h.forward_unchecked(l, n))
+            .collect();
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .expect("pool");
+            let batch = pool.install(|| h.forward_unchecked_batch(&jobs));
+            assert_eq!(batch, one_by_one, "{threads} threads");
+        }
+        assert!(one_by_one[500].is_err() && one_by_one[499].is_ok());
+    }
+
     #[test]
     fn flat_platform_in_the_base_plane_is_singular() {
         let h = genhexkins();
