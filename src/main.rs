@@ -2838,13 +2838,8 @@ fn dbb_ballbar(a: DbbArgs) -> Result<ExitCode, String> {
 }
 
 fn dbb_calibrate(a: CalibrateArgs) -> Result<ExitCode, String> {
-    use twinmill::calibration::hexapod_calibrate::Procedure;
     use twinmill::hexapod_scene::HexapodScene;
-    let procedure = match a.procedure.as_deref() {
-        None => Procedure::BallPlate,
-        Some(p) => Procedure::from_name(p)
-            .ok_or_else(|| format!("--procedure must be jig-free or ball-plate, got '{p}'"))?,
-    };
+    let procedure = procedure_arg(a.procedure.as_deref())?;
     let s = HexapodScene::load(&a.scene).map_err(|e| e.to_string())?;
     let plan = match &a.plan {
         None => None,
@@ -2862,14 +2857,22 @@ fn dbb_calibrate(a: CalibrateArgs) -> Result<ExitCode, String> {
     ))
 }
 
+/// `--procedure`: jig-free or ball-plate (default).
+fn procedure_arg(
+    name: Option<&str>,
+) -> Result<twinmill::calibration::hexapod_calibrate::Procedure, String> {
+    use twinmill::calibration::hexapod_calibrate::Procedure;
+    match name {
+        None => Ok(Procedure::BallPlate),
+        Some(p) => Procedure::from_name(p)
+            .ok_or_else(|| format!("--procedure must be jig-free or ball-plate, got '{p}'")),
+    }
+}
+
 fn dbb_calibrate_design(a: CalibrateDesignArgs) -> Result<ExitCode, String> {
     use twinmill::calibration::hexapod_calibrate::Procedure;
     use twinmill::hexapod_scene::HexapodScene;
-    let procedure = match a.procedure.as_deref() {
-        None => Procedure::BallPlate,
-        Some(p) => Procedure::from_name(p)
-            .ok_or_else(|| format!("--procedure must be jig-free or ball-plate, got '{p}'"))?,
-    };
+    let procedure = procedure_arg(a.procedure.as_deref())?;
     let circles = a.circles.unwrap_or(match procedure {
         Procedure::JigFree => 15,
         Procedure::BallPlate => 7,

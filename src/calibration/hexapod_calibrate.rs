@@ -150,16 +150,7 @@ pub fn default_plan(procedure: Procedure, ws: &Workspace, points: usize) -> Plan
     let t = 0.6 * ws.tilt_deg;
     let circle = |x: Real, y: Real, z: Real, tilt: Real, o: [Real; 3], swing: Real| {
         let lift = r * tilt.to_radians().sin();
-        DbbCircle {
-            centre_mm: Vector3::new(x, y, z - lift),
-            radius_mm: r,
-            plane: DbbPlane::XY,
-            tilt_deg: tilt,
-            orientation_deg: o,
-            swing_deg: swing,
-            turns: Turns::Ccw,
-            points,
-        }
+        xy_circle(Vector3::new(x, y, z - lift), r, tilt, o, swing, points)
     };
     let mut circles = Vec::new();
     match procedure {
@@ -182,9 +173,8 @@ pub fn default_plan(procedure: Procedure, ws: &Workspace, points: usize) -> Plan
             }
         }
         Procedure::BallPlate => {
-            let z = z0 + 0.25 * (z1 - z0);
-            circles.push(circle(xc, yc, z, 45.0, [0.0; 3], 0.0));
             let orient = [
+                [0.0; 3],
                 [t, 0.0, 0.0],
                 [0.0, t, 0.0],
                 [-t, 0.0, 0.0],
@@ -192,14 +182,53 @@ pub fn default_plan(procedure: Procedure, ws: &Workspace, points: usize) -> Plan
                 [t, t, 0.0],
                 [-t, -t, 0.0],
             ];
-            for (k, o) in orient.iter().enumerate() {
-                let ang = std::f64::consts::TAU * k as Real / 6.0;
-                let (x, y) = (xc + 0.6 * hx * ang.cos(), yc + 0.6 * hy * ang.sin());
-                circles.push(circle(x, y, z, 45.0, *o, 0.0));
+            for (ball, o) in plate_balls(ws).into_iter().zip(orient) {
+                circles.push(xy_circle(ball, r, 45.0, o, 0.0, points));
             }
         }
     }
     Plan { procedure, circles }
+}
+
+/// A counter-clockwise circle in the XY plane about the table ball `centre`.
+pub fn xy_circle(
+    centre: Vector3,
+    radius_mm: Real,
+    tilt_deg: Real,
+    orientation_deg: [Real; 3],
+    swing_deg: Real,
+    points: usize,
+) -> DbbCircle {
+    DbbCircle {
+        centre_mm: centre,
+        radius_mm,
+        plane: DbbPlane::XY,
+        tilt_deg,
+        orientation_deg,
+        swing_deg,
+        turns: Turns::Ccw,
+        points,
+    }
+}
+
+/// The 7-ball plate's ball centres on `ws`: the centre and six on a hexagon at 0.6 of the
+/// half-widths, at the height of the fixed plan's bar (0.4 of the smaller half-width, at
+/// most 100 mm) tilted 45° below a quarter of the height range.
+pub fn plate_balls(ws: &Workspace) -> Vec<Vector3> {
+    let (xc, yc) = (0.5 * (ws.x_mm.0 + ws.x_mm.1), 0.5 * (ws.y_mm.0 + ws.y_mm.1));
+    let (hx, hy) = (0.5 * (ws.x_mm.1 - ws.x_mm.0), 0.5 * (ws.y_mm.1 - ws.y_mm.0));
+    let r = (0.4 * hx.min(hy)).clamp(1.0, 100.0);
+    let z = ws.z_mm.0 + 0.25 * (ws.z_mm.1 - ws.z_mm.0) - r * 45f64.to_radians().sin();
+    let mut out = vec![Vector3::new(xc, yc, z)];
+    for k in 0..6 {
+        let ang = std::f64::consts::TAU * k as Real / 6.0;
+        out.push(Vector3::new(
+            xc + 0.6 * hx * ang.cos(),
+            yc + 0.6 * hy * ang.sin(),
+            z,
+        ));
+    }
+    out
 }
 
 /// The measured lengths of one circle.

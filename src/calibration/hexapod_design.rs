@@ -43,13 +43,12 @@
 
 use crate::calibration::hexapod_calibrate::{
     BALL_MAGNITUDE_MM, JOINT_MAGNITUDE_MM, PIVOT_TILT_DEG, Plan, Procedure, RANK_TOLERANCE, SOLVED,
-    STRUT_MAGNITUDE_MM, rigid_fields, solved_parameters, table_points,
+    STRUT_MAGNITUDE_MM, plate_balls, rigid_fields, solved_parameters, table_points, xy_circle,
 };
 use crate::machine::hexapod::{Hexapod, HexapodError, Pose};
 use crate::machine::hexapod_accuracy::Workspace;
 use crate::math::{Matrix3, Real, Vector3};
-use crate::metrology::ballbar::Turns;
-use crate::metrology::hexapod_dbb::{DbbCircle, DbbPlane};
+use crate::metrology::hexapod_dbb::DbbCircle;
 use nalgebra::{DMatrix, SMatrix, SVector};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -323,7 +322,7 @@ pub fn predict(
 /// 0.2, 0.5 and 0.8 of the height range, the table ball below it by the bar's lift; bar
 /// lengths 100, 175 and 250 mm; bar tilts 20°, 40° and 60°; the platform level or tilted
 /// ±0.6·tilt about x or y; held or swung 0.6·tilt along the bar. *Ball plate:* the plate's
-/// seven balls where [`super::hexapod_calibrate::default_plan`] puts them (fixed heights),
+/// seven balls ([`plate_balls`], where the fixed plan has them) (fixed heights),
 /// with the same bar lengths, tilts, platform orientations and swings.
 pub fn candidates(procedure: Procedure, ws: &Workspace, points: usize) -> Vec<DbbCircle> {
     let (xc, yc) = (0.5 * (ws.x_mm.0 + ws.x_mm.1), 0.5 * (ws.y_mm.0 + ws.y_mm.1));
@@ -340,15 +339,8 @@ pub fn candidates(procedure: Procedure, ws: &Workspace, points: usize) -> Vec<Db
     let radii: [Real; 3] = [100.0, 175.0, 250.0];
     let tilts: [Real; 3] = [20.0, 40.0, 60.0];
     let swings = [0.0, t];
-    let circle = |ball: Vector3, r: Real, tilt: Real, o: [Real; 3], swing: Real| DbbCircle {
-        centre_mm: ball,
-        radius_mm: r,
-        plane: DbbPlane::XY,
-        tilt_deg: tilt,
-        orientation_deg: o,
-        swing_deg: swing,
-        turns: Turns::Ccw,
-        points,
+    let circle = |ball: Vector3, r: Real, tilt: Real, o: [Real; 3], swing: Real| {
+        xy_circle(ball, r, tilt, o, swing, points)
     };
     let mut out = Vec::new();
     match procedure {
@@ -385,26 +377,6 @@ pub fn candidates(procedure: Procedure, ws: &Workspace, points: usize) -> Vec<Db
                 }
             }
         }
-    }
-    out
-}
-
-/// The 7-ball plate's ball centres on `ws` (where the fixed plan has them): the centre and
-/// six on a hexagon at 0.6 of the half-widths, at the height of a 100 mm bar tilted 45°
-/// below a quarter of the height range.
-pub fn plate_balls(ws: &Workspace) -> Vec<Vector3> {
-    let (xc, yc) = (0.5 * (ws.x_mm.0 + ws.x_mm.1), 0.5 * (ws.y_mm.0 + ws.y_mm.1));
-    let (hx, hy) = (0.5 * (ws.x_mm.1 - ws.x_mm.0), 0.5 * (ws.y_mm.1 - ws.y_mm.0));
-    let r = (0.4 * hx.min(hy)).clamp(1.0, 100.0);
-    let z = ws.z_mm.0 + 0.25 * (ws.z_mm.1 - ws.z_mm.0) - r * 45f64.to_radians().sin();
-    let mut out = vec![Vector3::new(xc, yc, z)];
-    for k in 0..6 {
-        let ang = std::f64::consts::TAU * k as Real / 6.0;
-        out.push(Vector3::new(
-            xc + 0.6 * hx * ang.cos(),
-            yc + 0.6 * hy * ang.sin(),
-            z,
-        ));
     }
     out
 }
