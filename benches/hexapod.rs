@@ -6,8 +6,9 @@
 //!   each cycle: 4,096 seeded target poses over the workspace (±250 mm, z 150–450 mm, a and
 //!   b ±15°, c ±30°), each solved from a start 0.1 mm and 0.01° away; single thread.
 //! - **FK, from home**: the same targets solved from the home pose (the cold start).
-//! - **FK, batch on all threads**: the servo-cycle batch split over rayon's pool in fixed
-//!   chunks; solves per second on every core.
+//! - **FK, batch on all threads**: the servo-cycle batch through
+//!   `Hexapod::forward_unchecked_batch` (rayon's pool, fixed chunks of 256); solves per
+//!   second on every core.
 //! - **DBB calibration**: seed 000's identification from 15 circles × 360 readings
 //!   (jig-free) and 7 × 360 (ball plate), readings measured once beforehand.
 
@@ -15,7 +16,6 @@ use criterion::criterion_main;
 
 mod group {
     use criterion::{Criterion, Throughput, criterion_group};
-    use rayon::prelude::*;
     use std::hint::black_box;
     use std::path::Path;
     use twinmill::hexapod_scene::HexapodScene;
@@ -88,19 +88,12 @@ mod group {
                     .sum::<usize>()
             })
         });
-        g.bench_function("fk servo cycle, all threads", |b| {
+        g.bench_function("fk servo cycle, batch over all threads", |b| {
             b.iter(|| {
-                batch
-                    .par_chunks(256)
-                    .map(|chunk| {
-                        chunk
-                            .iter()
-                            .map(|(l, near)| {
-                                h.forward_unchecked(l, near).expect("converges").iterations
-                            })
-                            .sum::<usize>()
-                    })
-                    .collect::<Vec<_>>()
+                h.forward_unchecked_batch(black_box(&batch))
+                    .iter()
+                    .map(|s| s.as_ref().expect("converges").iterations)
+                    .sum::<usize>()
             })
         });
         g.finish();

@@ -182,6 +182,11 @@ enum Command {
     /// Seed 000's double-ball-bar calibration of a hexapod scene on the twin: measure,
     /// identify with what is not determined, pose errors before and after (docs/hexapod.md).
     Calibrate(CalibrateArgs),
+    /// Design a hexapod's double-ball-bar calibration: choose the circles (ball positions,
+    /// bar lengths and tilts, platform tilts and swing) that predict the smallest pose error
+    /// after calibration, beside the fixed plan; write the plan `calibrate --plan` reads
+    /// (docs/hexapod.md).
+    CalibrateDesign(CalibrateDesignArgs),
     /// Simulate a scene's program on its deviated machine, scan the part, fit the faces and
     /// identify the deviations; write report.json, cloud.ply, faces.png and report.html (a
     /// self-contained page with the part in 3-D).
@@ -1729,6 +1734,7 @@ fn main() -> ExitCode {
         Command::Study { command } => study_command(command),
         Command::Ballbar(a) => dbb_command(dbb_ballbar(a)),
         Command::Calibrate(a) => dbb_command(dbb_calibrate(a)),
+        Command::CalibrateDesign(a) => dbb_command(dbb_calibrate_design(a)),
         Command::Evaluate {
             command:
                 EvaluateCommand::Iso230_2 {
@@ -2834,6 +2840,28 @@ struct CalibrateArgs {
     /// ±0.2 mm).
     #[arg(long, default_value_t = 0)]
     trials: usize,
+    /// Measure these circles instead of the procedure's fixed ones (a plan file written by
+    /// `calibrate-design`).
+    #[arg(long)]
+    plan: Option<PathBuf>,
+    /// Print the outcome as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(clap::Args)]
+struct CalibrateDesignArgs {
+    /// The hexapod scene file (needs [workspace]).
+    scene: PathBuf,
+    /// jig-free or ball-plate; default ball-plate.
+    #[arg(long)]
+    procedure: Option<String>,
+    /// Circles to select (1–60); default the fixed plan's count (15 jig-free, 7 ball plate).
+    #[arg(long)]
+    circles: Option<usize>,
+    /// Write the plan (TOML) here.
+    #[arg(long)]
+    out: Option<PathBuf>,
     /// Print the outcome as JSON.
     #[arg(long)]
     json: bool,
@@ -2931,19 +2959,54 @@ fn dbb_ballbar(a: DbbArgs) -> Result<ExitCode, String> {
 }
 
 fn dbb_calibrate(a: CalibrateArgs) -> Result<ExitCode, String> {
-    use twinmill::calibration::hexapod_calibrate::Procedure;
     use twinmill::hexapod_scene::HexapodScene;
-    let procedure = match a.procedure.as_deref() {
-        None => Procedure::BallPlate,
-        Some(p) => Procedure::from_name(p)
-            .ok_or_else(|| format!("--procedure must be jig-free or ball-plate, got '{p}'"))?,
-    };
+    let procedure = procedure_arg(a.procedure.as_deref())?;
     let s = HexapodScene::load(&a.scene).map_err(|e| e.to_string())?;
-    let o = twinmill::pipeline::dbb::calibrate_scene(&s, procedure, a.trials)
+    let plan = match &a.plan {
+        None => None,
+        Some(p) => Some(twinmill::pipeline::dbb::load_plan(p).map_err(|e| e.to_string())?),
+    };
+    let procedure = match (&plan, a.procedure.is_some()) {
+        (Some(p), false) => p.procedure,
+        _ => procedure,
+    };
+    let o = twinmill::pipeline::dbb::calibrate_scene(&s, procedure, plan, a.trials)
         .map_err(|e| e.to_string())?;
     if let Some(html) = &a.html {
         let page = twinmill::pipeline::pages::calibrate_page(&s.name, &o);
         twinmill::output::write_file(html, page.as_bytes()).map_err(|e| e.to_string())?;
+    }
+    Ok(print_out(
+        || o.summary.clone(),
+        a.json.then(|| serde_json::to_string_pretty(&o)),
+    ))
+}
+
+/// `--procedure`: jig-free or ball-plate (default).
+fn procedure_arg(
+    name: Option<&str>,
+) -> Result<twinmill::calibration::hexapod_calibrate::Procedure, String> {
+    use twinmill::calibration::hexapod_calibrate::Procedure;
+    match name {
+        None => Ok(Procedure::BallPlate),
+        Some(p) => Procedure::from_name(p)
+            .ok_or_else(|| format!("--procedure must be jig-free or ball-plate, got '{p}'")),
+    }
+}
+
+fn dbb_calibrate_design(a: CalibrateDesignArgs) -> Result<ExitCode, String> {
+    use twinmill::calibration::hexapod_calibrate::Procedure;
+    use twinmill::hexapod_scene::HexapodScene;
+    let procedure = procedure_arg(a.procedure.as_deref())?;
+    let circles = a.circles.unwrap_or(match procedure {
+        Procedure::JigFree => 15,
+        Procedure::BallPlate => 7,
+    });
+    let s = HexapodScene::load(&a.scene).map_err(|e| e.to_string())?;
+    let o = twinmill::pipeline::dbb::calibration_design(&s, procedure, circles)
+        .map_err(|e| e.to_string())?;
+    if let Some(out) = &a.out {
+        twinmill::output::write_file(out, o.plan_toml.as_bytes()).map_err(|e| e.to_string())?;
     }
     Ok(print_out(
         || o.summary.clone(),

@@ -150,16 +150,7 @@ pub fn default_plan(procedure: Procedure, ws: &Workspace, points: usize) -> Plan
     let t = 0.6 * ws.tilt_deg;
     let circle = |x: Real, y: Real, z: Real, tilt: Real, o: [Real; 3], swing: Real| {
         let lift = r * tilt.to_radians().sin();
-        DbbCircle {
-            centre_mm: Vector3::new(x, y, z - lift),
-            radius_mm: r,
-            plane: DbbPlane::XY,
-            tilt_deg: tilt,
-            orientation_deg: o,
-            swing_deg: swing,
-            turns: Turns::Ccw,
-            points,
-        }
+        xy_circle(Vector3::new(x, y, z - lift), r, tilt, o, swing, points)
     };
     let mut circles = Vec::new();
     match procedure {
@@ -182,9 +173,8 @@ pub fn default_plan(procedure: Procedure, ws: &Workspace, points: usize) -> Plan
             }
         }
         Procedure::BallPlate => {
-            let z = z0 + 0.25 * (z1 - z0);
-            circles.push(circle(xc, yc, z, 45.0, [0.0; 3], 0.0));
             let orient = [
+                [0.0; 3],
                 [t, 0.0, 0.0],
                 [0.0, t, 0.0],
                 [-t, 0.0, 0.0],
@@ -192,14 +182,53 @@ pub fn default_plan(procedure: Procedure, ws: &Workspace, points: usize) -> Plan
                 [t, t, 0.0],
                 [-t, -t, 0.0],
             ];
-            for (k, o) in orient.iter().enumerate() {
-                let ang = std::f64::consts::TAU * k as Real / 6.0;
-                let (x, y) = (xc + 0.6 * hx * ang.cos(), yc + 0.6 * hy * ang.sin());
-                circles.push(circle(x, y, z, 45.0, *o, 0.0));
+            for (ball, o) in plate_balls(ws).into_iter().zip(orient) {
+                circles.push(xy_circle(ball, r, 45.0, o, 0.0, points));
             }
         }
     }
     Plan { procedure, circles }
+}
+
+/// A counter-clockwise circle in the XY plane about the table ball `centre`.
+pub fn xy_circle(
+    centre: Vector3,
+    radius_mm: Real,
+    tilt_deg: Real,
+    orientation_deg: [Real; 3],
+    swing_deg: Real,
+    points: usize,
+) -> DbbCircle {
+    DbbCircle {
+        centre_mm: centre,
+        radius_mm,
+        plane: DbbPlane::XY,
+        tilt_deg,
+        orientation_deg,
+        swing_deg,
+        turns: Turns::Ccw,
+        points,
+    }
+}
+
+/// The 7-ball plate's ball centres on `ws`: the centre and six on a hexagon at 0.6 of the
+/// half-widths, at the height of the fixed plan's bar (0.4 of the smaller half-width, at
+/// most 100 mm) tilted 45° below a quarter of the height range.
+pub fn plate_balls(ws: &Workspace) -> Vec<Vector3> {
+    let (xc, yc) = (0.5 * (ws.x_mm.0 + ws.x_mm.1), 0.5 * (ws.y_mm.0 + ws.y_mm.1));
+    let (hx, hy) = (0.5 * (ws.x_mm.1 - ws.x_mm.0), 0.5 * (ws.y_mm.1 - ws.y_mm.0));
+    let r = (0.4 * hx.min(hy)).clamp(1.0, 100.0);
+    let z = ws.z_mm.0 + 0.25 * (ws.z_mm.1 - ws.z_mm.0) - r * 45f64.to_radians().sin();
+    let mut out = vec![Vector3::new(xc, yc, z)];
+    for k in 0..6 {
+        let ang = std::f64::consts::TAU * k as Real / 6.0;
+        out.push(Vector3::new(
+            xc + 0.6 * hx * ang.cos(),
+            yc + 0.6 * hy * ang.sin(),
+            z,
+        ));
+    }
+    out
 }
 
 /// The measured lengths of one circle.
@@ -297,7 +326,7 @@ pub struct HexapodCalibration {
 
 /// The six rigid motions of the base (translations x, y, z; rotations about x, y, z through
 /// the origin) as displacement fields of the points `pts`: 6 columns, 3 rows per point.
-fn rigid_fields(pts: &[Vector3]) -> DMatrix<Real> {
+pub fn rigid_fields(pts: &[Vector3]) -> DMatrix<Real> {
     let mut g = DMatrix::zeros(3 * pts.len(), 6);
     for (i, p) in pts.iter().enumerate() {
         for k in 0..3 {
@@ -752,26 +781,125 @@ pub fn true_deviations(
         .collect()
 }
 
+/// How the base frame's six rigid motions — which lengths cannot see — are fixed after a
+/// jig-free calibration (both modelled as exact).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TableCalibration {
+    /// The identified base joints best-fitted onto the actual ones: an alignment in joint
+    /// space no instrument performs; the identification's errors along the weak joint
+    /// directions tilt and shift the fitted frame, and the tool, 1.3 m below the base
+    /// joints, carries that tilt as a position error.
+    Joints,
+    /// The tool's reached positions at eight reference corners of the workspace (platform
+    /// level, [`table_points`]) best-fitted onto the commanded ones: what a table calibration sees (a dial gauge or
+    /// touch probe on reference points of the table measures the tool, not the joints).
+    Tool,
+}
+
+/// The table calibration's reference points: the eight corners of the box at 0.8 of the
+/// workspace's half-ranges about its centre, platform level, those `machine` can reach.
+pub fn table_points(machine: &Hexapod, ws: &Workspace) -> Vec<Pose> {
+    let mid = |r: (Real, Real)| 0.5 * (r.0 + r.1);
+    let half = |r: (Real, Real)| 0.4 * (r.1 - r.0);
+    let mut out = Vec::with_capacity(8);
+    for sz in [-1.0, 1.0] {
+        for sy in [-1.0, 1.0] {
+            for sx in [-1.0, 1.0] {
+                let p = Pose::from_mm_deg([
+                    mid(ws.x_mm) + sx * half(ws.x_mm),
+                    mid(ws.y_mm) + sy * half(ws.y_mm),
+                    mid(ws.z_mm) + sz * half(ws.z_mm),
+                    0.0,
+                    0.0,
+                    0.0,
+                ]);
+                if machine.check_pose(&p).is_ok() {
+                    out.push(p);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The controller `model` with its base moved by the rigid motion `(q, t)`: commanding
+/// `T` through it reaches what commanding `(q, t)⁻¹·T` through `model` reached.
+fn moved_base(model: &Hexapod, q: &Matrix3, t: &Vector3) -> Result<Hexapod, HexapodError> {
+    let mut p = model.parameters();
+    for (i, b) in model.base_joints().iter().enumerate() {
+        let m = q * b + t;
+        p[3 * i..3 * i + 3].copy_from_slice(m.as_slice());
+    }
+    model.with_parameters(&p)
+}
+
+/// The tool table calibration ([`TableCalibration::Tool`]): the controller `model`'s base
+/// moved by the rigid motion that best maps the commanded reference points onto the
+/// reached ones (three passes; the map is rigid to first order, so the second pass leaves
+/// nanometres). Returns the model and the total rotation (rad) and translation (mm).
+pub fn tool_table_calibration(
+    model: &Hexapod,
+    actual: &Hexapod,
+    ws: &Workspace,
+) -> Result<(Hexapod, Real, Real), HexapodError> {
+    let points = table_points(model, ws);
+    if points.len() < 4 {
+        return Err(HexapodError::Geometry(format!(
+            "the table calibration reaches {} of the workspace's 8 reference corners: fewer than 4",
+            points.len()
+        )));
+    }
+    let commanded: Vec<Vector3> = points.iter().map(|p| p.position).collect();
+    let mut m = model.clone();
+    for _ in 0..3 {
+        let reached = points
+            .iter()
+            .map(|p| twin_pose(&m, actual, p).map(|r| r.position))
+            .collect::<Result<Vec<_>, _>>()?;
+        let (q, t) = best_fit(&commanded, &reached);
+        m = moved_base(&m, &q, &t)?;
+    }
+    let b0: Vec<Vector3> = base_of(model);
+    let (q, t) = best_fit(&b0, &base_of(&m));
+    let angle = nalgebra::Rotation3::from_matrix_unchecked(q).angle();
+    let shift = (0..6)
+        .map(|i| (q * b0[i] + t - b0[i]).norm())
+        .fold(0.0, Real::max);
+    Ok((m, angle, shift))
+}
+
 /// The controller's model after calibration: the identified parameters; jig-free, with the
-/// base frame then placed by an exact table calibration (the identified base joints
-/// best-fitted onto the actual ones: the six rigid degrees of freedom the DBB cannot see).
-/// Also returns that table calibration's rotation (rad) and translation (mm) magnitudes.
+/// base frame then placed by an exact table calibration of the kind `table` (the six rigid
+/// degrees of freedom the DBB cannot see). Also returns that table calibration's rotation
+/// (rad) and largest joint displacement (mm).
 pub fn calibrated_model(
     identified: &HexapodCalibration,
     known: &Hexapod,
     actual: &Hexapod,
+    ws: &Workspace,
+    table: TableCalibration,
 ) -> Result<(Hexapod, Option<(Real, Real)>), HexapodError> {
     match identified.procedure {
         Procedure::BallPlate => Ok((known.with_parameters(&identified.parameters)?, None)),
         Procedure::JigFree => {
             let p = &identified.parameters;
-            let b: Vec<Vector3> = (0..6)
-                .map(|i| Vector3::new(p[3 * i], p[3 * i + 1], p[3 * i + 2]))
-                .collect();
-            let (q, t) = best_fit(&b, &base_of(actual));
-            let angle = nalgebra::Rotation3::from_matrix_unchecked(q).angle();
-            let aligned = aligned_base(p, &base_of(actual));
-            Ok((known.with_parameters(&aligned)?, Some((angle, t.norm()))))
+            match table {
+                TableCalibration::Joints => {
+                    let b: Vec<Vector3> = (0..6)
+                        .map(|i| Vector3::new(p[3 * i], p[3 * i + 1], p[3 * i + 2]))
+                        .collect();
+                    let (q, t) = best_fit(&b, &base_of(actual));
+                    let angle = nalgebra::Rotation3::from_matrix_unchecked(q).angle();
+                    let aligned = aligned_base(p, &base_of(actual));
+                    Ok((known.with_parameters(&aligned)?, Some((angle, t.norm()))))
+                }
+                TableCalibration::Tool => {
+                    let identified = known.with_parameters(p)?;
+                    let (m, angle, shift) = tool_table_calibration(&identified, actual, ws)?;
+                    Ok((m, Some((angle, shift))))
+                }
+            }
         }
     }
 }

@@ -14,3 +14,4 @@ pub mod calibrate;
 pub mod design;
 pub mod correct;
 pub mod hexapod_calibrate;
+pub mod hexapod_design;

@@ -5,17 +5,23 @@
 
 use super::hexapod::HexapodCommandError;
 use crate::calibration::hexapod_calibrate::{
-    CircleReadings, DEFAULT_POINTS, HexapodCalibration, PoseErrors, Procedure, WORK, WorkTime,
-    calibrate, calibrated_model, default_plan, pose_errors, true_deviations, work_time,
+    CircleReadings, DEFAULT_POINTS, HexapodCalibration, Plan, PoseErrors, Procedure,
+    TableCalibration, WORK, WorkTime, calibrate, calibrated_model, default_plan, pose_errors,
+    true_deviations, work_time,
 };
+use crate::calibration::hexapod_design::{CircleDesign, design};
 use crate::hexapod_scene::HexapodScene;
 use crate::machine::hexapod::{Hexapod, ParameterId};
 use crate::machine::hexapod_accuracy::Workspace;
 use crate::math::{CounterRng, Real, Vector3};
+use crate::metrology::ballbar::Turns;
 use crate::metrology::circular::{CircularFigures, CircularOptions, evaluate};
+use crate::metrology::hexapod_dbb::DbbPlane;
 use crate::metrology::hexapod_dbb::{DbbCircle, DbbInstrument, measure};
 use crate::report::plots::polar_plot;
+use crate::scene::{SceneError, line_col, read_text};
 use serde::Serialize;
+use std::path::Path;
 
 fn error(scene: &HexapodScene, message: impl Into<String>) -> HexapodCommandError {
     HexapodCommandError {
@@ -120,9 +126,13 @@ pub struct CalibrationRun {
     pub worst_normalised_error: Real,
     /// Pose errors with the nominal controller.
     pub before: PoseErrors,
-    /// Pose errors with the calibrated controller.
+    /// Pose errors with the calibrated controller (jig-free: the base frame placed by the
+    /// tool table calibration, [`TableCalibration::Tool`]).
     pub after: PoseErrors,
-    /// Jig-free: the table calibration's rotation (µrad) and translation (mm).
+    /// Jig-free: the pose errors with the base frame placed instead by the identified base
+    /// joints best-fitted onto the actual ones ([`TableCalibration::Joints`]).
+    pub after_joint_fit: Option<PoseErrors>,
+    /// Jig-free: the table calibration's rotation (µrad) and largest joint displacement (mm).
     pub table_alignment: Option<(Real, Real)>,
 }
 
@@ -130,11 +140,11 @@ pub struct CalibrationRun {
 pub fn calibration_run(
     scene: &HexapodScene,
     actual: &Hexapod,
-    procedure: Procedure,
+    plan: &Plan,
     ws: &Workspace,
     seed: u64,
 ) -> Result<CalibrationRun, HexapodCommandError> {
-    let plan = default_plan(procedure, ws, DEFAULT_POINTS);
+    let procedure = plan.procedure;
     let rng = CounterRng::new(seed ^ 0x006d_6f75_6e74);
     let mut readings = Vec::with_capacity(plan.circles.len());
     for (j, c) in plan.circles.iter().enumerate() {
@@ -159,7 +169,7 @@ pub fn calibration_run(
     let cal = calibrate(
         &scene.nominal,
         actual,
-        &plan,
+        plan,
         &readings,
         CALIBRATION_NOISE_MM,
     )
@@ -182,17 +192,29 @@ pub fn calibration_run(
         .map(|p| (p.identified_mm - p.injected_mm).abs() / p.sigma_mm)
         .fold(0.0, Real::max);
     let (model, table_alignment) =
-        calibrated_model(&cal, actual, actual).map_err(|e| error(scene, e.to_string()))?;
+        calibrated_model(&cal, actual, actual, ws, TableCalibration::Tool)
+            .map_err(|e| error(scene, e.to_string()))?;
     let before = pose_errors(&scene.nominal, actual, ws)
         .map_err(|e| error(scene, format!("pose errors before: {e}")))?;
     let after = pose_errors(&model, actual, ws)
         .map_err(|e| error(scene, format!("pose errors after: {e}")))?;
+    let after_joint_fit = if cal.procedure == Procedure::JigFree {
+        let (m, _) = calibrated_model(&cal, actual, actual, ws, TableCalibration::Joints)
+            .map_err(|e| error(scene, e.to_string()))?;
+        Some(
+            pose_errors(&m, actual, ws)
+                .map_err(|e| error(scene, format!("pose errors after: {e}")))?,
+        )
+    } else {
+        None
+    };
     Ok(CalibrationRun {
         calibration: cal,
         parameters,
         worst_normalised_error,
         before,
         after,
+        after_joint_fit,
         table_alignment: table_alignment.map(|(a, t)| (a * 1e6, t)),
     })
 }
@@ -238,6 +260,9 @@ pub struct TrialSummary {
     pub after_position_mm: Real,
     /// Largest pivot error after (mm).
     pub after_pivot_mm: Real,
+    /// Jig-free: the largest position and pivot errors after with the joint-space table
+    /// calibration ([`TableCalibration::Joints`]) instead (mm).
+    pub after_joint_fit_mm: Option<(Real, Real)>,
 }
 
 /// `twinmill calibrate`'s outcome.
@@ -256,10 +281,10 @@ pub struct CalibrateOutcome {
     pub summary: String,
 }
 
-/// Summarises seeded trials `1..=n` of `procedure`.
+/// Summarises seeded trials `1..=n` of `plan`.
 pub fn calibration_trials(
     scene: &HexapodScene,
-    procedure: Procedure,
+    plan: &Plan,
     ws: &Workspace,
     n: usize,
 ) -> Result<TrialSummary, HexapodCommandError> {
@@ -272,11 +297,12 @@ pub fn calibration_trials(
         before_pivot_mm: 0.0,
         after_position_mm: 0.0,
         after_pivot_mm: 0.0,
+        after_joint_fit_mm: None,
     };
     let (mut within, mut all) = (0usize, 0usize);
     for t in 1..=n as u64 {
         let actual = trial_machine(scene, t)?;
-        let r = calibration_run(scene, &actual, procedure, ws, 1000 + t)?;
+        let r = calibration_run(scene, &actual, plan, ws, 1000 + t)?;
         for p in &r.parameters {
             s.compared += 1;
             if (p.identified_mm - p.injected_mm).abs() <= 3.0 * p.sigma_mm {
@@ -290,17 +316,23 @@ pub fn calibration_trials(
         s.before_pivot_mm = s.before_pivot_mm.max(r.before.pivot_mm);
         s.after_position_mm = s.after_position_mm.max(r.after.position_mm);
         s.after_pivot_mm = s.after_pivot_mm.max(r.after.pivot_mm);
+        if let Some(j) = r.after_joint_fit {
+            let (p, v) = s.after_joint_fit_mm.unwrap_or((0.0, 0.0));
+            s.after_joint_fit_mm = Some((p.max(j.position_mm), v.max(j.pivot_mm)));
+        }
     }
     s.within_3_sigma = within as Real / s.compared.max(1) as Real;
     s.trials_all_within_3_sigma = all as Real / n.max(1) as Real;
     Ok(s)
 }
 
-/// Seed 000's calibration of the scene's machine by `procedure`, and `trials` seeded
-/// trials of random deviations.
+/// Seed 000's calibration of the scene's machine by `procedure` — its fixed plan, or `plan`
+/// (a designed one, whose procedure must agree) — and `trials` seeded trials of random
+/// deviations.
 pub fn calibrate_scene(
     scene: &HexapodScene,
     procedure: Procedure,
+    plan: Option<Plan>,
     trials: usize,
 ) -> Result<CalibrateOutcome, HexapodCommandError> {
     let ws = scene.workspace.ok_or_else(|| {
@@ -315,11 +347,30 @@ pub fn calibrate_scene(
             format!("--trials {trials} must lie in 0..={MAX_TRIALS}"),
         ));
     }
-    let run = calibration_run(scene, &scene.actual, procedure, &ws, 1)?;
-    let work = [Procedure::JigFree, Procedure::BallPlate]
-        .map(|p| work_time(&default_plan(p, &ws, DEFAULT_POINTS), &WORK));
+    let plan = match plan {
+        Some(p) if p.procedure != procedure => {
+            return Err(error(
+                scene,
+                format!(
+                    "the plan is for the {} procedure, not {}",
+                    p.procedure.name(),
+                    procedure.name()
+                ),
+            ));
+        }
+        Some(p) => p,
+        None => default_plan(procedure, &ws, DEFAULT_POINTS),
+    };
+    let run = calibration_run(scene, &scene.actual, &plan, &ws, 1)?;
+    let work = [Procedure::JigFree, Procedure::BallPlate].map(|p| {
+        if p == procedure {
+            work_time(&plan, &WORK)
+        } else {
+            work_time(&default_plan(p, &ws, DEFAULT_POINTS), &WORK)
+        }
+    });
     let trials = if trials > 0 {
-        Some(calibration_trials(scene, procedure, &ws, trials)?)
+        Some(calibration_trials(scene, &plan, &ws, trials)?)
     } else {
         None
     };
@@ -445,7 +496,7 @@ fn calibration_summary(
     if let Some((rot, tr)) = run.table_alignment {
         let _ = writeln!(
             t,
-            "  table calibration  corrects {rot:.1} µrad and {tr:.4} mm of the base frame (taken as exact)"
+            "  table calibration  the tool at the workspace's reference corners (taken as exact): turns the base frame {rot:.1} µrad, moves its joints ≤ {tr:.4} mm"
         );
     }
     let _ = writeln!(
@@ -456,6 +507,14 @@ fn calibration_summary(
         run.after.position_mm * 1e3,
         run.after.pivot_mm * 1e3
     );
+    if let Some(j) = run.after_joint_fit {
+        let _ = writeln!(
+            t,
+            "  (base frame fitted on the joints instead: {:.2} µm, {:.2} µm)",
+            j.position_mm * 1e3,
+            j.pivot_mm * 1e3
+        );
+    }
     for w in work {
         let _ = writeln!(
             t,
@@ -480,6 +539,282 @@ fn calibration_summary(
             s.before_pivot_mm,
             s.after_position_mm * 1e3,
             s.after_pivot_mm * 1e3
+        );
+        if let Some((p, v)) = s.after_joint_fit_mm {
+            let _ = writeln!(
+                t,
+                "                (base frame fitted on the joints instead: after {:.2} / {:.2} µm)",
+                p * 1e3,
+                v * 1e3
+            );
+        }
+    }
+    t
+}
+
+/// Most circles a plan file may hold.
+pub const MAX_PLAN_CIRCLES: usize = 1000;
+
+/// A plan as TOML: `procedure` and one `[[circle]]` table per circle (the table ball's
+/// nominal centre, bar length, plane, tilt, platform orientation, swing, direction and
+/// samples), with `comments` as `#` lines above; what [`parse_plan`] reads back exactly.
+pub fn plan_toml(plan: &Plan, comments: &[String]) -> String {
+    use std::fmt::Write as _;
+    let mut t = String::new();
+    for c in comments {
+        let _ = writeln!(t, "# {c}");
+    }
+    let _ = writeln!(t, "procedure = \"{}\"", plan.procedure.name());
+    for c in &plan.circles {
+        let v = |x: Real| format!("{x:?}");
+        let _ = writeln!(t, "\n[[circle]]");
+        let _ = writeln!(
+            t,
+            "centre_mm = [{}, {}, {}]",
+            v(c.centre_mm.x),
+            v(c.centre_mm.y),
+            v(c.centre_mm.z)
+        );
+        let _ = writeln!(t, "radius_mm = {}", v(c.radius_mm));
+        let _ = writeln!(t, "plane = \"{}\"", c.plane.name());
+        let _ = writeln!(t, "tilt_deg = {}", v(c.tilt_deg));
+        let o = c.orientation_deg;
+        let _ = writeln!(
+            t,
+            "orientation_deg = [{}, {}, {}]",
+            v(o[0]),
+            v(o[1]),
+            v(o[2])
+        );
+        let _ = writeln!(t, "swing_deg = {}", v(c.swing_deg));
+        let dir = match c.turns {
+            Turns::Ccw => "ccw",
+            Turns::Cw => "cw",
+            Turns::Both => "both",
+        };
+        let _ = writeln!(t, "direction = \"{dir}\"");
+        let _ = writeln!(t, "points = {}", c.points);
+    }
+    t
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PlanFile {
+    procedure: toml::Spanned<String>,
+    #[serde(default)]
+    circle: Vec<toml::Spanned<CircleFile>>,
+}
+
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CircleFile {
+    centre_mm: [Real; 3],
+    radius_mm: Real,
+    #[serde(default)]
+    plane: Option<String>,
+    #[serde(default)]
+    tilt_deg: Option<Real>,
+    #[serde(default)]
+    orientation_deg: Option<[Real; 3]>,
+    #[serde(default)]
+    swing_deg: Option<Real>,
+    #[serde(default)]
+    direction: Option<String>,
+    #[serde(default)]
+    points: Option<usize>,
+}
+
+/// Reads a plan written by [`plan_toml`] (or by hand: `plane` XY, `tilt_deg` and
+/// `swing_deg` 0, level, `direction` ccw and 360 `points` by default). Every value is
+/// checked as `twinmill ballbar` checks it; an error names the file, line and column.
+pub fn parse_plan(text: &str, path: &Path) -> Result<Plan, SceneError> {
+    let err = |at: usize, message: String| {
+        let (line, column) = line_col(text, at);
+        SceneError::Invalid {
+            path: path.to_path_buf(),
+            line,
+            column,
+            message,
+        }
+    };
+    let file: PlanFile = toml::from_str(text).map_err(|e| {
+        err(
+            e.span().map_or(0, |s| s.start),
+            e.message().trim().to_string(),
+        )
+    })?;
+    let procedure = Procedure::from_name(file.procedure.get_ref()).ok_or_else(|| {
+        err(
+            file.procedure.span().start,
+            format!(
+                "procedure must be jig-free or ball-plate, got '{}'",
+                file.procedure.get_ref()
+            ),
+        )
+    })?;
+    if file.circle.is_empty() || file.circle.len() > MAX_PLAN_CIRCLES {
+        return Err(err(
+            0,
+            format!(
+                "a plan needs 1 to {MAX_PLAN_CIRCLES} [[circle]] tables, found {}",
+                file.circle.len()
+            ),
+        ));
+    }
+    let mut circles = Vec::with_capacity(file.circle.len());
+    for (j, c) in file.circle.iter().enumerate() {
+        let at = c.span().start;
+        let f = c.get_ref();
+        let bad = |m: String| err(at, format!("circle {}: {m}", j + 1));
+        let plane = match &f.plane {
+            None => DbbPlane::XY,
+            Some(p) => DbbPlane::from_name(p)
+                .ok_or_else(|| bad(format!("plane must be XY, YZ or ZX, got '{p}'")))?,
+        };
+        let turns = match f.direction.as_deref() {
+            None | Some("ccw") => Turns::Ccw,
+            Some("cw") => Turns::Cw,
+            Some("both") => Turns::Both,
+            Some(d) => return Err(bad(format!("direction must be ccw, cw or both, got '{d}'"))),
+        };
+        let circle = DbbCircle {
+            centre_mm: Vector3::from(f.centre_mm),
+            radius_mm: f.radius_mm,
+            plane,
+            tilt_deg: f.tilt_deg.unwrap_or(0.0),
+            orientation_deg: f.orientation_deg.unwrap_or([0.0; 3]),
+            swing_deg: f.swing_deg.unwrap_or(0.0),
+            turns,
+            points: f.points.unwrap_or(DEFAULT_POINTS),
+        };
+        circle.validate().map_err(|e| bad(e.to_string()))?;
+        circles.push(circle);
+    }
+    Ok(Plan { procedure, circles })
+}
+
+/// Reads a plan file ([`parse_plan`]).
+pub fn load_plan(path: &Path) -> Result<Plan, SceneError> {
+    parse_plan(&read_text(path)?, path)
+}
+
+/// `twinmill calibrate-design`'s outcome.
+#[derive(Clone, Debug, Serialize)]
+pub struct CalibrationDesignOutcome {
+    /// The procedure.
+    pub procedure: Procedure,
+    /// The design and both predictions.
+    pub design: CircleDesign,
+    /// The designed plan's circles, one line each.
+    pub circles: Vec<String>,
+    /// The working time of the designed plan and of the fixed one.
+    pub work: [WorkTime; 2],
+    /// The plan file ([`plan_toml`]).
+    #[serde(skip)]
+    pub plan_toml: String,
+    /// The summary text.
+    #[serde(skip)]
+    pub summary: String,
+}
+
+/// Designs `circles` circles of `procedure` for the scene's machine ([`design`]) and
+/// compares them with the fixed plan.
+pub fn calibration_design(
+    scene: &HexapodScene,
+    procedure: Procedure,
+    circles: usize,
+) -> Result<CalibrationDesignOutcome, HexapodCommandError> {
+    let ws = scene.workspace.ok_or_else(|| {
+        error(
+            scene,
+            "calibrate-design needs [workspace] (where to place the circles)",
+        )
+    })?;
+    let fixed = default_plan(procedure, &ws, DEFAULT_POINTS);
+    let d = design(
+        &scene.nominal,
+        procedure,
+        &ws,
+        circles,
+        DEFAULT_POINTS,
+        CALIBRATION_NOISE_MM,
+        &fixed,
+    )
+    .map_err(|e| error(scene, e.to_string()))?;
+    let work = [work_time(&d.plan, &WORK), work_time(&fixed, &WORK)];
+    let lines: Vec<String> = d.plan.circles.iter().map(DbbCircle::describe).collect();
+    let comments = vec![
+        format!(
+            "twinmill calibrate-design on {}: {} circles, {}",
+            scene.name,
+            circles,
+            procedure.name()
+        ),
+        format!(
+            "predicted after calibration (σ {:.2} µm): worst position σ {:.3} µm, RMS {:.3} µm (fixed plan: {:.3}, {:.3} µm)",
+            CALIBRATION_NOISE_MM * 1e3,
+            d.predicted.worst_position_sigma_mm * 1e3,
+            d.predicted.rms_position_sigma_mm * 1e3,
+            d.fixed.worst_position_sigma_mm * 1e3,
+            d.fixed.rms_position_sigma_mm * 1e3
+        ),
+        format!(
+            "use: twinmill calibrate {} --procedure {} --plan THIS_FILE",
+            scene.path.display(),
+            procedure.name()
+        ),
+    ];
+    let plan_toml = plan_toml(&d.plan, &comments);
+    let summary = design_summary(&scene.name, procedure, &d, &lines, &work);
+    Ok(CalibrationDesignOutcome {
+        procedure,
+        design: d,
+        circles: lines,
+        work,
+        plan_toml,
+        summary,
+    })
+}
+
+fn design_summary(
+    scene: &str,
+    procedure: Procedure,
+    d: &CircleDesign,
+    lines: &[String],
+    work: &[WorkTime; 2],
+) -> String {
+    use std::fmt::Write as _;
+    let mut t = format!(
+        "twinmill: calibrate-design on {scene} ({}: {} circles from {} candidates, {} unreachable; {} exchanges)\n",
+        procedure.name(),
+        d.plan.circles.len(),
+        d.candidates,
+        d.rejected,
+        d.exchanges
+    );
+    for (k, l) in lines.iter().enumerate() {
+        let _ = writeln!(t, "  circle {:<3}   {l}", k + 1);
+    }
+    let _ = writeln!(
+        t,
+        "  predicted     σ {:.2} µm per reading; position error after calibration over the check poses:",
+        CALIBRATION_NOISE_MM * 1e3
+    );
+    for (name, p, w) in [
+        ("designed", &d.predicted, &work[0]),
+        ("fixed", &d.fixed, &work[1]),
+    ] {
+        let _ = writeln!(
+            t,
+            "  {name:<13} worst σ {:.3} µm, RMS σ {:.3} µm; largest parameter σ {:.2} µm; rank {}, condition {:.3e}; {} circles, {:.0} min",
+            p.worst_position_sigma_mm * 1e3,
+            p.rms_position_sigma_mm * 1e3,
+            p.max_parameter_sigma_mm * 1e3,
+            p.rank,
+            p.condition_number,
+            w.circles,
+            w.total_min
         );
     }
     t

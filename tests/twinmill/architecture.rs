@@ -56,6 +56,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "design",
             "correct",
             "hexapod_calibrate",
+            "hexapod_design",
         ],
     ),
     (
