@@ -15,11 +15,11 @@ use crate::machine::chain::{Axis, AxisKind, Chain};
 use crate::machine::hexapod::{
     Hexapod, HexapodTwin, Limits, ParameterId, Pose, STRUTS, Struts, TableAxes, twin_pose,
 };
+use crate::machine::hexapod_accuracy::{HomingSetup, Workspace};
 use crate::math::Point3;
+use crate::math::{Real, UnitVector3, Vector3, tol};
 use crate::nc::AxisLetter;
 use crate::scene::{MemoryBudget, Scene};
-use crate::machine::hexapod_accuracy::{HomingSetup, Workspace};
-use crate::math::{Real, UnitVector3, Vector3, tol};
 use crate::scene::{SceneError, line_col, read_text};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -580,10 +580,9 @@ impl HexapodScene {
             drives,
             homing,
             table,
-            table_axes: table_nominal.zip(table_chain).map(|(nominal, actual)| TableAxes {
-                nominal,
-                actual,
-            }),
+            table_axes: table_nominal
+                .zip(table_chain)
+                .map(|(nominal, actual)| TableAxes { nominal, actual }),
         })
     }
 

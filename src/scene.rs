@@ -1283,7 +1283,9 @@ impl Scene {
             if let Some(v) = v {
                 return Err(ctx.err(
                     v.span(),
-                    format!("[{section}] applies to hexapod scenes only ([machine] kind = \"hexapod\")"),
+                    format!(
+                        "[{section}] applies to hexapod scenes only ([machine] kind = \"hexapod\")"
+                    ),
                 ));
             }
         }
@@ -1420,7 +1422,10 @@ impl Scene {
             file.error_motions.values().next().map(|v| v.span()),
             "[error_motions]",
         )?;
-        refuse(file.reversal.values().next().map(|v| v.span()), "[reversal]")?;
+        refuse(
+            file.reversal.values().next().map(|v| v.span()),
+            "[reversal]",
+        )?;
         refuse(
             file.fixtures.first().map(|f| f.file.span()),
             "[[fixtures]] (collision checks are not run on a hexapod)",

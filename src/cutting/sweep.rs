@@ -40,8 +40,8 @@ use crate::cutting::cutter::{Line, Quadric, SweptTool, t_extremes};
 use crate::cutting::envelope::{ENVELOPE_TOL, MovePath, RotaryEnvelope, error_motion_speed};
 use crate::cutting::stock::{Cutter, RayCut, TriDexel};
 use crate::cutting::tool::{Tool, ToolKind};
-use crate::machine::chain::{AxisKind, Chain};
 use crate::machine::PoseSource;
+use crate::machine::chain::{AxisKind, Chain};
 use crate::machine::error_motion::Directions;
 use crate::math::{Aabb, Isometry3, Point3, Real, Rotation3, UnitVector3, Vector3, tol};
 use crate::nc::{AxisLetter, AxisValues, Move, MoveKind};
@@ -1218,7 +1218,10 @@ fn pilot_poses(
         tip_error = tip_error.max((pose.translation.vector - commanded.translation.vector).norm());
         pilot.push(pose);
     }
-    let (a, b) = (pilot[0].translation.vector, pilot[PILOT_STEPS].translation.vector);
+    let (a, b) = (
+        pilot[0].translation.vector,
+        pilot[PILOT_STEPS].translation.vector,
+    );
     let chord = b - a;
     let bow = pilot
         .iter()

@@ -893,7 +893,11 @@ impl HexapodTwin {
             }
         }
         Pose {
-            position: Vector3::new(q.get(AxisLetter::X), q.get(AxisLetter::Y), q.get(AxisLetter::Z)),
+            position: Vector3::new(
+                q.get(AxisLetter::X),
+                q.get(AxisLetter::Y),
+                q.get(AxisLetter::Z),
+            ),
             angles,
         }
     }

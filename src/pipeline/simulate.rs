@@ -6,8 +6,8 @@
 use super::pages::{display_part, part_png, reference_part, view};
 use super::{PipelineError, make_stock, sweep_failed};
 use crate::cutting::collide::{CollisionReport, sweep_with_checks};
-use crate::cutting::sweep::{Kinematics, sweep_program};
 use crate::cutting::mesh::{TriMesh, mesh_stock};
+use crate::cutting::sweep::{Kinematics, sweep_program};
 use crate::math::Real;
 use crate::nc::Program;
 use crate::progress::Progress;

@@ -111,7 +111,10 @@ fn face_height(
     r: Real,
     (x0, y0): (Real, Real),
 ) -> Real {
-    let (lo, hi) = ((x0 - r - 0.5).max(xs.min(xe)), (x0 + r + 0.5).min(xs.max(xe)));
+    let (lo, hi) = (
+        (x0 - r - 0.5).max(xs.min(xe)),
+        (x0 + r + 0.5).min(xs.max(xe)),
+    );
     let n = ((hi - lo) / 1e-3).ceil() as usize;
     let mut best = Real::INFINITY;
     for k in 0..=n {
@@ -258,7 +261,13 @@ fn a_table_axis_turns_the_part_and_its_tilt_shows_between_the_faces() {
     // at C = 180: points across each face, each against the oracle.
     let mut tilt_seen: Real = 0.0;
     for (c, y_face) in [(0.0, 20.0), (180.0, -20.0)] {
-        for (dx, dy) in [(-20.0, -5.0), (-20.0, 5.0), (0.0, 0.0), (20.0, -5.0), (20.0, 5.0)] {
+        for (dx, dy) in [
+            (-20.0, -5.0),
+            (-20.0, 5.0),
+            (0.0, 0.0),
+            (20.0, -5.0),
+            (20.0, 5.0),
+        ] {
             let (x, y, z) = z_top(&part.stock, dx, y_face + dy);
             // The W ray's point in the base frame, the disc's lowest height over it there,
             // and that height back in W (the ray is tilted by alpha in the base frame: the
@@ -307,7 +316,10 @@ fn cli_simulates_a_hexapod_and_refuses_bad_input_with_the_nc_line() {
     // Programs the machine cannot follow: a strut beyond its stroke (far below the table
     // reach), the platform tilted past its joint cones; each names the NC line.
     for (bad, line) in [
-        (program.replace("G0 Z159\nG1 X4", "G0 Z159\nG1 X4 Z-600"), 11),
+        (
+            program.replace("G0 Z159\nG1 X4", "G0 Z159\nG1 X4 Z-600"),
+            11,
+        ),
         (program.replace("G0 X90 C20", "G0 X90 A80"), 9),
     ] {
         sb.write("bad.ngc", bad.as_bytes());
@@ -330,18 +342,30 @@ fn cli_simulates_a_hexapod_and_refuses_bad_input_with_the_nc_line() {
     // Malformed hexapod scenes that cut: what a hexapod cannot take, named at its line.
     for (bad, what) in [
         (
-            scene.replace("[tool]", "[error_motions]\nEXX = { polynomial = [0.0, 1e-5] }\n\n[tool]"),
+            scene.replace(
+                "[tool]",
+                "[error_motions]\nEXX = { polynomial = [0.0, 1e-5] }\n\n[tool]",
+            ),
             "[error_motions] does not apply to a hexapod scene",
         ),
         (
-            scene.replace("length_mm = 40.0", "length_mm = 40.0\nholder_diameter_mm = 40.0"),
+            scene.replace(
+                "length_mm = 40.0",
+                "length_mm = 40.0\nholder_diameter_mm = 40.0",
+            ),
             "collision checks are not run on a hexapod",
         ),
         (
-            scene.replace("[tool]", "[table_axes]\naxes = [{ name = \"X\", direction = [0.0, 0.0, 1.0] }]\n\n[tool]"),
+            scene.replace(
+                "[tool]",
+                "[table_axes]\naxes = [{ name = \"X\", direction = [0.0, 0.0, 1.0] }]\n\n[tool]",
+            ),
             "a table axis is rotary",
         ),
-        (scene.replace("pitch_mm = 0.5", "pitch_mm = nan"), "pitch_mm"),
+        (
+            scene.replace("pitch_mm = 0.5", "pitch_mm = nan"),
+            "pitch_mm",
+        ),
     ] {
         sb.write("bad.toml", bad.as_bytes());
         let (code, out, err) = sb.run(&["simulate", "bad.toml", "--out", "out"]);
