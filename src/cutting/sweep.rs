@@ -137,7 +137,8 @@ pub struct SweepReport {
     pub tip_error_mm: Option<Real>,
     /// A machine driven pose by pose: the largest distance of the tool tip's path from the
     /// straight line between the move's reached ends, over the sampled poses of every move
-    /// (mm): how far the deviations curve the controller's straight moves.
+    /// that turns no angle (mm): how far the deviations curve the controller's straight
+    /// moves.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub path_bow_mm: Option<Real>,
 }
@@ -1236,7 +1237,13 @@ fn pilot_poses(
         })
         .fold(0.0, Real::max);
     report.tip_error_mm = Some(report.tip_error_mm.unwrap_or(0.0).max(tip_error));
-    report.path_bow_mm = Some(report.path_bow_mm.unwrap_or(0.0).max(bow));
+    // The bow of a straight move only: a move that turns an angle curves by design.
+    let turns = AxisLetter::ALL
+        .into_iter()
+        .any(|l| l.is_rotary() && mv.start.get(l) != mv.end.get(l));
+    if !turns {
+        report.path_bow_mm = Some(report.path_bow_mm.unwrap_or(0.0).max(bow));
+    }
     Ok(pilot)
 }
 

@@ -222,14 +222,14 @@ fn a_perfect_hexapod_cuts_the_commanded_faces() {
 }
 
 /// A C table turning the part on the step scene's machine: the table's axis tilted by
-/// `alpha_C` about x. Faces cut at C = 0 and C = 180 with the platform level against the
+/// `alpha_CS` about x. Faces cut at C = 0 and C = 180 with the platform level against the
 /// table turned by the exact rotation written out here.
 #[test]
 fn a_table_axis_turns_the_part_and_its_tilt_shows_between_the_faces() {
     let text = std::fs::read_to_string(scene_path("hexapod-step.toml")).expect("scene");
     let alpha: Real = 2e-4;
     let text = text
-        .replace("l0_1 = 0.1", &format!("l0_1 = 0.1\nalpha_C = {alpha}"))
+        .replace("l0_1 = 0.1", &format!("l0_1 = 0.1\nalpha_CS = {alpha}"))
         .replace(
             "[tool]",
             "[table_axes]\naxes = [{ name = \"C\", direction = [0.0, 0.0, 1.0] }]\n\n[tool]",
