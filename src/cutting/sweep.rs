@@ -853,7 +853,16 @@ enum Poses<'a> {
     Path(MovePath),
 }
 
-impl Poses<'_> {
+impl<'a> Poses<'a> {
+    /// The poses of `mv` on `chain` from the reversal shares `state`.
+    fn of(chain: &'a Chain, mv: &'a Move, state: &[Real; 6]) -> Self {
+        if chain.has_error_motions() {
+            Poses::Path(MovePath::with_state(chain, &mv.start, &mv.end, state))
+        } else {
+            Poses::Plain(chain, mv)
+        }
+    }
+
     fn at(&self, lambda: Real) -> Isometry3 {
         match self {
             Poses::Plain(chain, mv) => pose_at(chain, mv, lambda),
@@ -967,11 +976,7 @@ pub fn rotary_substeps<E>(
     keep_group: impl FnMut(Point3, Vector3, Rotation3) -> bool,
     each: impl FnMut(Point3, Vector3, Rotation3) -> Result<(), E>,
 ) -> Result<(), E> {
-    let poses = if chain.has_error_motions() {
-        Poses::Path(MovePath::with_state(chain, &mv.start, &mv.end, state))
-    } else {
-        Poses::Plain(chain, mv)
-    };
+    let poses = Poses::of(chain, mv, state);
     substeps(tool, n, |l| Ok(poses.at(l)), keep_group, each)
 }
 
@@ -1290,17 +1295,43 @@ fn sweep_sampled(
     report: &mut SweepReport,
     observer: &mut dyn SweepObserver,
 ) -> Result<Real, SweepError> {
-    let line = mv.line as u32;
-    let rapid = mv.kind == MoveKind::Rapid;
     let rb = SampledBound::of(tool, pilot);
     let n = rb.steps_for(bound, mv.line)?;
+    cut_substeps(
+        stock,
+        tool,
+        (k, mv),
+        (&rb, n),
+        |l| pose_of(src, mv, &src.interpolate(&mv.start, &mv.end, l), l),
+        report,
+        observer,
+    )?;
+    observer.after_move(stock, k, mv, &Piece::Sampled)?;
+    Ok(rb.at(n))
+}
+
+/// Cuts move `k` in the `n` sub-steps of the pose function `pose_at` ([`substeps`]),
+/// skipping the groups whose tool, grown by the bound `rb` at 64 steps, misses the stock,
+/// and showing a rapid's sub-steps to the observer; counts the move in `report` if it cut.
+fn cut_substeps(
+    stock: &mut TriDexel,
+    tool: &Tool,
+    (k, mv): (usize, &Move),
+    (rb, n): (&RotaryBound, usize),
+    pose_at: impl Fn(Real) -> Result<Isometry3, SweepError>,
+    report: &mut SweepReport,
+    observer: &mut dyn SweepObserver,
+) -> Result<(), SweepError> {
+    let line = mv.line as u32;
+    let rapid = mv.kind == MoveKind::Rapid;
+    // A coarse sub-step's box, grown by its own bound, holds every fine sub-step in it.
     let eps_c = rb.at(COARSE) + tol::SLIVER;
     let stock_box = *stock.bounds();
     let mut cut = false;
     substeps(
         tool,
         n,
-        |l| pose_of(src, mv, &src.interpolate(&mv.start, &mv.end, l), l),
+        pose_at,
         |tip, d, rot| {
             TranslatedTool::new(tool.clone(), tip, d, Piece::axis(&rot))
                 .bounds()
@@ -1314,14 +1345,13 @@ fn sweep_sampled(
             let swept = TranslatedTool::new(tool.clone(), tip, d, Piece::axis(&rotation));
             report.sweeps += 1;
             cut |= stock.remove(&swept, line);
-            Ok::<(), SweepError>(())
+            Ok(())
         },
     )?;
     if cut {
         report.cutting_moves += 1;
     }
-    observer.after_move(stock, k, mv, &Piece::Sampled)?;
-    Ok(rb.at(n))
+    Ok(())
 }
 
 /// Cuts move `k` that turns a rotary axis (the envelope, else sub-steps), counting it in
@@ -1364,35 +1394,16 @@ fn sweep_rotary(
     }
     let rb = RotaryBound::of_state(chain, tool, mv, state);
     let n = rb.steps_for(bound, mv.line)?;
-    // A coarse sub-step's box, grown by its own bound, holds every fine sub-step in it.
-    let eps_c = rb.at(COARSE) + tol::SLIVER;
-    let stock_box = *stock.bounds();
-    let mut cut = false;
-    rotary_substeps(
-        chain,
+    let poses = Poses::of(chain, mv, state);
+    cut_substeps(
+        stock,
         tool,
-        mv,
-        state,
-        n,
-        |tip, d, rot| {
-            TranslatedTool::new(tool.clone(), tip, d, Piece::axis(&rot))
-                .bounds()
-                .inflated(eps_c)
-                .intersects(&stock_box)
-        },
-        |tip, d, rotation| {
-            if rapid {
-                observer.before_rapid(stock, k, mv, &Piece::Translation { tip, d, rotation })?;
-            }
-            let swept = TranslatedTool::new(tool.clone(), tip, d, Piece::axis(&rotation));
-            report.sweeps += 1;
-            cut |= stock.remove(&swept, line);
-            Ok::<(), SweepError>(())
-        },
+        (k, mv),
+        (&rb, n),
+        |l| Ok(poses.at(l)),
+        report,
+        observer,
     )?;
-    if cut {
-        report.cutting_moves += 1;
-    }
     observer.after_move(
         stock,
         k,
