@@ -11,9 +11,15 @@
 //!
 //! **Invariant:** reads only the scene file it is given, through [`crate::scene::read_text`].
 
-use crate::machine::hexapod::{Hexapod, Limits, Pose, STRUTS, Struts, twin_pose};
+use crate::machine::chain::{Axis, AxisKind, Chain};
+use crate::machine::hexapod::{
+    Hexapod, HexapodTwin, Limits, ParameterId, Pose, STRUTS, Struts, TableAxes, twin_pose,
+};
 use crate::machine::hexapod_accuracy::{HomingSetup, Workspace};
+use crate::math::Point3;
 use crate::math::{Real, UnitVector3, Vector3, tol};
+use crate::nc::AxisLetter;
+use crate::scene::{MemoryBudget, Scene};
 use crate::scene::{SceneError, line_col, read_text};
 use serde::Deserialize;
 use std::collections::BTreeMap;
@@ -23,6 +29,10 @@ use toml::Spanned;
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
+#[expect(
+    dead_code,
+    reason = "the cutting sections are accepted here and read by Scene::parse_hexapod_cut"
+)]
 struct HexapodFile {
     #[serde(default)]
     name: Option<Spanned<String>>,
@@ -37,6 +47,49 @@ struct HexapodFile {
     homing: Option<HomingFile>,
     #[serde(default)]
     table: Option<TableFile>,
+    #[serde(default)]
+    table_axes: Option<TableAxesFile>,
+    // The cutting sections, read by `Scene::parse_hexapod_cut` (see [`HexapodScene::load_cut`]).
+    #[serde(default)]
+    program: Option<toml::Value>,
+    #[serde(default)]
+    tool: Option<toml::Value>,
+    #[serde(default)]
+    stock: Option<toml::Value>,
+    #[serde(default)]
+    sweep: Option<toml::Value>,
+    #[serde(default)]
+    nc: Option<toml::Value>,
+    #[serde(default)]
+    design: Option<toml::Value>,
+    #[serde(default)]
+    scanner: Option<toml::Value>,
+    #[serde(default)]
+    study: Option<toml::Value>,
+    #[serde(default)]
+    fixtures: Option<toml::Value>,
+    #[serde(default)]
+    identify: Option<toml::Value>,
+    #[serde(default)]
+    error_motions: Option<toml::Value>,
+    #[serde(default)]
+    reversal: Option<toml::Value>,
+}
+
+/// `[table_axes]`: serial axes carrying the part.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TableAxesFile {
+    axes: Spanned<Vec<TableAxisFile>>,
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct TableAxisFile {
+    name: Spanned<String>,
+    direction: Spanned<[Real; 3]>,
+    #[serde(default)]
+    origin: Option<Spanned<[Real; 3]>>,
 }
 
 #[derive(Deserialize)]
@@ -153,6 +206,8 @@ pub struct HexapodScene {
     pub homing: Option<HomingSetup>,
     /// `[table]`.
     pub table: Option<Table>,
+    /// `[table_axes]`: rotary axes carrying the part (nominal and with their deviations).
+    pub table_axes: Option<TableAxes>,
 }
 
 struct Ctx<'a> {
@@ -231,6 +286,42 @@ impl Ctx<'_> {
         let a = Vector3::from(self.finite(v, what)?);
         UnitVector3::try_new(a, tol::LENGTH_EPS)
             .ok_or_else(|| self.err(v.span(), format!("{what} must not be zero")))
+    }
+
+    /// `[table_axes]`: rotary axes A, B or C (the letters the platform then holds at home),
+    /// from the workpiece to the base frame.
+    fn table_axes(&self, t: &TableAxesFile) -> Result<Chain, SceneError> {
+        let mut axes = Vec::new();
+        if t.axes.get_ref().is_empty() {
+            return Err(self.err(t.axes.span(), "table_axes.axes is empty"));
+        }
+        for a in t.axes.get_ref() {
+            let letter = match a.name.get_ref().as_str() {
+                "A" => AxisLetter::A,
+                "B" => AxisLetter::B,
+                "C" => AxisLetter::C,
+                other => {
+                    return Err(self.err(
+                        a.name.span(),
+                        format!("a table axis is rotary, named A, B or C; got '{other}'"),
+                    ));
+                }
+            };
+            let d = Vector3::from(self.finite(&a.direction, "table_axes direction")?);
+            let direction = UnitVector3::try_new(d, tol::LENGTH_EPS)
+                .ok_or_else(|| self.err(a.direction.span(), "direction must not be zero"))?;
+            let origin = match &a.origin {
+                Some(o) => Point3::from(Vector3::from(self.finite(o, "table_axes origin")?)),
+                None => Point3::origin(),
+            };
+            axes.push(Axis {
+                letter,
+                kind: AxisKind::Rotary,
+                direction,
+                origin,
+            });
+        }
+        Chain::new(axes, "S").map_err(|e| self.err(t.axes.span(), e.to_string()))
     }
 
     fn limit(&self, v: &Option<Spanned<Real>>, what: &str) -> Result<Option<Real>, SceneError> {
@@ -336,14 +427,29 @@ impl HexapodScene {
         nominal
             .check_pose(&home)
             .map_err(|e| ctx.err(m.home.span(), format!("home pose {home}: {e}")))?;
-        // Deviations.
+        // Table axes.
+        let mut table_chain = match &file.table_axes {
+            Some(t) => Some(ctx.table_axes(t)?),
+            None => None,
+        };
+        let table_nominal = table_chain.clone();
+        // Deviations: the platform's parameters by name; with table axes, their joints'
+        // deviations by chain name (`dx_C`, `gamma_C`, …).
         let mut actual = nominal.clone();
         let mut injected = BTreeMap::new();
         for (k, v) in &file.deviations {
             let x = ctx.number(v, k)?;
-            actual
-                .add_deviation(k, x)
-                .map_err(|e| ctx.err(v.span(), e.to_string()))?;
+            match (ParameterId::from_name(k), table_chain.as_mut()) {
+                (Err(_), Some(chain)) if chain.deviation_id(k).is_ok() => {
+                    let id = chain
+                        .deviation_id(k)
+                        .map_err(|e| ctx.err(v.span(), e.to_string()))?;
+                    chain.set_deviation(id, x);
+                }
+                _ => actual
+                    .add_deviation(k, x)
+                    .map_err(|e| ctx.err(v.span(), e.to_string()))?,
+            }
             injected.insert(k.clone(), x);
         }
         if let Err(e) = twin_pose(&nominal, &actual, &home) {
@@ -474,6 +580,50 @@ impl HexapodScene {
             drives,
             homing,
             table,
+            table_axes: table_nominal
+                .zip(table_chain)
+                .map(|(nominal, actual)| TableAxes { nominal, actual }),
         })
+    }
+
+    /// The machine as an NC program drives it.
+    pub fn twin(&self) -> HexapodTwin {
+        HexapodTwin {
+            nominal: self.nominal.clone(),
+            actual: self.actual.clone(),
+            home: self.home,
+            table: self.table_axes.clone(),
+        }
+    }
+
+    /// Loads a hexapod scene that cuts (a program, tool and stock besides the machine) as a
+    /// [`Scene`] whose sweep drives the hexapod ([`Scene::hexapod`]); the stock must fit in
+    /// `memory`.
+    pub fn load_cut(path: &Path, memory: &MemoryBudget) -> Result<Scene, SceneError> {
+        let text = read_text(path)?;
+        let hex = Self::parse(&text, path)?;
+        let table: toml::Table = toml::from_str(&text).unwrap_or_default();
+        let absent: Vec<&str> = ["program", "tool", "stock"]
+            .into_iter()
+            .filter(|k| !table.contains_key(*k))
+            .collect();
+        if !absent.is_empty() {
+            return Err(SceneError::Missing {
+                path: path.to_path_buf(),
+                command: "cutting on a hexapod".into(),
+                what: format!(
+                    "program, [tool] and [stock] (this scene has no {})",
+                    absent.join(", ")
+                ),
+            });
+        }
+        Scene::parse_hexapod_cut(
+            &text,
+            path,
+            memory,
+            hex.twin(),
+            hex.machine_name.clone(),
+            hex.injected.clone(),
+        )
     }
 }

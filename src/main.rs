@@ -682,13 +682,18 @@ fn prepare(
         Some(m) => MemoryBudget::parse(m).map_err(fail)?,
         None => MemoryBudget::installed(),
     };
-    let scene = Scene::load_with(scene, &budget).map_err(|e| match e {
-        SceneError::Hexapod { path } => fail(format!(
-            "{}: `{command}` does not drive a hexapod yet (the scene's [machine] kind is \"hexapod\"; its commands are `twinmill hexapod ik|fk|amplification|homing|pivot`)",
-            path.display()
-        )),
-        e => fail(e),
-    })?;
+    let scene = match Scene::load_with(scene, &budget) {
+        Err(SceneError::Hexapod { .. }) if command == "simulate" => {
+            twinmill::hexapod_scene::HexapodScene::load_cut(scene, &budget).map_err(fail)?
+        }
+        Err(SceneError::Hexapod { path }) => {
+            return Err(fail(format!(
+                "{}: `{command}` does not drive a hexapod (the scene's [machine] kind is \"hexapod\"; `twinmill simulate` cuts its program, and its other commands are `twinmill hexapod ik|fk|amplification|homing|pivot`, `ballbar` and `calibrate`)",
+                path.display()
+            )));
+        }
+        r => r.map_err(fail)?,
+    };
     scene.require(command, needs).map_err(fail)?;
     let program = match scene.load_program() {
         Ok(p) => p,
@@ -2847,6 +2852,11 @@ struct CalibrateArgs {
     /// Print the outcome as JSON.
     #[arg(long)]
     json: bool,
+    /// Write the page (self-contained HTML: the identified parameters with σ, the singular
+    /// values, what is not determined and why, the pose errors before and after) into this
+    /// file.
+    #[arg(long, value_name = "FILE")]
+    html: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -2865,11 +2875,6 @@ struct CalibrateDesignArgs {
     /// Print the outcome as JSON.
     #[arg(long)]
     json: bool,
-    /// Write the page (self-contained HTML: the identified parameters with σ, the singular
-    /// values, what is not determined and why, the pose errors before and after) into this
-    /// file.
-    #[arg(long, value_name = "FILE")]
-    html: Option<PathBuf>,
 }
 
 fn dbb_command(r: Result<ExitCode, String>) -> ExitCode {

@@ -11,10 +11,11 @@ use crate::calibration::calibrate::Registration;
 use crate::calibration::identify::{FaceKind, FaceOptions, FaceRegion, FaceSpec};
 use crate::cutting::collide::{Fixture, Holder, HolderSection};
 use crate::cutting::shape::{ClosedMesh, Cylinder, Solid, read_obj, read_stl};
-use crate::cutting::sweep::SweepOptions;
+use crate::cutting::sweep::{Kinematics, SweepOptions};
 use crate::cutting::tool::{Tool, ToolKind};
 use crate::machine::chain::{Axis, AxisKind, Chain};
 use crate::machine::error_motion::{self, AxisErrorMotions};
+use crate::machine::hexapod::HexapodTwin;
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
 use crate::metrology::fit::RobustRule;
 use crate::metrology::scan::{Misregistration, ScanError, ScannerConfig, StudyOptions, Turntable};
@@ -86,13 +87,26 @@ pub enum Need {
     Parameters,
 }
 
+/// A scene file; `M` is the `[machine]` table: a serial chain's ([`MachineFile`]) or, for
+/// a hexapod scene that cuts, any table (read by [`crate::hexapod_scene`]).
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct SceneFile {
+struct SceneFile<M> {
     #[serde(default)]
     name: Option<Spanned<String>>,
     program: Spanned<String>,
-    machine: MachineFile,
+    machine: M,
+    /// Hexapod sections (read by [`crate::hexapod_scene`]; refused in a serial scene).
+    #[serde(default)]
+    workspace: Option<Spanned<toml::Value>>,
+    #[serde(default)]
+    drives: Option<Spanned<toml::Value>>,
+    #[serde(default)]
+    homing: Option<Spanned<toml::Value>>,
+    #[serde(default)]
+    table: Option<Spanned<toml::Value>>,
+    #[serde(default)]
+    table_axes: Option<Spanned<toml::Value>>,
     #[serde(default)]
     deviations: BTreeMap<String, Spanned<Real>>,
     #[serde(default)]
@@ -519,6 +533,10 @@ pub struct Scene {
     /// view (`[report] view`); `None`: the direction the machined faces face
     /// ([`crate::report::display::view_direction`]).
     pub view: Option<UnitVector3>,
+    /// A hexapod scene that cuts: the machine the sweep drives pose by pose. `chain` and
+    /// `model` are then the controller's Cartesian kinematics ([`HexapodTwin::command_chain`]),
+    /// and `injected` the hexapod's deviations by parameter name.
+    pub hexapod: Option<HexapodTwin>,
 }
 
 /// `[report] view`: `"faces"` (the default: `None`), `"iso"` (from +x, −y, +z), an axis
@@ -569,6 +587,18 @@ fn report_view(ctx: &Ctx<'_>, v: &Spanned<toml::Value>) -> Result<Option<UnitVec
     Ok(Some(UnitVector3::new_normalize(d)))
 }
 
+/// The machine part of a scene, built from `[machine]` and the deviations.
+struct MachineParts {
+    machine_name: String,
+    chain: Chain,
+    injected: BTreeMap<String, Real>,
+    model: Chain,
+    known: BTreeMap<String, Real>,
+    home: AxisValues,
+    hexapod: Option<HexapodTwin>,
+}
+
+#[derive(Clone, Copy)]
 struct Ctx<'a> {
     path: &'a Path,
     text: &'a str,
@@ -1302,11 +1332,26 @@ impl Scene {
                 path: path.to_path_buf(),
             });
         }
-        let file: SceneFile = toml::from_str(text).map_err(|e| {
+        let file: SceneFile<MachineFile> = toml::from_str(text).map_err(|e| {
             let span = e.span().unwrap_or(0..0);
             ctx.err(span, e.message().trim().to_string())
         })?;
-        let name = scene_name(&ctx, file.name.as_ref())?;
+        for (section, v) in [
+            ("workspace", &file.workspace),
+            ("drives", &file.drives),
+            ("homing", &file.homing),
+            ("table", &file.table),
+            ("table_axes", &file.table_axes),
+        ] {
+            if let Some(v) = v {
+                return Err(ctx.err(
+                    v.span(),
+                    format!(
+                        "[{section}] applies to hexapod scenes only ([machine] kind = \"hexapod\")"
+                    ),
+                ));
+            }
+        }
         // Machine.
         if let Some(k) = &file.machine.kind
             && k.get_ref() != "serial"
@@ -1397,6 +1442,119 @@ impl Scene {
             Some(id) => deviation_map(&ctx, &mut model, &id.known)?,
             None => BTreeMap::new(),
         };
+        let machine_name = file.machine.name.clone();
+        finish(
+            &ctx,
+            file,
+            MachineParts {
+                machine_name,
+                chain,
+                injected,
+                model,
+                known,
+                home,
+                hexapod: None,
+            },
+            memory,
+        )
+    }
+
+    /// Parses the cutting part of a hexapod scene (program, tool, stock, sweep, design) for
+    /// the machine `twin` whose deviations by name are `injected` (`[machine]` and the
+    /// hexapod sections are read by [`crate::hexapod_scene`]). The scene's `chain` is the
+    /// controller's Cartesian kinematics; error motions, reversal, `[identify]`, fixtures and
+    /// a holder are refused (no identification or collision checks on a hexapod).
+    pub fn parse_hexapod_cut(
+        text: &str,
+        path: &Path,
+        memory: &MemoryBudget,
+        twin: HexapodTwin,
+        machine_name: String,
+        injected: BTreeMap<String, Real>,
+    ) -> Result<Scene, SceneError> {
+        let ctx = Ctx { path, text };
+        let file: SceneFile<toml::Value> = toml::from_str(text).map_err(|e| {
+            let span = e.span().unwrap_or(0..0);
+            ctx.err(span, e.message().trim().to_string())
+        })?;
+        let refuse = |span: Option<Range<usize>>, what: &str| match span {
+            Some(span) => Err(ctx.err(span, format!("{what} does not apply to a hexapod scene"))),
+            None => Ok(()),
+        };
+        refuse(
+            file.error_motions.values().next().map(|v| v.span()),
+            "[error_motions]",
+        )?;
+        refuse(
+            file.reversal.values().next().map(|v| v.span()),
+            "[reversal]",
+        )?;
+        refuse(
+            file.fixtures.first().map(|f| f.file.span()),
+            "[[fixtures]] (collision checks are not run on a hexapod)",
+        )?;
+        let t = &file.tool;
+        refuse(
+            [
+                &t.shank_diameter_mm,
+                &t.shank_length_mm,
+                &t.holder_diameter_mm,
+                &t.holder_length_mm,
+            ]
+            .into_iter()
+            .flatten()
+            .map(|v| v.span())
+            .next()
+            .or(t.holder_sections.as_ref().map(|h| h.span())),
+            "a shank or holder (collision checks are not run on a hexapod)",
+        )?;
+        if file.identify.is_some() {
+            return Err(ctx.err(
+                file.program.span(),
+                "[identify] does not apply to a hexapod scene (`twinmill simulate` cuts it)",
+            ));
+        }
+        let chain = twin
+            .command_chain()
+            .map_err(|e| ctx.err(0..0, format!("[table_axes]: {e}")))?;
+        let home = twin.home_axis_values();
+        finish(
+            &ctx,
+            file,
+            MachineParts {
+                machine_name,
+                model: chain.clone(),
+                chain,
+                injected,
+                known: BTreeMap::new(),
+                home,
+                hexapod: Some(twin),
+            },
+            memory,
+        )
+    }
+}
+
+/// The rest of a scene once its machine is built: tool, holder, stock, fixtures, design,
+/// sweep, scanner, study, identification and the files it names.
+fn finish<M>(
+    ctx: &Ctx,
+    file: SceneFile<M>,
+    machine: MachineParts,
+    memory: &MemoryBudget,
+) -> Result<Scene, SceneError> {
+    let (ctx, path, text) = (*ctx, ctx.path, ctx.text);
+    let MachineParts {
+        machine_name,
+        chain,
+        injected,
+        model,
+        known,
+        home,
+        hexapod,
+    } = machine;
+    let name = scene_name(&ctx, file.name.as_ref())?;
+    {
         // Tool.
         let diameter = ctx.positive(&file.tool.diameter_mm, "diameter_mm")?;
         let length = ctx.positive(&file.tool.length_mm, "length_mm")?;
@@ -1786,7 +1944,7 @@ impl Scene {
         Ok(Scene {
             path: path.to_path_buf(),
             name,
-            machine_name: file.machine.name,
+            machine_name,
             program_path,
             nc_files,
             file_keys,
@@ -1816,7 +1974,18 @@ impl Scene {
             study,
             face_options: identify.face_options,
             view,
+            hexapod,
         })
+    }
+}
+
+impl Scene {
+    /// The machine the sweep drives: the hexapod pose by pose, or the deviated chain.
+    pub fn kinematics(&self) -> Kinematics<'_> {
+        match &self.hexapod {
+            Some(twin) => Kinematics::Poses(twin),
+            None => Kinematics::Chain(&self.chain),
+        }
     }
 
     /// Reads a file the scene names; one that cannot be read is reported at the scene's

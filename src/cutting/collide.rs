@@ -956,6 +956,8 @@ impl SweepObserver for Checks<'_> {
             Piece::Rotary { state, .. } => {
                 first_envelope_contact(stock, self.scene.chain, tool, mv, &state)
             }
+            // The checks drive a chain: a pose source's moves never reach them.
+            Piece::Sampled => None,
         };
         if let Some(o) = contact {
             self.log.note(
@@ -988,6 +990,8 @@ impl SweepObserver for Checks<'_> {
                 let e = self.scene.after_rotary(stock, &mut self.log, mv, &state)?;
                 self.log.check_error = self.log.check_error.max(e);
             }
+            // The checks drive a chain: a pose source's moves never reach them.
+            Piece::Sampled => {}
         }
         Ok(())
     }

@@ -40,6 +40,7 @@ use crate::cutting::cutter::{Line, Quadric, SweptTool, t_extremes};
 use crate::cutting::envelope::{ENVELOPE_TOL, MovePath, RotaryEnvelope, error_motion_speed};
 use crate::cutting::stock::{Cutter, RayCut, TriDexel};
 use crate::cutting::tool::{Tool, ToolKind};
+use crate::machine::PoseSource;
 use crate::machine::chain::{AxisKind, Chain};
 use crate::machine::error_motion::Directions;
 use crate::math::{Aabb, Isometry3, Point3, Real, Rotation3, UnitVector3, Vector3, tol};
@@ -80,15 +81,24 @@ pub enum SweepError {
     /// The bound is not in (0, 1] mm.
     #[error("rotary_step_bound_mm must be in (0, 1], got {0}")]
     BadBound(Real),
+    /// The machine cannot take a pose of the move (a pose source: out of the workspace, no
+    /// forward solution).
+    #[error("the machine cannot follow the move: {message}")]
+    Pose {
+        /// Source line.
+        line: usize,
+        /// Where along the move, the axis values and why.
+        message: String,
+    },
 }
 
 impl SweepError {
     /// The NC line the error is about, if any.
     pub fn line(&self) -> Option<usize> {
         match self {
-            SweepError::MissingAxis { line, .. } | SweepError::TooManySubsteps { line, .. } => {
-                Some(*line)
-            }
+            SweepError::MissingAxis { line, .. }
+            | SweepError::TooManySubsteps { line, .. }
+            | SweepError::Pose { line, .. } => Some(*line),
             SweepError::BadBound(_) => None,
         }
     }
@@ -120,10 +130,89 @@ pub struct SweepReport {
     /// Largest distance between the true and the simulated tool motion over all moves (mm):
     /// per move its chord sagitta plus its rotary bound, the largest over the moves.
     pub error_bound_mm: Real,
+    /// A machine driven pose by pose ([`Kinematics::Poses`]): the largest distance of the
+    /// tool tip from where the controller commands it, over the sampled poses (mm; absent
+    /// from the report for a chain).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub tip_error_mm: Option<Real>,
+    /// A machine driven pose by pose: the largest distance of the tool tip's path from the
+    /// straight line between the move's reached ends, over the sampled poses of every move
+    /// that turns no angle (mm): how far the deviations curve the controller's straight
+    /// moves.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub path_bow_mm: Option<Real>,
 }
 
 fn is_zero(n: &usize) -> bool {
     *n == 0
+}
+
+/// The machine the sweep drives: a serial chain (every pose through the chain, rotary moves
+/// by the envelope or bounded sub-steps), or a machine read pose by pose (a hexapod), each
+/// of whose moves is sampled at [`PILOT_STEPS`] + 1 poses and, unless it is an exact
+/// translation, cut in sub-steps bounded from those samples (see [`SampledBound`]).
+#[derive(Clone, Copy)]
+pub enum Kinematics<'a> {
+    /// A serial chain.
+    Chain(&'a Chain),
+    /// A machine read pose by pose.
+    Poses(&'a dyn PoseSource),
+}
+
+impl<'a> From<&'a Chain> for Kinematics<'a> {
+    fn from(chain: &'a Chain) -> Self {
+        Kinematics::Chain(chain)
+    }
+}
+
+impl Kinematics<'_> {
+    fn has_axis(&self, l: AxisLetter) -> bool {
+        match self {
+            Kinematics::Chain(c) => c.has_axis(l),
+            Kinematics::Poses(p) => p.has_axis(l),
+        }
+    }
+}
+
+/// Intervals a move of a pose source is sampled in before it is cut: its workspace is
+/// checked at these poses and its sub-step bound estimated from them.
+pub const PILOT_STEPS: usize = 64;
+
+/// Safety factor on the rates a pose source's samples show (the largest angular speed and
+/// path curvature between samples may exceed those at the samples).
+pub const SAMPLED_BOUND_FACTOR: Real = 2.0;
+
+/// The sub-step bound of a move read pose by pose, from its pilot samples `P_j` at
+/// `λ = j/M`: with the tool's mid-height point `c` and orientation `R`, the largest angular
+/// speed `Ω = max_j angle(R_j, R_{j+1})·M` (rad per unit λ) and curvature
+/// `C = max_j |c_{j−1} − 2c_j + c_{j+1}|·M²` (mm per unit λ²) give the bound of sub-steps as
+/// for rotary moves: a sub-step of width `h` held at its mid orientation, `c` moving
+/// straight, is off the true motion by at most `ρ_tool·Ω·h/2 + C·h²/8`, so
+/// `ε(N) = a/N + b/N²` with `a = F·Ω·ρ_tool/2`, `b = F·C/8` and the safety factor
+/// `F` = [`SAMPLED_BOUND_FACTOR`] on rates estimated from samples.
+pub struct SampledBound;
+
+impl SampledBound {
+    /// The bound of `tool` moved through the pilot poses `pilot` (at least three, evenly
+    /// spaced in λ from 0 to 1).
+    pub fn of(tool: &Tool, pilot: &[Isometry3]) -> RotaryBound {
+        let m = (pilot.len() - 1) as Real;
+        let mid = mid_point(tool);
+        let c: Vec<Point3> = pilot.iter().map(|p| p * mid).collect();
+        let omega = pilot
+            .windows(2)
+            .map(|w| w[0].rotation.angle_to(&w[1].rotation) * m)
+            .fold(0.0, Real::max);
+        let curvature = c
+            .windows(3)
+            .map(|w| (w[0].coords - 2.0 * w[1].coords + w[2].coords).norm() * m * m)
+            .fold(0.0, Real::max);
+        let rho = tool.reach_from(tool.length() / 2.0);
+        RotaryBound {
+            a: SAMPLED_BOUND_FACTOR * omega * rho / 2.0,
+            b: SAMPLED_BOUND_FACTOR * curvature / 8.0,
+        }
+    }
 }
 
 /// Largest number of sub-steps for one rotary move.
@@ -764,7 +853,16 @@ enum Poses<'a> {
     Path(MovePath),
 }
 
-impl Poses<'_> {
+impl<'a> Poses<'a> {
+    /// The poses of `mv` on `chain` from the reversal shares `state`.
+    fn of(chain: &'a Chain, mv: &'a Move, state: &[Real; 6]) -> Self {
+        if chain.has_error_motions() {
+            Poses::Path(MovePath::with_state(chain, &mv.start, &mv.end, state))
+        } else {
+            Poses::Plain(chain, mv)
+        }
+    }
+
     fn at(&self, lambda: Real) -> Isometry3 {
         match self {
             Poses::Plain(chain, mv) => pose_at(chain, mv, lambda),
@@ -807,6 +905,10 @@ pub enum Piece {
         /// The reversal shares the move starts from ([`Chain::reversal_state`]).
         state: [Real; 6],
     },
+    /// A whole move of a machine read pose by pose ([`Kinematics::Poses`]) that is not a
+    /// pure translation, cut in sub-steps (each shown to [`SweepObserver::before_rapid`] as
+    /// a [`Piece::Translation`]).
+    Sampled,
 }
 
 impl Piece {
@@ -871,6 +973,19 @@ pub fn rotary_substeps<E>(
     mv: &Move,
     state: &[Real; 6],
     n: usize,
+    keep_group: impl FnMut(Point3, Vector3, Rotation3) -> bool,
+    each: impl FnMut(Point3, Vector3, Rotation3) -> Result<(), E>,
+) -> Result<(), E> {
+    let poses = Poses::of(chain, mv, state);
+    substeps(tool, n, |l| Ok(poses.at(l)), keep_group, each)
+}
+
+/// The sub-steps of [`rotary_substeps`] for any pose function `pose_at(λ)` (fallible: a
+/// pose source may be unable to take a pose).
+fn substeps<E>(
+    tool: &Tool,
+    n: usize,
+    pose_at: impl Fn(Real) -> Result<Isometry3, E>,
     mut keep_group: impl FnMut(Point3, Vector3, Rotation3) -> bool,
     mut each: impl FnMut(Point3, Vector3, Rotation3) -> Result<(), E>,
 ) -> Result<(), E> {
@@ -880,17 +995,11 @@ pub fn rotary_substeps<E>(
         let v = rotation * Vector3::z();
         (a - v * half, b - a, rotation)
     };
-    let poses = if chain.has_error_motions() {
-        Poses::Path(MovePath::with_state(chain, &mv.start, &mv.end, state))
-    } else {
-        Poses::Plain(chain, mv)
-    };
-    let pose_at = |_: &Chain, _: &Move, l: Real| poses.at(l);
     let per = n / COARSE;
     for j in 0..COARSE {
         let (l0, l1) = (j as Real / COARSE as Real, (j + 1) as Real / COARSE as Real);
-        let (a0, a1) = (pose_at(chain, mv, l0) * mid, pose_at(chain, mv, l1) * mid);
-        let (tip, d, rot) = translation(a0, a1, pose_at(chain, mv, (l0 + l1) / 2.0).rotation);
+        let (a0, a1) = (pose_at(l0)? * mid, pose_at(l1)? * mid);
+        let (tip, d, rot) = translation(a0, a1, pose_at((l0 + l1) / 2.0)?.rotation);
         if !keep_group(tip, d, rot) {
             continue;
         }
@@ -898,9 +1007,8 @@ pub fn rotary_substeps<E>(
         for k in 0..per {
             let i = j * per + k;
             let (la, lb) = (i as Real / n as Real, (i + 1) as Real / n as Real);
-            let next = pose_at(chain, mv, lb) * mid;
-            let (tip, d, rot) =
-                translation(prev, next, pose_at(chain, mv, (la + lb) / 2.0).rotation);
+            let next = pose_at(lb)? * mid;
+            let (tip, d, rot) = translation(prev, next, pose_at((la + lb) / 2.0)?.rotation);
             each(tip, d, rot)?;
             prev = next;
         }
@@ -923,17 +1031,17 @@ pub fn chord_sagitta(mv: &Move, bound: Real) -> Real {
     }
 }
 
-/// Sweeps the tool through `moves` on `chain`, removing material from `stock` (the plain
-/// sweep: [`sweep_observed`] with [`NoObserver`]).
-pub fn sweep_program(
+/// Sweeps the tool through `moves` on the machine (a chain or a pose source), removing
+/// material from `stock` (the plain sweep: [`sweep_observed`] with [`NoObserver`]).
+pub fn sweep_program<'a>(
     stock: &mut TriDexel,
-    chain: &Chain,
+    machine: impl Into<Kinematics<'a>>,
     tool: &Tool,
     moves: &[Move],
     opts: &SweepOptions,
     progress: &dyn Progress,
 ) -> Result<SweepReport, SweepError> {
-    sweep_observed(stock, chain, tool, moves, opts, progress, &mut NoObserver)
+    sweep_observed(stock, machine, tool, moves, opts, progress, &mut NoObserver)
 }
 
 /// The sweep driver: sweeps the tool through `moves` on `chain`, removing material from
@@ -941,16 +1049,20 @@ pub fn sweep_program(
 /// Arcs become chords ([`as_chords`]); consecutive collinear straight moves are joined into
 /// one sweep, except that a rapid always starts a new run (so that its check sees the stock
 /// before it); moves that turn a rotary axis are cut by the envelope or in sub-steps. The
-/// stock comes out the same, bit for bit, whatever the observer.
-pub fn sweep_observed(
+/// stock comes out the same, bit for bit, whatever the observer. A machine read pose by
+/// pose ([`Kinematics::Poses`]) has every move sampled ([`PILOT_STEPS`]): an exact
+/// translation joins runs like a straight move, any other is cut in sub-steps within the
+/// bound ([`SampledBound`]).
+pub fn sweep_observed<'a>(
     stock: &mut TriDexel,
-    chain: &Chain,
+    machine: impl Into<Kinematics<'a>>,
     tool: &Tool,
     moves: &[Move],
     opts: &SweepOptions,
     progress: &dyn Progress,
     observer: &mut dyn SweepObserver,
 ) -> Result<SweepReport, SweepError> {
+    let machine = machine.into();
     let bound = opts.rotary_step_bound_mm;
     if !(bound > 0.0 && bound <= 1.0) {
         return Err(SweepError::BadBound(bound));
@@ -972,12 +1084,21 @@ pub fn sweep_observed(
     let joinable = TranslatedTool::has_closed_form(tool);
     let mut run: Option<Run> = None;
     // Before the first move every axis is taken as last moved in +.
-    let errors = chain.has_error_motions();
-    let mut state = chain.reversal_state(&Directions::default());
+    let (errors, mut state) = match machine {
+        Kinematics::Chain(chain) => (
+            chain.has_error_motions(),
+            chain.reversal_state(&Directions::default()),
+        ),
+        Kinematics::Poses(_) => (false, [0.0; 6]),
+    };
+    if let Kinematics::Poses(_) = machine {
+        report.tip_error_mm = Some(0.0);
+        report.path_bow_mm = Some(0.0);
+    }
     for (k, mv) in moves.iter().enumerate() {
         if let Some(missing) = AxisLetter::ALL
             .into_iter()
-            .find(|&l| !chain.has_axis(l) && mv.start.get(l) != mv.end.get(l))
+            .find(|&l| !machine.has_axis(l) && mv.start.get(l) != mv.end.get(l))
         {
             flush(run.take(), stock, tool, moves, &mut report, observer)?;
             return Err(SweepError::MissingAxis {
@@ -989,21 +1110,43 @@ pub fn sweep_observed(
         let sagitta = sagittas.get(k).copied().unwrap_or(0.0);
         report.chord_error_bound_mm = report.chord_error_bound_mm.max(sagitta);
         report.error_bound_mm = report.error_bound_mm.max(sagitta);
-        let (omega, _) = rotation_and_travel(chain, &mv.start, &mv.end);
-        let curved = errors && moves_error_axis(chain, mv);
         let before = state;
-        if errors {
-            state = chain.reversal_after_move(&state, &mv.start, &mv.end);
-        }
-        if omega == 0.0 && !curved {
-            let (p0, p1) = if errors {
-                (
-                    chain.w_from_t_state(&mv.start, &before),
-                    chain.w_from_t_state(&mv.end, &state),
-                )
-            } else {
-                (chain.w_from_t(&mv.start), chain.w_from_t(&mv.end))
-            };
+        let step = match machine {
+            Kinematics::Chain(chain) => {
+                let (omega, _) = rotation_and_travel(chain, &mv.start, &mv.end);
+                let curved = errors && moves_error_axis(chain, mv);
+                if errors {
+                    state = chain.reversal_after_move(&state, &mv.start, &mv.end);
+                }
+                if omega == 0.0 && !curved {
+                    Step::Straight(if errors {
+                        (
+                            chain.w_from_t_state(&mv.start, &before),
+                            chain.w_from_t_state(&mv.end, &state),
+                        )
+                    } else {
+                        (chain.w_from_t(&mv.start), chain.w_from_t(&mv.end))
+                    })
+                } else {
+                    Step::Curved {
+                        rotary: omega != 0.0,
+                        pilot: Vec::new(),
+                    }
+                }
+            }
+            Kinematics::Poses(src) => {
+                let pilot = pilot_poses(src, mv, &mut report)?;
+                if src.is_translation(&mv.start, &mv.end) {
+                    Step::Straight((pilot[0], pilot[PILOT_STEPS]))
+                } else {
+                    let rotary = AxisLetter::ALL
+                        .into_iter()
+                        .any(|l| l.is_rotary() && mv.start.get(l) != mv.end.get(l));
+                    Step::Curved { rotary, pilot }
+                }
+            }
+        };
+        if let Step::Straight((p0, p1)) = step {
             let tip0 = p0 * Point3::origin();
             let tip1 = p1 * Point3::origin();
             if let Some(r) = &mut run
@@ -1016,23 +1159,35 @@ pub fn sweep_observed(
             }
             flush(run.take(), stock, tool, moves, &mut report, observer)?;
             run = Some(Run::new(k, mv, tip0, tip1, p0.rotation));
-        } else {
+        } else if let Step::Curved { rotary, pilot } = step {
             flush(run.take(), stock, tool, moves, &mut report, observer)?;
-            if omega == 0.0 {
-                report.curved_moves += 1;
-            } else {
+            if rotary {
                 report.rotary_moves += 1;
+            } else {
+                report.curved_moves += 1;
             }
-            let e = sweep_rotary(
-                stock,
-                chain,
-                tool,
-                (k, mv),
-                &before,
-                bound,
-                &mut report,
-                observer,
-            )?;
+            let e = match machine {
+                Kinematics::Chain(chain) => sweep_rotary(
+                    stock,
+                    chain,
+                    tool,
+                    (k, mv),
+                    &before,
+                    bound,
+                    &mut report,
+                    observer,
+                )?,
+                Kinematics::Poses(src) => sweep_sampled(
+                    stock,
+                    src,
+                    tool,
+                    (k, mv),
+                    &pilot,
+                    bound,
+                    &mut report,
+                    observer,
+                )?,
+            };
             report.rotary_error_bound_mm = report.rotary_error_bound_mm.max(e);
             // A chord of an arc that also turns a rotary axis carries both errors.
             report.error_bound_mm = report.error_bound_mm.max(e + sagitta);
@@ -1042,6 +1197,161 @@ pub fn sweep_observed(
     flush(run.take(), stock, tool, moves, &mut report, observer)?;
     progress.finish();
     Ok(report)
+}
+
+/// How the driver cuts one move.
+enum Step {
+    /// A pure translation between two poses.
+    Straight((Isometry3, Isometry3)),
+    /// A curved move; for a pose source with its pilot poses.
+    Curved { rotary: bool, pilot: Vec<Isometry3> },
+}
+
+/// The pilot poses of a move of a pose source (λ = j/[`PILOT_STEPS`]), its tip error and
+/// bow recorded in `report`; a pose the machine cannot take is the error of the move's line.
+fn pilot_poses(
+    src: &dyn PoseSource,
+    mv: &Move,
+    report: &mut SweepReport,
+) -> Result<Vec<Isometry3>, SweepError> {
+    let mut pilot = Vec::with_capacity(PILOT_STEPS + 1);
+    let mut tip_error: Real = 0.0;
+    for j in 0..=PILOT_STEPS {
+        let lambda = j as Real / PILOT_STEPS as Real;
+        let q = src.interpolate(&mv.start, &mv.end, lambda);
+        let pose = pose_of(src, mv, &q, lambda)?;
+        let commanded = src.commanded(&q);
+        tip_error = tip_error.max((pose.translation.vector - commanded.translation.vector).norm());
+        pilot.push(pose);
+    }
+    let (a, b) = (
+        pilot[0].translation.vector,
+        pilot[PILOT_STEPS].translation.vector,
+    );
+    let chord = b - a;
+    let bow = pilot
+        .iter()
+        .map(|p| {
+            let w = p.translation.vector - a;
+            let n2 = chord.norm_squared();
+            if n2 > 0.0 {
+                (w - chord * (w.dot(&chord) / n2).clamp(0.0, 1.0)).norm()
+            } else {
+                w.norm()
+            }
+        })
+        .fold(0.0, Real::max);
+    report.tip_error_mm = Some(report.tip_error_mm.unwrap_or(0.0).max(tip_error));
+    // The bow of a straight move only: a move that turns an angle curves by design.
+    let turns = AxisLetter::ALL
+        .into_iter()
+        .any(|l| l.is_rotary() && mv.start.get(l) != mv.end.get(l));
+    if !turns {
+        report.path_bow_mm = Some(report.path_bow_mm.unwrap_or(0.0).max(bow));
+    }
+    Ok(pilot)
+}
+
+/// The pose of a pose source at `q`, `lambda` of the way along `mv`, or the error naming
+/// the move's line, the place and the axis values.
+fn pose_of(
+    src: &dyn PoseSource,
+    mv: &Move,
+    q: &AxisValues,
+    lambda: Real,
+) -> Result<Isometry3, SweepError> {
+    src.w_from_t(q).map_err(|e| {
+        let v = q.to_array();
+        SweepError::Pose {
+            line: mv.line,
+            message: format!(
+                "at {:.0} % of the move (X{:.4} Y{:.4} Z{:.4} A{:.4} B{:.4} C{:.4}): {e}",
+                lambda * 100.0,
+                v[0],
+                v[1],
+                v[2],
+                v[3],
+                v[4],
+                v[5]
+            ),
+        }
+    })
+}
+
+/// Cuts move `k` of a pose source in sub-steps within `bound` of its true motion (the
+/// bound estimated from its pilot poses, [`SampledBound`]), counting it in `report`;
+/// returns its error bound (mm).
+#[expect(
+    clippy::too_many_arguments,
+    reason = "the driver's state, passed down for one move"
+)]
+fn sweep_sampled(
+    stock: &mut TriDexel,
+    src: &dyn PoseSource,
+    tool: &Tool,
+    (k, mv): (usize, &Move),
+    pilot: &[Isometry3],
+    bound: Real,
+    report: &mut SweepReport,
+    observer: &mut dyn SweepObserver,
+) -> Result<Real, SweepError> {
+    let rb = SampledBound::of(tool, pilot);
+    let n = rb.steps_for(bound, mv.line)?;
+    cut_substeps(
+        stock,
+        tool,
+        (k, mv),
+        (&rb, n),
+        |l| pose_of(src, mv, &src.interpolate(&mv.start, &mv.end, l), l),
+        report,
+        observer,
+    )?;
+    observer.after_move(stock, k, mv, &Piece::Sampled)?;
+    Ok(rb.at(n))
+}
+
+/// Cuts move `k` in the `n` sub-steps of the pose function `pose_at` ([`substeps`]),
+/// skipping the groups whose tool, grown by the bound `rb` at 64 steps, misses the stock,
+/// and showing a rapid's sub-steps to the observer; counts the move in `report` if it cut.
+fn cut_substeps(
+    stock: &mut TriDexel,
+    tool: &Tool,
+    (k, mv): (usize, &Move),
+    (rb, n): (&RotaryBound, usize),
+    pose_at: impl Fn(Real) -> Result<Isometry3, SweepError>,
+    report: &mut SweepReport,
+    observer: &mut dyn SweepObserver,
+) -> Result<(), SweepError> {
+    let line = mv.line as u32;
+    let rapid = mv.kind == MoveKind::Rapid;
+    // A coarse sub-step's box, grown by its own bound, holds every fine sub-step in it.
+    let eps_c = rb.at(COARSE) + tol::SLIVER;
+    let stock_box = *stock.bounds();
+    let mut cut = false;
+    substeps(
+        tool,
+        n,
+        pose_at,
+        |tip, d, rot| {
+            TranslatedTool::new(tool.clone(), tip, d, Piece::axis(&rot))
+                .bounds()
+                .inflated(eps_c)
+                .intersects(&stock_box)
+        },
+        |tip, d, rotation| {
+            if rapid {
+                observer.before_rapid(stock, k, mv, &Piece::Translation { tip, d, rotation })?;
+            }
+            let swept = TranslatedTool::new(tool.clone(), tip, d, Piece::axis(&rotation));
+            report.sweeps += 1;
+            cut |= stock.remove(&swept, line);
+            Ok(())
+        },
+    )?;
+    if cut {
+        report.cutting_moves += 1;
+    }
+    Ok(())
 }
 
 /// Cuts move `k` that turns a rotary axis (the envelope, else sub-steps), counting it in
@@ -1084,35 +1394,16 @@ fn sweep_rotary(
     }
     let rb = RotaryBound::of_state(chain, tool, mv, state);
     let n = rb.steps_for(bound, mv.line)?;
-    // A coarse sub-step's box, grown by its own bound, holds every fine sub-step in it.
-    let eps_c = rb.at(COARSE) + tol::SLIVER;
-    let stock_box = *stock.bounds();
-    let mut cut = false;
-    rotary_substeps(
-        chain,
+    let poses = Poses::of(chain, mv, state);
+    cut_substeps(
+        stock,
         tool,
-        mv,
-        state,
-        n,
-        |tip, d, rot| {
-            TranslatedTool::new(tool.clone(), tip, d, Piece::axis(&rot))
-                .bounds()
-                .inflated(eps_c)
-                .intersects(&stock_box)
-        },
-        |tip, d, rotation| {
-            if rapid {
-                observer.before_rapid(stock, k, mv, &Piece::Translation { tip, d, rotation })?;
-            }
-            let swept = TranslatedTool::new(tool.clone(), tip, d, Piece::axis(&rotation));
-            report.sweeps += 1;
-            cut |= stock.remove(&swept, line);
-            Ok::<(), SweepError>(())
-        },
+        (k, mv),
+        (&rb, n),
+        |l| Ok(poses.at(l)),
+        report,
+        observer,
     )?;
-    if cut {
-        report.cutting_moves += 1;
-    }
     observer.after_move(
         stock,
         k,

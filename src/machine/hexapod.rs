@@ -33,7 +33,10 @@
 //! (no convergence, a singular Jacobian, a strut out of its stroke, a joint past its limit),
 //! never a number it did not solve. Knows nothing of files, scenes or NC programs.
 
-use crate::math::{Matrix3, Real, UnitVector3, Vector3, tol};
+use crate::machine::chain::Chain;
+use crate::machine::{PoseError, PoseSource};
+use crate::math::{Isometry3, Matrix3, Real, UnitVector3, Vector3, tol};
+use crate::nc::{AxisLetter, AxisValues};
 use nalgebra::{Matrix6, SMatrix, Vector6};
 use std::fmt;
 
@@ -866,6 +869,154 @@ pub fn twin_pose(
     actual
         .forward_unchecked(&actual.lengths_of_readings(&readings), command)
         .map(|s| s.pose)
+}
+
+/// Serial axes on the table side of a hexapod: the chain from the workpiece frame (the
+/// part, carried by the table) to the base frame, as the controller knows it and as built
+/// (with the deviations of its joints, named as for any chain: `dx_C`, `alpha_C`, …).
+#[derive(Clone, Debug, PartialEq)]
+pub struct TableAxes {
+    /// The chain as the controller knows it.
+    pub nominal: Chain,
+    /// The chain as built.
+    pub actual: Chain,
+}
+
+/// The hexapod as an NC program drives it: the controller interpolates the axis values
+/// linearly (Cartesian interpolation) and runs inverse kinematics on the nominal machine;
+/// the actual machine puts the tool at `FK_actual(IK_nominal(command))` ([`twin_pose`]).
+/// X, Y, Z and the angles A, B, C are the platform's pose (the tool point in the base
+/// frame, `R = Rz(c)·Ry(b)·Rx(a)`), except the letters of the table's axes: those turn the
+/// table, and the platform holds the home pose's value of that angle. The tool's tip is the
+/// tool point, its axis the platform's +z. The workpiece frame is the base frame, or with
+/// table axes the frame the table carries.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HexapodTwin {
+    /// The machine as the controller knows it.
+    pub nominal: Hexapod,
+    /// The machine as built.
+    pub actual: Hexapod,
+    /// The home pose: the platform's angles for the letters the table takes.
+    pub home: Pose,
+    /// Serial axes carrying the part, if any.
+    pub table: Option<TableAxes>,
+}
+
+impl HexapodTwin {
+    /// The platform's commanded pose at the axis values `q`.
+    pub fn platform_command(&self, q: &AxisValues) -> Pose {
+        let mut angles = self.home.angles;
+        for (k, l) in [AxisLetter::A, AxisLetter::B, AxisLetter::C]
+            .into_iter()
+            .enumerate()
+        {
+            if !self.table_has(l) {
+                angles[k] = q.get(l).to_radians();
+            }
+        }
+        Pose {
+            position: Vector3::new(
+                q.get(AxisLetter::X),
+                q.get(AxisLetter::Y),
+                q.get(AxisLetter::Z),
+            ),
+            angles,
+        }
+    }
+
+    /// Whether a table axis takes the letter.
+    pub fn table_has(&self, l: AxisLetter) -> bool {
+        self.table.as_ref().is_some_and(|t| t.nominal.has_axis(l))
+    }
+
+    /// The axis values at home: the home pose's, the table's axes at 0.
+    pub fn home_axis_values(&self) -> AxisValues {
+        let h = self.home.to_mm_deg();
+        let mut q = AxisValues::default();
+        for (l, v) in AxisLetter::ALL.into_iter().zip(h) {
+            q.set(l, if self.table_has(l) { 0.0 } else { v });
+        }
+        q
+    }
+
+    /// The controller's Cartesian kinematics as a chain of the machine's axis letters, from
+    /// the workpiece to the tool: the table's axes (nominal), X, Y, Z along the base frame's
+    /// axes, then the platform's C, B, A about z, y, x through the tool point
+    /// (`Trans(x, y, z)·Rz(c)·Ry(b)·Rx(a)`, the pose convention). Without table axes its
+    /// pose is the commanded pose ([`PoseSource::commanded`]); with them the angles the table
+    /// takes are left out (the platform holds them at home). An error when a table axis
+    /// repeats a letter or is named like the spindle.
+    pub fn command_chain(&self) -> Result<Chain, crate::machine::chain::KinematicsError> {
+        use crate::machine::chain::{Axis, AxisKind};
+        let mut axes: Vec<Axis> = self
+            .table
+            .as_ref()
+            .map_or_else(Vec::new, |t| t.nominal.axes().to_vec());
+        let unit = |v: Vector3| UnitVector3::new_normalize(v);
+        for (l, kind, d) in [
+            (AxisLetter::X, AxisKind::Linear, Vector3::x()),
+            (AxisLetter::Y, AxisKind::Linear, Vector3::y()),
+            (AxisLetter::Z, AxisKind::Linear, Vector3::z()),
+            (AxisLetter::C, AxisKind::Rotary, Vector3::z()),
+            (AxisLetter::B, AxisKind::Rotary, Vector3::y()),
+            (AxisLetter::A, AxisKind::Rotary, Vector3::x()),
+        ] {
+            if !self.table_has(l) {
+                axes.push(Axis {
+                    letter: l,
+                    kind,
+                    direction: unit(d),
+                    origin: crate::math::Point3::origin(),
+                });
+            }
+        }
+        Chain::new(axes, "S")
+    }
+
+    /// The platform pose reached for the axis values `q` (base frame).
+    pub fn reached(&self, q: &AxisValues) -> Result<Pose, HexapodError> {
+        twin_pose(&self.nominal, &self.actual, &self.platform_command(q))
+    }
+}
+
+/// The tool frame of a platform pose in the base frame.
+pub fn pose_isometry(pose: &Pose) -> Isometry3 {
+    let r = nalgebra::Rotation3::from_matrix_unchecked(pose.rotation());
+    Isometry3::from_parts(
+        pose.position.into(),
+        nalgebra::UnitQuaternion::from_rotation_matrix(&r),
+    )
+}
+
+impl PoseSource for HexapodTwin {
+    fn has_axis(&self, _axis: AxisLetter) -> bool {
+        true
+    }
+
+    fn w_from_t(&self, q: &AxisValues) -> Result<Isometry3, PoseError> {
+        let base = pose_isometry(&self.reached(q).map_err(|e| PoseError(e.to_string()))?);
+        Ok(match &self.table {
+            Some(t) => t.actual.w_from_t(q) * base,
+            None => base,
+        })
+    }
+
+    fn commanded(&self, q: &AxisValues) -> Isometry3 {
+        let base = pose_isometry(&self.platform_command(q));
+        match &self.table {
+            Some(t) => t.nominal.w_from_t(q) * base,
+            None => base,
+        }
+    }
+
+    fn is_translation(&self, start: &AxisValues, end: &AxisValues) -> bool {
+        let turns = [AxisLetter::A, AxisLetter::B, AxisLetter::C]
+            .into_iter()
+            .any(|l| start.get(l) != end.get(l));
+        self.nominal == self.actual
+            && !turns
+            && self.table.as_ref().is_none_or(|t| t.nominal == t.actual)
+    }
 }
 
 #[cfg(test)]

@@ -18,6 +18,42 @@ pub mod chain;
 pub mod hexapod;
 pub mod hexapod_accuracy;
 
+use crate::math::{Isometry3, Real};
+use crate::nc::{AxisLetter, AxisValues};
+
+/// Why a machine cannot take some axis values (out of its workspace, no forward solution).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("{0}")]
+pub struct PoseError(pub String);
+
+/// A machine the tool sweep reads pose by pose along a move instead of through a serial
+/// chain (a hexapod): the controller interpolates every axis value linearly between a move's
+/// ends, and the machine puts the tool where its own kinematics take it. Implemented by
+/// [`hexapod::HexapodTwin`]; the sweep bounds the error of cutting such a move from the poses
+/// it samples ([`crate::cutting::sweep`]).
+pub trait PoseSource: Sync {
+    /// Whether the machine has the axis.
+    fn has_axis(&self, axis: AxisLetter) -> bool;
+    /// The tool's pose (tool frame to workpiece frame: the tip at the tool frame's origin,
+    /// the tool axis its +z) at the axis values `q`, or why the machine cannot take them.
+    fn w_from_t(&self, q: &AxisValues) -> Result<Isometry3, PoseError>;
+    /// The pose the controller commands at `q` (where a perfect machine puts the tool).
+    fn commanded(&self, q: &AxisValues) -> Isometry3;
+    /// Whether the move `start → end` is a pure translation of the tool with its tip linear
+    /// in the move's parameter (then its two end poses define it exactly).
+    fn is_translation(&self, start: &AxisValues, end: &AxisValues) -> bool;
+    /// Every axis value `lambda` of the way from `start` to `end` (the controller's
+    /// interpolation).
+    fn interpolate(&self, start: &AxisValues, end: &AxisValues, lambda: Real) -> AxisValues {
+        let mut q = *start;
+        for l in AxisLetter::ALL {
+            let (a, b) = (start.get(l), end.get(l));
+            q.set(l, a + (b - a) * lambda);
+        }
+        q
+    }
+}
+
 /// The six components of a deviation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Component {

@@ -201,7 +201,7 @@ pub fn machine_part(
     let clock = Instant::now();
     let sweep = sweep_program(
         &mut stock,
-        &scene.chain,
+        scene.kinematics(),
         &scene.tool,
         &program.moves,
         &scene.sweep,

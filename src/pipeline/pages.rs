@@ -12,7 +12,8 @@ use super::{PipelineError, make_stock, sweep_failed};
 use crate::calibration::calibrate::Feature;
 use crate::cutting::mesh::{TriMesh, mesh_stock};
 use crate::cutting::stock::TriDexel;
-use crate::cutting::sweep::sweep_program;
+use crate::cutting::sweep::{Kinematics, sweep_program};
+use crate::machine::hexapod::{HexapodTwin, TableAxes};
 use crate::math::{Point3, Real, UnitVector3, Vector3};
 use crate::nc::Move;
 use crate::progress::NoProgress;
@@ -51,7 +52,20 @@ pub fn reference_part(scene: &Scene, moves: &[Move]) -> Result<Reference, Pipeli
         });
     }
     let nominal = scene.chain.nominal();
-    if scene.chain == nominal {
+    // A hexapod's nominal machine: the actual one with the nominal parameters.
+    let nominal_twin = scene.hexapod.as_ref().map(|t| HexapodTwin {
+        actual: t.nominal.clone(),
+        table: t.table.as_ref().map(|a| TableAxes {
+            nominal: a.nominal.clone(),
+            actual: a.nominal.clone(),
+        }),
+        ..t.clone()
+    });
+    let perfect = match (&scene.hexapod, &nominal_twin) {
+        (Some(t), Some(n)) => t == n,
+        _ => scene.chain == nominal,
+    };
+    if perfect {
         return Ok(Reference {
             model: None,
             what: "the machine has no deviations, so the part is the nominal part (deviation 0)"
@@ -60,9 +74,13 @@ pub fn reference_part(scene: &Scene, moves: &[Move]) -> Result<Reference, Pipeli
     }
     let spath = scene.path.display().to_string();
     let mut stock = make_stock(scene)?;
+    let machine = match &nominal_twin {
+        Some(t) => Kinematics::Poses(t),
+        None => Kinematics::Chain(&nominal),
+    };
     sweep_program(
         &mut stock,
-        &nominal,
+        machine,
         &scene.tool,
         moves,
         &scene.sweep,

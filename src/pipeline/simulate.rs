@@ -5,8 +5,9 @@
 
 use super::pages::{display_part, part_png, reference_part, view};
 use super::{PipelineError, make_stock, sweep_failed};
-use crate::cutting::collide::sweep_with_checks;
+use crate::cutting::collide::{CollisionReport, sweep_with_checks};
 use crate::cutting::mesh::{TriMesh, mesh_stock};
+use crate::cutting::sweep::{Kinematics, sweep_program};
 use crate::math::Real;
 use crate::nc::Program;
 use crate::progress::Progress;
@@ -55,17 +56,38 @@ pub fn simulate(
     let volume0 = stock.volume();
     timings.insert("stock".into(), clock.elapsed().as_secs_f64());
     let clock = Instant::now();
-    let checked = sweep_with_checks(
-        &mut stock,
-        &scene.chain,
-        &scene.tool,
-        scene.holder.as_ref(),
-        &scene.fixtures,
-        &program.moves,
-        &scene.sweep,
-        progress,
-    )
-    .map_err(sweep_failed(program, &path))?;
+    // A hexapod scene has no holder or fixtures (refused on loading): its sweep runs
+    // without the collision checks, which drive a chain.
+    let checked = match &scene.hexapod {
+        Some(twin) => {
+            let sweep = sweep_program(
+                &mut stock,
+                Kinematics::Poses(twin),
+                &scene.tool,
+                &program.moves,
+                &scene.sweep,
+                progress,
+            )
+            .map_err(sweep_failed(program, &path))?;
+            CollisionReport {
+                events: Vec::new(),
+                moves: sweep.moves,
+                sweep,
+                check_error_bound_mm: 0.0,
+            }
+        }
+        None => sweep_with_checks(
+            &mut stock,
+            &scene.chain,
+            &scene.tool,
+            scene.holder.as_ref(),
+            &scene.fixtures,
+            &program.moves,
+            &scene.sweep,
+            progress,
+        )
+        .map_err(sweep_failed(program, &path))?,
+    };
     timings.insert("sweep".into(), clock.elapsed().as_secs_f64());
     let clock = Instant::now();
     let (mesh, mesh_report) = mesh_stock(&stock).map_err(|source| PipelineError::Mesh {

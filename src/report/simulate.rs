@@ -157,6 +157,11 @@ impl SimulationReport {
             self.mesh.vertices,
             self.mesh.euler_characteristic,
         );
+        if let (Some(tip), Some(bow)) = (self.sweep.tip_error_mm, self.sweep.path_bow_mm) {
+            s.push_str(&format!(
+                "hexapod       tip off its command by up to {tip:.4} mm, straight moves bowed by up to {bow:.2e} mm (sampled poses); collision checks not run\n"
+            ));
+        }
         s.push_str(&format!("collisions    {}\n", self.collisions.len()));
         for e in &self.collisions {
             s.push_str(&format!(

@@ -564,11 +564,10 @@ fn cli_ik_fk_round_trip_and_bad_input() {
         assert!(!err.contains("panicked"), "{args:?}: {err}");
     }
     assert!(super::files_in(&sb.dir).is_empty());
+    let (_, _, err) = sb.run(&["run", scene]);
+    assert!(err.contains("`run` does not drive a hexapod"), "{err}");
     let (_, _, err) = sb.run(&["simulate", scene]);
-    assert!(
-        err.contains("`simulate` does not drive a hexapod yet"),
-        "{err}"
-    );
+    assert!(err.contains("needs program, [tool] and [stock]"), "{err}");
     // The map writes its CSV and PNG.
     let (code, out, err) = sb.run(&[
         "hexapod",

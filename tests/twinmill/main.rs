@@ -20,6 +20,7 @@ mod study;
 mod hexapod;
 mod html;
 mod hexapod_calibration;
+mod hexapod_cut;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};
