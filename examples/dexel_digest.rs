@@ -139,8 +139,15 @@ fn main() {
             Box::new(move || {
                 let tool = Tool::try_new(kind, p1::TOOL_DIAMETER, 30.0).expect("valid");
                 let mut s = TriDexel::new_box(p1::stock_box(), 0.05, 8e9).expect("fits");
-                sweep_program(&mut s, &xyz_chain(), &tool, &p1::moves(), &opts, &NoProgress)
-                    .expect("sweeps");
+                sweep_program(
+                    &mut s,
+                    &xyz_chain(),
+                    &tool,
+                    &p1::moves(),
+                    &opts,
+                    &NoProgress,
+                )
+                .expect("sweeps");
                 s
             }),
         ));
