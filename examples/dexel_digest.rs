@@ -10,7 +10,6 @@
 
 use std::path::Path;
 use std::time::Instant;
-use twinmill::cutting::shape::Cylinder;
 use twinmill::cutting::stock::TriDexel;
 use twinmill::cutting::sweep::{SweepOptions, sweep_program};
 use twinmill::cutting::tool::{Tool, ToolKind};
@@ -19,10 +18,13 @@ use twinmill::math::{Aabb, Point3, Real, UnitVector3, Vector3};
 use twinmill::nc::{AxisLetter, AxisValues, Move, MoveKind};
 use twinmill::progress::NoProgress;
 use twinmill::scene::Scene;
-use twinmill::{math, nc};
+use twinmill::{cutting, math, nc};
 
 #[path = "../benches/support/p1.rs"]
 mod p1;
+#[path = "../benches/support/rotary.rs"]
+mod rotary;
+use rotary::{bar, helix, hexagon};
 
 /// FNV-1a over the crossings of the three grids, in the grids' fixed order.
 fn digest(stock: &TriDexel) -> (u64, usize) {
@@ -63,62 +65,6 @@ fn xyz_chain() -> Chain {
         "S",
     )
     .expect("valid chain")
-}
-
-fn polyline(points: &[AxisValues]) -> Vec<Move> {
-    points
-        .windows(2)
-        .enumerate()
-        .map(|(k, w)| Move {
-            kind: MoveKind::Linear,
-            start: w[0],
-            end: w[1],
-            feed_mm_per_min: Some(600.0),
-            line: k + 1,
-        })
-        .collect()
-}
-
-fn bar(radius: Real, x0: Real, len: Real, pitch: Real) -> TriDexel {
-    let c = Cylinder::try_new(Point3::new(x0, 0.0, 0.0), Vector3::x(), radius, len).expect("ok");
-    let b = radius + 0.5;
-    let bounds = Aabb {
-        min: Point3::new(x0, -b, -b),
-        max: Point3::new(x0 + len, b, b),
-    };
-    TriDexel::from_solid(bounds, pitch, 8e9, &c).expect("fits")
-}
-
-/// P3 of benches/rotary.rs: six faces of a hexagon side-milled on a round bar.
-fn hexagon(r: Real) -> Vec<Move> {
-    let home = AxisValues::default()
-        .with(AxisLetter::X, -30.0)
-        .with(AxisLetter::Y, -(8.0 + r))
-        .with(AxisLetter::Z, 60.0);
-    let mut points = vec![home];
-    for k in 0..6 {
-        let p = home.with(AxisLetter::A, 60.0 * k as Real);
-        points.push(p);
-        points.push(p.with(AxisLetter::Z, -12.0));
-        points.push(p.with(AxisLetter::Z, -12.0).with(AxisLetter::X, 30.0));
-        points.push(p.with(AxisLetter::X, 30.0));
-        points.push(p);
-    }
-    polyline(&points)
-}
-
-/// P4 of benches/rotary.rs: one turn of a helical groove, X and A together in 60 moves.
-fn helix() -> Vec<Move> {
-    let points: Vec<AxisValues> = (0..=60)
-        .map(|k| {
-            let f = k as Real / 60.0;
-            AxisValues::default()
-                .with(AxisLetter::X, -5.0 + 10.0 * f)
-                .with(AxisLetter::Z, 7.0)
-                .with(AxisLetter::A, 360.0 * f)
-        })
-        .collect();
-    polyline(&points)
 }
 
 fn main() {
@@ -229,7 +175,6 @@ fn main() {
             }),
         ));
     }
-    let _ = nc::MoveKind::Rapid;
     for (name, run) in cases.iter().filter(|(n, _)| n.contains(&filter)) {
         let t = Instant::now();
         let s = run();
