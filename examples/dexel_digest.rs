@@ -14,7 +14,7 @@ use twinmill::cutting::stock::TriDexel;
 use twinmill::cutting::sweep::{SweepOptions, sweep_program};
 use twinmill::cutting::tool::{Tool, ToolKind};
 use twinmill::machine::chain::{Axis, AxisKind, Chain};
-use twinmill::math::{Aabb, Point3, Real, UnitVector3, Vector3};
+use twinmill::math::{Aabb, Point3, UnitVector3, Vector3};
 use twinmill::nc::{AxisLetter, AxisValues, Move, MoveKind};
 use twinmill::progress::NoProgress;
 use twinmill::scene::Scene;

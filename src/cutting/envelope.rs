@@ -612,9 +612,9 @@ impl RotaryEnvelope {
             slot.resize(2 * n + 1, NO_PROBE);
             probes.clear();
             for j in (0..n).filter(|&j| grown[j]) {
-                for k in 2 * j..=2 * j + 2 {
-                    if slot[k] == NO_PROBE {
-                        slot[k] = probes.len() as u32;
+                for (k, at) in slot.iter_mut().enumerate().skip(2 * j).take(3) {
+                    if *at == NO_PROBE {
+                        *at = probes.len() as u32;
                         probes.push(self.probe(&self.samples[k], self.lambda_of(k), &ray));
                     }
                 }

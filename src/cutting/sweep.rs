@@ -474,7 +474,9 @@ impl TranslatedTool {
         } else {
             (top, t_tip)
         };
-        if !(t_out - t_in > tol::LENGTH_EPS) || t_in >= span.1 || t_out <= span.0 {
+        // Not `t_out - t_in <= …`: a NaN length is no cut either.
+        let long = t_out - t_in > tol::LENGTH_EPS;
+        if !long || t_in >= span.1 || t_out <= span.0 {
             return None;
         }
         let (s_in, n_in, s_out, n_out) = if sigma > 0.0 {
