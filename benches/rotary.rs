@@ -11,75 +11,22 @@
 //!   each, and a reversal), poses per second.
 
 use criterion::criterion_main;
+use twinmill::{cutting, math, nc};
+
+#[path = "support/rotary.rs"]
+mod rotary;
 
 mod group {
+    use crate::rotary::{bar, helix, hexagon};
     use criterion::{BatchSize, Criterion, Throughput, criterion_group};
     use std::path::Path;
-    use twinmill::cutting::shape::Cylinder;
-    use twinmill::cutting::stock::TriDexel;
     use twinmill::cutting::sweep::{SweepOptions, sweep_program};
     use twinmill::cutting::tool::{Tool, ToolKind};
-    use twinmill::math::{Aabb, Point3, Real, Vector3};
-    use twinmill::nc::{AxisLetter, AxisValues, Move, MoveKind};
+    use twinmill::nc::{AxisLetter, AxisValues};
     use twinmill::progress::NoProgress;
     use twinmill::scene::Scene;
 
     const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/mdx50-step.toml");
-
-    fn polyline(points: &[AxisValues]) -> Vec<Move> {
-        points
-            .windows(2)
-            .enumerate()
-            .map(|(k, w)| Move {
-                kind: MoveKind::Linear,
-                start: w[0],
-                end: w[1],
-                feed_mm_per_min: Some(600.0),
-                line: k + 1,
-            })
-            .collect()
-    }
-
-    fn bar(radius: Real, x0: Real, len: Real, pitch: Real) -> TriDexel {
-        let c =
-            Cylinder::try_new(Point3::new(x0, 0.0, 0.0), Vector3::x(), radius, len).expect("valid");
-        let b = radius + 0.5;
-        let bounds = Aabb {
-            min: Point3::new(x0, -b, -b),
-            max: Point3::new(x0 + len, b, b),
-        };
-        TriDexel::from_solid(bounds, pitch, 8e9, &c).expect("fits")
-    }
-
-    fn hexagon(r: Real) -> Vec<Move> {
-        let home = AxisValues::default()
-            .with(AxisLetter::X, -30.0)
-            .with(AxisLetter::Y, -(8.0 + r))
-            .with(AxisLetter::Z, 60.0);
-        let mut points = vec![home];
-        for k in 0..6 {
-            let p = home.with(AxisLetter::A, 60.0 * k as Real);
-            points.push(p);
-            points.push(p.with(AxisLetter::Z, -12.0));
-            points.push(p.with(AxisLetter::Z, -12.0).with(AxisLetter::X, 30.0));
-            points.push(p.with(AxisLetter::X, 30.0));
-            points.push(p);
-        }
-        polyline(&points)
-    }
-
-    fn helix() -> Vec<Move> {
-        let points: Vec<AxisValues> = (0..=60)
-            .map(|k| {
-                let f = k as Real / 60.0;
-                AxisValues::default()
-                    .with(AxisLetter::X, -5.0 + 10.0 * f)
-                    .with(AxisLetter::Z, 7.0)
-                    .with(AxisLetter::A, 360.0 * f)
-            })
-            .collect();
-        polyline(&points)
-    }
 
     fn benches(c: &mut Criterion) {
         let scene = Scene::load(Path::new(SCENE)).expect("scene");

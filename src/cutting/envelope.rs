@@ -590,9 +590,11 @@ impl RotaryEnvelope {
         SCRATCH.with_borrow_mut(|scratch| {
             let Scratch {
                 grown,
+                slot,
                 probes,
                 comp_of,
                 comps,
+                cuts,
             } = scratch;
             grown.clear();
             grown.extend((0..n).map(|j| {
@@ -604,22 +606,27 @@ impl RotaryEnvelope {
             if !grown.iter().any(|&g| g) {
                 return;
             }
+            // The probes at the samples of the cells that may meet the ray, each once:
+            // `slot[k]` indexes sample k's probe in `probes` (NO_PROBE: not evaluated).
+            slot.clear();
+            slot.resize(2 * n + 1, NO_PROBE);
             probes.clear();
-            probes.resize(2 * n + 1, None);
             for j in (0..n).filter(|&j| grown[j]) {
-                for (k, slot) in probes.iter_mut().enumerate().skip(2 * j).take(3) {
-                    if slot.is_none() {
-                        *slot = Some(self.probe(&self.samples[k], self.lambda_of(k), &ray));
+                for (k, at) in slot.iter_mut().enumerate().skip(2 * j).take(3) {
+                    if *at == NO_PROBE {
+                        *at = probes.len() as u32;
+                        probes.push(self.probe(&self.samples[k], self.lambda_of(k), &ray));
                     }
                 }
             }
+            let at = |k: usize| probes.get(slot[k] as usize);
             // Connected sets of poses: runs of samples inside the tool joined by half-cells
             // of cells that may meet the ray; each starts from its samples' extremes.
             comp_of.clear();
             comp_of.resize(2 * n + 1, None);
             comps.clear();
             for k in 0..=2 * n {
-                let Some(p) = probes[k].filter(|p| p.hit.is_some()) else {
+                let Some(p) = at(k).filter(|p| p.hit.is_some()) else {
                     continue;
                 };
                 let id = match (k > 0 && grown[(k - 1) / 2])
@@ -633,48 +640,49 @@ impl RotaryEnvelope {
                     }
                 };
                 comp_of[k] = Some(id);
-                offer(&mut comps[id], &p, self.r);
+                offer(&mut comps[id], p);
             }
             // Extremes between the samples, half-cell by half-cell.
             for k in (0..2 * n).filter(|k| grown[k / 2]) {
-                let (Some(a), Some(b)) = (probes[k], probes[k + 1]) else {
+                let (Some(a), Some(b)) = (at(k), at(k + 1)) else {
                     continue;
                 };
                 match comp_of[k].or(comp_of[k + 1]) {
-                    Some(id) => self.refine(&ray, &a, &b, &mut comps[id], 0),
+                    Some(id) => self.refine(&ray, a, b, &mut comps[id], 0),
                     None => {
                         let mut touch = None;
-                        self.refine(&ray, &a, &b, &mut touch, 0);
+                        self.refine(&ray, a, b, &mut touch, 0);
                         comps.push(touch);
                     }
                 }
             }
-            let mut cuts: Vec<RawEnd> = comps.drain(..).flatten().collect();
-            Self::merge_and_emit(&mut cuts, out);
+            cuts.clear();
+            cuts.extend(comps.drain(..).flatten());
+            self.merge_and_emit(cuts, out);
         });
     }
 
     /// Sorts the intervals, merges those that overlap and emits them with their normals.
-    fn merge_and_emit(cuts: &mut [RawEnd], out: &mut Vec<RayCut>) {
-        cuts.sort_by(|a, b| a.t0.total_cmp(&b.t0));
+    fn merge_and_emit(&self, cuts: &mut [RawEnd], out: &mut Vec<RayCut>) {
+        cuts.sort_by(|a, b| a.lo.t.total_cmp(&b.lo.t));
         let mut merged: Option<RawEnd> = None;
         for &c in cuts.iter() {
             merged = Some(match merged {
-                Some(mut m) if c.t0 <= m.t1 + tol::SLIVER => {
-                    if c.t1 > m.t1 {
-                        (m.t1, m.n1) = (c.t1, c.n1);
+                Some(mut m) if c.lo.t <= m.hi.t + tol::SLIVER => {
+                    if c.hi.t > m.hi.t {
+                        m.hi = c.hi;
                     }
                     m
                 }
                 Some(m) => {
-                    emit(&m, out);
+                    emit(&m, self.r, out);
                     c
                 }
                 None => c,
             });
         }
         if let Some(m) = merged {
-            emit(&m, out);
+            emit(&m, self.r, out);
         }
     }
 
@@ -687,7 +695,7 @@ impl RotaryEnvelope {
         }
         let bisect = |acc: &mut Option<RawEnd>| {
             let m = self.probe_at(0.5 * (a.lambda + b.lambda), ray);
-            offer(acc, &m, self.r);
+            offer(acc, &m);
             self.refine(ray, a, &m, acc, depth + 1);
             self.refine(ray, &m, b, acc, depth + 1);
         };
@@ -708,15 +716,16 @@ impl RotaryEnvelope {
             let grow = self.speed * w / 2.0 - ENVELOPE_TOL;
             if grow > 0.0 && self.meets_grown(&s, ray, grow) {
                 let m = self.probe(&s, mid, ray);
-                offer(acc, &m, self.r);
+                offer(acc, &m);
                 self.refine(ray, a, &m, acc, depth + 1);
                 self.refine(ray, &m, b, acc, depth + 1);
             }
             return;
         }
         // Ends already beyond the span need no refinement.
-        let (in_done, out_done) =
-            acc.map_or((false, false), |c| (c.t0 < ray.span.0, c.t1 > ray.span.1));
+        let (in_done, out_done) = acc.map_or((false, false), |c| {
+            (c.lo.t < ray.span.0, c.hi.t > ray.span.1)
+        });
         if in_done && out_done {
             return;
         }
@@ -808,7 +817,7 @@ impl RotaryEnvelope {
                 }
             }
             let p = self.probe_at(m, ray);
-            offer(acc, &p, self.r);
+            offer(acc, &p);
             let fm = f(&p)?;
             if fm.is_nan() {
                 return None;
@@ -859,67 +868,94 @@ impl Stop {
     }
 }
 
-fn emit(c: &RawEnd, out: &mut Vec<RayCut>) {
-    if c.t1 - c.t0 > tol::LENGTH_EPS {
+fn emit(c: &RawEnd, r: Real, out: &mut Vec<RayCut>) {
+    if c.hi.t - c.lo.t > tol::LENGTH_EPS {
         out.push(RayCut {
-            t_in: c.t0,
-            t_out: c.t1,
-            n_in: c.n0,
-            n_out: c.n1,
+            t_in: c.lo.t,
+            t_out: c.hi.t,
+            n_in: c.lo.normal(r),
+            n_out: c.hi.normal(r),
         });
     }
 }
+
+/// `Scratch::slot` of a sample not evaluated.
+const NO_PROBE: u32 = u32::MAX;
 
 /// Per-thread buffers of [`RotaryEnvelope::intervals_in`], reused from ray to ray.
 #[derive(Default)]
 struct Scratch {
     grown: Vec<bool>,
-    probes: Vec<Option<Probe>>,
+    /// Per sample, its probe's index in `probes` or [`NO_PROBE`].
+    slot: Vec<u32>,
+    probes: Vec<Probe>,
     comp_of: Vec<Option<usize>>,
     comps: Vec<Option<RawEnd>>,
+    cuts: Vec<RawEnd>,
 }
 
 thread_local! {
     static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
 }
 
-/// An interval with where (λ, face) its ends were found.
+/// One end of an interval and where it was found: its normal is worked out only for the
+/// ends that are kept (the same arithmetic as at the probe, so the same bits).
 #[derive(Clone, Copy, Debug)]
-struct RawEnd {
-    t0: Real,
-    /// Material normal at `t0` (W).
-    n0: Vector3,
-    t1: Real,
-    /// Material normal at `t1` (W).
-    n1: Vector3,
+struct End {
+    t: Real,
+    face: Face,
+    /// The end's point and the ray's direction in the tool frame, and the pose's rotation.
+    q: Vector3,
+    u: Vector3,
+    rot: Matrix3,
 }
 
-/// Widens `best` by the interval of the probe, if the ray meets the tool there (`r` the
-/// tool radius, for the normals).
-fn offer(best: &mut Option<RawEnd>, p: &Probe, r: Real) {
+impl End {
+    fn at(p: &Probe, t: Real, face: Face) -> Self {
+        Self {
+            t,
+            face,
+            q: p.p + p.u * t,
+            u: p.u,
+            rot: p.rot,
+        }
+    }
+
+    /// The material normal (W): the tool's inward normal at the end, the ray where no face
+    /// (`r` the tool radius).
+    fn normal(&self, r: Real) -> Vector3 {
+        match tool_normal(&self.q, self.face, r) {
+            Some(n) => -(self.rot * n),
+            None => self.rot * self.u,
+        }
+    }
+}
+
+/// An interval: its lower and upper ends.
+#[derive(Clone, Copy, Debug)]
+struct RawEnd {
+    lo: End,
+    hi: End,
+}
+
+/// Widens `best` by the interval of the probe, if the ray meets the tool there.
+fn offer(best: &mut Option<RawEnd>, p: &Probe) {
     let Some(h) = p.hit else {
         return;
-    };
-    // The material normal: the tool's inward normal at the end (the ray where no face).
-    let normal = |t: Real, face: Face| match tool_normal(&(p.p + p.u * t), face, r) {
-        Some(n) => -(p.rot * n),
-        None => p.rot * p.u,
     };
     match best {
         None => {
             *best = Some(RawEnd {
-                t0: h.t_in,
-                n0: normal(h.t_in, h.face_in),
-                t1: h.t_out,
-                n1: normal(h.t_out, h.face_out),
+                lo: End::at(p, h.t_in, h.face_in),
+                hi: End::at(p, h.t_out, h.face_out),
             })
         }
         Some(c) => {
-            if h.t_in < c.t0 {
-                (c.t0, c.n0) = (h.t_in, normal(h.t_in, h.face_in));
+            if h.t_in < c.lo.t {
+                c.lo = End::at(p, h.t_in, h.face_in);
             }
-            if h.t_out > c.t1 {
-                (c.t1, c.n1) = (h.t_out, normal(h.t_out, h.face_out));
+            if h.t_out > c.hi.t {
+                c.hi = End::at(p, h.t_out, h.face_out);
             }
         }
     }

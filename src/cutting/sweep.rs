@@ -272,7 +272,20 @@ impl TranslatedTool {
 
     /// The NC line of the move at parameter `s` (the first whose end is at or past `s`).
     fn line_at(&self, s: Real, line: u32) -> u32 {
-        let k = self.parts.partition_point(|&(end, _)| end < s);
+        // The first part whose end is not below `s` (a binary search's partition point):
+        // the parts are about evenly spaced, so the walk from the even guess is short.
+        let n = self.parts.len();
+        let mut k = if s > 0.0 {
+            ((s * n as Real) as usize).min(n)
+        } else {
+            0
+        };
+        while k > 0 && self.parts[k - 1].0 >= s {
+            k -= 1;
+        }
+        while k < n && self.parts[k].0 < s {
+            k += 1;
+        }
         self.parts
             .get(k)
             .or(self.parts.last())
@@ -300,6 +313,9 @@ impl TranslatedTool {
         }
     }
 }
+
+/// The whole ray: the span of an exact cut.
+const EVERYWHERE: (Real, Real) = (Real::NEG_INFINITY, Real::INFINITY);
 
 /// Bounding box of the tool with its tip at `tip` and axis `v`.
 fn tool_bounds(tool: &Tool, tip: &Point3, v: &UnitVector3) -> Aabb {
@@ -479,7 +495,12 @@ impl TranslatedTool {
     /// its tip to its top, the earliest such `s` making both ends; a ball end mill reaches
     /// lowest where its centre passes nearest (`s*`), `R − sqrt(R² − |w − s*·d|²)` above
     /// the tip, and to its top.
-    fn along_axis_cut(&self, origin: &Point3, axis: usize) -> Option<(RayCut, Real, Real)> {
+    fn along_axis_cut(
+        &self,
+        origin: &Point3,
+        axis: usize,
+        span: (Real, Real),
+    ) -> Option<(RayCut, Real, Real)> {
         let sigma = self.v[axis];
         let r = self.tool.radius();
         let w = {
@@ -512,8 +533,8 @@ impl TranslatedTool {
         e[axis] = 1.0;
         let tip = self.start[axis];
         let top = tip + sigma * self.tool.length();
-        // The end of the tool's tip side along the ray, its s and the material normal there.
-        let (t_tip, s_tip, n_tip) = match self.tool.kind() {
+        // The end of the tool's tip side along the ray, its s, and the ball's centre there.
+        let (t_tip, s_tip, centre) = match self.tool.kind() {
             ToolKind::Ball => {
                 let s_star = if dd == 0.0 {
                     0.0
@@ -523,21 +544,36 @@ impl TranslatedTool {
                 let rho2 = (w - self.d * s_star).norm_squared();
                 let depth = (r * r - rho2).max(0.0).sqrt();
                 let centre = self.start + self.v.into_inner() * r + self.d * s_star;
-                let t = centre[axis] - sigma * depth;
-                let mut x = *origin;
-                x[axis] = t;
-                // Material normal: against the ball's outward normal (the ray if grazing).
-                let n = (centre - x).try_normalize(0.0).unwrap_or(e * sigma);
-                (t, s_star, n)
+                (centre[axis] - sigma * depth, s_star, Some(centre))
             }
-            _ => (tip, sa, e * sigma),
+            _ => (tip, sa, None),
         };
-        let (t_in, s_in, n_in, t_out, s_out, n_out) = if sigma > 0.0 {
-            (t_tip, s_tip, n_tip, top, sa, -e)
+        // The material normal at the tip side's end: against the ball's outward normal (the
+        // ray if grazing), the ray for a flat end.
+        let n_tip = || match centre {
+            Some(centre) => {
+                let mut x = *origin;
+                x[axis] = t_tip;
+                (centre - x).try_normalize(0.0).unwrap_or(e * sigma)
+            }
+            None => e * sigma,
+        };
+        let (t_in, t_out) = if sigma > 0.0 {
+            (t_tip, top)
         } else {
-            (top, sa, e, t_tip, s_tip, n_tip)
+            (top, t_tip)
         };
-        (t_out - t_in > tol::LENGTH_EPS).then_some((
+        // Not `t_out - t_in <= …`: a NaN length is no cut either.
+        let long = t_out - t_in > tol::LENGTH_EPS;
+        if !long || t_in >= span.1 || t_out <= span.0 {
+            return None;
+        }
+        let (s_in, n_in, s_out, n_out) = if sigma > 0.0 {
+            (s_tip, n_tip(), sa, -e)
+        } else {
+            (sa, e, s_tip, n_tip())
+        };
+        Some((
             RayCut {
                 t_in,
                 t_out,
@@ -642,10 +678,16 @@ impl TranslatedTool {
         ))
     }
 
-    /// The closed form's cut of the ray with the move parameters `s` of its two ends.
-    fn closed_cut(&self, origin: &Point3, axis: usize) -> Option<(RayCut, Real, Real)> {
+    /// The closed form's cut of the ray with the move parameters `s` of its two ends; a cut
+    /// along the tool axis wholly outside `span` may be left out.
+    fn closed_cut(
+        &self,
+        origin: &Point3,
+        axis: usize,
+        span: (Real, Real),
+    ) -> Option<(RayCut, Real, Real)> {
         match self.square_axis {
-            Some(a) if a == axis => return self.along_axis_cut(origin, axis),
+            Some(a) if a == axis => return self.along_axis_cut(origin, axis, span),
             Some(a) => return self.across_axis_cut(origin, axis, a),
             None => {}
         }
@@ -702,7 +744,7 @@ impl Cutter for TranslatedTool {
     fn ray_cut(&self, origin: &Point3, axis: usize) -> Option<RayCut> {
         match &self.general {
             Some(g) => g.ray_cut(origin, axis),
-            None => self.closed_cut(origin, axis).map(|(c, _, _)| c),
+            None => self.closed_cut(origin, axis, EVERYWHERE).map(|(c, _, _)| c),
         }
     }
 
@@ -723,9 +765,34 @@ impl Cutter for TranslatedTool {
     ) {
         if let Some(g) = &self.general {
             g.ray_cuts_lined(origin, axis, line, out, lines);
-        } else if let Some((c, s_in, s_out)) = self.closed_cut(origin, axis) {
+        } else if let Some((c, s_in, s_out)) = self.closed_cut(origin, axis, EVERYWHERE) {
             out.push(c);
             lines.push([self.line_at(s_in, line), self.line_at(s_out, line)]);
+        }
+    }
+
+    /// Exact, except that a cut along the tool axis that lies wholly outside `span` (so it
+    /// cannot change the ray) is left out without working out its normals and NC lines.
+    fn ray_cuts_in_span(
+        &self,
+        origin: &Point3,
+        axis: usize,
+        span: (Real, Real),
+        line: u32,
+        out: &mut Vec<RayCut>,
+        lines: &mut Vec<[u32; 2]>,
+    ) {
+        if let Some(g) = &self.general {
+            g.ray_cuts_lined(origin, axis, line, out, lines);
+        } else if let Some((c, s_in, s_out)) = self.closed_cut(origin, axis, span) {
+            out.push(c);
+            let l_in = self.line_at(s_in, line);
+            let l_out = if s_out == s_in {
+                l_in
+            } else {
+                self.line_at(s_out, line)
+            };
+            lines.push([l_in, l_out]);
         }
     }
 }

@@ -1,0 +1,185 @@
+//! A digest of every dexel crossing (coordinate, normal and NC line, bit for bit) after the
+//! sweep of benchmarks P1-flat, P1-ball (0.05 mm), P3 and P4 (docs/benchmarks.md), the rotary
+//! move of the brute-force test and the programs of the scenes in `scenes/`: changes to the
+//! sweep engine that must not change its results are checked by comparing the digests
+//! before and after. `cargo run --release --example dexel_digest [FILTER]`.
+//!
+//! Prints one line per case: the FNV-1a 64 digest, the number of crossings and the time.
+
+#![allow(clippy::print_stdout, reason = "an example reports on the terminal")]
+
+use std::path::Path;
+use std::time::Instant;
+use twinmill::cutting::stock::TriDexel;
+use twinmill::cutting::sweep::{SweepOptions, sweep_program};
+use twinmill::cutting::tool::{Tool, ToolKind};
+use twinmill::machine::chain::{Axis, AxisKind, Chain};
+use twinmill::math::{Aabb, Point3, UnitVector3, Vector3};
+use twinmill::nc::{AxisLetter, AxisValues, Move, MoveKind};
+use twinmill::progress::NoProgress;
+use twinmill::scene::Scene;
+use twinmill::{cutting, math, nc};
+
+#[path = "../benches/support/p1.rs"]
+mod p1;
+#[path = "../benches/support/rotary.rs"]
+mod rotary;
+use rotary::{bar, helix, hexagon};
+
+/// FNV-1a over the crossings of the three grids, in the grids' fixed order.
+fn digest(stock: &TriDexel) -> (u64, usize) {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |bytes: &[u8]| {
+        for &b in bytes {
+            h ^= b as u64;
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+    };
+    let mut count = 0;
+    for g in stock.grids() {
+        g.for_each_crossing(|p, c| {
+            count += 1;
+            for k in 0..3 {
+                eat(&p[k].to_bits().to_le_bytes());
+                eat(&c.normal[k].to_bits().to_le_bytes());
+            }
+            eat(&c.line.to_le_bytes());
+        });
+    }
+    (h, count)
+}
+
+fn xyz_chain() -> Chain {
+    let ax = |letter, d: Vector3| Axis {
+        letter,
+        kind: AxisKind::Linear,
+        direction: UnitVector3::new_normalize(d),
+        origin: Point3::origin(),
+    };
+    Chain::new(
+        vec![
+            ax(AxisLetter::Y, Vector3::y()),
+            ax(AxisLetter::X, Vector3::x()),
+            ax(AxisLetter::Z, Vector3::z()),
+        ],
+        "S",
+    )
+    .expect("valid chain")
+}
+
+fn main() {
+    let filter = std::env::args().nth(1).unwrap_or_default();
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes");
+    let mdx = Scene::load(&Path::new(dir).join("mdx50-step.toml")).expect("scene");
+    let opts = SweepOptions {
+        rotary_step_bound_mm: math::tol::ROTARY_STEP_BOUND,
+    };
+    let bench_opts = SweepOptions {
+        rotary_step_bound_mm: 1e-4,
+    };
+    type Case = Box<dyn Fn() -> TriDexel>;
+    let mut cases: Vec<(String, Case)> = Vec::new();
+    for (name, kind) in [("flat", ToolKind::Flat), ("ball", ToolKind::Ball)] {
+        cases.push((
+            format!("P1-{name} 0.05 mm"),
+            Box::new(move || {
+                let tool = Tool::try_new(kind, p1::TOOL_DIAMETER, 30.0).expect("valid");
+                let mut s = TriDexel::new_box(p1::stock_box(), 0.05, 8e9).expect("fits");
+                sweep_program(
+                    &mut s,
+                    &xyz_chain(),
+                    &tool,
+                    &p1::moves(),
+                    &opts,
+                    &NoProgress,
+                )
+                .expect("sweeps");
+                s
+            }),
+        ));
+    }
+    for pitch in [0.2, 0.1] {
+        let chain = mdx.chain.clone();
+        cases.push((
+            format!("P4 helical groove {pitch} mm"),
+            Box::new(move || {
+                let ball = Tool::try_new(ToolKind::Ball, 4.0, 12.0).expect("valid");
+                let mut s = bar(8.0, -10.0, 20.0, pitch);
+                sweep_program(&mut s, &chain, &ball, &helix(), &bench_opts, &NoProgress)
+                    .expect("sweeps");
+                s
+            }),
+        ));
+    }
+    {
+        let (chain, tool) = (mdx.chain.clone(), mdx.tool.clone());
+        cases.push((
+            "P3 hexagon 0.1 mm".into(),
+            Box::new(move || {
+                let mut s = bar(10.0, -20.0, 40.0, 0.1);
+                let moves = hexagon(tool.radius());
+                sweep_program(&mut s, &chain, &tool, &moves, &bench_opts, &NoProgress)
+                    .expect("sweeps");
+                s
+            }),
+        ));
+    }
+    {
+        // tests/twinmill/rotary.rs: rotary_move_surface_agrees_with_brute_force.
+        let chain = mdx.chain.nominal();
+        cases.push((
+            "rotary move A 0-90 0.4 mm".into(),
+            Box::new(move || {
+                let tool = Tool::try_new(ToolKind::Flat, 6.0, 10.0).expect("valid");
+                let start = AxisValues::default().with(AxisLetter::Z, 6.0);
+                let mv = Move {
+                    kind: MoveKind::Linear,
+                    start,
+                    end: start.with(AxisLetter::A, 90.0),
+                    feed_mm_per_min: Some(100.0),
+                    line: 3,
+                };
+                let bounds = Aabb {
+                    min: Point3::new(-8.03, -10.0, -10.0),
+                    max: Point3::new(7.97, 10.0, 10.0),
+                };
+                let mut s = TriDexel::new_box(bounds, 0.4, 4e9).expect("fits");
+                let o = SweepOptions {
+                    rotary_step_bound_mm: 5e-4,
+                };
+                sweep_program(&mut s, &chain, &tool, &[mv], &o, &NoProgress).expect("sweeps");
+                s
+            }),
+        ));
+    }
+    let mut names: Vec<_> = std::fs::read_dir(dir)
+        .expect("scenes")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .filter(|p| !p.to_string_lossy().contains("hexapod"))
+        .collect();
+    names.sort();
+    for path in names {
+        let label = format!(
+            "scene {}",
+            path.file_name().unwrap_or_default().to_string_lossy()
+        );
+        cases.push((
+            label,
+            Box::new(move || {
+                let scene = Scene::load(&path).expect("scene");
+                let program = scene.load_program().expect("program");
+                twinmill::pipeline::machine_part(&scene, &program, &NoProgress)
+                    .expect("sweeps")
+                    .stock
+            }),
+        ));
+    }
+    for (name, run) in cases.iter().filter(|(n, _)| n.contains(&filter)) {
+        let t = Instant::now();
+        let s = run();
+        let dt = t.elapsed().as_secs_f64();
+        let (h, n) = digest(&s);
+        println!("{h:016x}  {n:>9} crossings  {dt:7.3} s  {name}");
+    }
+}
