@@ -1343,7 +1343,7 @@ fn measure_rotary(scene: &Scene, a: &MeasureArgs) -> Result<Measured, String> {
     Ok(Measured {
         text: out.trace_csv.clone(),
         plot,
-        html: twinmill::pipeline::pages::rotary_page(&out, &s),
+        html: twinmill::pipeline::instrument_pages::rotary_page(&out, &s),
         summary: s,
         json: serde_json::to_string_pretty(rep),
     })
@@ -2954,7 +2954,7 @@ fn dbb_ballbar(a: DbbArgs) -> Result<ExitCode, String> {
         twinmill::output::write_file(png, &o.png).map_err(|e| e.to_string())?;
     }
     if let Some(html) = &a.html {
-        let page = twinmill::pipeline::pages::hexapod_ballbar_page(&s.name, &o);
+        let page = twinmill::pipeline::instrument_pages::hexapod_ballbar_page(&s.name, &o);
         twinmill::output::write_file(html, page.as_bytes()).map_err(|e| e.to_string())?;
     }
     Ok(print_out(
@@ -2978,7 +2978,7 @@ fn dbb_calibrate(a: CalibrateArgs) -> Result<ExitCode, String> {
     let o = twinmill::pipeline::dbb::calibrate_scene(&s, procedure, plan, a.trials)
         .map_err(|e| e.to_string())?;
     if let Some(html) = &a.html {
-        let page = twinmill::pipeline::pages::calibrate_page(&s.name, &o);
+        let page = twinmill::pipeline::instrument_pages::calibrate_page(&s.name, &o);
         twinmill::output::write_file(html, page.as_bytes()).map_err(|e| e.to_string())?;
     }
     Ok(print_out(

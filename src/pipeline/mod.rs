@@ -3,7 +3,8 @@
 //! corrected moves — and writes nothing ([`crate::output`] does). One module per command:
 //! [`simulate()`], [`run()`] (and [`scanner_study`]), [`fit_cloud`], [`correct()`],
 //! [`identify_scene`], [`design_scene`], [`rotary_test()`]; [`pages`] makes what their
-//! `report.html` and `part.png` need (the reference part, the display mesh, the 3-D view);
+//! `report.html` and `part.png` need (the reference part, the display mesh, the 3-D view),
+//! [`instrument_pages`] the pages of the instrument commands;
 //! this file holds what they share: the stock, the sweep of the program through the deviated
 //! machine, and the errors.
 //!
@@ -20,6 +21,7 @@ mod design;
 mod rotary;
 pub mod hexapod;
 pub mod dbb;
+pub mod instrument_pages;
 
 pub use correct::{CorrectOutcome, correct, identified_model};
 pub use design::{DesignOutcome, MAX_DESIGN_ROUNDS, design_scene};

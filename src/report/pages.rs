@@ -631,23 +631,7 @@ fn identification_sections(r: &IdentifyReport) -> Vec<Section> {
         &r.registration_absorbs,
     ));
     let threshold = 1.0 / DETERMINED_FRACTION;
-    let mut rows: Vec<Vec<String>> = r
-        .singular_values
-        .iter()
-        .enumerate()
-        .map(|(i, s)| {
-            vec![
-                format!("{}", i + 1),
-                format!("{s:.6e}"),
-                if *s >= threshold {
-                    "determined"
-                } else {
-                    "not determined"
-                }
-                .into(),
-            ]
-        })
-        .collect();
+    let mut rows = singular_value_rows(&r.singular_values, threshold);
     rows.push(vec![
         "condition".into(),
         format!("{:.6e}", r.condition_number),
@@ -1155,4 +1139,25 @@ pub fn amplification_page(
         "K_p and K_a over the x–y grid: each cell the largest over z and the orientations; grey where no pose is reachable.",
     )];
     instrument_page(title.into(), summary.into(), sections, plots, report)
+}
+
+/// The identifiability table's rows: each singular value (1-based index, value) and whether
+/// its direction is determined (at least `threshold`).
+pub fn singular_value_rows(values: &[Real], threshold: Real) -> Vec<Vec<String>> {
+    values
+        .iter()
+        .enumerate()
+        .map(|(i, s)| {
+            vec![
+                (i + 1).to_string(),
+                format!("{s:.6e}"),
+                if *s >= threshold {
+                    "determined"
+                } else {
+                    "not determined"
+                }
+                .into(),
+            ]
+        })
+        .collect()
 }
