@@ -2857,6 +2857,15 @@ struct CalibrateArgs {
     /// file.
     #[arg(long, value_name = "FILE")]
     html: Option<PathBuf>,
+    /// Identify from bar readings measured on the machine instead of measuring on the twin:
+    /// one trace file per circle of the plan (`--plan`, or the procedure's fixed one), in
+    /// its order, in the format `twinmill ballbar --out` writes.
+    #[arg(long, value_name = "FILE,…", value_delimiter = ',')]
+    readings: Vec<PathBuf>,
+    /// With `--readings`: write the corrected parameters (a `[deviations]` fragment of the
+    /// scene) into this file.
+    #[arg(long, value_name = "FILE")]
+    corrected: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]
@@ -2975,6 +2984,49 @@ fn dbb_calibrate(a: CalibrateArgs) -> Result<ExitCode, String> {
         (Some(p), false) => p.procedure,
         _ => procedure,
     };
+    if a.corrected.is_some() && a.readings.is_empty() {
+        return Err(
+            "--corrected needs --readings (the parameters identified from measured circles)".into(),
+        );
+    }
+    if !a.readings.is_empty() {
+        if a.trials > 0 {
+            return Err("--trials runs on the twin; it cannot go with --readings".into());
+        }
+        if a.html.is_some() {
+            return Err("--html is for calibrations on the twin; with --readings the summary, --json and --corrected say it all".into());
+        }
+        let plan = match plan {
+            Some(p) => p,
+            None => {
+                let ws = s.workspace.ok_or_else(|| {
+                    format!(
+                        "{}: calibrate needs [workspace] (where the fixed plan's circles are)",
+                        s.path.display()
+                    )
+                })?;
+                twinmill::calibration::hexapod_calibrate::default_plan(
+                    procedure,
+                    &ws,
+                    twinmill::calibration::hexapod_calibrate::DEFAULT_POINTS,
+                )
+            }
+        };
+        let mut files = Vec::with_capacity(a.readings.len());
+        for p in &a.readings {
+            let text = twinmill::scene::read_text(p).map_err(|e| e.to_string())?;
+            files.push((p.clone(), text));
+        }
+        let o = twinmill::pipeline::dbb::calibrate_measured(&s, &plan, &files)
+            .map_err(|e| e.to_string())?;
+        if let Some(out) = &a.corrected {
+            twinmill::output::write_file(out, o.fragment.as_bytes()).map_err(|e| e.to_string())?;
+        }
+        return Ok(print_out(
+            || o.summary.clone(),
+            a.json.then(|| serde_json::to_string_pretty(&o)),
+        ));
+    }
     let o = twinmill::pipeline::dbb::calibrate_scene(&s, procedure, plan, a.trials)
         .map_err(|e| e.to_string())?;
     if let Some(html) = &a.html {

@@ -819,3 +819,188 @@ fn design_summary(
     }
     t
 }
+
+/// A calibration from bar readings measured on the real machine: the identification, the
+/// corrected parameters as a scene fragment, and the summary.
+#[derive(Clone, Debug, Serialize)]
+pub struct MeasuredCalibrationOutcome {
+    /// The procedure.
+    pub procedure: Procedure,
+    /// The trace file read for each circle, in the plan's order.
+    pub files: Vec<String>,
+    /// The identification.
+    pub calibration: HexapodCalibration,
+    /// How far the identified machine's tool is from where the nominal controller puts it
+    /// (largest level positioning and pivot errors over the workspace): the error the
+    /// calibration removes, if the identified machine is the real one. Jig-free with the
+    /// base frame placed by the tool table calibration.
+    pub predicted_correction: PoseErrors,
+    /// The corrected parameters as a `[deviations]` fragment of the hexapod scene (TOML).
+    pub fragment: String,
+    /// What the CLI prints.
+    pub summary: String,
+}
+
+/// Seed 000's calibration from readings measured on the machine: one trace file per circle
+/// of `plan`, in its order, in the format `twinmill ballbar --out` writes (`circular`'s
+/// CSV: turn, angle, deviation = bar length − radius). Each file must hold the circle's
+/// samples in the plan's order (its turns and angles, to 1e-6 rad); the platform joints are
+/// taken from the scene (known from a CMM, as in seed 000).
+pub fn calibrate_measured(
+    scene: &HexapodScene,
+    plan: &Plan,
+    files: &[(std::path::PathBuf, String)],
+) -> Result<MeasuredCalibrationOutcome, HexapodCommandError> {
+    use crate::metrology::circular::parse_trace;
+    use std::fmt::Write as _;
+    let ws = scene.workspace.ok_or_else(|| {
+        error(
+            scene,
+            "calibrate needs [workspace] (the pose errors of the corrected machine)",
+        )
+    })?;
+    if files.len() != plan.circles.len() {
+        return Err(error(
+            scene,
+            format!(
+                "--readings names {} file(s) for a plan of {} circles (one trace per circle, in the plan's order)",
+                files.len(),
+                plan.circles.len()
+            ),
+        ));
+    }
+    let mut readings = Vec::with_capacity(files.len());
+    for (j, ((path, text), c)) in files.iter().zip(&plan.circles).enumerate() {
+        let at = path.display();
+        let samples = parse_trace(text, path).map_err(|e| error(scene, e.to_string()))?;
+        let angles = c.angles();
+        if samples.len() != angles.len() {
+            return Err(error(
+                scene,
+                format!(
+                    "{at}: {} samples, but circle {} of the plan has {} ({} points per turn, {:?})",
+                    samples.len(),
+                    j + 1,
+                    angles.len(),
+                    c.points,
+                    c.turns
+                ),
+            ));
+        }
+        for (i, (s, &(turn, theta))) in samples.iter().zip(&angles).enumerate() {
+            let d = (s.angle_rad - theta).rem_euclid(std::f64::consts::TAU);
+            let off = d.min(std::f64::consts::TAU - d);
+            if s.turn != turn || off > 1e-6 {
+                return Err(error(
+                    scene,
+                    format!(
+                        "{at}: sample {} is {:?} at {:.6}°, but circle {} of the plan runs {:?} at {:.6}° there",
+                        i + 1,
+                        s.turn,
+                        s.angle_rad.to_degrees(),
+                        j + 1,
+                        turn,
+                        theta.to_degrees()
+                    ),
+                ));
+            }
+        }
+        readings.push(CircleReadings {
+            lengths_mm: samples
+                .iter()
+                .map(|s| c.radius_mm + s.deviation_mm)
+                .collect(),
+            commands: angles.iter().map(|&(_, t)| c.command(t)).collect(),
+        });
+    }
+    let cal = calibrate(
+        &scene.nominal,
+        &scene.actual,
+        plan,
+        &readings,
+        CALIBRATION_NOISE_MM,
+    )
+    .map_err(|e| error(scene, e.to_string()))?;
+    // The identified machine stands in for the real one: its tool against the nominal
+    // controller's is the correction the calibration makes.
+    let (identified, _) = calibrated_model(
+        &cal,
+        &scene.actual,
+        &scene.actual,
+        &ws,
+        TableCalibration::Tool,
+    )
+    .map_err(|e| error(scene, e.to_string()))?;
+    let predicted_correction = pose_errors(&scene.nominal, &identified, &ws)
+        .map_err(|e| error(scene, format!("pose errors of the identified machine: {e}")))?;
+    let mut fragment = format!(
+        "# Corrected parameters of {} identified by `twinmill calibrate` ({}, {} circles)\n\
+         # from {}.\n\
+         # Deviations from nominal (mm) with their standard uncertainty; the platform joints\n\
+         # are the scene's (CMM). Replace the scene's base-joint and reference-length lines.\n",
+        scene.name,
+        plan.procedure.name(),
+        plan.circles.len(),
+        files
+            .iter()
+            .map(|(p, _)| p.display().to_string())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    if !cal.identifiability.gauge.is_empty() {
+        fragment.push_str(
+            "# Jig-free: the base frame's six rigid motions are not determined by lengths; the\n\
+             # base joints are given with no rigid motion, the table calibration places them.\n",
+        );
+    }
+    fragment.push_str("[deviations]\n");
+    for e in &cal.estimates {
+        let _ = writeln!(
+            fragment,
+            "{} = {:.7}   # σ {:.7}",
+            e.name, e.value_mm, e.sigma_mm
+        );
+    }
+    let mut summary = format!(
+        "twinmill: calibrate {} from {} measured circles ({})\n  unknowns      {}, rank {}, condition {:.3e}\n  determined    {} of the {} parameters\n",
+        scene.name,
+        plan.circles.len(),
+        plan.procedure.name(),
+        cal.identifiability.unknowns,
+        cal.identifiability.rank,
+        cal.identifiability.condition_number,
+        cal.identifiability.parameters_determined,
+        cal.estimates.len()
+    );
+    for g in &cal.identifiability.gauge {
+        let _ = writeln!(summary, "  not determined  {g}");
+    }
+    let _ = writeln!(
+        summary,
+        "  residual      rms {:.3} µm after {} Gauss–Newton steps",
+        cal.residual_rms_mm * 1e3,
+        cal.iterations
+    );
+    for e in &cal.estimates {
+        let _ = writeln!(
+            summary,
+            "  {:<12}  {:+.4} µm ± {:.4} µm",
+            e.name,
+            e.value_mm * 1e3,
+            e.sigma_mm * 1e3
+        );
+    }
+    let _ = writeln!(
+        summary,
+        "  correction    the nominal controller is off by up to {:.4} mm (position), {:.4} mm (pivot) on the identified machine",
+        predicted_correction.position_mm, predicted_correction.pivot_mm
+    );
+    Ok(MeasuredCalibrationOutcome {
+        procedure: plan.procedure,
+        files: files.iter().map(|(p, _)| p.display().to_string()).collect(),
+        calibration: cal,
+        predicted_correction,
+        fragment,
+        summary,
+    })
+}

@@ -588,3 +588,128 @@ fn cli_calibrate_design_writes_the_plan_calibrate_reads() {
         assert!(!sb.dir.join("p2.toml").exists());
     }
 }
+
+/// `calibrate --readings`: bar readings measured elsewhere (here on the scene's machine,
+/// written as `twinmill ballbar --out` writes them) identify the parameters the scene file
+/// injects — read from its `[deviations]` table, not from the code — within 3σ; the
+/// corrected-parameters fragment holds the same values; bad files name the file and line,
+/// exit non-zero and write nothing.
+#[test]
+fn calibrate_reads_measured_dbb_files_and_writes_the_corrected_parameters() {
+    let sb = Sandbox::new("hexapod-dbb-readings");
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/hexapod-machining-centre.toml");
+    let s = HexapodScene::load(&path).expect("scene");
+    let ws = s.workspace.expect("workspace");
+    let plan = default_plan(Procedure::BallPlate, &ws, DEFAULT_POINTS);
+    let mut names = Vec::new();
+    for (j, c) in plan.circles.iter().enumerate() {
+        let inst = DbbInstrument {
+            mount_mm: Vector3::zeros(),
+            noise_sigma_mm: 0.5e-3,
+            seed: 11,
+            stream: (j as u64) << 32,
+        };
+        let m = measure(&s.nominal, &s.actual, c, &inst).expect("measures");
+        let name = format!("circle{}.csv", j + 1);
+        std::fs::write(sb.dir.join(&name), m.csv(&["# measured".into()])).expect("writes");
+        names.push(name);
+    }
+    let list = names.join(",");
+    let scene = path.to_str().expect("utf-8");
+    let (code, out, err) = sb.run(&[
+        "calibrate",
+        scene,
+        "--procedure",
+        "ball-plate",
+        "--readings",
+        &list,
+        "--corrected",
+        "corrected.toml",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).expect("json");
+    // The truth: the scene file's own [deviations] (absent names: 0).
+    let file: toml::Table = std::fs::read_to_string(&path)
+        .expect("reads")
+        .parse()
+        .expect("toml");
+    let injected = file["deviations"].as_table().expect("deviations");
+    let fragment: toml::Table = std::fs::read_to_string(sb.dir.join("corrected.toml"))
+        .expect("fragment written")
+        .parse()
+        .expect("fragment is TOML");
+    let corrected = fragment["deviations"].as_table().expect("[deviations]");
+    let estimates = v["calibration"]["estimates"].as_array().expect("estimates");
+    assert_eq!(estimates.len(), 24);
+    for e in estimates {
+        let name = e["name"].as_str().expect("name");
+        let value = e["value_mm"].as_f64().expect("value");
+        let sigma = e["sigma_mm"].as_f64().expect("sigma");
+        let truth = injected.get(name).and_then(|t| t.as_float()).unwrap_or(0.0);
+        assert!(
+            (value - truth).abs() <= 3.0 * sigma + 1e-7,
+            "{name}: identified {value} ± {sigma}, injected {truth}"
+        );
+        // Determined: σ below a tenth of the realistic magnitude (0.5 mm joints, 0.2 mm struts).
+        assert!(sigma > 0.0 && sigma < 0.02, "{name}: σ {sigma}");
+        let written = corrected[name].as_float().expect("fragment value");
+        assert!(
+            (written - value).abs() <= 1e-7,
+            "{name}: {written} vs {value}"
+        );
+    }
+    // The nominal controller's error on the identified machine is the scene's class.
+    let position = v["predicted_correction"]["position_mm"]
+        .as_f64()
+        .expect("position");
+    assert!(position > 0.05, "position correction {position}");
+
+    // Bad files: a non-finite reading, a missing value, too few samples, the wrong count.
+    let good = std::fs::read_to_string(sb.dir.join("circle1.csv")).expect("reads");
+    let mut lines: Vec<String> = good.lines().map(String::from).collect();
+    let row = lines
+        .iter()
+        .position(|l| {
+            !l.starts_with('#') && l.contains(',') && l.chars().any(|c| c.is_ascii_digit())
+        })
+        .expect("a data row");
+    let data_row = lines[row].clone();
+    let cols: Vec<&str> = data_row.split(',').collect();
+    let mut nan = lines.clone();
+    nan[row] = format!("{},{},nan", cols[0], cols[1]);
+    std::fs::write(sb.dir.join("nan.csv"), nan.join("\n")).expect("writes");
+    let mut missing = lines.clone();
+    missing[row] = format!("{},{}", cols[0], cols[1]);
+    std::fs::write(sb.dir.join("missing.csv"), missing.join("\n")).expect("writes");
+    lines.truncate(lines.len() - 3);
+    std::fs::write(sb.dir.join("short.csv"), lines.join("\n")).expect("writes");
+    let with_first = |first: &str| {
+        let mut n = names.clone();
+        n[0] = first.to_string();
+        n.join(",")
+    };
+    for (files, expect) in [
+        (with_first("nan.csv"), "nan.csv:"),
+        (with_first("missing.csv"), "missing.csv:"),
+        (with_first("short.csv"), "short.csv"),
+        (with_first("absent.csv"), "absent.csv"),
+        (names[..6].join(","), "6 file(s) for a plan of 7"),
+    ] {
+        let (code, _, err) = sb.run(&[
+            "calibrate",
+            scene,
+            "--procedure",
+            "ball-plate",
+            "--readings",
+            &files,
+            "--corrected",
+            "bad.toml",
+        ]);
+        assert_ne!(code, 0, "{files}");
+        assert_eq!(err.trim().lines().count(), 1, "{files}: {err}");
+        assert!(err.contains(expect), "{files}: {err}");
+        assert!(!err.contains("panicked"), "{files}: {err}");
+        assert!(!sb.dir.join("bad.toml").exists(), "{files}");
+    }
+}
