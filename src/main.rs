@@ -2996,28 +2996,12 @@ fn dbb_calibrate(a: CalibrateArgs) -> Result<ExitCode, String> {
         if a.html.is_some() {
             return Err("--html is for calibrations on the twin; with --readings the summary, --json and --corrected say it all".into());
         }
-        let plan = match plan {
-            Some(p) => p,
-            None => {
-                let ws = s.workspace.ok_or_else(|| {
-                    format!(
-                        "{}: calibrate needs [workspace] (where the fixed plan's circles are)",
-                        s.path.display()
-                    )
-                })?;
-                twinmill::calibration::hexapod_calibrate::default_plan(
-                    procedure,
-                    &ws,
-                    twinmill::calibration::hexapod_calibrate::DEFAULT_POINTS,
-                )
-            }
-        };
         let mut files = Vec::with_capacity(a.readings.len());
         for p in &a.readings {
             let text = twinmill::scene::read_text(p).map_err(|e| e.to_string())?;
             files.push((p.clone(), text));
         }
-        let o = twinmill::pipeline::dbb::calibrate_measured(&s, &plan, &files)
+        let o = twinmill::pipeline::dbb::calibrate_measured(&s, procedure, plan, &files)
             .map_err(|e| e.to_string())?;
         if let Some(out) = &a.corrected {
             twinmill::output::write_file(out, o.fragment.as_bytes()).map_err(|e| e.to_string())?;

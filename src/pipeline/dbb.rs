@@ -326,6 +326,38 @@ pub fn calibration_trials(
     Ok(s)
 }
 
+/// The scene's `[workspace]`, which a calibration needs.
+fn calibration_workspace(scene: &HexapodScene) -> Result<Workspace, HexapodCommandError> {
+    scene.workspace.ok_or_else(|| {
+        error(
+            scene,
+            "calibrate needs [workspace] (where to place the circles)",
+        )
+    })
+}
+
+/// The circles of a calibration by `procedure`: `plan` (a designed one, whose procedure
+/// must agree) or the procedure's fixed plan.
+fn procedure_plan(
+    scene: &HexapodScene,
+    procedure: Procedure,
+    plan: Option<Plan>,
+    ws: &Workspace,
+) -> Result<Plan, HexapodCommandError> {
+    match plan {
+        Some(p) if p.procedure != procedure => Err(error(
+            scene,
+            format!(
+                "the plan is for the {} procedure, not {}",
+                p.procedure.name(),
+                procedure.name()
+            ),
+        )),
+        Some(p) => Ok(p),
+        None => Ok(default_plan(procedure, ws, DEFAULT_POINTS)),
+    }
+}
+
 /// Seed 000's calibration of the scene's machine by `procedure` — its fixed plan, or `plan`
 /// (a designed one, whose procedure must agree) — and `trials` seeded trials of random
 /// deviations.
@@ -335,32 +367,14 @@ pub fn calibrate_scene(
     plan: Option<Plan>,
     trials: usize,
 ) -> Result<CalibrateOutcome, HexapodCommandError> {
-    let ws = scene.workspace.ok_or_else(|| {
-        error(
-            scene,
-            "calibrate needs [workspace] (where to place the circles)",
-        )
-    })?;
+    let ws = calibration_workspace(scene)?;
     if trials > MAX_TRIALS {
         return Err(error(
             scene,
             format!("--trials {trials} must lie in 0..={MAX_TRIALS}"),
         ));
     }
-    let plan = match plan {
-        Some(p) if p.procedure != procedure => {
-            return Err(error(
-                scene,
-                format!(
-                    "the plan is for the {} procedure, not {}",
-                    p.procedure.name(),
-                    procedure.name()
-                ),
-            ));
-        }
-        Some(p) => p,
-        None => default_plan(procedure, &ws, DEFAULT_POINTS),
-    };
+    let plan = procedure_plan(scene, procedure, plan, &ws)?;
     let run = calibration_run(scene, &scene.actual, &plan, &ws, 1)?;
     let work = [Procedure::JigFree, Procedure::BallPlate].map(|p| {
         if p == procedure {
@@ -842,23 +856,21 @@ pub struct MeasuredCalibrationOutcome {
 }
 
 /// Seed 000's calibration from readings measured on the machine: one trace file per circle
-/// of `plan`, in its order, in the format `twinmill ballbar --out` writes (`circular`'s
+/// of the plan (`plan`, whose procedure must agree, or `procedure`'s fixed plan), in its
+/// order, in the format `twinmill ballbar --out` writes (`circular`'s
 /// CSV: turn, angle, deviation = bar length − radius). Each file must hold the circle's
 /// samples in the plan's order (its turns and angles, to 1e-6 rad); the platform joints are
 /// taken from the scene (known from a CMM, as in seed 000).
 pub fn calibrate_measured(
     scene: &HexapodScene,
-    plan: &Plan,
+    procedure: Procedure,
+    plan: Option<Plan>,
     files: &[(std::path::PathBuf, String)],
 ) -> Result<MeasuredCalibrationOutcome, HexapodCommandError> {
     use crate::metrology::circular::parse_trace;
     use std::fmt::Write as _;
-    let ws = scene.workspace.ok_or_else(|| {
-        error(
-            scene,
-            "calibrate needs [workspace] (the pose errors of the corrected machine)",
-        )
-    })?;
+    let ws = calibration_workspace(scene)?;
+    let plan = &procedure_plan(scene, procedure, plan, &ws)?;
     if files.len() != plan.circles.len() {
         return Err(error(
             scene,

@@ -712,4 +712,24 @@ fn calibrate_reads_measured_dbb_files_and_writes_the_corrected_parameters() {
         assert!(!err.contains("panicked"), "{files}: {err}");
         assert!(!sb.dir.join("bad.toml").exists(), "{files}");
     }
+    // A plan whose procedure is not the one asked for is refused, as on the twin.
+    std::fs::write(sb.dir.join("plate.toml"), plan_toml(&plan, &[])).expect("writes");
+    let (code, _, err) = sb.run(&[
+        "calibrate",
+        scene,
+        "--plan",
+        "plate.toml",
+        "--procedure",
+        "jig-free",
+        "--readings",
+        &list,
+        "--corrected",
+        "bad.toml",
+    ]);
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("the plan is for the ball-plate procedure"),
+        "{err}"
+    );
+    assert!(!sb.dir.join("bad.toml").exists());
 }
