@@ -670,6 +670,27 @@ fn amplitude(d: &[Option<(Real, Real)>], k: usize, wanted: bool, why: &str) -> D
     }
 }
 
+/// A test trace: 720 samples every 0.5°, alternately ccw and cw; the ccw run bulges
+/// outwards by up to 5 µm around 0° (`5 µm · max(cos θ, 0)⁸`), the cw run is round. The
+/// plots' tests check the bulge is drawn where it is.
+#[cfg(test)]
+pub(crate) fn bulge_trace() -> Vec<Sample> {
+    (0..720)
+        .map(|i| {
+            let t = (i as Real * 0.5).to_radians();
+            Sample {
+                turn: if i % 2 == 0 { Turn::Ccw } else { Turn::Cw },
+                angle_rad: t,
+                deviation_mm: if i % 2 == 0 {
+                    5e-3 * t.cos().max(0.0).powi(8)
+                } else {
+                    0.0
+                },
+            }
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -482,20 +482,7 @@ mod tests {
     #[test]
     fn polar_plot_puts_a_bulge_where_the_trace_has_it() {
         // +5 µm bulge around 0° (east) in ccw only, otherwise round.
-        let s: Vec<Sample> = (0..720)
-            .map(|i| {
-                let t = (i as Real * 0.5).to_radians();
-                Sample {
-                    turn: if i % 2 == 0 { Turn::Ccw } else { Turn::Cw },
-                    angle_rad: t,
-                    deviation_mm: if i % 2 == 0 {
-                        5e-3 * t.cos().max(0.0).powi(8)
-                    } else {
-                        0.0
-                    },
-                }
-            })
-            .collect();
+        let s = crate::metrology::circular::bulge_trace();
         let opts = CircularOptions {
             radius_mm: 100.0,
             pitch_mm: None,

@@ -744,21 +744,8 @@ mod tests {
 
     #[test]
     fn the_polar_svg_puts_a_bulge_where_the_trace_has_it() {
-        use crate::metrology::circular::{CircularOptions, Turn, evaluate};
-        let s: Vec<Sample> = (0..720)
-            .map(|i| {
-                let t = (i as Real * 0.5).to_radians();
-                Sample {
-                    turn: if i % 2 == 0 { Turn::Ccw } else { Turn::Cw },
-                    angle_rad: t,
-                    deviation_mm: if i % 2 == 0 {
-                        5e-3 * t.cos().max(0.0).powi(8)
-                    } else {
-                        0.0
-                    },
-                }
-            })
-            .collect();
+        use crate::metrology::circular::{CircularOptions, evaluate};
+        let s = crate::metrology::circular::bulge_trace();
         let opts = CircularOptions {
             radius_mm: 100.0,
             pitch_mm: None,
