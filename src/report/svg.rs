@@ -137,34 +137,70 @@ pub fn deviation_map_svg(
                 ))
             }))
             .map_err(draw_err)?;
-        let mut bar = ChartBuilder::on(&right)
-            .margin_top(40)
-            .margin_bottom(50)
-            .margin_right(10)
-            .y_label_area_size(0)
-            .right_y_label_area_size(60)
-            .caption(unit, ("sans-serif", 14))
-            .build_cartesian_2d(0.0..1.0, -range_mm * scale..range_mm * scale)
-            .map_err(draw_err)?;
-        bar.configure_mesh()
-            .disable_mesh()
-            .disable_x_axis()
-            .y_labels(5)
-            .draw()
-            .map_err(draw_err)?;
-        let steps = 64;
-        bar.draw_series((0..steps).map(|k| {
-            let f = -1.0 + 2.0 * (k as Real + 0.5) / steps as Real;
-            let (a, b) = (
-                (-1.0 + 2.0 * k as Real / steps as Real) * range_mm * scale,
-                (-1.0 + 2.0 * (k + 1) as Real / steps as Real) * range_mm * scale,
-            );
-            Rectangle::new([(0.0, a), (1.0, b)], rgb(diverging_colour(f)).filled())
-        }))
-        .map_err(draw_err)?;
+        colour_bar(
+            &right,
+            ColourBar {
+                range: (-range_mm * scale, range_mm * scale),
+                steps: 64,
+                margins: (50, 10),
+                caption: Some(unit),
+            },
+            |t| diverging_colour(2.0 * t - 1.0),
+        )?;
         root.present().map_err(draw_err)?;
     }
     Ok(s)
+}
+
+/// A colour bar's scale and layout.
+struct ColourBar<'a> {
+    /// The values at its bottom and top.
+    range: (Real, Real),
+    /// Bands drawn.
+    steps: usize,
+    /// Bottom and right margins (px; the top is 40).
+    margins: (u32, u32),
+    /// A caption above it (the unit).
+    caption: Option<&'a str>,
+}
+
+/// Draws a colour bar on `area`: `bar.steps` bands from the bottom of `bar.range` to its
+/// top, band k coloured by `colour` at its middle's fraction `(k + ½) / steps` of the
+/// range, with five labels on the right.
+fn colour_bar(
+    area: &DrawingArea<SVGBackend<'_>, plotters::coord::Shift>,
+    bar: ColourBar<'_>,
+    colour: impl Fn(Real) -> image::Rgb<u8>,
+) -> Result<(), SvgError> {
+    let (lo, hi) = bar.range;
+    let mut builder = ChartBuilder::on(area);
+    builder
+        .margin_top(40)
+        .margin_bottom(bar.margins.0)
+        .margin_right(bar.margins.1)
+        .right_y_label_area_size(60);
+    if let Some(c) = bar.caption {
+        builder.caption(c, ("sans-serif", 14));
+    }
+    let mut chart = builder
+        .build_cartesian_2d(0.0..1.0, lo..hi)
+        .map_err(draw_err)?;
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .disable_x_axis()
+        .y_labels(5)
+        .draw()
+        .map_err(draw_err)?;
+    let n = bar.steps as Real;
+    chart
+        .draw_series((0..bar.steps).map(|k| {
+            let k = k as Real;
+            let (a, b) = (lo + (hi - lo) * k / n, lo + (hi - lo) * (k + 1.0) / n);
+            Rectangle::new([(0.0, a), (1.0, b)], rgb(colour((k + 0.5) / n)).filled())
+        }))
+        .map_err(draw_err)?;
+    Ok(())
 }
 
 /// The identifiability spectrum: the singular values, largest first, as bars on a log axis;
@@ -633,29 +669,16 @@ pub fn amplification_svg(map: &AmplificationMap, title: &str) -> Result<String, 
                     )
                 }))
                 .map_err(draw_err)?;
-            let mut bar = ChartBuilder::on(&bar_area)
-                .margin_top(40)
-                .margin_bottom(44)
-                .margin_right(8)
-                .right_y_label_area_size(60)
-                .build_cartesian_2d(0.0..1.0, lo..lo + span)
-                .map_err(draw_err)?;
-            bar.configure_mesh()
-                .disable_mesh()
-                .disable_x_axis()
-                .y_labels(5)
-                .draw()
-                .map_err(draw_err)?;
-            let steps = 48;
-            bar.draw_series((0..steps).map(|k| {
-                let f = (k as Real + 0.5) / steps as Real;
-                let (a, b) = (
-                    lo + span * k as Real / steps as Real,
-                    lo + span * (k + 1) as Real / steps as Real,
-                );
-                Rectangle::new([(0.0, a), (1.0, b)], rgb(height_colour(f)).filled())
-            }))
-            .map_err(draw_err)?;
+            colour_bar(
+                &bar_area,
+                ColourBar {
+                    range: (lo, lo + span),
+                    steps: 48,
+                    margins: (44, 8),
+                    caption: None,
+                },
+                height_colour,
+            )?;
         }
         root.present().map_err(draw_err)?;
     }
