@@ -1,11 +1,14 @@
 //! Benchmark P1 (docs/benchmarks.md) on the tri-dexel sweep, once, for profiling and for
 //! measuring peak memory: `cargo run --release --example p1_sweep -- flat|ball [pitch]`.
 //!
-//! Prints the wall time, moves/s, removed volume and the bytes the tri-dexel holds.
+//! Prints the wall time, moves/s, removed volume and the bytes the tri-dexel holds; with
+//! `mesh` as a third argument also meshes the part adaptively and prints its size, time,
+//! Euler characteristic and enclosed volume against the tri-dexel's.
 
 #![allow(clippy::print_stdout, reason = "an example reports on the terminal")]
 
 use std::time::Instant;
+use twinmill::cutting::adaptive::{AdaptiveOptions, mesh_stock_adaptive};
 use twinmill::cutting::stock::TriDexel;
 use twinmill::cutting::sweep::{SweepOptions, sweep_program};
 use twinmill::cutting::tool::{Tool, ToolKind};
@@ -62,4 +65,19 @@ fn main() {
         1.5 * p1::offset_area(3.0),
         s.memory_bytes() as f64 / 1e6
     );
+    if args.get(3).map(String::as_str) == Some("mesh") {
+        let t = Instant::now();
+        let (m, r) = mesh_stock_adaptive(&s, &AdaptiveOptions::default()).expect("meshes");
+        let dt = t.elapsed().as_secs_f64();
+        let closed = m.check_watertight().is_ok();
+        println!(
+            "adaptive mesh {dt:.3} s: {} triangles, {} vertices, closed {closed}, Euler {}, \
+             volume {:.4} mm³ (tri-dexel {:.4}); {r:?}",
+            m.triangles.len(),
+            m.vertices.len(),
+            m.euler_characteristic(),
+            m.signed_volume(),
+            s.volume()
+        );
+    }
 }

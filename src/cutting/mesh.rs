@@ -105,6 +105,12 @@ pub enum MeshError {
         /// Uses to→from.
         backward: usize,
     },
+    /// The adaptive mesher met a case it cannot mesh (a defect, not bad input).
+    #[error("the adaptive mesher could not close {what}")]
+    Unresolved {
+        /// What it could not close.
+        what: &'static str,
+    },
     /// Writing failed.
     #[error("writing the mesh: {0}")]
     Io(#[from] std::io::Error),
@@ -476,40 +482,49 @@ pub struct MeshReport {
     pub fallback_edges: usize,
 }
 
-struct Lattice<'a> {
-    stock: &'a TriDexel,
-    n: [usize; 3],
+/// The lattice of a tri-dexel's ray centres (see the module documentation): lattice index
+/// `i` along an axis is at `o + i·h`; indices `−1` and `n` are the grown layer outside the
+/// box. Shared with the adaptive mesher ([`super::adaptive`]).
+#[derive(Clone, Copy)]
+pub(super) struct Frame<'a> {
+    pub(super) stock: &'a TriDexel,
+    /// Rays per axis (lattice indices `0..n` carry rays).
+    pub(super) n: [usize; 3],
     /// Coordinate of lattice index 0 and spacing, per axis.
-    o: [Real; 3],
-    h: [Real; 3],
-    /// Words per z column of occupancy bits; bit b is lattice k = b − 1.
-    words: usize,
-    occ: Vec<u64>,
+    pub(super) o: [Real; 3],
+    pub(super) h: [Real; 3],
 }
 
-impl Lattice<'_> {
-    fn coord(&self, axis: usize, i: isize) -> Real {
+impl<'a> Frame<'a> {
+    pub(super) fn of(stock: &'a TriDexel) -> Self {
+        let gz = &stock.grids()[2];
+        let gx = &stock.grids()[0];
+        let (nx, ny) = gz.dims();
+        let nz = gx.dims().1;
+        let (hx, hy) = gz.pitches();
+        let hz = gx.pitches().1;
+        let o0 = gz.ray_origin(0, 0);
+        let oz = gx.ray_origin(0, 0);
+        Self {
+            stock,
+            n: [nx, ny, nz],
+            o: [o0.x, o0.y, oz.z],
+            h: [hx, hy, hz],
+        }
+    }
+
+    pub(super) fn coord(&self, axis: usize, i: isize) -> Real {
         self.o[axis] + i as Real * self.h[axis]
     }
 
-    /// Occupancy words of lattice column (i, j), or None outside the grid (all outside).
-    fn column(&self, i: isize, j: isize) -> Option<&[u64]> {
-        if i < 0 || j < 0 || i >= self.n[0] as isize || j >= self.n[1] as isize {
-            return None;
-        }
-        let c = (j as usize * self.n[0] + i as usize) * self.words;
-        Some(&self.occ[c..c + self.words])
-    }
-
-    fn inside(&self, i: isize, j: isize, k: isize) -> bool {
-        let b = (k + 1) as usize;
-        self.column(i, j)
-            .is_some_and(|w| w[b / 64] >> (b % 64) & 1 == 1)
-    }
-
-    /// The surface point and normal on the lattice edge from (i, j, k) along `axis`
+    /// The surface point and normal on the lattice edge from `p` along `axis`
     /// (`inside_low`: the lower end is inside). Returns whether the ray had a crossing.
-    fn crossing(&self, axis: usize, p: [isize; 3], inside_low: bool) -> (Point3, Vector3, bool) {
+    pub(super) fn crossing(
+        &self,
+        axis: usize,
+        p: [isize; 3],
+        inside_low: bool,
+    ) -> (Point3, Vector3, bool) {
         let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
         let t0 = self.coord(axis, p[axis]);
         let t1 = t0 + self.h[axis];
@@ -541,6 +556,39 @@ impl Lattice<'_> {
                 (point, n, false)
             }
         }
+    }
+}
+
+struct Lattice<'a> {
+    f: Frame<'a>,
+    n: [usize; 3],
+    /// Words per z column of occupancy bits; bit b is lattice k = b − 1.
+    words: usize,
+    occ: Vec<u64>,
+}
+
+impl Lattice<'_> {
+    fn coord(&self, axis: usize, i: isize) -> Real {
+        self.f.coord(axis, i)
+    }
+
+    /// Occupancy words of lattice column (i, j), or None outside the grid (all outside).
+    fn column(&self, i: isize, j: isize) -> Option<&[u64]> {
+        if i < 0 || j < 0 || i >= self.n[0] as isize || j >= self.n[1] as isize {
+            return None;
+        }
+        let c = (j as usize * self.n[0] + i as usize) * self.words;
+        Some(&self.occ[c..c + self.words])
+    }
+
+    fn inside(&self, i: isize, j: isize, k: isize) -> bool {
+        let b = (k + 1) as usize;
+        self.column(i, j)
+            .is_some_and(|w| w[b / 64] >> (b % 64) & 1 == 1)
+    }
+
+    fn crossing(&self, axis: usize, p: [isize; 3], inside_low: bool) -> (Point3, Vector3, bool) {
+        self.f.crossing(axis, p, inside_low)
     }
 }
 
@@ -595,18 +643,13 @@ impl Lattice<'_> {
 /// Meshes the boundary of the stock's material. See the module documentation for the
 /// guarantees. Fails only if the mesh would need 2³¹ vertices or more.
 pub fn mesh_stock(stock: &TriDexel) -> Result<(TriMesh, MeshReport), MeshError> {
+    let f = Frame::of(stock);
     let gz = &stock.grids()[2];
-    let gx = &stock.grids()[0];
-    let (nx, ny) = gz.dims();
-    let nz = gx.dims().1;
-    let (hx, hy) = gz.pitches();
-    let hz = gx.pitches().1;
-    let o0 = gz.ray_origin(0, 0);
-    let oz = gx.ray_origin(0, 0);
+    let [nx, ny, nz] = f.n;
+    let (o, h) = (f.o, f.h);
+    let hz = h[2];
     let words = (nz + 2).div_ceil(64);
-    let n = [nx, ny, nz];
-    let o = [o0.x, o0.y, oz.z];
-    let h = [hx, hy, hz];
+    let n = f.n;
 
     // Occupancy of every lattice point from its z ray (lo ≤ z < hi).
     let mut occ = vec![0u64; nx * ny * words];
@@ -631,14 +674,7 @@ pub fn mesh_stock(stock: &TriDexel) -> Result<(TriMesh, MeshReport), MeshError> 
                 }
             }
         });
-    let lat = Lattice {
-        stock,
-        n,
-        o,
-        h,
-        words,
-        occ,
-    };
+    let lat = Lattice { f, n, words, occ };
     let table = polygon_table();
     // Lower lattice columns (i, j) ∈ [−1, nx) × [−1, ny), row-major; stored at
     // (j + 1)·(nx + 1) + i + 1.
@@ -856,7 +892,7 @@ fn too_many(count: usize) -> MeshError {
 
 /// Quadratic error of a point to tangent planes: Σ (n·(x − p))².
 #[derive(Clone, Copy, Debug, Default)]
-struct Qef {
+pub(super) struct Qef {
     ata: [Real; 6],
     atb: Vector3,
     mass: Vector3,
@@ -864,7 +900,7 @@ struct Qef {
 }
 
 impl Qef {
-    fn add(&mut self, p: &Point3, n: &Vector3) {
+    pub(super) fn add(&mut self, p: &Point3, n: &Vector3) {
         let d = n.dot(&p.coords);
         self.ata[0] += n.x * n.x;
         self.ata[1] += n.x * n.y;
@@ -883,14 +919,14 @@ impl Qef {
     }
 
     /// Number of constrained directions (eigenvalues above [`QEF_RANK`] of the largest).
-    fn rank(&self) -> usize {
+    pub(super) fn rank(&self) -> usize {
         let e = self.matrix().symmetric_eigenvalues();
         let top = e.iter().copied().fold(0.0, Real::max);
         e.iter().filter(|&&l| l > QEF_RANK * top).count()
     }
 
     /// The minimiser nearest the crossings' mean, clamped to the cell [lo, hi].
-    fn solve(&self, lo: &Point3, hi: &Point3) -> Point3 {
+    pub(super) fn solve(&self, lo: &Point3, hi: &Point3) -> Point3 {
         let m = self.mass / self.count.max(1) as Real;
         let a = self.matrix();
         let r = self.atb - a * m;

@@ -18,4 +18,5 @@ pub mod envelope;
 pub mod sweep;
 pub mod collide;
 pub mod mesh;
+pub mod adaptive;
 pub mod zmap;

@@ -10,7 +10,8 @@
 
 use super::{PipelineError, make_stock, sweep_failed};
 use crate::calibration::calibrate::Feature;
-use crate::cutting::mesh::{TriMesh, mesh_stock};
+use crate::cutting::adaptive::{AdaptiveOptions, mesh_stock_adaptive};
+use crate::cutting::mesh::TriMesh;
 use crate::cutting::stock::TriDexel;
 use crate::cutting::sweep::{Kinematics, sweep_program};
 use crate::machine::hexapod::{HexapodTwin, TableAxes};
@@ -90,9 +91,11 @@ pub fn reference_part(scene: &Scene, moves: &[Move]) -> Result<Reference, Pipeli
         location: format!("{spath}: nominal part"),
         source,
     })?;
-    let (mesh, _) = mesh_stock(&stock).map_err(|source| PipelineError::Mesh {
-        path: spath.clone(),
-        source,
+    let (mesh, _) = mesh_stock_adaptive(&stock, &AdaptiveOptions::default()).map_err(|source| {
+        PipelineError::Mesh {
+            path: spath.clone(),
+            source,
+        }
     })?;
     let model =
         ReferenceSurface::new(mesh.vertices, mesh.triangles).ok_or(PipelineError::Deviation {
@@ -211,10 +214,13 @@ pub fn run_page(
     program: &crate::nc::Program,
     outcome: &super::Outcome,
 ) -> Result<String, PipelineError> {
-    let (mesh, _) = mesh_stock(&outcome.stock).map_err(|source| PipelineError::Mesh {
-        path: scene.path.display().to_string(),
-        source,
-    })?;
+    let (mesh, _) =
+        mesh_stock_adaptive(&outcome.stock, &AdaptiveOptions::default()).map_err(|source| {
+            PipelineError::Mesh {
+                path: scene.path.display().to_string(),
+                source,
+            }
+        })?;
     let shown = display_part(scene, &mesh, || reference_part(scene, &program.moves))?;
     let v = view(
         scene,
@@ -316,9 +322,11 @@ pub fn scan_page(
     cloud: &[Point3],
 ) -> Result<String, PipelineError> {
     let spath = scene.path.display().to_string();
-    let (mesh, _) = mesh_stock(stock).map_err(|source| PipelineError::Mesh {
-        path: spath.clone(),
-        source,
+    let (mesh, _) = mesh_stock_adaptive(stock, &AdaptiveOptions::default()).map_err(|source| {
+        PipelineError::Mesh {
+            path: spath.clone(),
+            source,
+        }
     })?;
     let shown = display_part(scene, &mesh, || {
         Ok(Reference {
@@ -368,9 +376,11 @@ pub fn correct_page(
         &NoProgress,
     )
     .map_err(sweep_failed(program, &spath))?;
-    let (mesh, _) = mesh_stock(&stock).map_err(|source| PipelineError::Mesh {
-        path: spath.clone(),
-        source,
+    let (mesh, _) = mesh_stock_adaptive(&stock, &AdaptiveOptions::default()).map_err(|source| {
+        PipelineError::Mesh {
+            path: spath.clone(),
+            source,
+        }
     })?;
     let shown = display_part(scene, &mesh, || {
         let mut r = reference_part(scene, &program.moves)?;

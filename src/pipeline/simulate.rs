@@ -5,8 +5,9 @@
 
 use super::pages::{display_part, part_png, reference_part, view};
 use super::{PipelineError, make_stock, sweep_failed};
+use crate::cutting::adaptive::{AdaptiveOptions, mesh_stock_adaptive};
 use crate::cutting::collide::{CollisionReport, sweep_with_checks};
-use crate::cutting::mesh::{TriMesh, mesh_stock};
+use crate::cutting::mesh::TriMesh;
 use crate::cutting::sweep::{Kinematics, sweep_program};
 use crate::math::Real;
 use crate::nc::Program;
@@ -90,10 +91,13 @@ pub fn simulate(
     };
     timings.insert("sweep".into(), clock.elapsed().as_secs_f64());
     let clock = Instant::now();
-    let (mesh, mesh_report) = mesh_stock(&stock).map_err(|source| PipelineError::Mesh {
-        path: path.clone(),
-        source,
-    })?;
+    let (mesh, mesh_report) =
+        mesh_stock_adaptive(&stock, &AdaptiveOptions::default()).map_err(|source| {
+            PipelineError::Mesh {
+                path: path.clone(),
+                source,
+            }
+        })?;
     timings.insert("mesh".into(), clock.elapsed().as_secs_f64());
     let clock = Instant::now();
     let render_err = |source| PipelineError::Render {
@@ -184,6 +188,11 @@ pub fn simulate(
             volume_mm3: mesh.signed_volume(),
             area_mm2: mesh.area(),
             feature_vertices: mesh_report.feature_vertices,
+            bound_mm: mesh_report.bound_mm,
+            max_plane_residual_mm: mesh_report.max_plane_residual_mm,
+            planar_regions: mesh_report.planar_leaves,
+            edge_regions: mesh_report.edge_leaves,
+            fine_cells: mesh_report.fine_cells,
         },
         collisions: checked.events.iter().map(CollisionEvent::of).collect(),
         deviation,

@@ -49,8 +49,21 @@ pub struct MeshSummary {
     pub volume_mm3: f64,
     /// Surface area (mm²).
     pub area_mm2: f64,
-    /// Vertices added at sharp edges and corners (the rest lie on exact dexel crossings).
+    /// Vertices added where the part is meshed at dexel resolution, at the quadratic-error
+    /// point of a cell's crossings (sharp features there).
     pub feature_vertices: usize,
+    /// Every crossing of the tri-dexel lies within this distance of the mesh (mm): the
+    /// adaptive mesher's stated bound, 2 × plane tolerance + polyline tolerance
+    /// (docs/cutting.md#the-part-mesh).
+    pub bound_mm: f64,
+    /// Largest distance of a crossing from the plane its region was meshed with (mm).
+    pub max_plane_residual_mm: f64,
+    /// Regions meshed as one plane (few large triangles).
+    pub planar_regions: usize,
+    /// Regions meshed as two planes meeting at an exact sharp edge.
+    pub edge_regions: usize,
+    /// Lattice cells meshed at dexel resolution (curved or intricate surface).
+    pub fine_cells: usize,
 }
 
 /// What `twinmill simulate` reports.

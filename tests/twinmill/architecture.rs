@@ -28,7 +28,8 @@ const LAYOUT: &[(&str, &[&str])] = &[
     (
         "cutting",
         &[
-            "tool", "shape", "stock", "cutter", "envelope", "sweep", "collide", "mesh", "zmap",
+            "tool", "shape", "stock", "cutter", "envelope", "sweep", "collide", "mesh", "adaptive",
+            "zmap",
         ],
     ),
     (
