@@ -1,10 +1,12 @@
 //! Meshing the P1 pocket stock (docs/benchmarks.md: 100 × 100 × 20 box, Ø6 flat pocket
-//! 1.5 mm deep) at 0.1 mm pitch: throughput in triangles/s.
+//! 1.5 mm deep): the adaptive part mesh at 0.05 mm (what `twinmill simulate` writes) and
+//! the dexel-resolution contour at 0.1 mm, throughput in triangles/s.
 //!
 //! `cargo bench --bench mesh`.
 
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use std::hint::black_box;
+use twinmill::cutting::adaptive::{AdaptiveOptions, mesh_stock_adaptive};
 use twinmill::cutting::mesh::mesh_stock;
 use twinmill::cutting::stock::TriDexel;
 use twinmill::cutting::sweep::{SweepOptions, sweep_program};
@@ -57,8 +59,22 @@ fn benches(c: &mut Criterion) {
         mesh.signed_volume(),
         stock.volume()
     );
+    let fine = p1_stock(0.05);
+    let opts = AdaptiveOptions::default();
+    let (adaptive, areport) = mesh_stock_adaptive(&fine, &opts).expect("meshes");
+    println!(
+        "P1 flat at 0.05 mm, adaptive: {} triangles, {} vertices, Euler {}, volume {:.3} mm³; {areport:?}",
+        adaptive.triangles.len(),
+        adaptive.vertices.len(),
+        adaptive.euler_characteristic(),
+        adaptive.signed_volume(),
+    );
     let mut g = c.benchmark_group("mesh");
     g.sample_size(10);
+    g.throughput(Throughput::Elements(adaptive.triangles.len() as u64));
+    g.bench_function("P1 flat 0.05 mm adaptive (triangles)", |b| {
+        b.iter(|| mesh_stock_adaptive(black_box(&fine), &opts))
+    });
     g.throughput(Throughput::Elements(mesh.triangles.len() as u64));
     g.bench_function("P1 flat 0.1 mm (triangles)", |b| {
         b.iter(|| mesh_stock(black_box(&stock)))

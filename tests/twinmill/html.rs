@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 #[path = "../../benches/support/p1.rs"]
-mod p1;
+pub(crate) mod p1;
 
 /// Largest page (bytes).
 const MAX_PAGE: u64 = 10 * 1024 * 1024;

@@ -722,3 +722,40 @@ fn simulate_refuses_bad_tools_stocks_meshes_and_numbers() {
         &["p.ngc:2:", "divide by zero"],
     );
 }
+
+#[test]
+fn simulate_meshes_the_p1_pocket_adaptively_small_closed_and_within_its_bound() {
+    use crate::html::p1;
+    // The built-in scene is benchmark P1 as text: the same program the benches cut.
+    assert_eq!(builtin("p1-pocket.ngc"), p1::gcode());
+    let sb = Sandbox::new("simulate-p1");
+    sb.write("p1-pocket.toml", builtin("p1-pocket.toml").as_bytes());
+    sb.write("p1-pocket.ngc", builtin("p1-pocket.ngc").as_bytes());
+    let (code, stdout, stderr) = sb.run(&["simulate", "p1-pocket.toml", "--json"]);
+    assert_eq!(code, 0, "{stderr}");
+    let r: serde_json::Value = serde_json::from_str(&stdout).expect("--json prints it");
+    let mesh = &r["mesh"];
+    // One closed surface with no handle.
+    assert_eq!(mesh["euler_characteristic"].as_i64(), Some(2));
+    // The pocket is flat-bottomed with vertical walls: removed volume 1.5 mm × the area of
+    // the 3 mm offset of the path (docs/benchmarks.md). The mesh's flat faces and sharp
+    // edges are exact; its only approximation is within the stated bound over the walls.
+    let removed = 100.0 * 100.0 * 20.0 - mesh["volume_mm3"].as_f64().expect("number");
+    let truth = 1.5 * p1::offset_area(3.0);
+    let bound = mesh["bound_mm"].as_f64().expect("number");
+    assert!(bound <= 0.005, "{bound}");
+    let walls = 1.5 * 4.0 * 86.0 * 2.0;
+    assert!(
+        (removed - truth).abs() <= bound * walls,
+        "{removed} vs {truth}"
+    );
+    // Few triangles: part.stl far below the dexel-resolution 1.1 GB.
+    let stl = std::fs::metadata(sb.dir.join("out/p1-pocket-simulate/part.stl"))
+        .expect("part.stl")
+        .len();
+    let triangles = mesh["triangles"].as_u64().expect("number");
+    assert_eq!(stl, 84 + 50 * triangles);
+    assert!(stl <= 30 * 1024 * 1024, "{stl} bytes");
+    assert!(triangles < 100_000, "{triangles}");
+    assert!(mesh["planar_regions"].as_u64().expect("number") > 1000);
+}
