@@ -4,7 +4,8 @@ started in turn (peer, twinmill, peer, twinmill, ...) so that a drift in the mac
 speed hits both alike; prints each command's median wall and CPU seconds and peak memory,
 and the median of the pair-by-pair wall-time ratios.
 
-    python3 benches/peers/run.py [--runs N] [--warmup N] [--only nc|segment] [--twinmill PATH]
+    python3 benches/peers/run.py [--runs N] [--warmup N] [--only nc|segment|commands]
+                                 [--twinmill PATH]
 
 Pairs (docs/benchmarks.md#peers-as-processes):
 
@@ -16,6 +17,12 @@ Pairs (docs/benchmarks.md#peers-as-processes):
   `twinmill fit CLOUD --planes` (every planar face, with robust fits) on a 1,266,606-point
   binary PLY laid out like benches/segment.rs: two faces 1 mm apart and a top face,
   0.185 mm spacing, sigma 0.025 mm (written by this script, seed fixed).
+
+And twinmill's own commands as a user runs them (no peer runs these; medians of the runs):
+
+* commands: `twinmill simulate scenes/p1-pocket.toml` (benchmark P1 at 0.05 mm, with its
+  report page and part.stl; acceptance: <= 1.5 s wall, <= 400 MB peak, part.stl <= 30 MB)
+  and `twinmill run scenes/mdx50-step.toml` (the whole pipeline and its page).
 
 A peer that is not installed is skipped, saying so. Standard library only (Open3D's own
 process imports Open3D). Every command's output goes to a file in a temporary directory,
@@ -80,6 +87,25 @@ def compare(name, twinmill, peer, runs, warmup, workdir):
     print(f"  twinmill faster by {wall:.2f}x wall (pairs {lo:.2f}-{hi:.2f}), {cpu:.2f}x CPU")
 
 
+def solo(name, argv, runs, warmup, workdir, files=()):
+    """Runs one twinmill command `runs` times; prints median wall, CPU and peak memory, and
+    the size of the files it wrote (paths relative to workdir)."""
+    for _ in range(warmup):
+        run_once(argv, os.path.join(workdir, "solo.stdout"))
+    rs = [run_once(argv, os.path.join(workdir, "solo.stdout")) for _ in range(runs)]
+    if any(r[3] != 0 for r in rs):
+        print(f"{name}: a run failed (see above); no figures")
+        return
+    med = lambda k: statistics.median(r[k] for r in rs)
+    print(f"\n{name} ({runs} runs, {warmup} warm-up)")
+    print(f"  {'wall s':>8} {'cpu s':>8} {'peak MiB':>9}   (range of wall {min(r[0] for r in rs):.3f}-{max(r[0] for r in rs):.3f} s)")
+    print(f"  {med(0):8.3f} {med(1):8.3f} {med(2):9.1f}")
+    for f in files:
+        path = os.path.join(workdir, f)
+        if os.path.exists(path):
+            print(f"  {f}: {os.path.getsize(path) / 1e6:.2f} MB")
+
+
 def write_cloud(path):
     """The segmentation cloud of benches/segment.rs as binary little-endian PLY (doubles):
     rows 0-383 face B (y = 1, z < 0), 384-767 face A (y = 0, z > 0), 768-1151 the top face
@@ -132,7 +158,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=5, help="timed pairs per comparison (default 5)")
     ap.add_argument("--warmup", type=int, default=1, help="untimed pairs first (default 1)")
-    ap.add_argument("--only", choices=["nc", "segment"], help="run one comparison")
+    ap.add_argument("--only", choices=["nc", "segment", "commands"], help="run one comparison")
     ap.add_argument(
         "--twinmill",
         default=os.path.join(REPO, "target", "release", "twinmill"),
@@ -180,6 +206,24 @@ def main():
                     args.warmup,
                     work,
                 )
+        if args.only in (None, "commands"):
+            out = os.path.join(work, "out")
+            solo(
+                "commands: twinmill simulate scenes/p1-pocket.toml (P1 at 0.05 mm)",
+                [tw, "simulate", os.path.join(REPO, "scenes", "p1-pocket.toml"), "--out", out],
+                args.runs,
+                args.warmup,
+                work,
+                files=("out/p1-pocket-simulate/part.stl", "out/p1-pocket-simulate/report.html"),
+            )
+            solo(
+                "commands: twinmill run scenes/mdx50-step.toml",
+                [tw, "run", os.path.join(REPO, "scenes", "mdx50-step.toml"), "--out", out],
+                args.runs,
+                args.warmup,
+                work,
+                files=("out/mdx50-step/report.html",),
+            )
     print(f"\nload average after: {os.getloadavg()}")
 
 
