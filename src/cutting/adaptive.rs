@@ -590,48 +590,35 @@ fn child_origin(o: [isize; 3], s: usize, c: usize) -> [isize; 3] {
     ]
 }
 
-/// Classifies the block at `nodes[at]`, splitting until every part is a leaf.
-fn grow(
-    lat: &Lat,
-    nodes: &mut Vec<Node>,
-    at: usize,
-    o: [isize; 3],
-    s: usize,
+/// Grows a root block's tree: classifies blocks, splitting until every part is a leaf;
+/// keeps the largest plane residual of the leaves it made.
+struct Grower<'a, 'b> {
+    lat: &'a Lat<'b>,
     tol: Real,
-    resid: &mut Real,
-) {
-    let (kind, r) = classify(lat, o, s, tol);
-    match kind {
-        Some(k) => {
-            nodes[at] = Node::Leaf(k);
-            *resid = resid.max(r);
-        }
-        None => split(lat, nodes, at, o, s, tol, resid),
-    }
+    resid: Real,
 }
 
-fn split(
-    lat: &Lat,
-    nodes: &mut Vec<Node>,
-    at: usize,
-    o: [isize; 3],
-    s: usize,
-    tol: Real,
-    resid: &mut Real,
-) {
-    let first = nodes.len();
-    nodes.extend([Node::Leaf(Kind::Empty); 8]);
-    nodes[at] = Node::Split(first as u32);
-    for c in 0..8 {
-        grow(
-            lat,
-            nodes,
-            first + c,
-            child_origin(o, s, c),
-            s / 2,
-            tol,
-            resid,
-        );
+impl Grower<'_, '_> {
+    /// Classifies the block at `nodes[at]` (origin `o`, size `s`).
+    fn grow(&mut self, nodes: &mut Vec<Node>, at: usize, o: [isize; 3], s: usize) {
+        let (kind, r) = classify(self.lat, o, s, self.tol);
+        match kind {
+            Some(k) => {
+                nodes[at] = Node::Leaf(k);
+                self.resid = self.resid.max(r);
+            }
+            None => self.split(nodes, at, o, s),
+        }
+    }
+
+    /// Makes `nodes[at]` a split node and grows its eight children.
+    fn split(&mut self, nodes: &mut Vec<Node>, at: usize, o: [isize; 3], s: usize) {
+        let first = nodes.len();
+        nodes.extend([Node::Leaf(Kind::Empty); 8]);
+        nodes[at] = Node::Split(first as u32);
+        for c in 0..8 {
+            self.grow(nodes, first + c, child_origin(o, s, c), s / 2);
+        }
     }
 }
 
@@ -1316,8 +1303,13 @@ pub fn mesh_stock_adaptive(
             }
             let o = origin(r);
             let mut nodes = vec![Node::Leaf(Kind::Empty)];
-            let mut resid = 0.0;
-            grow(&lat, &mut nodes, 0, o, ROOT, tol, &mut resid);
+            let mut g = Grower {
+                lat: &lat,
+                tol,
+                resid: 0.0,
+            };
+            g.grow(&mut nodes, 0, o, ROOT);
+            let resid = g.resid;
             let empty = matches!(nodes[0], Node::Leaf(Kind::Empty));
             (
                 (!empty).then_some(Tree {
@@ -1395,14 +1387,18 @@ pub fn mesh_stock_adaptive(
             .par_iter_mut()
             .zip(&failed)
             .map(|(t, nodes)| {
-                let mut resid: Real = 0.0;
+                let mut g = Grower {
+                    lat,
+                    tol,
+                    resid: 0.0,
+                };
                 for &node in nodes {
                     let (o, s) = node_box(t, node);
                     if s > 1 {
-                        split(lat, &mut t.nodes, node, o, s, tol, &mut resid);
+                        g.split(&mut t.nodes, node, o, s);
                     }
                 }
-                resid
+                g.resid
             })
             .reduce(|| 0.0, Real::max);
         report.max_plane_residual_mm = report.max_plane_residual_mm.max(resid);
@@ -1519,48 +1515,16 @@ mod tests {
     use super::p1;
     use super::*;
     use crate::cutting::mesh::mesh_stock;
-    use crate::cutting::sweep::TranslatedTool;
     use crate::cutting::tool::{Tool, ToolKind};
-    use crate::math::{Aabb, UnitVector3};
+    use crate::math::UnitVector3;
     use parry3d_f64::query::PointQuery;
 
-    fn stock(size: [Real; 3], pitch: Real) -> TriDexel {
-        let b = Aabb {
-            min: Point3::origin(),
-            max: Point3::new(size[0], size[1], size[2]),
-        };
-        TriDexel::new_box(b, pitch, 1e9).expect("fits")
-    }
-
-    fn cut_along(
-        s: &mut TriDexel,
-        kind: ToolKind,
-        dia: Real,
-        a: [Real; 3],
-        b: [Real; 3],
-        axis: Vector3,
-    ) {
-        let tool = Tool::try_new(kind, dia, 40.0).expect("valid");
-        let a = Point3::new(a[0], a[1], a[2]);
-        let d = Point3::new(b[0], b[1], b[2]) - a;
-        s.remove(
-            &TranslatedTool::new(tool, a, d, UnitVector3::new_normalize(axis)),
-            1,
-        );
-    }
-
-    fn cut(s: &mut TriDexel, kind: ToolKind, dia: Real, a: [Real; 3], b: [Real; 3]) {
-        cut_along(s, kind, dia, a, b, Vector3::z());
-    }
+    use crate::cutting::mesh::test_parts::{
+        STADIUM, closed, cut, cut_along, random_part, stadium_stages, stock,
+    };
 
     fn adaptive(s: &TriDexel) -> (TriMesh, AdaptiveReport) {
         mesh_stock_adaptive(s, &AdaptiveOptions::default()).expect("meshes")
-    }
-
-    /// Closed and oriented (every edge once each way); returns the Euler characteristic.
-    fn closed(m: &TriMesh) -> i64 {
-        m.check_watertight().expect("watertight and oriented");
-        m.euler_characteristic()
     }
 
     /// Largest distance to the mesh (parry3d's closest point, independent of the mesher)
@@ -1620,86 +1584,30 @@ mod tests {
 
     #[test]
     fn pocket_groove_hole_and_slot_keep_their_topology_and_volume() {
-        let mut s = stock([10.0, 10.0, 5.0], 0.2);
-        let (r, len, depth) = (1.5, 5.0, 2.0);
-        cut(
-            &mut s,
-            ToolKind::Flat,
-            2.0 * r,
-            [3.0, 3.0, 3.0],
-            [7.0, 6.0, 3.0],
-        );
-        let (m, rep) = adaptive(&s);
+        let stages = stadium_stages();
+        let (m, rep) = adaptive(&stages[0].0);
         assert_eq!(closed(&m), 2);
         // Blind stadium pocket: box minus stadium area × depth. Flat faces and sharp edges
         // are exact; only the curved wall is replaced by planes within the bound.
+        let (r, len, depth) = STADIUM;
         let exact = 500.0 - (2.0 * r * len + std::f64::consts::PI * r * r) * depth;
         let wall = 2.0 * (len + std::f64::consts::PI * r) * depth;
         let v = m.signed_volume();
         assert!((v - exact).abs() <= rep.bound_mm * wall, "{v} vs {exact}");
-        assert!(worst_distance(&s, &m, false) <= rep.bound_mm + 1e-9);
-        // A ball groove sloping into the floor: still a sphere.
-        cut(
-            &mut s,
-            ToolKind::Ball,
-            2.0,
-            [3.0, 7.0, 3.5],
-            [7.0, 7.5, 2.5],
-        );
-        let (m, rep) = adaptive(&s);
-        assert_eq!(closed(&m), 2);
-        assert!(worst_distance(&s, &m, false) <= rep.bound_mm + 1e-9);
-        // A hole through the whole height: genus 1.
-        cut(
-            &mut s,
-            ToolKind::Flat,
-            2.5,
-            [5.0, 5.0, -1.0],
-            [5.0, 5.0, -0.5],
-        );
-        let (m, _) = adaptive(&s);
-        assert_eq!(closed(&m), 0);
-        // A slot through the side under the top (z rays with two segments): genus 2.
-        cut_along(
-            &mut s,
-            ToolKind::Flat,
-            1.0,
-            [-1.0, 2.0, 1.0],
-            [11.0, 2.0, 1.0],
-            Vector3::y(),
-        );
-        assert!(s.grids()[2].ray(25, 12).len() == 2, "slot under material");
-        let (m, rep) = adaptive(&s);
-        assert_eq!(closed(&m), -2);
-        assert!(worst_distance(&s, &m, false) <= rep.bound_mm + 1e-9);
+        // Then the ball groove, the through hole and the side slot: topology and bound.
+        for (s, euler) in &stages {
+            let (m, rep) = adaptive(s);
+            assert_eq!(closed(&m), *euler);
+            assert!(worst_distance(s, &m, false) <= rep.bound_mm + 1e-9);
+        }
     }
 
     #[test]
     fn random_cuts_always_give_a_closed_oriented_mesh_within_the_bound() {
         // Thin walls, slivers, tiny islands, tilted tools: the topology guarantee holds for
         // any stock, and the bound for every crossing the lattice resolves.
-        let rng = crate::math::CounterRng::new(5);
         for case in 0..40u64 {
-            let u = |k: u64| rng.uniform(case, k);
-            let pitch = 0.15 + 0.2 * u(0);
-            let mut s = stock([4.0, 3.0, 2.0], pitch);
-            for c in 0..6u64 {
-                let kind = if u(10 + c) < 0.5 {
-                    ToolKind::Flat
-                } else {
-                    ToolKind::Ball
-                };
-                let p = |k: u64| {
-                    [
-                        4.5 * u(k) - 0.25,
-                        3.5 * u(k + 1) - 0.25,
-                        0.3 + 2.0 * u(k + 2),
-                    ]
-                };
-                let d = 0.2 + 1.2 * u(20 + c);
-                let axis = Vector3::new(u(50 + c) - 0.5, u(60 + c) - 0.5, 1.5);
-                cut_along(&mut s, kind, d, p(30 + 10 * c), p(35 + 10 * c), axis);
-            }
+            let s = random_part(5, case, true);
             let (m, rep) = adaptive(&s);
             m.check_watertight()
                 .unwrap_or_else(|e| panic!("case {case}: {e}"));

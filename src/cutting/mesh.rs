@@ -944,15 +944,17 @@ impl Qef {
     }
 }
 
+/// Parts for the meshers' tests: box stock, cuts, random parts, the closedness check.
 #[cfg(test)]
-mod tests {
-    use super::*;
+pub(super) mod test_parts {
+    use super::TriMesh;
     use crate::cutting::stock::TriDexel;
     use crate::cutting::sweep::TranslatedTool;
     use crate::cutting::tool::{Tool, ToolKind};
-    use crate::math::{Aabb, CounterRng, UnitVector3};
+    use crate::math::{Aabb, CounterRng, Point3, Real, UnitVector3, Vector3};
 
-    fn stock(size: [Real; 3], pitch: Real) -> TriDexel {
+    /// A box stock from the origin to `size` at `pitch`.
+    pub fn stock(size: [Real; 3], pitch: Real) -> TriDexel {
         let b = Aabb {
             min: Point3::origin(),
             max: Point3::new(size[0], size[1], size[2]),
@@ -960,18 +962,123 @@ mod tests {
         TriDexel::new_box(b, pitch, 1e9).expect("fits")
     }
 
-    fn cut(s: &mut TriDexel, kind: ToolKind, dia: Real, a: [Real; 3], b: [Real; 3]) {
+    /// Cuts a straight move of a tool of `kind` and diameter `dia` with its axis along
+    /// `axis`, tip from `a` to `b`.
+    pub fn cut_along(
+        s: &mut TriDexel,
+        kind: ToolKind,
+        dia: Real,
+        a: [Real; 3],
+        b: [Real; 3],
+        axis: Vector3,
+    ) {
         let tool = Tool::try_new(kind, dia, 40.0).expect("valid");
         let a = Point3::new(a[0], a[1], a[2]);
         let d = Point3::new(b[0], b[1], b[2]) - a;
-        s.remove(&TranslatedTool::new(tool, a, d, Vector3::z_axis()), 1);
+        s.remove(
+            &TranslatedTool::new(tool, a, d, UnitVector3::new_normalize(axis)),
+            1,
+        );
+    }
+
+    /// The same with the tool axis along +z.
+    pub fn cut(s: &mut TriDexel, kind: ToolKind, dia: Real, a: [Real; 3], b: [Real; 3]) {
+        cut_along(s, kind, dia, a, b, Vector3::z());
+    }
+
+    /// A 4 × 3 × 2 mm box at a random pitch (0.15–0.35 mm) cut by six random flat and
+    /// ball moves (tool axes tilted up to about 25° with `tilted`): thin walls, slivers and
+    /// tiny islands included.
+    pub fn random_part(seed: u64, case: u64, tilted: bool) -> TriDexel {
+        let rng = CounterRng::new(seed);
+        let u = |k: u64| rng.uniform(case, k);
+        let pitch = 0.15 + 0.2 * u(0);
+        let mut s = stock([4.0, 3.0, 2.0], pitch);
+        for c in 0..6u64 {
+            let kind = if u(10 + c) < 0.5 {
+                ToolKind::Flat
+            } else {
+                ToolKind::Ball
+            };
+            let p = |k: u64| {
+                [
+                    4.5 * u(k) - 0.25,
+                    3.5 * u(k + 1) - 0.25,
+                    0.3 + 2.0 * u(k + 2),
+                ]
+            };
+            let d = 0.2 + 1.2 * u(20 + c);
+            let axis = if tilted {
+                Vector3::new(u(50 + c) - 0.5, u(60 + c) - 0.5, 1.5)
+            } else {
+                Vector3::z()
+            };
+            cut_along(&mut s, kind, d, p(30 + 10 * c), p(35 + 10 * c), axis);
+        }
+        s
+    }
+
+    /// Radius, length and depth of the stadium pocket of [`stadium_stages`].
+    pub const STADIUM: (Real, Real, Real) = (1.5, 5.0, 2.0);
+
+    /// A 10 × 10 × 5 mm box at 0.2 mm after each of four cuts, with the Euler characteristic
+    /// its surface must have: a blind flat stadium pocket (Ø3 mm from (3, 3) to (7, 6), 2 mm
+    /// deep; a sphere, 2), a ball groove sloping into its floor (2), a hole through the
+    /// whole height (genus 1: 0), a slot through the side under the top, z rays with two
+    /// segments (genus 2: −2).
+    pub fn stadium_stages() -> Vec<(TriDexel, i64)> {
+        let (r, _, depth) = STADIUM;
+        let mut s = stock([10.0, 10.0, 5.0], 0.2);
+        let z = 5.0 - depth;
+        cut(
+            &mut s,
+            ToolKind::Flat,
+            2.0 * r,
+            [3.0, 3.0, z],
+            [7.0, 6.0, z],
+        );
+        let mut out = vec![(s.clone(), 2)];
+        cut(
+            &mut s,
+            ToolKind::Ball,
+            2.0,
+            [3.0, 7.0, 3.5],
+            [7.0, 7.5, 2.5],
+        );
+        out.push((s.clone(), 2));
+        cut(
+            &mut s,
+            ToolKind::Flat,
+            2.5,
+            [5.0, 5.0, -1.0],
+            [5.0, 5.0, -0.5],
+        );
+        out.push((s.clone(), 0));
+        cut_along(
+            &mut s,
+            ToolKind::Flat,
+            1.0,
+            [-1.0, 2.0, 1.0],
+            [11.0, 2.0, 1.0],
+            Vector3::y(),
+        );
+        assert!(s.grids()[2].ray(25, 12).len() == 2, "slot under material");
+        out.push((s, -2));
+        out
     }
 
     /// Every check a closed, oriented surface must pass, and its Euler characteristic.
-    fn closed(m: &TriMesh) -> i64 {
+    pub fn closed(m: &TriMesh) -> i64 {
         m.check_watertight().expect("watertight and oriented");
         m.euler_characteristic()
     }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::test_parts::{STADIUM, closed, cut, random_part, stadium_stages, stock};
+    use super::*;
+    use crate::cutting::tool::ToolKind;
 
     #[test]
     fn every_cell_case_gives_closed_oriented_polygons() {
@@ -1021,16 +1128,10 @@ mod tests {
     #[test]
     fn pocket_through_hole_and_slot_have_the_right_topology() {
         // Blind flat pocket, exact volume (stadium area × depth): still a sphere.
-        let mut s = stock([10.0, 10.0, 5.0], 0.2);
-        let (r, len, depth) = (1.5, 5.0, 2.0);
-        cut(
-            &mut s,
-            ToolKind::Flat,
-            2.0 * r,
-            [3.0, 3.0, 3.0],
-            [7.0, 6.0, 3.0],
-        );
-        let (m, _) = mesh_stock(&s).expect("meshes");
+        let stages = stadium_stages();
+        let s = &stages[0].0;
+        let (r, len, depth) = STADIUM;
+        let (m, _) = mesh_stock(s).expect("meshes");
         assert_eq!(closed(&m), 2);
         let exact = 500.0 - (2.0 * r * len + std::f64::consts::PI * r * r) * depth;
         // Bound: sharp edges (box 100 mm, pocket rim and floor edge 2·(2·len + 2πr)) lose at
@@ -1047,65 +1148,19 @@ mod tests {
             "{v} vs tri-dexel {}",
             s.volume()
         );
-        // A ball groove sloping into the floor: still a sphere.
-        cut(
-            &mut s,
-            ToolKind::Ball,
-            2.0,
-            [3.0, 7.0, 3.5],
-            [7.0, 7.5, 2.5],
-        );
-        let (m, _) = mesh_stock(&s).expect("meshes");
-        assert_eq!(closed(&m), 2);
-        // A hole through the whole height: genus 1.
-        cut(
-            &mut s,
-            ToolKind::Flat,
-            2.5,
-            [5.0, 5.0, -1.0],
-            [5.0, 5.0, -0.5],
-        );
-        let (m, _) = mesh_stock(&s).expect("meshes");
-        assert_eq!(closed(&m), 0);
-        // A slot through the side under the top (z rays with two segments): genus 2 now.
-        let tool = Tool::try_new(ToolKind::Flat, 1.0, 40.0).expect("valid");
-        let side = TranslatedTool::new(
-            tool,
-            Point3::new(-1.0, 2.0, 1.0),
-            Vector3::new(0.0, 0.0, 0.0) + Vector3::new(12.0, 0.0, 0.0),
-            UnitVector3::new_normalize(Vector3::y()),
-        );
-        s.remove(&side, 2);
-        let (m, _) = mesh_stock(&s).expect("meshes");
-        assert_eq!(closed(&m), -2);
-        assert!(s.grids()[2].ray(25, 12).len() == 2, "slot under material");
+        // The ball groove, the through hole, the side slot: the topology of each.
+        for (s, euler) in &stages[1..] {
+            let (m, _) = mesh_stock(s).expect("meshes");
+            assert_eq!(closed(&m), *euler);
+        }
     }
 
     #[test]
     fn random_cuts_always_give_a_closed_oriented_mesh() {
         // Thin walls, slivers and tiny islands included: the topology guarantee holds for
         // any stock.
-        let rng = CounterRng::new(3);
         for case in 0..60u64 {
-            let u = |k: u64| rng.uniform(case, k);
-            let pitch = 0.15 + 0.2 * u(0);
-            let mut s = stock([4.0, 3.0, 2.0], pitch);
-            for c in 0..6u64 {
-                let kind = if u(10 + c) < 0.5 {
-                    ToolKind::Flat
-                } else {
-                    ToolKind::Ball
-                };
-                let p = |k: u64| {
-                    [
-                        4.5 * u(k) - 0.25,
-                        3.5 * u(k + 1) - 0.25,
-                        0.3 + 2.0 * u(k + 2),
-                    ]
-                };
-                let d = 0.2 + 1.2 * u(20 + c);
-                cut(&mut s, kind, d, p(30 + 10 * c), p(35 + 10 * c));
-            }
+            let s = random_part(3, case, false);
             let (m, _) = mesh_stock(&s).expect("meshes");
             m.check_watertight()
                 .unwrap_or_else(|e| panic!("case {case}: {e}"));
