@@ -1276,7 +1276,8 @@ fn share_cell_face(a: Key, b: Key) -> bool {
 // The mesher.
 
 /// Meshes the boundary of the stock's material adaptively. See the module documentation
-/// for the guarantees. Fails only if the mesh would need 2³² vertices or more.
+/// for the guarantees. Fails only if the mesh would need 2³² vertices or more, or (a
+/// defect, never seen) if a single lattice cell's face segments did not close.
 pub fn mesh_stock_adaptive(
     stock: &TriDexel,
     opts: &AdaptiveOptions,

@@ -2,6 +2,11 @@
 //! material boundary whose vertices are the exact dexel crossings, and writers for binary
 //! STL, OBJ and binary PLY.
 //!
+//! This is the *dexel-resolution contour*: one polygon per lattice cell the surface
+//! crosses, tens of millions of triangles for a large part at a fine pitch. The commands
+//! write and draw the adaptive mesh of [`super::adaptive`] instead, which meshes single cells
+//! as this module does and is checked against this one's vertices.
+//!
 //! **Lattice.** The three dexel grids of a [`TriDexel`] share their spacings per axis, so
 //! their rays lie on the lines of one lattice of points `P(i,j,k)` (the ray centres), and
 //! each lattice edge lies on exactly one ray. The lattice is grown by one layer of points
