@@ -1483,6 +1483,10 @@ impl Forest<'_> {
                 }
             }
         }
+        // Each vertex is named by every leaf that uses it: keep one per tree (equal keys
+        // carry equal positions), so the trees' outputs stay near the mesh's size.
+        out.verts.sort_unstable_by_key(|v| v.0);
+        out.verts.dedup_by_key(|v| v.0);
         out
     }
 }
