@@ -157,7 +157,7 @@ impl SimulationReport {
     /// A short text summary.
     pub fn summary(&self) -> String {
         let mut s = format!(
-            "scene         {}\nprogram       {}\nmoves         {} ({} cutting, {} rotary)\nremoved       {:.4} mm³ of {:.4} mm³\nsweep bound   {:.2e} mm (rotary envelope or sub-steps, and arc chords)\nmesh          {} triangles, {} vertices, Euler characteristic {}\n",
+            "scene         {}\nprogram       {}\nmoves         {} ({} cutting, {} rotary)\nremoved       {:.4} mm³ of {:.4} mm³\nsweep bound   {:.2e} mm (rotary envelope or sub-steps, and arc chords)\nmesh          {} triangles, {} vertices, Euler characteristic {}, resolved crossings within {:.1e} mm\n",
             self.scene,
             self.program,
             self.sweep.moves,
@@ -169,6 +169,7 @@ impl SimulationReport {
             self.mesh.triangles,
             self.mesh.vertices,
             self.mesh.euler_characteristic,
+            self.mesh.bound_mm,
         );
         if let (Some(tip), Some(bow)) = (self.sweep.tip_error_mm, self.sweep.path_bow_mm) {
             s.push_str(&format!(
