@@ -420,6 +420,10 @@ pub struct RotaryEnvelope {
     part_speed: [Real; PARTS],
     /// Poses at λ = k/(2N), k = 0..=2N: cell ends at even k, middles at odd k.
     samples: Vec<Sample>,
+    /// Poses halfway between consecutive samples, with their λ: where every ray's first
+    /// bisection and touch test look (computed once per move instead of once per ray; the
+    /// same pose bit for bit, see [`RotaryEnvelope::sample_at`]).
+    quarters: Vec<(Real, Sample)>,
     /// Box of each cell's grown tool.
     cell_boxes: Vec<Aabb>,
     bounds: Aabb,
@@ -488,6 +492,13 @@ impl RotaryEnvelope {
         let cell_boxes = (0..cells)
             .map(|j| frame_box(&samples[2 * j + 1], shape, r, l, delta))
             .collect();
+        let lambda_of = |k: usize| k as Real / (2 * cells) as Real;
+        let quarters = (0..2 * cells)
+            .map(|k| {
+                let mid = 0.5 * (lambda_of(k) + lambda_of(k + 1));
+                (mid, path.sample(mid))
+            })
+            .collect();
         Ok(Self {
             shape,
             r,
@@ -499,6 +510,7 @@ impl RotaryEnvelope {
             part_z,
             part_speed,
             samples,
+            quarters,
             cell_boxes,
             bounds,
         })
@@ -569,7 +581,20 @@ impl RotaryEnvelope {
     }
 
     fn probe_at(&self, lambda: Real, ray: &Ray) -> Probe {
-        self.probe(&self.path.sample(lambda), lambda, ray)
+        self.probe(&self.sample_at(lambda), lambda, ray)
+    }
+
+    /// The pose at `lambda`: the stored one when `lambda` is exactly a quarter point (the
+    /// midpoint of two consecutive samples as [`Self::refine`] computes it), else computed.
+    fn sample_at(&self, lambda: Real) -> Sample {
+        let k = ((lambda * (4 * self.cells) as Real - 1.0) / 2.0).round();
+        if k >= 0.0
+            && let Some((at, s)) = self.quarters.get(k as usize)
+            && *at == lambda
+        {
+            return *s;
+        }
+        self.path.sample(lambda)
     }
 
     /// The sorted, disjoint intervals of the ray `o + t·e` (`e` unit) inside the swept volume,
@@ -712,7 +737,7 @@ impl RotaryEnvelope {
             }
             // And the grown tool about the middle to meet it.
             let mid = 0.5 * (a.lambda + b.lambda);
-            let s = self.path.sample(mid);
+            let s = self.sample_at(mid);
             let grow = self.speed * w / 2.0 - ENVELOPE_TOL;
             if grow > 0.0 && self.meets_grown(&s, ray, grow) {
                 let m = self.probe(&s, mid, ray);
