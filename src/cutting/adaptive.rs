@@ -765,9 +765,14 @@ fn cell_face_segments(inside: [bool; 4]) -> ([(usize, usize, usize); 2], usize) 
     // Edge k joins corners k and k + 1; midpoints and corners in face units.
     const MID: [[Real; 2]; 4] = [[0.5, 0.0], [1.0, 0.5], [0.5, 1.0], [0.0, 0.5]];
     const CORNER: [[Real; 2]; 4] = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
-    let active: Vec<usize> = (0..4)
-        .filter(|&k| inside[k] != inside[(k + 1) % 4])
-        .collect();
+    let mut active = [0usize; 4];
+    let mut n_active = 0;
+    for k in 0..4 {
+        if inside[k] != inside[(k + 1) % 4] {
+            active[n_active] = k;
+            n_active += 1;
+        }
+    }
     let mut segs = [(0, 0, 0); 2];
     let mut count = 0;
     let mut add = |a: usize, b: usize, c: usize, slot: usize| {
@@ -781,7 +786,7 @@ fn cell_face_segments(inside: [bool; 4]) -> ([(usize, usize, usize); 2], usize) 
         };
         count += 1;
     };
-    match active.len() {
+    match n_active {
         2 => {
             let c = (0..4).find(|&c| inside[c]).unwrap_or(0);
             add(active[0], active[1], c, 0);
@@ -826,6 +831,9 @@ impl Forest<'_> {
             for a in 0..q {
                 let cs = [(a, b), (a + 1, b), (a + 1, b + 1), (a, b + 1)];
                 let ins = cs.map(|(x, y)| signs[x + y * w]);
+                if ins.iter().all(|&x| x == ins[0]) {
+                    continue;
+                }
                 let (list, count) = cell_face_segments(ins);
                 if count == 0 {
                     continue;
