@@ -11,8 +11,7 @@ use twinmill::cutting::mesh::mesh_stock;
 use twinmill::cutting::stock::TriDexel;
 use twinmill::cutting::sweep::{SweepOptions, sweep_program};
 use twinmill::cutting::tool::{Tool, ToolKind};
-use twinmill::machine::chain::{Axis, AxisKind, Chain};
-use twinmill::math::{Point3, UnitVector3, Vector3};
+use twinmill::machine::chain::Chain;
 use twinmill::nc::AxisLetter;
 use twinmill::progress::NoProgress;
 use twinmill::{math, nc};
@@ -21,21 +20,8 @@ use twinmill::{math, nc};
 mod p1;
 
 fn p1_stock(pitch: f64) -> TriDexel {
-    let ax = |letter, d: Vector3| Axis {
-        letter,
-        kind: AxisKind::Linear,
-        direction: UnitVector3::new_normalize(d),
-        origin: Point3::origin(),
-    };
-    let chain = Chain::new(
-        vec![
-            ax(AxisLetter::Y, Vector3::y()),
-            ax(AxisLetter::X, Vector3::x()),
-            ax(AxisLetter::Z, Vector3::z()),
-        ],
-        "S",
-    )
-    .expect("valid chain");
+    let chain =
+        Chain::cartesian([AxisLetter::Y, AxisLetter::X, AxisLetter::Z]).expect("valid chain");
     let tool = Tool::try_new(ToolKind::Flat, p1::TOOL_DIAMETER, 30.0).expect("valid");
     let mut s = TriDexel::new_box(p1::stock_box(), pitch, 8e9).expect("fits");
     let opts = SweepOptions {

@@ -11,8 +11,7 @@ use twinmill::cutting::stock::TriDexel;
 use twinmill::cutting::sweep::{SweepOptions, sweep_program};
 use twinmill::cutting::tool::{Tool, ToolKind};
 use twinmill::cutting::zmap::{ZMap, ZMapOptions};
-use twinmill::machine::chain::{Axis, AxisKind, Chain};
-use twinmill::math::{Point3, UnitVector3, Vector3};
+use twinmill::machine::chain::Chain;
 use twinmill::nc::AxisLetter;
 use twinmill::progress::NoProgress;
 use twinmill::{math, nc};
@@ -22,21 +21,7 @@ mod p1;
 
 /// The nominal 3-axis machine (Y table, X carriage, Z spindle).
 pub fn xyz_chain() -> Chain {
-    let ax = |letter, d: Vector3| Axis {
-        letter,
-        kind: AxisKind::Linear,
-        direction: UnitVector3::new_normalize(d),
-        origin: Point3::origin(),
-    };
-    Chain::new(
-        vec![
-            ax(AxisLetter::Y, Vector3::y()),
-            ax(AxisLetter::X, Vector3::x()),
-            ax(AxisLetter::Z, Vector3::z()),
-        ],
-        "S",
-    )
-    .expect("valid chain")
+    Chain::cartesian([AxisLetter::Y, AxisLetter::X, AxisLetter::Z]).expect("valid chain")
 }
 
 fn benches(c: &mut Criterion) {

@@ -13,8 +13,8 @@ use std::time::Instant;
 use twinmill::cutting::stock::TriDexel;
 use twinmill::cutting::sweep::{SweepOptions, sweep_program};
 use twinmill::cutting::tool::{Tool, ToolKind};
-use twinmill::machine::chain::{Axis, AxisKind, Chain};
-use twinmill::math::{Aabb, Point3, UnitVector3, Vector3};
+use twinmill::machine::chain::Chain;
+use twinmill::math::{Aabb, Point3};
 use twinmill::nc::{AxisLetter, AxisValues, Move, MoveKind};
 use twinmill::progress::NoProgress;
 use twinmill::scene::Scene;
@@ -50,21 +50,7 @@ fn digest(stock: &TriDexel) -> (u64, usize) {
 }
 
 fn xyz_chain() -> Chain {
-    let ax = |letter, d: Vector3| Axis {
-        letter,
-        kind: AxisKind::Linear,
-        direction: UnitVector3::new_normalize(d),
-        origin: Point3::origin(),
-    };
-    Chain::new(
-        vec![
-            ax(AxisLetter::Y, Vector3::y()),
-            ax(AxisLetter::X, Vector3::x()),
-            ax(AxisLetter::Z, Vector3::z()),
-        ],
-        "S",
-    )
-    .expect("valid chain")
+    Chain::cartesian([AxisLetter::Y, AxisLetter::X, AxisLetter::Z]).expect("valid chain")
 }
 
 fn main() {

@@ -12,8 +12,7 @@ use twinmill::cutting::adaptive::{AdaptiveOptions, mesh_stock_adaptive};
 use twinmill::cutting::stock::TriDexel;
 use twinmill::cutting::sweep::{SweepOptions, sweep_program};
 use twinmill::cutting::tool::{Tool, ToolKind};
-use twinmill::machine::chain::{Axis, AxisKind, Chain};
-use twinmill::math::{Point3, UnitVector3, Vector3};
+use twinmill::machine::chain::Chain;
 use twinmill::nc::AxisLetter;
 use twinmill::progress::NoProgress;
 use twinmill::{math, nc};
@@ -28,21 +27,8 @@ fn main() {
         _ => ToolKind::Flat,
     };
     let pitch: f64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(0.05);
-    let ax = |letter, d: Vector3| Axis {
-        letter,
-        kind: AxisKind::Linear,
-        direction: UnitVector3::new_normalize(d),
-        origin: Point3::origin(),
-    };
-    let chain = Chain::new(
-        vec![
-            ax(AxisLetter::Y, Vector3::y()),
-            ax(AxisLetter::X, Vector3::x()),
-            ax(AxisLetter::Z, Vector3::z()),
-        ],
-        "S",
-    )
-    .expect("valid chain");
+    let chain =
+        Chain::cartesian([AxisLetter::Y, AxisLetter::X, AxisLetter::Z]).expect("valid chain");
     let tool = Tool::try_new(kind, p1::TOOL_DIAMETER, 30.0).expect("valid");
     let moves = p1::moves();
     let opts = SweepOptions {

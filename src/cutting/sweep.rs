@@ -1725,21 +1725,7 @@ mod tests {
 
     /// The nominal 3-axis machine of benchmark P1 (Y table, X carriage, Z spindle).
     fn xyz_chain() -> Chain {
-        let ax = |letter, d: Vector3| crate::machine::chain::Axis {
-            letter,
-            kind: AxisKind::Linear,
-            direction: UnitVector3::new_normalize(d),
-            origin: Point3::origin(),
-        };
-        Chain::new(
-            vec![
-                ax(AxisLetter::Y, Vector3::y()),
-                ax(AxisLetter::X, Vector3::x()),
-                ax(AxisLetter::Z, Vector3::z()),
-            ],
-            "S",
-        )
-        .expect("valid chain")
+        Chain::cartesian([AxisLetter::Y, AxisLetter::X, AxisLetter::Z]).expect("valid chain")
     }
 
     fn linear(start: AxisValues, end: AxisValues, line: usize) -> Move {

@@ -695,21 +695,7 @@ mod tests {
     use crate::progress::NoProgress;
 
     fn xyz_chain() -> Chain {
-        let ax = |letter, d: Vector3| Axis {
-            letter,
-            kind: AxisKind::Linear,
-            direction: UnitVector3::new_normalize(d),
-            origin: Point3::origin(),
-        };
-        Chain::new(
-            vec![
-                ax(AxisLetter::Y, Vector3::y()),
-                ax(AxisLetter::X, Vector3::x()),
-                ax(AxisLetter::Z, Vector3::z()),
-            ],
-            "S",
-        )
-        .expect("valid chain")
+        Chain::cartesian([AxisLetter::Y, AxisLetter::X, AxisLetter::Z]).expect("valid chain")
     }
 
     fn mv(a: [Real; 3], b: [Real; 3], line: usize) -> Move {

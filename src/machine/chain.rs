@@ -164,6 +164,29 @@ pub struct Chain {
 }
 
 impl Chain {
+    /// A nominal Cartesian machine: three linear axes, each along its letter's unit
+    /// direction (X along x, Y along y, Z along z; origin 0, no deviations), listed from the
+    /// workpiece to the tool in `order`, ending at the spindle S. A rotary letter has no such
+    /// direction ([`KinematicsError::BadDirection`]); a repeated one is refused as by
+    /// [`Chain::new`].
+    pub fn cartesian(order: [AxisLetter; 3]) -> Result<Self, KinematicsError> {
+        let axes = order
+            .iter()
+            .map(|&letter| {
+                let mut d = Vector3::zeros();
+                *d.get_mut(letter.index())
+                    .ok_or(KinematicsError::BadDirection(letter.as_char()))? = 1.0;
+                Ok(Axis {
+                    letter,
+                    kind: AxisKind::Linear,
+                    direction: UnitVector3::new_normalize(d),
+                    origin: Point3::origin(),
+                })
+            })
+            .collect::<Result<Vec<_>, KinematicsError>>()?;
+        Self::new(axes, "S")
+    }
+
     /// A chain of `axes` from workpiece to tool, ending at the body `spindle`, with all
     /// deviations zero.
     pub fn new(axes: Vec<Axis>, spindle: &str) -> Result<Self, KinematicsError> {
@@ -668,26 +691,32 @@ pub(crate) fn mdx50_for_tests() -> Chain {
 /// instruments' unit tests build on.
 #[cfg(test)]
 pub(crate) fn xyz_for_tests() -> Chain {
-    let ax = |letter, d: Vector3| Axis {
-        letter,
-        kind: AxisKind::Linear,
-        direction: UnitVector3::new_normalize(d),
-        origin: Point3::origin(),
-    };
-    Chain::new(
-        vec![
-            ax(AxisLetter::X, Vector3::x()),
-            ax(AxisLetter::Y, Vector3::y()),
-            ax(AxisLetter::Z, Vector3::z()),
-        ],
-        "S",
-    )
-    .expect("valid chain")
+    Chain::cartesian([AxisLetter::X, AxisLetter::Y, AxisLetter::Z]).expect("valid chain")
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_cartesian_chain_puts_the_tip_at_the_axis_values_and_refuses_bad_letters() {
+        use AxisLetter::{A, X, Y, Z};
+        for order in [[X, Y, Z], [Y, X, Z], [Z, X, Y]] {
+            let c = Chain::cartesian(order).expect("valid");
+            let q = AxisValues::from_array([1.5, -2.25, 3.0, 0.0, 0.0, 0.0]);
+            let t = c.w_from_t(&q);
+            assert_eq!(t.translation.vector, Vector3::new(1.5, -2.25, 3.0));
+            assert_eq!(t.rotation, nalgebra::UnitQuaternion::identity());
+        }
+        assert_eq!(
+            Chain::cartesian([X, A, Z]).err(),
+            Some(KinematicsError::BadDirection('A'))
+        );
+        assert_eq!(
+            Chain::cartesian([X, Y, X]).err(),
+            Some(KinematicsError::DuplicateAxis('X'))
+        );
+    }
 
     fn mdx50() -> Chain {
         super::mdx50_for_tests()

@@ -173,21 +173,7 @@ fn mesh_stock_respects_the_memory_budget() {
 }
 
 fn xyz() -> Chain {
-    let ax = |letter, d: Vector3| Axis {
-        letter,
-        kind: AxisKind::Linear,
-        direction: UnitVector3::new_normalize(d),
-        origin: Point3::origin(),
-    };
-    Chain::new(
-        vec![
-            ax(AxisLetter::Y, Vector3::y()),
-            ax(AxisLetter::X, Vector3::x()),
-            ax(AxisLetter::Z, Vector3::z()),
-        ],
-        "S",
-    )
-    .expect("chain")
+    Chain::cartesian([AxisLetter::Y, AxisLetter::X, AxisLetter::Z]).expect("chain")
 }
 
 fn mv(kind: MoveKind, a: [Real; 3], b: [Real; 3], line: usize) -> Move {

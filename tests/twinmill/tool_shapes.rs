@@ -61,21 +61,7 @@ fn flat_and_ball_closed_forms_agree_with_the_piecewise_cutter() {
 }
 
 fn xyz_chain() -> Chain {
-    let lin = |letter, dir: Vector3| Axis {
-        letter,
-        kind: AxisKind::Linear,
-        direction: UnitVector3::new_normalize(dir),
-        origin: Point3::origin(),
-    };
-    Chain::new(
-        vec![
-            lin(AxisLetter::X, Vector3::x()),
-            lin(AxisLetter::Y, Vector3::y()),
-            lin(AxisLetter::Z, Vector3::z()),
-        ],
-        "S",
-    )
-    .expect("valid chain")
+    Chain::cartesian([AxisLetter::X, AxisLetter::Y, AxisLetter::Z]).expect("valid chain")
 }
 
 fn at(x: Real, y: Real, z: Real) -> AxisValues {
