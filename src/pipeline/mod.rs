@@ -189,6 +189,28 @@ pub fn make_stock(scene: &Scene) -> Result<TriDexel, PipelineError> {
     })
 }
 
+/// The cut part's mesh as the commands write and draw it: the adaptive mesh at its default
+/// tolerances (docs/cutting.md#the-part-mesh), its failure naming the scene at `path`.
+pub fn part_mesh(
+    stock: &TriDexel,
+    path: &str,
+) -> Result<
+    (
+        crate::cutting::mesh::TriMesh,
+        crate::cutting::adaptive::AdaptiveReport,
+    ),
+    PipelineError,
+> {
+    crate::cutting::adaptive::mesh_stock_adaptive(
+        stock,
+        &crate::cutting::adaptive::AdaptiveOptions::default(),
+    )
+    .map_err(|source| PipelineError::Mesh {
+        path: path.to_string(),
+        source,
+    })
+}
+
 /// Makes the stock and sweeps the program through the scene's deviated chain.
 pub fn machine_part(
     scene: &Scene,

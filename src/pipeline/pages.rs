@@ -10,7 +10,6 @@
 
 use super::{PipelineError, make_stock, sweep_failed};
 use crate::calibration::calibrate::Feature;
-use crate::cutting::adaptive::{AdaptiveOptions, mesh_stock_adaptive};
 use crate::cutting::mesh::TriMesh;
 use crate::cutting::stock::TriDexel;
 use crate::cutting::sweep::{Kinematics, sweep_program};
@@ -91,12 +90,7 @@ pub fn reference_part(scene: &Scene, moves: &[Move]) -> Result<Reference, Pipeli
         location: format!("{spath}: nominal part"),
         source,
     })?;
-    let (mesh, _) = mesh_stock_adaptive(&stock, &AdaptiveOptions::default()).map_err(|source| {
-        PipelineError::Mesh {
-            path: spath.clone(),
-            source,
-        }
-    })?;
+    let (mesh, _) = super::part_mesh(&stock, &spath)?;
     let model =
         ReferenceSurface::new(mesh.vertices, mesh.triangles).ok_or(PipelineError::Deviation {
             path: spath,
@@ -214,13 +208,7 @@ pub fn run_page(
     program: &crate::nc::Program,
     outcome: &super::Outcome,
 ) -> Result<String, PipelineError> {
-    let (mesh, _) =
-        mesh_stock_adaptive(&outcome.stock, &AdaptiveOptions::default()).map_err(|source| {
-            PipelineError::Mesh {
-                path: scene.path.display().to_string(),
-                source,
-            }
-        })?;
+    let (mesh, _) = super::part_mesh(&outcome.stock, &scene.path.display().to_string())?;
     let shown = display_part(scene, &mesh, || reference_part(scene, &program.moves))?;
     let v = view(
         scene,
@@ -322,12 +310,7 @@ pub fn scan_page(
     cloud: &[Point3],
 ) -> Result<String, PipelineError> {
     let spath = scene.path.display().to_string();
-    let (mesh, _) = mesh_stock_adaptive(stock, &AdaptiveOptions::default()).map_err(|source| {
-        PipelineError::Mesh {
-            path: spath.clone(),
-            source,
-        }
-    })?;
+    let (mesh, _) = super::part_mesh(stock, &spath)?;
     let shown = display_part(scene, &mesh, || {
         Ok(Reference {
             model: None,
@@ -376,12 +359,7 @@ pub fn correct_page(
         &NoProgress,
     )
     .map_err(sweep_failed(program, &spath))?;
-    let (mesh, _) = mesh_stock_adaptive(&stock, &AdaptiveOptions::default()).map_err(|source| {
-        PipelineError::Mesh {
-            path: spath.clone(),
-            source,
-        }
-    })?;
+    let (mesh, _) = super::part_mesh(&stock, &spath)?;
     let shown = display_part(scene, &mesh, || {
         let mut r = reference_part(scene, &program.moves)?;
         if r.model.is_some() && scene.design.is_none() {

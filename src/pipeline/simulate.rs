@@ -5,7 +5,6 @@
 
 use super::pages::{display_part, part_png, reference_part, view};
 use super::{PipelineError, make_stock, sweep_failed};
-use crate::cutting::adaptive::{AdaptiveOptions, mesh_stock_adaptive};
 use crate::cutting::collide::{CollisionReport, sweep_with_checks};
 use crate::cutting::mesh::TriMesh;
 use crate::cutting::sweep::{Kinematics, sweep_program};
@@ -91,13 +90,7 @@ pub fn simulate(
     };
     timings.insert("sweep".into(), clock.elapsed().as_secs_f64());
     let clock = Instant::now();
-    let (mesh, mesh_report) =
-        mesh_stock_adaptive(&stock, &AdaptiveOptions::default()).map_err(|source| {
-            PipelineError::Mesh {
-                path: path.clone(),
-                source,
-            }
-        })?;
+    let (mesh, mesh_report) = super::part_mesh(&stock, &path)?;
     timings.insert("mesh".into(), clock.elapsed().as_secs_f64());
     let clock = Instant::now();
     let render_err = |source| PipelineError::Render {
