@@ -1003,7 +1003,8 @@ fn simplify(ch: &mut Chain, tol: Real) {
 struct Out {
     tris: Vec<[Key; 3]>,
     verts: Vec<(Key, Point3)>,
-    failed: Vec<usize>,
+    /// Leaves whose triangulation failed: node, origin, size.
+    failed: Vec<(usize, [isize; 3], usize)>,
     planar: usize,
     edge: usize,
     fine: usize,
@@ -1128,7 +1129,7 @@ impl Forest<'_> {
                             _ => out.edge += 1,
                         }
                     }
-                    None => out.failed.push(leaf.node),
+                    None => out.failed.push((leaf.node, leaf.o, leaf.s)),
                 }
             }
         }
@@ -1216,7 +1217,7 @@ impl Forest<'_> {
         let Some(loops) = self.loops(leaf, &signs, tol, &mut corners) else {
             // Cannot happen for a single cell (its face segments always close); keep the
             // mesh closed by failing loudly in the report instead of guessing.
-            out.failed.push(leaf.node);
+            out.failed.push((leaf.node, leaf.o, leaf.s));
             return;
         };
         out.fine += 1;
@@ -1369,7 +1370,7 @@ pub fn mesh_stock_adaptive(
                 *o = n;
             }
         }
-        let failed: Vec<Vec<usize>> = outs
+        let failed: Vec<Vec<(usize, [isize; 3], usize)>> = outs
             .iter()
             .map(|o| o.as_ref().map_or_else(Vec::new, |o| o.failed.clone()))
             .collect();
@@ -1380,11 +1381,7 @@ pub fn mesh_stock_adaptive(
         // cell cannot fail (its face segments always close), but if one did it would fail
         // forever: stop instead.
         report.split_rounds += 1;
-        let cell_failed = forest
-            .trees
-            .iter()
-            .zip(&failed)
-            .any(|(t, nodes)| nodes.iter().any(|&node| node_box(t, node).1 == 1));
+        let cell_failed = failed.iter().flatten().any(|&(_, _, s)| s == 1);
         if cell_failed {
             return Err(MeshError::Unresolved {
                 what: "a single lattice cell whose face segments do not close",
@@ -1401,11 +1398,8 @@ pub fn mesh_stock_adaptive(
                     tol,
                     resid: 0.0,
                 };
-                for &node in nodes {
-                    let (o, s) = node_box(t, node);
-                    if s > 1 {
-                        g.split(&mut t.nodes, node, o, s);
-                    }
+                for &(node, o, s) in nodes {
+                    g.split(&mut t.nodes, node, o, s);
                 }
                 g.resid
             })
@@ -1497,22 +1491,6 @@ impl Forest<'_> {
         out.verts.dedup_by_key(|v| v.0);
         out
     }
-}
-
-/// Origin and size of a node, found by walking down from the root.
-fn node_box(t: &Tree, target: usize) -> ([isize; 3], usize) {
-    let mut stack = vec![(0usize, t.origin, ROOT)];
-    while let Some((node, o, s)) = stack.pop() {
-        if node == target {
-            return (o, s);
-        }
-        if let Node::Split(first) = t.nodes[node] {
-            for c in 0..8 {
-                stack.push((first as usize + c, child_origin(o, s, c), s / 2));
-            }
-        }
-    }
-    (t.origin, ROOT)
 }
 
 #[cfg(test)]
