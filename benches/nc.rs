@@ -14,9 +14,9 @@ use twinmill::nc::{InterpOptions, Interpreter, RecordBody};
 /// Motion blocks in the program.
 const BLOCKS: usize = 200_000;
 
-fn count(interp: Interpreter) -> usize {
+fn count(mut interp: Interpreter) -> usize {
     let mut n = 0;
-    for rec in interp {
+    while let Some(rec) = interp.next_ref() {
         if let Ok(r) = rec
             && matches!(r.body, RecordBody::Motion(_))
         {

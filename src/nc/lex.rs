@@ -789,6 +789,129 @@ impl Lexer {
         read_block(&self.norm[..k], &self.gaps, line, params, &mut self.block)
     }
 
+    /// Reads a *plain* line straight into [`Lexer::block`], without the normalised copy:
+    /// words of a letter and an unsigned or signed decimal number of at most
+    /// [`FAST_DIGITS`] digits, separated by blanks or nothing, G codes with at most one
+    /// decimal, M codes whole, no repeated word. That is what most lines of a long program
+    /// are. Returns false, with nothing decided, for any other line (comments, parameters,
+    /// expressions, O-words, block delete, a blank inside a word, anything in error): the
+    /// caller then reads it with [`Lexer::prepare`] and [`Lexer::parse`], which give the
+    /// same block for a plain line (tested on every line of the conformance corpus).
+    pub fn read_plain(&mut self, line: &[u8]) -> bool {
+        let b = &mut *self.block;
+        b.clear();
+        let n = line.len();
+        let mut i = 0;
+        loop {
+            while i < n && matches!(line[i], b' ' | b'\t' | b'\r') {
+                i += 1;
+            }
+            if i == n {
+                return true;
+            }
+            let start = i;
+            let letter = line[i];
+            if !letter.is_ascii_alphabetic() {
+                return false;
+            }
+            let ch = letter.to_ascii_lowercase();
+            i += 1;
+            let mut neg = false;
+            if let Some(&c @ (b'+' | b'-')) = line.get(i) {
+                neg = c == b'-';
+                i += 1;
+            }
+            let mut mant: u64 = 0;
+            let mut digits = 0;
+            while let Some(d) = line.get(i).map(|c| c.wrapping_sub(b'0'))
+                && d <= 9
+            {
+                mant = mant * 10 + d as u64;
+                digits += 1;
+                i += 1;
+                if digits > FAST_DIGITS {
+                    return false;
+                }
+            }
+            let mut frac = 0;
+            if line.get(i) == Some(&b'.') {
+                i += 1;
+                while let Some(d) = line.get(i).map(|c| c.wrapping_sub(b'0'))
+                    && d <= 9
+                {
+                    mant = mant * 10 + d as u64;
+                    frac += 1;
+                    digits += 1;
+                    i += 1;
+                    if digits > FAST_DIGITS {
+                        return false;
+                    }
+                }
+            }
+            if digits == 0 {
+                return false;
+            }
+            // what follows a number is a blank, the next letter or the end (a blank then a
+            // digit, a point or a sign would continue the number in the general reader)
+            let mut j = i;
+            while j < n && matches!(line[j], b' ' | b'\t' | b'\r') {
+                j += 1;
+            }
+            if j < n && !line[j].is_ascii_alphabetic() {
+                return false;
+            }
+            let pos = start as u32;
+            match ch {
+                b'g' | b'm' => {
+                    // the code ×10, exactly what the general reader rounds `v × 10` to
+                    let code = match frac {
+                        0 if mant < 100_000 => mant as i32 * 10,
+                        1 if mant < 1_000_000 => mant as i32,
+                        _ => return false,
+                    };
+                    if neg {
+                        return false;
+                    }
+                    if ch == b'g' {
+                        if b.ng >= MAX_CODES {
+                            return false;
+                        }
+                        b.g[b.ng] = (code, pos);
+                        b.ng += 1;
+                    } else {
+                        if code % 10 != 0 || b.nm >= MAX_CODES {
+                            return false;
+                        }
+                        b.m[b.nm] = (code / 10, pos);
+                        b.nm += 1;
+                    }
+                }
+                b'n' => {
+                    if b.n.is_some() {
+                        return false;
+                    }
+                    let v = mant as Real / POW10[frac];
+                    b.n = Some(if neg { -v } else { v });
+                }
+                _ => {
+                    if !WORD_LETTER[ch as usize] {
+                        return false;
+                    }
+                    let k = slot(ch);
+                    if b.present & (1 << k) != 0 {
+                        return false;
+                    }
+                    let v = mant as Real / POW10[frac];
+                    b.words[k] = if neg { -v } else { v };
+                    b.present |= 1 << k;
+                    b.word_pos[k] = pos;
+                }
+            }
+            b.has_words = true;
+            i = j;
+        }
+    }
+
     /// Reads `line` into [`Lexer::block`].
     pub fn read<P: ParamRead + ?Sized>(&mut self, line: &[u8], params: &P) -> LResult<()> {
         self.prepare(line)?;
@@ -1027,6 +1150,7 @@ fn read_oword<P: ParamRead + ?Sized>(c: &mut Cursor<'_, P>, start: usize) -> LRe
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::path::Path;
 
     fn val(expr: &str) -> Real {
         let mut lx = Lexer::default();
@@ -1054,6 +1178,122 @@ mod tests {
         assert_eq!(val("1."), 1.0);
         assert_eq!(val(".5"), 0.5);
         assert_eq!(val("0.1"), 0.1);
+    }
+
+    /// The fields of a block that mean something, for comparing two readings of a line.
+    fn meaning(b: &Block) -> String {
+        let words: Vec<_> = (0..28)
+            .filter(|k| b.present & (1 << k) != 0)
+            .map(|k| (k, b.words[k].to_bits(), b.word_pos[k]))
+            .collect();
+        format!(
+            "{} {:?} {:?} {:?} {:?} {:?} {:?} {} {:?}",
+            b.block_delete,
+            words,
+            b.gs(),
+            b.ms(),
+            b.n.map(Real::to_bits),
+            b.o.as_ref().map(|o| &o.label),
+            b.assigns,
+            b.has_words,
+            b.message
+        )
+    }
+
+    /// Reads `line` with the plain reader and, when it takes it, checks the block is the
+    /// general reader's, bit for bit. Returns whether the plain reader took it.
+    fn plain_agrees(line: &[u8]) -> bool {
+        let mut plain = Lexer::default();
+        let mut general = Lexer::default();
+        let took = plain.read_plain(line);
+        if took {
+            let text = String::from_utf8_lossy(line);
+            general
+                .read(line, &NoParams)
+                .unwrap_or_else(|e| panic!("{text:?}: plain read, general refused: {e:?}"));
+            assert_eq!(meaning(&plain.block), meaning(&general.block), "{text:?}");
+        }
+        took
+    }
+
+    #[test]
+    fn plain_lines_read_as_the_general_reader_reads_them() {
+        for line in [
+            "G1 X1.25 Y-0.5 A30.125",
+            "g1x1y2z-3",
+            "N10 G0 X0",
+            "G3 X1 Y0 I0.5 J0",
+            "G38.2 Z-5 F100",
+            "M3 S1000",
+            "G1 X+.5",
+            "G1 X1.",
+            "X1e5",
+            "T1 M6",
+            "G21 G90 G17 G94 F1200",
+            "G1\tX1\r",
+            "",
+            "   ",
+            "X123456789012345",
+        ] {
+            assert!(
+                plain_agrees(line.as_bytes()),
+                "plain line refused: {line:?}"
+            );
+        }
+        // lines only the general reader reads (or refuses): a blank inside a word, an
+        // expression, a parameter, a comment, an O-word, block delete, a bad or repeated
+        // word, a G code with two decimals, a fractional M code, too many digits
+        for line in [
+            "G1 X1 .5",
+            "G 1 X1",
+            "G1 X1 2",
+            "G1 X1 -2",
+            "G1 X[1+2]",
+            "G1 X#1",
+            "#1=2",
+            "G1 X1 (move)",
+            "G1 X1 ; move",
+            "o100 sub",
+            "/G1 X1",
+            "G1 U1",
+            "G1 X1 X2",
+            "N1 N2",
+            "G1.23",
+            "M3.5",
+            "G-1",
+            "X.",
+            "X",
+            "Xsin[30]",
+            "G1 X1.2.3",
+            "X1234567890123456",
+            "G1 X1 %",
+        ] {
+            assert!(
+                !plain_agrees(line.as_bytes()),
+                "needs the general reader: {line:?}"
+            );
+        }
+        // every line of the conformance corpus and the LinuxCNC examples
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus");
+        let mut stack = vec![root];
+        let (mut lines, mut plain) = (0usize, 0usize);
+        while let Some(dir) = stack.pop() {
+            for entry in std::fs::read_dir(&dir).expect("corpus folder") {
+                let path = entry.expect("entry").path();
+                if path.is_dir() {
+                    stack.push(path);
+                } else if path.extension().is_some_and(|e| e == "ngc") {
+                    let bytes = std::fs::read(&path).expect("corpus file");
+                    for line in bytes.split(|c| *c == b'\n') {
+                        let line = line.strip_suffix(b"\r").unwrap_or(line);
+                        lines += 1;
+                        plain += plain_agrees(line) as usize;
+                    }
+                }
+            }
+        }
+        assert!(lines > 10_000, "corpus lines read: {lines}");
+        assert!(plain * 3 > lines, "plain lines: {plain} of {lines}");
     }
 
     #[test]

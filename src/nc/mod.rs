@@ -528,15 +528,16 @@ pub fn interpret_program(text: &str, path: &Path, opts: InterpOptions) -> Result
     let mut ended_by = None;
     let mut changed = [false; 6];
     let mut last_end = start;
-    for rec in Interpreter::from_text(text, path, opts) {
+    let mut interp = Interpreter::from_text(text, path, opts);
+    while let Some(rec) = interp.next_ref() {
         let rec = rec?;
-        match rec.body {
+        match &rec.body {
             RecordBody::Event(e) => {
                 if e.call == "PROGRAM_END" {
                     ended_by = Some(rec.line);
                 }
             }
-            RecordBody::Motion(m) => {
+            &RecordBody::Motion(m) => {
                 let feed = m.feed.filter(|_| !m.feed_per_rev);
                 let mut push = |kind: MoveKind, s: AxisValues, e: AxisValues, feed| {
                     let full = matches!(kind, MoveKind::Arc(_));
@@ -617,14 +618,14 @@ pub fn parse_program(text: &str, path: &Path, start: AxisValues) -> Result<Progr
 /// Sequence of JSON lines (see [`output`]) of a run; `events` includes non-motion records.
 /// Stops at the first error, which is returned after the lines written so far.
 pub fn write_jsonl(
-    interp: Interpreter,
+    mut interp: Interpreter,
     events: bool,
     mut sink: impl FnMut(&[u8]) -> std::io::Result<()>,
 ) -> Result<Result<(), NcError>, std::io::Error> {
     let mut seq = 0;
     let mut line = Vec::with_capacity(512);
     let mut memo = output::PointMemo::default();
-    for rec in interp {
+    while let Some(rec) = interp.next_ref() {
         let rec = match rec {
             Ok(r) => r,
             Err(e) => return Ok(Err(e)),
@@ -633,7 +634,7 @@ pub fn write_jsonl(
             continue;
         }
         line.clear();
-        output::write_json_with(&mut line, seq, &rec, &mut memo);
+        output::write_json_with(&mut line, seq, rec, &mut memo);
         line.push(b'\n');
         seq += 1;
         sink(&line)?;

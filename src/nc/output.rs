@@ -4,12 +4,10 @@
 //! and tool length), X Y Z in mm and A B C in degrees. The JSON form has the fields of the
 //! normalised LinuxCNC output used as the conformance reference (`seq`, `kind`, `n`,
 //! `start`, `end`, `feed`, `feed_unit`, and for arcs `center`, `plane`, `direction`,
-//! `turns`, `rotation`, `normal`, `radius`, `radius_end`, `sweep_deg`), plus `line` and
-//! `file` (the source line of the block).
+//! `turns`, `rotation`, `normal`, `radius`, `radius_end`, `sweep_deg`), plus `line` (the
+//! source line of the block).
 
 use std::io::Write as _;
-use std::path::Path;
-use std::sync::Arc;
 
 use crate::math::{Point3, Real, Vector3};
 
@@ -144,8 +142,9 @@ pub enum RecordBody {
 pub struct Record {
     /// Move or event.
     pub body: RecordBody,
-    /// Source file of the block.
-    pub path: Arc<Path>,
+    /// Source file of the block: 0 for the program, then subroutine files in the order
+    /// they were opened ([`crate::nc::Interpreter::file_path`] names them).
+    pub file: usize,
     /// 1-based source line of the block.
     pub line: usize,
     /// The block's N word, if any.

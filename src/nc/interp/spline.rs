@@ -229,7 +229,7 @@ impl Interpreter {
                     EventArg::Num(order as Real),
                 ],
             }),
-            path: self.path(),
+            file: self.cur,
             line: self.line_no,
             n: self.line_n,
         };
