@@ -45,6 +45,7 @@ impl Interpreter {
     }
 
     /// Checks modal-group conflicts and returns the codes by group.
+    #[inline(always)]
     fn groups(&self, b: &Block) -> LR<GCodes> {
         let mut g = GCodes::default();
         for &(code, pos) in b.gs() {

@@ -18,7 +18,8 @@
 //!   biarc segmentation);
 //! * `spline`: G5, G5.1 and G5.2 … G5.3 as the interpreter reads them, and the moves of a
 //!   curve;
-//! * `thread`: spindle-synchronised motion, G33, and the G76 threading cycle.
+//! * `thread`: spindle-synchronised motion, G33, and the G76 threading cycle;
+//! * `queue`: the records produced and not yet handed out, in reused slots.
 
 mod params;
 mod errors;
@@ -32,8 +33,9 @@ mod cycle;
 mod nurbs;
 mod spline;
 mod thread;
+mod queue;
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::HashMap;
 use std::path::Path;
 use std::sync::Arc;
 
@@ -43,13 +45,14 @@ use super::comp::{Compensator, Plane as CompPlane};
 use super::lex::{Block, Lexer, NUM_PARAMS};
 use super::output::{Event, EventArg, Motion, MotionKind, Plane, Record, RecordBody};
 use super::source::{Pos, Source};
-use super::{AxisValues, Diagnostic, InterpOptions, LengthUnit, NcError};
+use super::{Diagnostic, InterpOptions, LengthUnit, NcError};
 
 pub(crate) use params::Params;
 
 use cutter_comp::CompPayload;
 use errors::{LR, lerr};
 use oword::{Frame, LoopState, Skip};
+use queue::{MoveParts, Origin, Queue};
 
 /// Millimetres per inch.
 const MM_PER_INCH: Real = 25.4;
@@ -79,7 +82,7 @@ pub struct Interpreter {
     spare_block: Option<Box<Block>>,
     buf: Vec<u8>,
     params: Params,
-    out: VecDeque<Record>,
+    out: Queue,
     /// The front of `out` was lent by [`Interpreter::next_ref`]: it goes at the next call.
     lent: bool,
     state: RunState,
@@ -225,7 +228,7 @@ impl Interpreter {
                 metric: true,
                 incremental: false,
             },
-            out: VecDeque::new(),
+            out: Queue::default(),
             lent: false,
             state: RunState::Running,
             error: None,
@@ -299,7 +302,7 @@ impl Interpreter {
     /// when the program has ended.
     pub fn next_record(&mut self) -> Option<Result<Record, NcError>> {
         if self.fill() {
-            return self.out.pop_front().map(Ok);
+            return self.out.take_front().map(Ok);
         }
         self.error.take().map(Err)
     }
@@ -321,7 +324,7 @@ impl Interpreter {
     fn fill(&mut self) -> bool {
         if self.lent {
             self.lent = false;
-            self.out.pop_front();
+            self.out.drop_front();
         }
         while self.out.is_empty() {
             if self.state != RunState::Running {
@@ -358,12 +361,25 @@ impl Interpreter {
             line: self.line_no,
             n: self.line_n,
         };
-        self.out.push_back(rec);
+        self.out.push(rec);
     }
 
-    fn motion(&mut self, mut m: Motion) {
+    fn motion(&mut self, m: Motion) {
+        self.put_motion(MoveParts {
+            kind: m.kind,
+            start: m.start.to_array(),
+            end: m.end.to_array(),
+            feed: m.feed,
+            feed_per_rev: m.feed_per_rev,
+            arc: m.arc,
+        });
+    }
+
+    /// Emits a move (see [`Queue::push_motion`]).
+    #[inline(always)]
+    fn put_motion(&mut self, mut m: MoveParts) {
         if let Some(p) = self.out_pos.take() {
-            m.start = AxisValues::from_array(p);
+            m.start = p;
         }
         // a move sets the canon position (rs274's rigid tap leaves it, coming back)
         if self.offs_set && m.kind != MotionKind::RigidTap {
@@ -378,13 +394,12 @@ impl Interpreter {
         {
             self.last_feed = Some(f);
         }
-        let rec = Record {
-            body: RecordBody::Motion(m),
+        let at = Origin {
             file: self.cur,
             line: self.line_no,
             n: self.line_n,
         };
-        self.out.push_back(rec);
+        self.out.push_motion(at, m);
     }
 
     fn pu(&self, mm: Real) -> EventArg {

@@ -9,6 +9,7 @@ use crate::nc::lex::Block;
 use crate::nc::output::{Motion, MotionKind};
 
 use super::errors::LR;
+use super::queue::MoveParts;
 use super::{FeedMode, Interpreter};
 
 /// rs274's simulated probe backs off this far (mm) from the target after tripping.
@@ -23,6 +24,7 @@ impl Interpreter {
     /// `^` (angle, degrees) about the program origin of the XY plane (`block` has refused
     /// X or Y beside them); absolute `@` alone keeps the angle, `^` alone the radius, and
     /// incremental ones add to them, which the origin leaves undefined.
+    #[inline(always)]
     pub(super) fn target(&self, b: &Block) -> LR<[Real; 6]> {
         let p = self.prog();
         let mut end = p;
@@ -82,19 +84,20 @@ impl Interpreter {
         Ok(end)
     }
 
+    #[inline(always)]
     pub(super) fn emit_line(&mut self, kind: MotionKind, end: [Real; 6], feed: Option<Real>) {
-        let m = Motion {
+        self.put_motion(MoveParts {
             kind,
-            start: AxisValues::from_array(self.mpos),
-            end: AxisValues::from_array(end),
+            start: self.mpos,
+            end,
             feed,
             feed_per_rev: self.feed_mode == FeedMode::PerRev && feed.is_some(),
             arc: None,
-        };
-        self.motion(m);
+        });
         self.mpos = end;
     }
 
+    #[inline(always)]
     pub(super) fn feed_for(&self, b: &Block, code: i32, length_mm: Real) -> LR<Real> {
         match self.feed_mode {
             FeedMode::InverseTime => {

@@ -62,6 +62,7 @@ impl Interpreter {
     }
 
     /// Program coordinates (mm, deg) → machine.
+    #[inline(always)]
     pub(super) fn to_machine(&self, p: &[Real; 6]) -> [Real; 6] {
         let mut q = [0.0; 6];
         for i in 0..6 {
@@ -80,6 +81,7 @@ impl Interpreter {
     }
 
     /// Machine → program coordinates (mm, deg).
+    #[inline(always)]
     pub(super) fn to_program(&self, m: &[Real; 6]) -> [Real; 6] {
         let mut q = [0.0; 6];
         for i in 0..6 {
@@ -98,6 +100,7 @@ impl Interpreter {
     }
 
     /// The current point (program coordinates, mm).
+    #[inline(always)]
     pub(super) fn prog(&self) -> [Real; 6] {
         match self.prog_override {
             Some(p) => p,

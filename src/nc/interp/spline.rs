@@ -233,7 +233,7 @@ impl Interpreter {
             line: self.line_no,
             n: self.line_n,
         };
-        self.out.push_back(rec);
+        self.out.push(rec);
         let (feed, per_rev) = match self.feed_mode {
             FeedMode::PerMinute => (Some(self.feed), false),
             FeedMode::PerRev => (Some(self.feed), true),
