@@ -531,6 +531,7 @@ impl RotaryEnvelope {
     }
 
     /// Whether the ray meets the tool at a pose grown by `grow` (mm) within the ray's span.
+    #[inline(always)]
     fn meets_grown(&self, s: &Sample, ray: &Ray, grow: Real) -> bool {
         let p = s.rot.tr_mul(&(ray.o - s.tip));
         let u = s.rot.tr_mul(ray.e);
@@ -539,6 +540,7 @@ impl RotaryEnvelope {
     }
 
     /// The ray evaluated exactly at a pose.
+    #[inline(always)]
     fn probe(&self, s: &Sample, lambda: Real, ray: &Ray) -> Probe {
         let p = s.rot.tr_mul(&(ray.o - s.tip));
         let u = s.rot.tr_mul(ray.e);
@@ -580,12 +582,14 @@ impl RotaryEnvelope {
         }
     }
 
+    #[inline(always)]
     fn probe_at(&self, lambda: Real, ray: &Ray) -> Probe {
         self.probe(&self.sample_at(lambda), lambda, ray)
     }
 
     /// The pose at `lambda`: the stored one when `lambda` is exactly a quarter point (the
     /// midpoint of two consecutive samples as [`Self::refine`] computes it), else computed.
+    #[inline(always)]
     fn sample_at(&self, lambda: Real) -> Sample {
         let k = ((lambda * (4 * self.cells) as Real - 1.0) / 2.0).round();
         if k >= 0.0
@@ -964,6 +968,7 @@ struct RawEnd {
 }
 
 /// Widens `best` by the interval of the probe, if the ray meets the tool there.
+#[inline(always)]
 fn offer(best: &mut Option<RawEnd>, p: &Probe) {
     let Some(h) = p.hit else {
         return;
@@ -988,6 +993,7 @@ fn offer(best: &mut Option<RawEnd>, p: &Probe) {
 
 /// The tool's outward normal (tool frame) on `face` at the tool-frame point `q` (`r` the
 /// tool radius).
+#[inline(always)]
 fn tool_normal(q: &Vector3, face: Face, r: Real) -> Option<Vector3> {
     match face {
         Face::Side => Vector3::new(q.x, q.y, 0.0).try_normalize(0.0),
@@ -1134,6 +1140,7 @@ fn frame_box(f: &Sample, shape: Shape, r: Real, l: Real, margin: Real) -> Aabb {
 
 /// Interval of the line `p + t·u` (tool frame, `u` unit) inside the infinite cylinder of
 /// radius `rad` about the z axis: `None` if it misses, infinite ends if parallel inside.
+#[inline(always)]
 fn cylinder(p: &Vector3, u: &Vector3, rad: Real) -> Option<(Real, Real)> {
     let a = u.x * u.x + u.y * u.y;
     let b = p.x * u.x + p.y * u.y;
@@ -1151,6 +1158,7 @@ fn cylinder(p: &Vector3, u: &Vector3, rad: Real) -> Option<(Real, Real)> {
 }
 
 /// Interval of the line inside the slab `h0 ≤ z ≤ h1`, with the face at each end.
+#[inline(always)]
 fn slab(pz: Real, uz: Real, h0: Real, h1: Real) -> Option<(Real, Face, Real, Face)> {
     if uz.abs() <= tol::RELATIVE_EPS {
         return (h0 <= pz && pz <= h1).then_some((
@@ -1169,6 +1177,7 @@ fn slab(pz: Real, uz: Real, h0: Real, h1: Real) -> Option<(Real, Face, Real, Fac
 }
 
 /// The tool's interval along the line `p + t·u` (tool frame), the tool grown by `g`.
+#[inline(always)]
 fn tool_interval(
     shape: Shape,
     r: Real,
