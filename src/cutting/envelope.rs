@@ -535,8 +535,13 @@ impl RotaryEnvelope {
     fn meets_grown(&self, s: &Sample, ray: &Ray, grow: Real) -> bool {
         let p = s.rot.tr_mul(&(ray.o - s.tip));
         let u = s.rot.tr_mul(ray.e);
-        tool_interval(self.shape, self.r, self.l, &p, &u, grow)
-            .is_some_and(|(t0, _, t1, _)| t1 >= ray.span.0 && t0 <= ray.span.1)
+        let meets = |(t0, _, t1, _): (Real, Face, Real, Face)| t1 >= ray.span.0 && t0 <= ray.span.1;
+        // A ball's interval holds its sphere's: when that meets the span so does the tool's
+        // (the shank's cylinder, with its divisions, is then not needed for the answer)
+        if self.shape == Shape::Ball && ball_sphere(self.r, &p, &u, grow).is_some_and(meets) {
+            return true;
+        }
+        tool_interval(self.shape, self.r, self.l, &p, &u, grow).is_some_and(meets)
     }
 
     /// The ray evaluated exactly at a pose.
@@ -1199,17 +1204,7 @@ fn tool_interval(
     if shape == Shape::Flat {
         return cyl;
     }
-    // The sphere about (0, 0, r) of radius r + g.
-    let w = p - Vector3::new(0.0, 0.0, r);
-    let rad = r + g;
-    let b = w.dot(u);
-    let c = w.dot(&w) - rad * rad;
-    let disc = b * b - c;
-    let sph = (disc >= 0.0).then(|| {
-        let sq = disc.sqrt();
-        (-b - sq, Face::Sphere, -b + sq, Face::Sphere)
-    });
-    match (cyl, sph) {
+    match (cyl, ball_sphere(r, p, u, g)) {
         (Some(a), Some(b)) => {
             let (t0, f0) = if a.0 <= b.0 { (a.0, a.1) } else { (b.0, b.1) };
             let (t1, f1) = if a.2 >= b.2 { (a.2, a.3) } else { (b.2, b.3) };
@@ -1217,6 +1212,22 @@ fn tool_interval(
         }
         (a, b) => a.or(b),
     }
+}
+
+/// The interval of the line `p + t·u` (tool frame, `u` unit) in a ball end mill's sphere
+/// (about (0, 0, r), radius r + g): part of [`tool_interval`], which is its hull with the
+/// shank's interval.
+#[inline(always)]
+fn ball_sphere(r: Real, p: &Vector3, u: &Vector3, g: Real) -> Option<(Real, Face, Real, Face)> {
+    let w = p - Vector3::new(0.0, 0.0, r);
+    let rad = r + g;
+    let b = w.dot(u);
+    let c = w.dot(&w) - rad * rad;
+    let disc = b * b - c;
+    (disc >= 0.0).then(|| {
+        let sq = disc.sqrt();
+        (-b - sq, Face::Sphere, -b + sq, Face::Sphere)
+    })
 }
 
 impl Cutter for RotaryEnvelope {
