@@ -67,6 +67,7 @@ use crate::machine::chain::{AxisKind, Chain};
 use crate::machine::error_motion::{self, AxisErrorMotions, Directions};
 use crate::math::{Aabb, Isometry3, Matrix3, Point3, Real, Vector3, tol};
 use crate::nc::AxisValues;
+use std::cell::Cell;
 
 /// Bound (mm) on the distance of the envelope's interval ends from the true swept surface
 /// along a ray: 0.1 µm, the µm-metrology budget with a factor ten to spare; the solver
@@ -356,23 +357,20 @@ impl Face {
     }
 }
 
-/// The exact tool interval along a ray at one pose, with the rate of each end.
+/// The exact tool interval along a ray at one pose (the rate of each end: [`Probe::g_in`],
+/// [`Probe::g_out`]).
 #[derive(Clone, Copy, Debug)]
 struct Hit {
     t_in: Real,
     face_in: Face,
-    /// `dt_in/dλ`.
-    g_in: Real,
     t_out: Real,
     face_out: Face,
-    /// `dt_out/dλ`.
-    g_out: Real,
 }
 
 /// A ray evaluated at one pose: its interval (if any) and, per edge circle (bottom, top),
 /// `φ` = the radius where the ray crosses the edge's plane minus `R` (`+∞` for no edge or a
 /// ray parallel to the plane).
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 struct Probe {
     lambda: Real,
     hit: Option<Hit>,
@@ -382,6 +380,55 @@ struct Probe {
     u: Vector3,
     /// The pose's rotation (`w_from_t`).
     rot: Matrix3,
+    /// The pose's angular velocity and tip velocity (tool frame), for the rates.
+    w_t: Vector3,
+    v_t: Vector3,
+    /// `dt_in/dλ` and `dt_out/dλ` of the hit, each worked out when first read (bit `k` of
+    /// `known`): many are never read, the ray's end being outside the material there.
+    rates: Cell<[Real; 2]>,
+    known: Cell<u8>,
+}
+
+impl Probe {
+    /// `dt_in/dλ` of the hit (the tool radius `r`).
+    #[inline(always)]
+    fn g_in(&self, r: Real) -> Real {
+        self.rate(0, r)
+    }
+
+    /// `dt_out/dλ` of the hit.
+    #[inline(always)]
+    fn g_out(&self, r: Real) -> Real {
+        self.rate(1, r)
+    }
+
+    /// The rate of the hit's end `end` (0 in, 1 out): the end's normal speed over the
+    /// normal's component along the ray; NaN without a normal or a hit.
+    #[inline(always)]
+    fn rate(&self, end: usize, r: Real) -> Real {
+        if self.known.get() & (1 << end) == 0 {
+            let g = match self.hit {
+                Some(h) => {
+                    let (t, face) = if end == 0 {
+                        (h.t_in, h.face_in)
+                    } else {
+                        (h.t_out, h.face_out)
+                    };
+                    let q = self.p + self.u * t;
+                    match tool_normal(&q, face, r) {
+                        Some(n) => n.dot(&(self.w_t.cross(&q) + self.v_t)) / n.dot(&self.u),
+                        None => Real::NAN,
+                    }
+                }
+                None => Real::NAN,
+            };
+            let mut rates = self.rates.get();
+            rates[end] = g;
+            self.rates.set(rates);
+            self.known.set(self.known.get() | 1 << end);
+        }
+        self.rates.get()[end]
+    }
 }
 
 /// A ray `o + t·e` with `e` a unit vector, and the span of `t` where the answer matters.
@@ -549,23 +596,13 @@ impl RotaryEnvelope {
     fn probe(&self, s: &Sample, lambda: Real, ray: &Ray) -> Probe {
         let p = s.rot.tr_mul(&(ray.o - s.tip));
         let u = s.rot.tr_mul(ray.e);
-        let hit = tool_interval(self.shape, self.r, self.l, &p, &u, 0.0).map(|(t0, f0, t1, f1)| {
-            let rate = |t: Real, face: Face| {
-                let q = p + u * t;
-                match tool_normal(&q, face, self.r) {
-                    Some(n) => n.dot(&(s.w_t.cross(&q) + s.v_t)) / n.dot(&u),
-                    None => Real::NAN,
-                }
-            };
-            Hit {
+        let hit =
+            tool_interval(self.shape, self.r, self.l, &p, &u, 0.0).map(|(t0, f0, t1, f1)| Hit {
                 t_in: t0,
                 face_in: f0,
-                g_in: rate(t0, f0),
                 t_out: t1,
                 face_out: f1,
-                g_out: rate(t1, f1),
-            }
-        });
+            });
         let phi = |h: Real| {
             if u.z.abs() <= tol::RELATIVE_EPS {
                 return Real::INFINITY;
@@ -584,6 +621,10 @@ impl RotaryEnvelope {
             p,
             u,
             rot: s.rot,
+            w_t: s.w_t,
+            v_t: s.v_t,
+            rates: Cell::new([Real::NAN; 2]),
+            known: Cell::new(0),
         }
     }
 
@@ -778,6 +819,7 @@ impl RotaryEnvelope {
                 return;
             }
         }
+        let r = self.r;
         match (ha, hb) {
             (Some(x), Some(y)) => {
                 if x.face_in.family() != y.face_in.family()
@@ -785,14 +827,14 @@ impl RotaryEnvelope {
                 {
                     return bisect(acc);
                 }
-                if !in_done && x.g_in < 0.0 && y.g_in > 0.0 {
-                    let g = |p: &Probe| p.hit.map(|h| h.g_in);
+                if !in_done && a.g_in(r) < 0.0 && b.g_in(r) > 0.0 {
+                    let g = |p: &Probe| p.hit.map(|_| p.g_in(r));
                     if self.solve(ray, a, b, g, Stop::Extreme, acc).is_none() {
                         return bisect(acc);
                     }
                 }
-                if !out_done && x.g_out > 0.0 && y.g_out < 0.0 {
-                    let g = |p: &Probe| p.hit.map(|h| h.g_out);
+                if !out_done && a.g_out(r) > 0.0 && b.g_out(r) < 0.0 {
+                    let g = |p: &Probe| p.hit.map(|_| p.g_out(r));
                     if self.solve(ray, a, b, g, Stop::Extreme, acc).is_none() {
                         bisect(acc);
                     }
@@ -800,10 +842,10 @@ impl RotaryEnvelope {
             }
             // Into a touch t_in rises and t_out falls: an end moving the other way on the
             // inside has an extreme before the ray leaves.
-            (Some(x), None) if (!in_done && x.g_in < 0.0) || (!out_done && x.g_out > 0.0) => {
+            (Some(_), None) if (!in_done && a.g_in(r) < 0.0) || (!out_done && a.g_out(r) > 0.0) => {
                 bisect(acc)
             }
-            (None, Some(y)) if (!in_done && y.g_in > 0.0) || (!out_done && y.g_out < 0.0) => {
+            (None, Some(_)) if (!in_done && b.g_in(r) > 0.0) || (!out_done && b.g_out(r) < 0.0) => {
                 bisect(acc)
             }
             _ => {}
@@ -822,7 +864,7 @@ impl RotaryEnvelope {
         stop: Stop,
         acc: &mut Option<RawEnd>,
     ) -> Option<(Probe, Probe)> {
-        let (mut lo, mut hi) = (*a, *b);
+        let (mut lo, mut hi) = (a.clone(), b.clone());
         let (Some(f_lo), Some(f_hi)) = (f(&lo), f(&hi)) else {
             return None;
         };
@@ -834,7 +876,7 @@ impl RotaryEnvelope {
         let mut width = hi.lambda - lo.lambda;
         for step in 0..MAX_SOLVE_STEPS {
             let w = hi.lambda - lo.lambda;
-            if stop.reached(self.speed, &lo, &hi, flo, fhi, w) {
+            if stop.reached(self.speed, self.r, &lo, &hi, flo, fhi, w) {
                 break;
             }
             let mut m = (lo.lambda * whi - hi.lambda * wlo) / (whi - wlo);
@@ -885,14 +927,24 @@ enum Stop {
 }
 
 impl Stop {
-    fn reached(self, speed: Real, lo: &Probe, hi: &Probe, flo: Real, fhi: Real, w: Real) -> bool {
+    #[allow(clippy::too_many_arguments)]
+    fn reached(
+        self,
+        speed: Real,
+        r: Real,
+        lo: &Probe,
+        hi: &Probe,
+        flo: Real,
+        fhi: Real,
+        w: Real,
+    ) -> bool {
         let slope = match self {
             Stop::Extreme => flo.abs().min(fhi.abs()),
             Stop::Crossing => {
-                let rates = [lo.hit, hi.hit]
+                let rates = [lo, hi]
                     .into_iter()
-                    .flatten()
-                    .flat_map(|h| [h.g_in.abs(), h.g_out.abs()])
+                    .filter(|p| p.hit.is_some())
+                    .flat_map(|p| [p.g_in(r).abs(), p.g_out(r).abs()])
                     .filter(|g| g.is_finite())
                     .fold(Real::NEG_INFINITY, Real::max);
                 if rates.is_finite() { rates } else { speed }
