@@ -157,6 +157,27 @@ impl Aabb {
         }
         (t0 <= t1).then_some((t0, t1))
     }
+
+    /// [`Aabb::ray_interval`] for `dir` the unit vector along `axis` (a dexel ray), without
+    /// its six divisions: the same result bit for bit (a division by one is exact).
+    #[inline]
+    pub fn axis_ray_interval(&self, origin: &Point3, axis: usize) -> Option<(Real, Real)> {
+        for k in 0..3 {
+            if k != axis && (origin[k] < self.min[k] || origin[k] > self.max[k]) {
+                return None;
+            }
+        }
+        let a = self.min[axis] - origin[axis];
+        let b = self.max[axis] - origin[axis];
+        let t0 = Real::NEG_INFINITY.max(a.min(b));
+        let t1 = Real::INFINITY.min(a.max(b));
+        (t0 <= t1).then_some((t0, t1))
+    }
+
+    /// The axis `dir` is exactly the unit vector of, if any.
+    pub fn unit_axis(dir: &Vector3) -> Option<usize> {
+        (0..3).find(|&k| dir[k] == 1.0 && dir[(k + 1) % 3] == 0.0 && dir[(k + 2) % 3] == 0.0)
+    }
 }
 
 /// Counter-based pseudo-random numbers: the value for index `i` depends only on
@@ -220,6 +241,42 @@ mod tests {
             b.ray_interval(&Point3::new(-1.0, 2.0, 0.5), &Vector3::x())
                 .is_none()
         );
+    }
+
+    /// The dexel-ray form gives exactly the general slab method's interval, also for
+    /// origins on a box face, in a degenerate box and outside it.
+    #[test]
+    fn axis_ray_interval_is_the_slab_methods() {
+        let rng = CounterRng::new(3);
+        let grid = |i: u64, k: u64| ((rng.uniform(i, k) * 8.0).floor() - 4.0) * 0.25;
+        let mut hits = 0;
+        for i in 0..20_000u64 {
+            let (p, q) = (
+                Point3::new(grid(i, 0), grid(i, 1), grid(i, 2)),
+                Point3::new(grid(i, 3), grid(i, 4), grid(i, 5)),
+            );
+            let b = Aabb {
+                min: p.inf(&q),
+                max: p.sup(&q),
+            };
+            let o = Point3::new(grid(i, 6), grid(i, 7), rng.uniform(i, 8) * 3.0 - 1.5);
+            for axis in 0..3 {
+                let mut e = Vector3::zeros();
+                e[axis] = 1.0;
+                assert_eq!(Aabb::unit_axis(&e), Some(axis));
+                let general = b.ray_interval(&o, &e);
+                let axial = b.axis_ray_interval(&o, axis);
+                assert_eq!(
+                    general.map(|(a, b)| (a.to_bits(), b.to_bits())),
+                    axial.map(|(a, b)| (a.to_bits(), b.to_bits())),
+                    "{b:?} {o:?} {axis}"
+                );
+                hits += general.is_some() as usize;
+            }
+        }
+        assert!(hits > 1000, "{hits}");
+        assert_eq!(Aabb::unit_axis(&Vector3::new(1.0, 1e-300, 0.0)), None);
+        assert_eq!(Aabb::unit_axis(&Vector3::new(-1.0, 0.0, 0.0)), None);
     }
 
     #[test]

@@ -657,7 +657,13 @@ impl RotaryEnvelope {
     /// material's extent): interval ends outside it are left unrefined (they stay outside
     /// it) and parts of the move whose grown tool meets the ray only outside it are skipped.
     pub fn intervals_in(&self, o: &Point3, e: &Vector3, span: (Real, Real), out: &mut Vec<RayCut>) {
-        if self.bounds.ray_interval(o, e).is_none() {
+        // a dexel ray's box tests need no divisions (the same results)
+        let axis = Aabb::unit_axis(e);
+        let box_meets = |b: &Aabb| match axis {
+            Some(a) => b.axis_ray_interval(o, a),
+            None => b.ray_interval(o, e),
+        };
+        if box_meets(&self.bounds).is_none() {
             return;
         }
         let ray = Ray { o, e, span };
@@ -673,9 +679,7 @@ impl RotaryEnvelope {
             } = scratch;
             grown.clear();
             grown.extend((0..n).map(|j| {
-                self.cell_boxes[j]
-                    .ray_interval(o, e)
-                    .is_some_and(|(t0, t1)| t1 >= span.0 && t0 <= span.1)
+                box_meets(&self.cell_boxes[j]).is_some_and(|(t0, t1)| t1 >= span.0 && t0 <= span.1)
                     && self.meets_grown(&self.samples[2 * j + 1], &ray, self.delta)
             }));
             if !grown.iter().any(|&g| g) {
