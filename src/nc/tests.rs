@@ -154,6 +154,54 @@ fn streaming_from_a_file_matches_text() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A move made inside a subroutine file names that file, the others the program; a lent
+/// record (`next_ref`) is the record the iterator hands out.
+#[test]
+fn records_name_the_file_of_their_block() {
+    let dir = std::env::temp_dir().join(format!("twinmill-nc-file-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let main = dir.join("main.ngc");
+    std::fs::write(&main, "G21 F100\nG1 X1\no<side> call\nG1 X3\nM2\n").expect("write");
+    std::fs::write(dir.join("side.ngc"), "o<side> sub\nG1 X2\no<side> endsub\n").expect("write");
+    let mut interp = Interpreter::from_file(&main, InterpOptions::default()).expect("opens");
+    let mut seen = Vec::new();
+    while let Some(rec) = interp.next_ref() {
+        let rec = rec.expect("runs").clone();
+        if let RecordBody::Motion(m) = &rec.body {
+            seen.push((m.end.get(AxisLetter::X), rec.line, rec.file));
+        }
+    }
+    let names: Vec<_> = seen
+        .iter()
+        .map(|&(x, line, file)| {
+            let name = interp
+                .file_path(file)
+                .and_then(|p| p.file_name())
+                .expect("named");
+            (x, line, name.to_string_lossy().into_owned())
+        })
+        .collect();
+    assert_eq!(
+        names,
+        [
+            (1.0, 2, "main.ngc".to_string()),
+            (2.0, 2, "side.ngc".to_string()),
+            (3.0, 4, "main.ngc".to_string()),
+        ]
+    );
+    let by_value: Vec<Record> = Interpreter::from_file(&main, InterpOptions::default())
+        .expect("opens")
+        .map(|r| r.expect("runs"))
+        .collect();
+    let mut lent = Vec::new();
+    let mut interp = Interpreter::from_file(&main, InterpOptions::default()).expect("opens");
+    while let Some(rec) = interp.next_ref() {
+        lent.push(rec.expect("runs").clone());
+    }
+    assert_eq!(by_value, lent);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// Small programs covering most of the language, mutated by the property tests.
 const SEEDS: &[&str] = &[
     "G21 G90 G17 F500\nG0 X0 Y0 Z5\nG1 Z-1\nG2 X10 Y0 I5 J0\nG3 X0 Y0 R5\nG91 G1 X1 Y1 A10\nG90 M2\n",
