@@ -45,14 +45,14 @@ use super::comp::{Compensator, Plane as CompPlane};
 use super::lex::{Block, Lexer, NUM_PARAMS};
 use super::output::{Event, EventArg, Motion, MotionKind, Plane, Record, RecordBody};
 use super::source::{Pos, Source};
-use super::{Diagnostic, InterpOptions, LengthUnit, NcError};
+use super::{AxisValues, Diagnostic, InterpOptions, LengthUnit, NcError};
 
 pub(crate) use params::Params;
 
 use cutter_comp::CompPayload;
 use errors::{LR, lerr};
 use oword::{Frame, LoopState, Skip};
-use queue::{MoveParts, Origin, Queue};
+use queue::{Origin, Queue};
 
 /// Millimetres per inch.
 const MM_PER_INCH: Real = 25.4;
@@ -364,22 +364,11 @@ impl Interpreter {
         self.out.push(rec);
     }
 
-    fn motion(&mut self, m: Motion) {
-        self.put_motion(MoveParts {
-            kind: m.kind,
-            start: m.start.to_array(),
-            end: m.end.to_array(),
-            feed: m.feed,
-            feed_per_rev: m.feed_per_rev,
-            arc: m.arc,
-        });
-    }
-
     /// Emits a move (see [`Queue::push_motion`]).
     #[inline(always)]
-    fn put_motion(&mut self, mut m: MoveParts) {
+    fn motion(&mut self, mut m: Motion) {
         if let Some(p) = self.out_pos.take() {
-            m.start = p;
+            m.start = AxisValues::from_array(p);
         }
         // a move sets the canon position (rs274's rigid tap leaves it, coming back)
         if self.offs_set && m.kind != MotionKind::RigidTap {

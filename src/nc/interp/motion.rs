@@ -9,7 +9,6 @@ use crate::nc::lex::Block;
 use crate::nc::output::{Motion, MotionKind};
 
 use super::errors::LR;
-use super::queue::MoveParts;
 use super::{FeedMode, Interpreter};
 
 /// rs274's simulated probe backs off this far (mm) from the target after tripping.
@@ -86,10 +85,10 @@ impl Interpreter {
 
     #[inline(always)]
     pub(super) fn emit_line(&mut self, kind: MotionKind, end: [Real; 6], feed: Option<Real>) {
-        self.put_motion(MoveParts {
+        self.motion(Motion {
             kind,
-            start: self.mpos,
-            end,
+            start: AxisValues::from_array(self.mpos),
+            end: AxisValues::from_array(end),
             feed,
             feed_per_rev: self.feed_mode == FeedMode::PerRev && feed.is_some(),
             arc: None,

@@ -4,8 +4,7 @@
 //! (twice) into a queue — a record is some 230 bytes, and those copies of freshly written
 //! memory were a fifth of the interpretation.
 
-use crate::nc::AxisValues;
-use crate::nc::output::{ArcGeom, Event, Motion, MotionKind, Record, RecordBody};
+use crate::nc::output::{Event, Motion, Record, RecordBody};
 
 /// Records `recs[head..live]` wait to be handed out; `recs[live..]` are spare slots.
 #[derive(Default)]
@@ -21,16 +20,6 @@ pub(super) struct Origin {
     pub file: usize,
     pub line: usize,
     pub n: Option<crate::math::Real>,
-}
-
-/// A straight move or an arc, as its parts.
-pub(super) struct MoveParts {
-    pub kind: MotionKind,
-    pub start: [crate::math::Real; 6],
-    pub end: [crate::math::Real; 6],
-    pub feed: Option<crate::math::Real>,
-    pub feed_per_rev: bool,
-    pub arc: Option<ArcGeom>,
 }
 
 impl Queue {
@@ -84,7 +73,7 @@ impl Queue {
     }
 
     /// Appends a move, written into a spare slot field by field when it holds a move.
-    pub fn push_motion(&mut self, at: Origin, m: MoveParts) {
+    pub fn push_motion(&mut self, at: Origin, m: Motion) {
         if let Some(Record {
             body: RecordBody::Motion(slot),
             file,
@@ -93,8 +82,8 @@ impl Queue {
         }) = self.recs.get_mut(self.live)
         {
             slot.kind = m.kind;
-            slot.start = AxisValues::from_array(m.start);
-            slot.end = AxisValues::from_array(m.end);
+            slot.start = m.start;
+            slot.end = m.end;
             slot.feed = m.feed;
             slot.feed_per_rev = m.feed_per_rev;
             slot.arc = m.arc;
@@ -103,14 +92,7 @@ impl Queue {
             return;
         }
         self.push(Record {
-            body: RecordBody::Motion(Motion {
-                kind: m.kind,
-                start: AxisValues::from_array(m.start),
-                end: AxisValues::from_array(m.end),
-                feed: m.feed,
-                feed_per_rev: m.feed_per_rev,
-                arc: m.arc,
-            }),
+            body: RecordBody::Motion(m),
             file: at.file,
             line: at.line,
             n: at.n,
@@ -121,16 +103,18 @@ impl Queue {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::nc::AxisValues;
+    use crate::nc::output::{ArcGeom, MotionKind};
 
-    fn parts(x: f64, arc: bool) -> MoveParts {
-        MoveParts {
+    fn parts(x: f64, arc: bool) -> Motion {
+        Motion {
             kind: if arc {
                 MotionKind::Arc
             } else {
                 MotionKind::Linear
             },
-            start: [x - 1.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-            end: [x, 0.0, 0.0, 0.0, 0.0, 0.0],
+            start: AxisValues::from_array([x - 1.0, 0.0, 0.0, 0.0, 0.0, 0.0]),
+            end: AxisValues::from_array([x, 0.0, 0.0, 0.0, 0.0, 0.0]),
             feed: Some(x),
             feed_per_rev: false,
             arc: arc.then_some(ArcGeom {
@@ -173,15 +157,8 @@ mod tests {
         q.push_motion(at(1), parts(1.0, true));
         q.push(event("A"));
         q.push_motion(at(3), parts(3.0, false));
-        let expect = |p: MoveParts, line: usize| Record {
-            body: RecordBody::Motion(Motion {
-                kind: p.kind,
-                start: AxisValues::from_array(p.start),
-                end: AxisValues::from_array(p.end),
-                feed: p.feed,
-                feed_per_rev: p.feed_per_rev,
-                arc: p.arc,
-            }),
+        let expect = |m: Motion, line: usize| Record {
+            body: RecordBody::Motion(m),
             file: 0,
             line,
             n: Some(line as f64),
