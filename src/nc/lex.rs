@@ -273,47 +273,12 @@ impl<P: ParamRead + ?Sized> Cursor<'_, P> {
     /// A plain number: optional sign, digits, optional point and digits.
     #[inline]
     fn number(&mut self) -> LResult<Real> {
-        let s = self.s;
-        let start = self.i;
-        let mut i = start;
-        let mut neg = false;
-        if let Some(&c @ (b'+' | b'-')) = s.get(i) {
-            neg = c == b'-';
-            i += 1;
+        let d = Decimal::scan(self.s, self.i);
+        if !d.is_fast() {
+            return self.number_general(self.i);
         }
-        let mut mant: u64 = 0;
-        let mut digits = 0;
-        for &c in s.get(i..).unwrap_or(&[]) {
-            let d = c.wrapping_sub(b'0');
-            if d > 9 {
-                break;
-            }
-            mant = mant.wrapping_mul(10).wrapping_add(d as u64);
-            digits += 1;
-        }
-        i += digits;
-        let mut frac = 0;
-        if s.get(i) == Some(&b'.') {
-            i += 1;
-            for &c in s.get(i..).unwrap_or(&[]) {
-                let d = c.wrapping_sub(b'0');
-                if d > 9 {
-                    break;
-                }
-                mant = mant.wrapping_mul(10).wrapping_add(d as u64);
-                frac += 1;
-            }
-            i += frac;
-            digits += frac;
-        }
-        if digits == 0 || digits > FAST_DIGITS {
-            return self.number_general(start);
-        }
-        self.i = i;
-        // mantissa (< 10^15 < 2^53) and power of ten are both exact: one division rounds
-        // correctly
-        let v = mant as Real / POW10[frac];
-        Ok(if neg { -v } else { v })
+        self.i = d.end;
+        Ok(d.value())
     }
 
     /// [`Cursor::number`] for any number of digits, and its errors.
@@ -651,6 +616,74 @@ const NORMAL: [u8; 256] = {
     t
 };
 
+/// A plain decimal as scanned: optional sign, digits, optional point and digits.
+#[derive(Clone, Copy)]
+struct Decimal {
+    neg: bool,
+    /// The digits as an integer (wrapping: meaningful when [`Decimal::is_fast`]).
+    mant: u64,
+    /// Digits in all, and after the point.
+    digits: usize,
+    frac: usize,
+    /// Index just after the number.
+    end: usize,
+}
+
+impl Decimal {
+    /// Scans the decimal starting at `s[i]` (no digits at all: `digits` is 0).
+    #[inline(always)]
+    fn scan(s: &[u8], mut i: usize) -> Decimal {
+        let mut neg = false;
+        if let Some(&c @ (b'+' | b'-')) = s.get(i) {
+            neg = c == b'-';
+            i += 1;
+        }
+        let (mut mant, mut digits, mut frac) = (0u64, 0, 0);
+        digits += digit_run(s, &mut i, &mut mant);
+        if s.get(i) == Some(&b'.') {
+            i += 1;
+            frac = digit_run(s, &mut i, &mut mant);
+            digits += frac;
+        }
+        Decimal {
+            neg,
+            mant,
+            digits,
+            frac,
+            end: i,
+        }
+    }
+
+    /// Some digits, and few enough for [`Decimal::value`] to be exact.
+    #[inline(always)]
+    fn is_fast(&self) -> bool {
+        self.digits > 0 && self.digits <= FAST_DIGITS
+    }
+
+    /// The value: mantissa (< 10^15 < 2^53) and power of ten are both exact, so one
+    /// division rounds correctly.
+    #[inline(always)]
+    fn value(&self) -> Real {
+        let v = self.mant as Real / POW10[self.frac];
+        if self.neg { -v } else { v }
+    }
+}
+
+/// Reads the decimal digits at `s[*i..]` into `mant` (wrapping), moving `i` past them;
+/// returns how many there were.
+#[inline(always)]
+fn digit_run(s: &[u8], i: &mut usize, mant: &mut u64) -> usize {
+    let mut n = 0;
+    while let Some(d) = s.get(*i).map(|c| c.wrapping_sub(b'0'))
+        && d <= 9
+    {
+        *mant = mant.wrapping_mul(10).wrapping_add(d as u64);
+        n += 1;
+        *i += 1;
+    }
+    n
+}
+
 /// Numbers with at most this many digits take the fast path of [`Cursor::number`]: their
 /// mantissa stays below 10^15 < 2^53, exact in f64.
 const FAST_DIGITS: usize = 15;
@@ -815,45 +848,16 @@ impl Lexer {
                 return false;
             }
             let ch = letter.to_ascii_lowercase();
-            i += 1;
-            let mut neg = false;
-            if let Some(&c @ (b'+' | b'-')) = line.get(i) {
-                neg = c == b'-';
-                i += 1;
-            }
-            let mut mant: u64 = 0;
-            let mut digits = 0;
-            while let Some(d) = line.get(i).map(|c| c.wrapping_sub(b'0'))
-                && d <= 9
-            {
-                mant = mant * 10 + d as u64;
-                digits += 1;
-                i += 1;
-                if digits > FAST_DIGITS {
-                    return false;
-                }
-            }
-            let mut frac = 0;
-            if line.get(i) == Some(&b'.') {
-                i += 1;
-                while let Some(d) = line.get(i).map(|c| c.wrapping_sub(b'0'))
-                    && d <= 9
-                {
-                    mant = mant * 10 + d as u64;
-                    frac += 1;
-                    digits += 1;
-                    i += 1;
-                    if digits > FAST_DIGITS {
-                        return false;
-                    }
-                }
-            }
-            if digits == 0 {
+            let num = Decimal::scan(line, i + 1);
+            if !num.is_fast() {
                 return false;
             }
+            let Decimal {
+                neg, mant, frac, ..
+            } = num;
             // what follows a number is a blank, the next letter or the end (a blank then a
             // digit, a point or a sign would continue the number in the general reader)
-            let mut j = i;
+            let mut j = num.end;
             while j < n && matches!(line[j], b' ' | b'\t' | b'\r') {
                 j += 1;
             }
@@ -890,8 +894,7 @@ impl Lexer {
                     if b.n.is_some() {
                         return false;
                     }
-                    let v = mant as Real / POW10[frac];
-                    b.n = Some(if neg { -v } else { v });
+                    b.n = Some(num.value());
                 }
                 _ => {
                     if !WORD_LETTER[ch as usize] {
@@ -901,8 +904,7 @@ impl Lexer {
                     if b.present & (1 << k) != 0 {
                         return false;
                     }
-                    let v = mant as Real / POW10[frac];
-                    b.words[k] = if neg { -v } else { v };
+                    b.words[k] = num.value();
                     b.present |= 1 << k;
                     b.word_pos[k] = pos;
                 }
