@@ -880,7 +880,7 @@ impl RotaryEnvelope {
         let mut width = hi.lambda - lo.lambda;
         for step in 0..MAX_SOLVE_STEPS {
             let w = hi.lambda - lo.lambda;
-            if stop.reached(self.speed, self.r, &lo, &hi, flo, fhi, w) {
+            if stop.reached(self, &lo, &hi, flo, fhi, w) {
                 break;
             }
             let mut m = (lo.lambda * whi - hi.lambda * wlo) / (whi - wlo);
@@ -931,11 +931,11 @@ enum Stop {
 }
 
 impl Stop {
-    #[allow(clippy::too_many_arguments)]
+    /// Whether the bracket `lo`–`hi` (width `w` in λ, `f` there `flo`, `fhi`) of `env`'s
+    /// solve is fine enough.
     fn reached(
         self,
-        speed: Real,
-        r: Real,
+        env: &RotaryEnvelope,
         lo: &Probe,
         hi: &Probe,
         flo: Real,
@@ -948,10 +948,10 @@ impl Stop {
                 let rates = [lo, hi]
                     .into_iter()
                     .filter(|p| p.hit.is_some())
-                    .flat_map(|p| [p.g_in(r).abs(), p.g_out(r).abs()])
+                    .flat_map(|p| [p.g_in(env.r).abs(), p.g_out(env.r).abs()])
                     .filter(|g| g.is_finite())
                     .fold(Real::NEG_INFINITY, Real::max);
-                if rates.is_finite() { rates } else { speed }
+                if rates.is_finite() { rates } else { env.speed }
             }
         };
         slope * w <= SOLVE_TOL || w <= 4.0 * Real::EPSILON
