@@ -223,6 +223,17 @@ impl CounterRng {
     }
 }
 
+/// Runs `f` on a rayon pool of `threads` threads: the tests that results do not depend on
+/// the thread count.
+#[cfg(test)]
+pub(crate) fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .expect("pool")
+        .install(f)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

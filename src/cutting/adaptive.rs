@@ -1700,13 +1700,7 @@ mod tests {
             [2.0, 6.0, 3.5],
             [8.0, 6.0, 3.5],
         );
-        let run = |threads| {
-            rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .expect("pool")
-                .install(|| adaptive(&s))
-        };
+        let run = |threads| crate::math::in_pool(threads, || adaptive(&s));
         let (a, ra) = run(1);
         let (b, rb) = run(2);
         assert_eq!(a, b);

@@ -1184,13 +1184,7 @@ mod tests {
             [2.0, 3.0, 3.0],
             [8.0, 6.0, 3.5],
         );
-        let run = |threads| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .expect("pool");
-            pool.install(|| mesh_stock(&s).expect("meshes").0)
-        };
+        let run = |threads| crate::math::in_pool(threads, || mesh_stock(&s).expect("meshes").0);
         assert_eq!(run(1), run(2));
     }
 

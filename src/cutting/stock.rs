@@ -1060,11 +1060,7 @@ mod tests {
     #[test]
     fn result_is_independent_of_thread_count() {
         let run = |threads| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .expect("pool");
-            pool.install(|| {
+            crate::math::in_pool(threads, || {
                 let mut s = TriDexel::new_box(unit_box(10.0), 0.1, 1e9).expect("fits");
                 let pocket = Aabb {
                     min: Point3::new(2.05, 1.33, 5.01),

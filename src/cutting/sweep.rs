@@ -1932,11 +1932,7 @@ mod tests {
             .map(|(k, w)| linear(w[0], w[1], k + 1))
             .collect();
         let run = |threads| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .expect("pool");
-            pool.install(|| {
+            crate::math::in_pool(threads, || {
                 let bounds = Aabb {
                     min: Point3::new(-8.0, -8.0, -4.0),
                     max: Point3::new(8.0, 8.0, 4.0),

@@ -1066,11 +1066,7 @@ mod tests {
     #[test]
     fn result_is_bit_identical_for_one_and_two_threads() {
         let run = |threads| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .expect("pool");
-            pool.install(|| p1_map(ToolKind::Ball, p1::stock_box(), 0.1).0)
+            crate::math::in_pool(threads, || p1_map(ToolKind::Ball, p1::stock_box(), 0.1).0)
         };
         let (a, b) = (run(1), run(2));
         assert!(

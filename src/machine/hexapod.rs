@@ -1101,11 +1101,7 @@ mod tests {
             .map(|(l, n)| h.forward_unchecked(l, n))
             .collect();
         for threads in [1, 2] {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .expect("pool");
-            let batch = pool.install(|| h.forward_unchecked_batch(&jobs));
+            let batch = crate::math::in_pool(threads, || h.forward_unchecked_batch(&jobs));
             assert_eq!(batch, one_by_one, "{threads} threads");
         }
         assert!(one_by_one[500].is_err() && one_by_one[499].is_ok());

@@ -380,11 +380,7 @@ mod tests {
     fn bit_identical_across_thread_counts() {
         let pts = patch(&pose(11), 100_000, 0.025, 8);
         let run = |threads: usize| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .expect("pool");
-            pool.install(|| {
+            crate::math::in_pool(threads, || {
                 (
                     fit_plane(&pts).expect("fit"),
                     fit_plane_robust(&pts, &RobustRule::default()).expect("robust"),

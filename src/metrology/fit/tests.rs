@@ -421,11 +421,7 @@ fn shape_fits_bit_identical_across_thread_counts() {
         (p - s.centre).normalize()
     });
     let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .expect("pool");
-        pool.install(|| {
+        crate::math::in_pool(threads, || {
             (
                 fit_sphere(&sphere).expect("sphere"),
                 fit_circle(&circle).expect("circle"),

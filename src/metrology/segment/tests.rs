@@ -184,14 +184,6 @@ pub(super) fn check_step(
     }
 }
 
-fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
-    rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .expect("pool")
-        .install(f)
-}
-
 fn fit_bits(f: &PlaneFit) -> Vec<u64> {
     let mut v = vec![
         f.plane.offset.to_bits(),
@@ -207,19 +199,19 @@ fn fit_bits(f: &PlaneFit) -> Vec<u64> {
 fn bit_identical_for_one_and_two_threads() {
     let c = step_cloud(SIGMA, &tilted_pose());
     let opts = step_opts();
-    let one = in_pool(1, || segment_planes(&c.points, &opts).expect("one"));
-    let two = in_pool(2, || segment_planes(&c.points, &opts).expect("two"));
+    let one = crate::math::in_pool(1, || segment_planes(&c.points, &opts).expect("one"));
+    let two = crate::math::in_pool(2, || segment_planes(&c.points, &opts).expect("two"));
     assert_eq!(one, two);
     for (a, b) in one.iter().zip(&two) {
         assert_eq!(fit_bits(&a.fit), fit_bits(&b.fit));
     }
     let seed = c.points[c.points.len() / 2];
-    let r1 = in_pool(1, || select_region_from_seed(&c.points, &seed, &opts));
-    let r2 = in_pool(2, || select_region_from_seed(&c.points, &seed, &opts));
+    let r1 = crate::math::in_pool(1, || select_region_from_seed(&c.points, &seed, &opts));
+    let r2 = crate::math::in_pool(2, || select_region_from_seed(&c.points, &seed, &opts));
     assert_eq!(r1, r2);
     let sub = &c.points[..5000];
-    let n1 = in_pool(1, || estimate_normals(sub, 12, None).expect("n1"));
-    let n2 = in_pool(2, || estimate_normals(sub, 12, None).expect("n2"));
+    let n1 = crate::math::in_pool(1, || estimate_normals(sub, 12, None).expect("n1"));
+    let n2 = crate::math::in_pool(2, || estimate_normals(sub, 12, None).expect("n2"));
     assert_eq!(n1, n2);
     let ro = RansacOptions {
         distance_mm: 0.1,
@@ -227,8 +219,8 @@ fn bit_identical_for_one_and_two_threads() {
         seed: 9,
         min_inliers: 100,
     };
-    let p1 = in_pool(1, || ransac_plane(&c.points, &ro));
-    let p2 = in_pool(2, || ransac_plane(&c.points, &ro));
+    let p1 = crate::math::in_pool(1, || ransac_plane(&c.points, &ro));
+    let p2 = crate::math::in_pool(2, || ransac_plane(&c.points, &ro));
     assert_eq!(p1, p2);
 }
 
