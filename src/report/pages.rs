@@ -1012,11 +1012,11 @@ pub fn circular_sections(f: &CircularFigures) -> Vec<Section> {
     let mut both = vec![
         vec![
             "squareness".into(),
-            diagnosis(&f.squareness_urad, 1.0, "µrad (µm/m)"),
+            diagnosis(&f.squareness_urad, 1.0, "µrad"),
         ],
         vec![
             "servo mismatch".into(),
-            diagnosis(&f.servo_mismatch_urad, 1.0, "µrad (µm/m)"),
+            diagnosis(&f.servo_mismatch_urad, 1.0, "µrad"),
         ],
     ];
     if let Some(h) = f.h {
@@ -1124,7 +1124,7 @@ pub fn amplification_page(
     let sections = vec![Section {
         heading: "Amplification factors".into(),
         intro: format!(
-            "Over {} poses ({} × {} × {} positions and the tilts); {} outside the workspace.",
+            "The nominal machine (its design parameters; the scene's [deviations] are not used), over {} poses ({} × {} × {} positions and the tilts); {} outside the workspace.",
             map.samples.len(),
             map.steps[0],
             map.steps[1],
