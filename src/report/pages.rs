@@ -390,9 +390,21 @@ pub fn run_page(r: &Report, view: Option<View3d>, mut plots: Vec<Plot>) -> Page 
         columns: vec!["deviation".into(), "value".into(), "σ".into(), "injected".into()],
         rows,
     });
+    let why = r
+        .why_not_identified
+        .iter()
+        .map(|w| {
+            let mut c = w.chars();
+            let first: String = c
+                .next()
+                .map(|f| f.to_uppercase().collect())
+                .unwrap_or_default();
+            format!(" {first}{}.", c.as_str())
+        })
+        .collect::<String>();
     sections.extend(list_section(
         "Not identified",
-        "This experiment does not determine these: each is held at its known value and never given an identified value.",
+        &format!("This experiment does not determine these: each is held at its known value and never given an identified value.{why}"),
         &r.not_identified,
     ));
     let mut sv_rows: Vec<Vec<String>> = r
