@@ -497,18 +497,51 @@ pub fn simulate_page(r: &SimulationReport, view: Option<View3d>, plots: Vec<Plot
         });
     }
     if let Some(d) = &r.deviation {
-        sections.push(Section {
-            heading: "Deviation from the design".into(),
-            intro: format!(
-                "Every dexel crossing of the cut part against {} (+ material left, − gouge).",
-                d.design
+        let (heading, intro) = match &d.design {
+            Some(design) => (
+                "Deviation from the design",
+                format!(
+                    "Every dexel crossing of the cut part against {design} (+ material left, − gouge)."
+                ),
             ),
-            columns: vec!["figure".into(), "mm".into()],
+            None => (
+                "Deviation from the nominal part",
+                format!(
+                    "What the part's colours show: the display surface's deviation from {} at {} triangle corners, mean and RMS over its area (+ material left, − gouge).",
+                    d.reference(),
+                    d.map.points
+                ),
+            ),
+        };
+        let at = |p: &[Real; 3], line: u32| {
+            let by = if line == 0 {
+                "stock face".to_string()
+            } else {
+                format!("NC line {line}")
+            };
+            format!("({:.3}, {:.3}, {:.3}), {by}", p[0], p[1], p[2])
+        };
+        sections.push(Section {
+            heading: heading.into(),
+            intro,
+            columns: vec!["figure".into(), "mm".into(), "where".into()],
             rows: vec![
-                vec!["max".into(), format!("{:+.6}", d.map.max_mm)],
-                vec!["min".into(), format!("{:+.6}", d.map.min_mm)],
-                vec!["mean".into(), format!("{:+.6}", d.map.mean_mm)],
-                vec!["rms".into(), format!("{:.6}", d.map.rms_mm)],
+                vec![
+                    "max".into(),
+                    format!("{:+.6}", d.map.max_mm),
+                    at(&d.map.at_max, d.map.line_at_max),
+                ],
+                vec![
+                    "min".into(),
+                    format!("{:+.6}", d.map.min_mm),
+                    at(&d.map.at_min, d.map.line_at_min),
+                ],
+                vec![
+                    "mean".into(),
+                    format!("{:+.6}", d.map.mean_mm),
+                    String::new(),
+                ],
+                vec!["rms".into(), format!("{:.6}", d.map.rms_mm), String::new()],
             ],
         });
     }
