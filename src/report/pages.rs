@@ -617,7 +617,7 @@ fn identification_sections(r: &IdentifyReport) -> Vec<Section> {
                     e.monte_carlo_spread
                         .map_or_else(|| "—".into(), |m| format!("{m:.3e}")),
                     e.injected
-                        .map_or_else(|| "—".into(), |i| format!("{i:+.6e}")),
+                        .map_or_else(|| "—".into(), |i| super::deviation_value(&e.name, i)),
                 ]
             })
             .collect()

@@ -110,7 +110,7 @@ impl Report {
         let inj: Vec<String> = self
             .injected
             .iter()
-            .map(|(k, v)| format!("{k} = {v}"))
+            .map(|(k, v)| format!("{k} = {}", super::deviation_value(k, *v)))
             .collect();
         let _ = writeln!(
             s,
