@@ -880,12 +880,12 @@ fn circular_summary(title: &str, extra: &[(&str, String)], f: &CircularFigures) 
     let _ = writeln!(
         s,
         "  squareness    {}",
-        diag(&f.squareness_urad, 1.0, "µm/m")
+        diag(&f.squareness_urad, 1.0, "µrad")
     );
     let _ = writeln!(
         s,
         "  servo mismatch {}",
-        diag(&f.servo_mismatch_urad, 1.0, "µm/m")
+        diag(&f.servo_mismatch_urad, 1.0, "µrad")
     );
     s
 }

@@ -1076,7 +1076,14 @@ fn named_combinations(rows: &DMatrix<Real>, scale: &[Real], names: &[String]) ->
         // Scaled coefficient a_j on q_j = p_j / s_j → a_j / s_j on p_j. The name drops
         // the small terms; the coefficients keep them (values must not depend on the
         // undetermined directions).
-        let mut c: Vec<Real> = row.iter().zip(scale).map(|(a, s)| a / s).collect();
+        // A coefficient below the numerical rank's resolution is the elimination's
+        // rounding, not a coupling: exactly 0 (so a parameter the combination does not
+        // contain does not enter its value, or its injected value, at 1e-19).
+        let mut c: Vec<Real> = row
+            .iter()
+            .zip(scale)
+            .map(|(a, s)| if a.abs() < RANK_EPS * big { 0.0 } else { a / s })
+            .collect();
         let lead_at = row
             .iter()
             .position(|a| a.abs() >= COMBINATION_CUTOFF * big)
@@ -1460,7 +1467,17 @@ pub fn identify(model: &Model) -> Result<Identification, CalibrateError> {
             let k = ident.parameters.iter().position(|n| n == name).unwrap_or(0);
             let a = basis * basis.row(k).transpose();
             let c = (0..np)
-                .map(|j| scale[k] * a[j] / (scale[j] * a[k]))
+                .map(|j| {
+                    // A coupling below the numerical rank's resolution is the projection's
+                    // rounding, not a coupling: exactly 0 (a parameter nothing couples to is
+                    // valued, and compared with the truth, on its own).
+                    let r = a[j] / a[k];
+                    if j != k && r.abs() < RANK_EPS {
+                        0.0
+                    } else {
+                        scale[k] * r / scale[j]
+                    }
+                })
                 .collect();
             estimate(name.clone(), c)
         })

@@ -1255,10 +1255,13 @@ pub fn face_errors(
     Ok(FaceCheck { faces, step_mm })
 }
 
-/// A machined part against the nominal part, ray by ray over the three dexel grids.
+/// A machined part against the nominal part, ray by ray over the three dexel grids: the
+/// distance between each cut surface and the same surface of the nominal part (the surface
+/// the same NC line made).
 #[derive(Clone, Copy, Debug, PartialEq, Default, serde::Serialize)]
 pub struct PartError {
-    /// Crossings compared (made by a cut in either part, seen at most 60° off the ray).
+    /// Crossings compared (made by the same cut in both parts, seen at most 60° off the
+    /// ray).
     pub crossings: usize,
     /// Largest distance between corresponding crossings, along the surface normal (mm).
     pub max_mm: Real,
@@ -1269,6 +1272,11 @@ pub struct PartError {
     /// Rays whose material intervals differ in number or in the orientation of their ends
     /// (a surface edge moved across the ray): not compared.
     pub unmatched_rays: usize,
+    /// Corresponding crossings made by different NC lines in the two parts (or by a cut in
+    /// one and the stock in the other): an edge between two surfaces moved across the ray,
+    /// so the ray meets one surface in one part and another in the other — their distance
+    /// along the ray is the height of the edge, not a surface error. Not compared.
+    pub other_surface_crossings: usize,
 }
 
 /// A crossing is compared on a grid whose rays meet its surface at most 60° off the normal
@@ -1278,7 +1286,11 @@ const PART_RAY_COS: Real = 0.5;
 
 /// Compares every cut surface of `part` with `nominal` (the same stock box and pitch): on
 /// each ray, corresponding crossings' distance along the ray times the cosine between ray
-/// and normal — the distance between the surfaces there, to first order.
+/// and normal — the distance between the surfaces there, to first order — where both
+/// crossings lie on the same surface: made by the same NC line (a corrected program's
+/// blocks carry their source line). Where an edge between two surfaces has moved across a
+/// ray (a floor's edge at a step: the ray meets the upper floor in one part, the lower in
+/// the other), the crossings are of different lines and are counted, not compared.
 pub fn part_error(part: &TriDexel, nominal: &TriDexel) -> PartError {
     let mut out = PartError::default();
     let mut sum = 0.0;
@@ -1311,6 +1323,10 @@ pub fn part_error(part: &TriDexel, nominal: &TriDexel) -> PartError {
                 for (x, y) in pairs() {
                     let n = y.normal();
                     if (x.line == 0 && y.line == 0) || n[axis].abs() < PART_RAY_COS {
+                        continue;
+                    }
+                    if x.line != y.line {
+                        out.other_surface_crossings += 1;
                         continue;
                     }
                     let d = (x.t - y.t).abs() * n[axis].abs();

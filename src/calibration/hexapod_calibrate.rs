@@ -135,13 +135,14 @@ impl Plan {
 /// Samples per circle of the default plans (one a degree).
 pub const DEFAULT_POINTS: usize = 360;
 
-/// Seed 000's plans on a workspace: `jig-free` 15 circles (five positions in x–y — the
-/// centre and ±0.4 of the half-widths — at three
-/// heights, the platform level, tilted about x and tilted about y, the bar at 20°, 30° and
-/// 45° so that every table ball's z is seen), `ball-plate` 7 circles about a plate's centre ball and six balls on a hexagon, the
-/// bar tilted 45° for z sensitivity, the platform level at the centre and tilted ±t about x
-/// and y at the others. Radius 100 mm (less on a small workspace); t = 0.6 × the
-/// workspace's tilt.
+/// Seed 000's plans on a workspace, with t = 0.6 × the workspace's tilt: `jig-free` 15
+/// circles (five positions in x–y — the centre and ±0.4 of the half-widths — at three
+/// heights; per height the platform level, tilted 0.5·t = 0.3·tilt about x, tilted
+/// −0.3·tilt about y, the bar at 20°, 30° and 45° so that every table ball's z is seen;
+/// every circle swung by 0.6·t = 0.36·tilt along the bar while it runs — seed 000's arcs run
+/// while the tilt changes), `ball-plate` 7 circles about a plate's centre ball and six balls
+/// on a hexagon, the bar tilted 45° for z sensitivity, the platform level at the centre and
+/// tilted ±t about x and y at the others. Radius 100 mm (less on a small workspace).
 pub fn default_plan(procedure: Procedure, ws: &Workspace, points: usize) -> Plan {
     let (xc, yc) = (0.5 * (ws.x_mm.0 + ws.x_mm.1), 0.5 * (ws.y_mm.0 + ws.y_mm.1));
     let (hx, hy) = (0.5 * (ws.x_mm.1 - ws.x_mm.0), 0.5 * (ws.y_mm.1 - ws.y_mm.0));

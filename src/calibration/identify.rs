@@ -16,10 +16,16 @@
 //! tilt = 2·(gamma_AY + gamma_YX).
 //!
 //! **Identification.** Those two measurements are matched exactly: Levenberg–Marquardt on
-//! the exact chain (the flank planes recomputed from the transforms) over dy and gamma of the
-//! rotary axis's joint, with every other deviation held at its known value. The Jacobian's
-//! singular values decide whether the pair is identifiable from these faces; if not, no
-//! value is given. Everything else is reported as not observable from this experiment.
+//! the exact chain (the flank planes recomputed from the transforms) over an offset and an
+//! angle of the rotary axis's joint, with every other deviation held at its known value: the
+//! offset the step is most sensitive to (the axis line's offset along the faces' normal: dy
+//! for seed 002's A axis and faces normal to Y) and the angle the faces' relative tilt is
+//! most sensitive to (gamma there). When no angle of the joint tilts the faces apart about
+//! the tool axis — the rotary axis parallel to it, a C table under a vertical spindle — the
+//! offset is found from the step alone and the angles are reported not identified, saying
+//! why. The Jacobian's singular values decide whether the pair is identifiable from these
+//! faces; if not, no value is given. Everything else is reported as not observable from
+//! this experiment.
 //!
 //! **Invariant:** identification reads a cloud and the program's moves; it never runs the
 //! sweep or the scanner (it must work on clouds twinmill did not make).
@@ -773,6 +779,9 @@ pub struct StepIdentification {
     /// Deviation names this experiment does not identify (alone or separably): held at
     /// their known values (0 unless the scene gives them), never given a value.
     pub not_identified: Vec<String>,
+    /// Why the offset or the angle combination was not identified, one sentence each
+    /// (empty when both were).
+    pub why_not: Vec<String>,
 }
 
 /// The two parameters solved for, on a model chain.
@@ -875,16 +884,6 @@ pub fn identify_step(
             f1.name
         )));
     };
-    let ids = [
-        DeviationId {
-            joint,
-            component: Component::Dy,
-        },
-        DeviationId {
-            joint,
-            component: Component::Gamma,
-        },
-    ];
     let frame = StepFrame {
         at: Point3::from((f0.fit.centroid.coords + f1.fit.centroid.coords) / 2.0),
         n: f0.flank.plane.normal,
@@ -903,12 +902,52 @@ pub fn identify_step(
         .design
         .slope_sigma_along_cut()
         .hypot(f1.design.slope_sigma_along_cut());
+    let cuts = [&f0.cut, &f1.cut];
+    let toward = [f0.flank.plane.normal, f1.flank.plane.normal];
+    // The parameters: of the rotary axis's joint, the offset the step sees most (its line's
+    // offset along the faces' normal: dy_AY for seed 002) and the angle the faces' relative
+    // tilt about the tool axis sees most (gamma_AY), by central differences on the model.
+    let slope = |component: Component| -> Option<Vector2<Real>> {
+        let id = DeviationId { joint, component };
+        let h = if component.is_angle() { 1e-6 } else { 1e-4 };
+        let at = |d: Real| {
+            let mut chain = model.clone();
+            chain.set_deviation(id, model.deviation(id) + d);
+            let [a, b] = [0, 1].map(|k| flank_towards(&chain, tool, cuts[k], &toward[k]));
+            frame.measure(&a?.plane, &b?.plane)
+        };
+        let (p, m) = (at(h)?, at(-h)?);
+        Some(Vector2::new(p.0 - m.0, p.1 - m.1) / (2.0 * h))
+    };
+    let degenerate = || IdentifyError::NotAStepPair("the model faces are degenerate".into());
+    let pick = |components: [Component; 3], k: usize| {
+        let mut best = (components[0], Vector2::<Real>::zeros());
+        for c in components {
+            let j = slope(c).ok_or_else(degenerate)?;
+            if j[k].abs() > best.1[k].abs() {
+                best = (c, j);
+            }
+        }
+        Ok::<_, IdentifyError>(best)
+    };
+    let (offset_c, j_offset) = pick([Component::Dx, Component::Dy, Component::Dz], 0)?;
+    let (angle_c, j_angle) = pick([Component::Alpha, Component::Beta, Component::Gamma], 1)?;
+    let ids = [
+        DeviationId {
+            joint,
+            component: offset_c,
+        },
+        DeviationId {
+            joint,
+            component: angle_c,
+        },
+    ];
     let problem = StepProblem {
         model: model.clone(),
         ids,
         base: [model.deviation(ids[0]), model.deviation(ids[1])],
-        cuts: [&f0.cut, &f1.cut],
-        toward: [f0.flank.plane.normal, f1.flank.plane.normal],
+        cuts,
+        toward,
         tool,
         frame,
         measured: Vector2::new(step, tilt),
@@ -916,27 +955,40 @@ pub fn identify_step(
     };
     let j0 = problem
         .jacobian_at(&Vector2::zeros())
-        .ok_or_else(|| IdentifyError::NotAStepPair("the model faces are degenerate".into()))?;
+        .ok_or_else(degenerate)?;
     let sv = j0.svd(false, false).singular_values;
     let (smax, smin) = (sv.max(), sv.min());
     let identifiable = smax > 0.0 && smin / smax > IDENTIFIABLE_RATIO;
+    // No angle of the joint turns the faces apart about the tool axis (the rotary axis is
+    // parallel to it: a C table under a vertical spindle): the tilt carries no information
+    // on the joint, and the offset is found from the step alone.
+    let no_angle = j_angle[1].abs() <= IDENTIFIABLE_RATIO * j_offset[0].abs();
     let joint_next = model.joint_name(joint + 1).to_string();
     let offset_name = model.deviation_name(ids[0]);
     let angle_name = if joint + 1 < model.axes().len() {
-        format!("{}+gamma_{joint_next}", model.deviation_name(ids[1]))
+        format!(
+            "{}+{}_{joint_next}",
+            model.deviation_name(ids[1]),
+            angle_c.prefix()
+        )
     } else {
         model.deviation_name(ids[1])
     };
-    let mut observed = vec![offset_name.clone(), model.deviation_name(ids[1])];
-    if joint + 1 < model.axes().len() {
-        observed.push(format!("gamma_{joint_next}"));
+    let mut observed = vec![offset_name.clone()];
+    if !no_angle {
+        observed.push(model.deviation_name(ids[1]));
+        if joint + 1 < model.axes().len() {
+            observed.push(format!("{}_{joint_next}", angle_c.prefix()));
+        }
     }
     let not_identified = model
         .deviation_names()
         .into_iter()
         .filter(|n| !observed.contains(n))
         .collect();
-    let (offset, angle_sum, solver) = if identifiable {
+    let axis = model.axes()[joint].letter.as_char();
+    let mut why_not = Vec::new();
+    let (offset, angle_sum, solver) = if identifiable && !no_angle {
         let (solved, rep) = LevenbergMarquardt::new().minimize(problem);
         let x = solved.x;
         let res = solved
@@ -951,10 +1003,10 @@ pub fn identify_step(
         let sig = |k: usize| {
             ((jinv[(k, 0)] * step_sigma).powi(2) + (jinv[(k, 1)] * tilt_sigma).powi(2)).sqrt()
         };
-        let gamma_next = if joint + 1 < model.axes().len() {
+        let angle_next = if joint + 1 < model.axes().len() {
             model.deviation(DeviationId {
                 joint: joint + 1,
-                component: Component::Gamma,
+                component: angle_c,
             })
         } else {
             0.0
@@ -963,12 +1015,30 @@ pub fn identify_step(
             Some((offset_name.clone(), solved.base[0] + x[0], sig(0))),
             Some((
                 angle_name.clone(),
-                solved.base[1] + x[1] + gamma_next,
+                solved.base[1] + x[1] + angle_next,
                 sig(1),
             )),
             (rep.number_of_evaluations, res),
         )
+    } else if no_angle && j_offset[0].abs() > 0.0 {
+        why_not.push(format!(
+            "no angle of joint {} turns the faces apart about the tool axis (the {axis} axis is parallel to it, so a rotation about it turns both faces alike): their relative tilt determines none, and {offset_name} is found from the step alone, every angle held at its known value",
+            model.joint_name(joint)
+        ));
+        let (value, evaluations, residual) = solve_offset(&problem, step, j_offset[0]);
+        (
+            Some((
+                offset_name.clone(),
+                problem.base[0] + value,
+                step_sigma / j_offset[0].abs(),
+            )),
+            None,
+            (evaluations, residual),
+        )
     } else {
+        why_not.push(format!(
+            "the step and the faces' relative tilt depend on {offset_name} and {angle_name} only together (singular values {smax:.3e}, {smin:.3e}): neither is determined"
+        ));
         (None, None, (0, Real::NAN))
     };
     Ok(StepIdentification {
@@ -984,8 +1054,34 @@ pub fn identify_step(
         singular_values: [smax, smin],
         solver,
         not_identified,
+        why_not,
     })
 }
+
+/// The offset (mm, from its model value) at which the model's step equals `measured`: Newton
+/// on the step alone, from the slope `slope` at the model (the step is nearly linear in the
+/// offset); (value, evaluations, |step residual|).
+fn solve_offset(problem: &StepProblem<'_>, measured: Real, slope: Real) -> (Real, usize, Real) {
+    let step_at = |x: Real| problem.predict(&Vector2::new(x, 0.0)).map(|p| p[0]);
+    let (mut x, mut evaluations) = (0.0, 0);
+    let mut residual = Real::INFINITY;
+    for _ in 0..OFFSET_ITERATIONS {
+        evaluations += 1;
+        let Some(s) = step_at(x) else {
+            return (Real::NAN, evaluations, Real::NAN);
+        };
+        residual = s - measured;
+        if residual.abs() <= tol::LENGTH_EPS {
+            break;
+        }
+        x -= residual / slope;
+    }
+    (x, evaluations, residual.abs())
+}
+
+/// Newton steps on the offset alone; the step is linear in it to a part in 1e6, so two or
+/// three reach rounding.
+const OFFSET_ITERATIONS: usize = 20;
 
 /// The step and tilt the exact chain predicts for two cuts, measured in `frame`: on each
 /// cut the flank on the side `toward` points to — the side of its face's model flank, the

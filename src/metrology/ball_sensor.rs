@@ -42,7 +42,8 @@
 //!
 //! **Invariant:** a reading is produced only when the ball cuts both sheets and both shadows
 //! lie inside the micrometers' measuring range; readings are converted only when they are
-//! finite and geometrically possible (0 < L₂ ≤ 2R + tolerance, the shadow inside the band);
+//! finite and geometrically possible (0 < L₂ ≤ 2R + a, the shadow inside the band; a chord
+//! between 2R and 2R + a is the equator's read long, Z = 0);
 //! anything else is an error naming what is wrong, never a number.
 
 use super::table::{FieldError, fields, length_unit, name_and_unit, number, rows};
@@ -240,12 +241,14 @@ impl BallSensor {
                     "micrometer {which}: a shadow of {l2} mm is not a ball's"
                 )));
             }
-            // A chord longer than the diameter by more than the accuracy cannot be a ball's;
-            // within it, the centre is taken to be in the sheet.
-            if h > r + self.accuracy_mm {
+            // A reading is the true chord (at most the diameter D) read within ±a: a chord
+            // longer than D + a cannot be a ball's; between D and D + a it is the equator's
+            // read long, and the centre is taken to be in the sheet (Z = 0).
+            if l2 > 2.0 * r + self.accuracy_mm {
                 return Err(SensorError::Impossible(format!(
-                    "micrometer {which}: a shadow of {l2:.4} mm is longer than the ball's diameter {:.4} mm",
-                    2.0 * r
+                    "micrometer {which}: a shadow of {l2:.4} mm is longer than the ball's diameter {:.4} mm plus the micrometer's accuracy {:.3} µm",
+                    2.0 * r,
+                    self.accuracy_mm * 1e3
                 )));
             }
             Ok((r * r - h * h).max(0.0).sqrt())
@@ -585,6 +588,43 @@ mod tests {
             )
             .is_err()
         );
+    }
+
+    #[test]
+    fn a_chord_is_refused_only_beyond_the_diameter_plus_the_accuracy() {
+        // A micrometer reads the true chord within ±a, and no chord of a ball is longer than
+        // its diameter D: D + a is the longest possible reading (the equator read a long).
+        let s = sensor();
+        let (d, a) = (4.0002, 0.5e-3);
+        let other = Reading { l1: 3.0, l2: 3.9 };
+        let at = |l2: Real| {
+            s.centre(
+                &Reading {
+                    l1: 5.0 - 0.5 * l2,
+                    l2,
+                },
+                &other,
+            )
+        };
+        // Just inside: the centre is taken to be in the sheet, Z = 0.
+        for l2 in [d, d + 0.5 * a, d + 0.999 * a] {
+            let c = at(l2).expect("a possible reading");
+            assert_eq!(c.centre_mm[2], 0.0, "L2 = D + {} µm", (l2 - d) * 1e3);
+        }
+        // A chord read a long above the equator: Z from the half-chord (L2/2)² + Z² = R².
+        let z = 0.01;
+        let chord = 2.0 * (0.25 * d * d - z * z).sqrt();
+        let c = at(chord + 0.5 * a).expect("possible");
+        let half = 0.5 * (chord + 0.5 * a);
+        assert!((c.centre_mm[2] - (0.25 * d * d - half * half).max(0.0).sqrt()).abs() < 1e-12);
+        // Beyond D + a no ball gives the reading.
+        for l2 in [d + 1.001 * a, d + 1.5 * a, d + 2.0 * a] {
+            let e = at(l2).expect_err("longer than any chord read within ±a");
+            assert!(
+                e.to_string().contains("longer than the ball's diameter"),
+                "{e}"
+            );
+        }
     }
 
     #[test]

@@ -42,7 +42,9 @@ fn nonzero_deviations(chain: &Chain) -> BTreeMap<String, Real> {
         .into_iter()
         .filter_map(|n| {
             let v = chain.deviation(chain.deviation_id(&n).ok()?);
-            (v != 0.0).then_some((n, v))
+            // What rounds to nothing at the printed resolution (the rounding of an ISO
+            // term composed onto the joints) is not a deviation corrected for.
+            (crate::report::deviation_value(&n, v) != "0").then_some((n, v))
         })
         .collect()
 }
@@ -279,7 +281,7 @@ pub fn correct(
             } else {
                 corrected_for
                     .iter()
-                    .map(|(k, v)| format!("{k} = {v}"))
+                    .map(|(k, v)| format!("{k} = {}", crate::report::deviation_value(k, *v)))
                     .collect::<Vec<_>>()
                     .join(", ")
             }

@@ -70,6 +70,9 @@ pub struct AmplificationRequest {
 /// The amplification map and what it demands.
 #[derive(Clone, Debug, Serialize)]
 pub struct AmplificationOutcome {
+    /// The machine mapped: always `"nominal"` — the design parameters (seed 001's factors
+    /// are a property of the design); the scene's `[deviations]` are not used.
+    pub machine: &'static str,
     /// Every pose.
     pub map: AmplificationMap,
     /// The largest K_p and K_a.
@@ -91,7 +94,8 @@ pub struct AmplificationOutcome {
     pub summary: String,
 }
 
-/// The resolution amplification map of the scene's nominal machine.
+/// The resolution amplification map of the scene's nominal machine (its design parameters;
+/// the scene's `[deviations]` are not used).
 pub fn hexapod_amplification(
     scene: &HexapodScene,
     req: &AmplificationRequest,
@@ -132,6 +136,7 @@ pub fn hexapod_amplification(
         drive_resolution_mm,
     );
     Ok(AmplificationOutcome {
+        machine: "nominal",
         csv: amplification_csv(&map),
         map,
         general,

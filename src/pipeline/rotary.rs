@@ -5,15 +5,17 @@
 //! cannot determine named.
 //!
 //! The scene's `chain` is the machine that moves; its `model` (nominal plus the deviations
-//! known a priori) is what the controller computes with and what the identification starts
-//! from. The identified values are the location errors of the machine *relative to that
-//! model*.
+//! known a priori) is what the controller computes with. The identification's model is the
+//! scene's machine with everything but the terms it identifies (deviations, error motions,
+//! reversals), those at their known values: the identified values are the location errors
+//! *relative to the known values*, with the rest of the machine as the scene has it.
 
 use super::PipelineError;
 use crate::calibration::calibrate::{
     IsoTerm, Model, Registration, ball_features, identify as solve,
 };
 use crate::cutting::tool::{Tool, ToolKind};
+use crate::machine::chain::Chain;
 use crate::math::{Point3, Real, Vector3};
 use crate::metrology::ball_sensor::BallSensor;
 use crate::metrology::rotary_test::{
@@ -21,6 +23,7 @@ use crate::metrology::rotary_test::{
 };
 use crate::scene::Scene;
 use serde::Serialize;
+use std::collections::BTreeMap;
 
 /// The instrument of a rotary-axis test.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -196,8 +199,9 @@ fn identify_location(
     let features = ball_features(samples, setup.tool_offset, 0);
     // Ball features do not use the tool; the model takes one for plane features.
     let tool = Tool::try_new(ToolKind::Ball, 1.0, 1.0).map_err(|e| e.to_string())?;
+    let chain = test_model(scene, &terms).map_err(|e| e.to_string())?;
     let model = Model {
-        chain: &scene.model,
+        chain: &chain,
         ids: &[],
         iso_terms: &terms,
         tool: &tool,
@@ -234,6 +238,50 @@ fn identify_location(
         chi2: r.solver.chi2,
         dof: r.solver.dof,
     })
+}
+
+/// The chain the identification fits: the scene's machine with everything it has — its
+/// error motions and reversals and every deviation `[deviations]` injects — except the
+/// `terms` being identified, which start from their values in the scene's model (`[identify]
+/// known`, else zero). A term counts as identified under any of its names (`EC0XY`,
+/// `EC(0X)Y`). The deviations are applied as a scene applies them: joint deviations first,
+/// then ISO terms, each in name order.
+fn test_model(
+    scene: &Scene,
+    terms: &[IsoTerm],
+) -> Result<Chain, crate::machine::chain::KinematicsError> {
+    let identified = |name: &str| {
+        !name.contains('_')
+            && scene
+                .model
+                .iso_term_id(name)
+                .is_ok_and(|(axis, component)| {
+                    terms
+                        .iter()
+                        .any(|t| t.axis == axis && t.component == component)
+                })
+    };
+    let mut deviations: BTreeMap<&str, Real> = scene
+        .injected
+        .iter()
+        .filter(|(n, _)| !identified(n))
+        .map(|(n, v)| (n.as_str(), *v))
+        .collect();
+    for (n, v) in scene.known.iter().filter(|(n, _)| identified(n)) {
+        deviations.insert(n, *v);
+    }
+    let mut chain = scene.model.nominal().with_error_motions_of(&scene.model);
+    for iso in [false, true] {
+        for (name, v) in deviations.iter().filter(|(n, _)| n.contains('_') != iso) {
+            if iso {
+                chain.apply_iso_term(name, *v)?;
+            } else {
+                let id = chain.deviation_id(name)?;
+                chain.set_deviation(id, *v);
+            }
+        }
+    }
+    Ok(chain)
 }
 
 /// The default setup: the table-side point at (60, 0, 30) mm in the workpiece frame (off

@@ -259,9 +259,15 @@ pub fn run(
         identified,
         uncertainty,
         not_identified,
+        why_not_identified: ident.why_not.clone(),
         faces: faces.iter().zip(&scene.faces).map(|(f, s)| face_report(f, s.line)).collect(),
         solver: SolverReport {
-            method: "Levenberg-Marquardt on the exact chain (step, tilt), seed 002 eq. (6)(7) to first order".into(),
+            method: if ident.offset.is_some() && ident.angle_sum.is_none() {
+                "Newton on the exact chain (the step alone: the tilt sees no angle of the joint)"
+            } else {
+                "Levenberg-Marquardt on the exact chain (step, tilt), seed 002 eq. (6)(7) to first order"
+            }
+            .into(),
             singular_values: ident.singular_values,
             evaluations: ident.solver.0,
             residual: ident.solver.1,

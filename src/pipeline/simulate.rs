@@ -1,7 +1,7 @@
 //! `simulate`: the program cut into the scene's stock on the deviated machine with the
 //! collision checks, the part's surface mesh, its picture and page coloured by deviation
-//! (from the design model, or from the part the nominal machine cuts), and the deviation
-//! map against the design model.
+//! (from the design model, or from the part the nominal machine cuts) with the figures
+//! behind the colours, and the deviation map against the design model.
 
 use super::pages::{display_part, part_png, reference_part, view};
 use super::{PipelineError, make_stock, sweep_failed};
@@ -11,7 +11,10 @@ use crate::cutting::sweep::{Kinematics, sweep_program};
 use crate::math::Real;
 use crate::nc::Program;
 use crate::progress::Progress;
-use crate::report::deviation_map::{DeviationImageOptions, deviation_map, render_deviation_map};
+use crate::report::deviation_map::{
+    DeviationImageOptions, DeviationReport, deviation_map, render_deviation_map,
+};
+use crate::report::display::surface_deviation;
 use crate::report::html::{Marker, Plot, render_page};
 use crate::report::render::encode_png;
 use crate::report::svg::{MapLabels, deviation_map_svg};
@@ -35,6 +38,22 @@ pub struct Simulation {
     pub html: String,
     /// PNG of the deviation map against the scene's design model, if it has one.
     pub deviation_png: Option<Vec<u8>>,
+}
+
+/// The NC line that made the cut part's surface nearest to `p` (a point inside a face of the
+/// display surface): that of the nearest dexel crossing (0 for an uncut stock face, or a
+/// part without crossings).
+fn nearest_line(stock: &crate::cutting::stock::TriDexel, p: &crate::math::Point3) -> u32 {
+    let mut best = (Real::INFINITY, 0);
+    for g in stock.grids() {
+        g.for_each_crossing(|q, c| {
+            let d = (q - p).norm_squared();
+            if d < best.0 {
+                best = (d, c.line);
+            }
+        });
+    }
+    best.1
 }
 
 /// Size of the deviation picture (px).
@@ -147,13 +166,37 @@ pub fn simulate(
             timings.insert("deviation".into(), clock.elapsed().as_secs_f64());
             (
                 Some(DeviationSummary {
-                    design: design_path.display().to_string(),
+                    from: "design",
+                    design: Some(design_path.display().to_string()),
                     map: summary,
                 }),
                 Some(png),
             )
         }
-        None => (None, None),
+        // Without a design, the numbers behind the colours: the display's deviations from
+        // the nominal part.
+        None => (
+            shown
+                .deviations
+                .as_deref()
+                .and_then(|d| surface_deviation(&shown.mesh, d))
+                .map(|d| DeviationSummary {
+                    from: "nominal part",
+                    design: None,
+                    map: DeviationReport {
+                        points: d.corners,
+                        max_mm: d.max.value_mm,
+                        min_mm: d.min.value_mm,
+                        mean_mm: d.mean_mm,
+                        rms_mm: d.rms_mm,
+                        at_max: d.max.corner.coords.into(),
+                        at_min: d.min.corner.coords.into(),
+                        line_at_max: nearest_line(&stock, &d.max.centroid),
+                        line_at_min: nearest_line(&stock, &d.min.centroid),
+                    },
+                }),
+            None,
+        ),
     };
     let clock = Instant::now();
     let markers = checked

@@ -84,7 +84,7 @@ impl CorrectReport {
             self.scene, self.program, self.accuracy_mm
         );
         for (k, v) in &self.corrected_for {
-            let _ = writeln!(s, "  corrected for {k} = {v}");
+            let _ = writeln!(s, "  corrected for {k} = {}", super::deviation_value(k, *v));
         }
         for it in &self.iterations {
             let label = if it.iteration == 0 {

@@ -104,6 +104,10 @@ pub struct DeviationReport {
     pub at_max: [Real; 3],
     /// Where the minimum is (W).
     pub at_min: [Real; 3],
+    /// The NC line that made the surface where the maximum is (0: an uncut stock face).
+    pub line_at_max: u32,
+    /// The NC line that made the surface where the minimum is.
+    pub line_at_min: u32,
 }
 
 /// The deviation of every crossing of `stock` from `design`, and its summary.
@@ -154,6 +158,8 @@ pub fn deviation_map(
         rms_mm: (sum2 / n).sqrt(),
         at_max: at(imax),
         at_min: at(imin),
+        line_at_max: points[imax].line,
+        line_at_min: points[imin].line,
     };
     Ok((points, report))
 }

@@ -314,6 +314,99 @@ pub fn area_colour_range_mm(mesh: &DisplayMesh, deviations: &[[Real; 3]]) -> Rea
     nice_ceil((q * (1.0 - 1e-6)).max(1.0)) * 1e-3
 }
 
+/// The figures behind a display mesh's deviation colours.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfaceDeviation {
+    /// Triangle corners with a deviation (3 per triangle counted).
+    pub corners: usize,
+    /// Largest corner deviation (mm), its corner and its triangle's centroid.
+    pub max: Extreme,
+    /// Smallest corner deviation (mm), likewise.
+    pub min: Extreme,
+    /// Mean over the surface (mm).
+    pub mean_mm: Real,
+    /// Root mean square over the surface (mm).
+    pub rms_mm: Real,
+}
+
+/// Where a deviation figure is reached.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Extreme {
+    /// The value (mm).
+    pub value_mm: Real,
+    /// The corner that has it.
+    pub corner: Point3,
+    /// The centroid of the corner's triangle: a point inside the face it lies on.
+    pub centroid: Point3,
+}
+
+/// Corner values within this (mm) of an extreme reach it: of those, the largest triangle's
+/// corner is named, so that a face cut a millimetre off is named rather than a sliver along
+/// its edge with the same value.
+const EXTREME_TIE_MM: Real = 1e-6;
+
+/// The figures of a display mesh's corner deviations (`deviations`, as [`deviations`] gives
+/// them): the largest and smallest corner value and where (of the corners within
+/// [`EXTREME_TIE_MM`] of it, the one on the largest triangle), and the mean and RMS over the
+/// surface with the deviation linear across each triangle between its corners — as the
+/// colours interpolate it — integrated exactly: over a triangle of corners a, b, c the mean
+/// is (a + b + c)/3 and the mean square (a² + b² + c² + ab + bc + ca)/6, weighted by its
+/// area. Triangles with a corner that has no value (degenerate) are left out; `None` if none
+/// has all three.
+pub fn surface_deviation(mesh: &DisplayMesh, deviations: &[[Real; 3]]) -> Option<SurfaceDeviation> {
+    let triangles: Vec<([Point3; 3], [Real; 3], Real)> = mesh
+        .triangles
+        .iter()
+        .zip(deviations)
+        .filter(|(_, d)| d.iter().all(|x| x.is_finite()))
+        .map(|(t, d)| {
+            let p = t.map(|i| mesh.vertices[i as usize]);
+            (p, *d, 0.5 * (p[1] - p[0]).cross(&(p[2] - p[0])).norm())
+        })
+        .collect();
+    let values = || triangles.iter().flat_map(|t| t.1);
+    let hi = values().fold(Real::NEG_INFINITY, Real::max);
+    let lo = values().fold(Real::INFINITY, Real::min);
+    let at = |target: Real| {
+        let mut best: Option<(Real, Extreme)> = None;
+        for (p, d, a) in &triangles {
+            for (v, q) in d.iter().zip(p) {
+                if (v - target).abs() <= EXTREME_TIE_MM && best.is_none_or(|b| *a > b.0) {
+                    let centroid = Point3::from((p[0].coords + p[1].coords + p[2].coords) / 3.0);
+                    best = Some((
+                        *a,
+                        Extreme {
+                            value_mm: target,
+                            corner: *q,
+                            centroid,
+                        },
+                    ));
+                }
+            }
+        }
+        best.map(|b| b.1)
+    };
+    let (max, min) = (at(hi)?, at(lo)?);
+    let (mut area, mut sum, mut sum2) = (0.0, 0.0, 0.0);
+    for (_, [x, y, z], a) in &triangles {
+        area += a;
+        sum += a * (x + y + z) / 3.0;
+        sum2 += a * (x * x + y * y + z * z + x * y + y * z + z * x) / 6.0;
+    }
+    let (mean_mm, rms_mm) = if area > 0.0 {
+        (sum / area, (sum2 / area).max(0.0).sqrt())
+    } else {
+        (0.0, 0.0)
+    };
+    Some(SurfaceDeviation {
+        corners: 3 * triangles.len(),
+        max,
+        min,
+        mean_mm,
+        rms_mm,
+    })
+}
+
 /// Whether the triangle lies on a face of `b` (within 1 nm): part of the stock as it was.
 fn on_box(t: [Point3; 3], b: &Aabb) -> bool {
     const EPS: Real = 1e-6;

@@ -135,7 +135,7 @@ pub fn amplification_summary(
     drive_resolution_mm: Option<Real>,
 ) -> String {
     let mut s = format!(
-        "twinmill: hexapod amplification on {scene} ({} poses, {} unreachable)\n",
+        "twinmill: hexapod amplification on {scene}, nominal machine (the scene's [deviations] not used; {} poses, {} unreachable)\n",
         map.samples.len(),
         map.unreachable
     );

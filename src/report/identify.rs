@@ -141,7 +141,7 @@ impl IdentifyReport {
                 let _ = write!(t, " (MC spread {m:.2e})");
             }
             if let Some(i) = e.injected {
-                let _ = write!(t, " [injected {i:+.6e}]");
+                let _ = write!(t, " [injected {}]", super::deviation_value(&e.name, i));
             }
             t
         };

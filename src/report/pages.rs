@@ -390,9 +390,21 @@ pub fn run_page(r: &Report, view: Option<View3d>, mut plots: Vec<Plot>) -> Page 
         columns: vec!["deviation".into(), "value".into(), "σ".into(), "injected".into()],
         rows,
     });
+    let why = r
+        .why_not_identified
+        .iter()
+        .map(|w| {
+            let mut c = w.chars();
+            let first: String = c
+                .next()
+                .map(|f| f.to_uppercase().collect())
+                .unwrap_or_default();
+            format!(" {first}{}.", c.as_str())
+        })
+        .collect::<String>();
     sections.extend(list_section(
         "Not identified",
-        "This experiment does not determine these: each is held at its known value and never given an identified value.",
+        &format!("This experiment does not determine these: each is held at its known value and never given an identified value.{why}"),
         &r.not_identified,
     ));
     let mut sv_rows: Vec<Vec<String>> = r
@@ -485,18 +497,51 @@ pub fn simulate_page(r: &SimulationReport, view: Option<View3d>, plots: Vec<Plot
         });
     }
     if let Some(d) = &r.deviation {
-        sections.push(Section {
-            heading: "Deviation from the design".into(),
-            intro: format!(
-                "Every dexel crossing of the cut part against {} (+ material left, − gouge).",
-                d.design
+        let (heading, intro) = match &d.design {
+            Some(design) => (
+                "Deviation from the design",
+                format!(
+                    "Every dexel crossing of the cut part against {design} (+ material left, − gouge)."
+                ),
             ),
-            columns: vec!["figure".into(), "mm".into()],
+            None => (
+                "Deviation from the nominal part",
+                format!(
+                    "What the part's colours show: the display surface's deviation from {} at {} triangle corners, mean and RMS over its area (+ material left, − gouge).",
+                    d.reference(),
+                    d.map.points
+                ),
+            ),
+        };
+        let at = |p: &[Real; 3], line: u32| {
+            let by = if line == 0 {
+                "stock face".to_string()
+            } else {
+                format!("NC line {line}")
+            };
+            format!("({:.3}, {:.3}, {:.3}), {by}", p[0], p[1], p[2])
+        };
+        sections.push(Section {
+            heading: heading.into(),
+            intro,
+            columns: vec!["figure".into(), "mm".into(), "where".into()],
             rows: vec![
-                vec!["max".into(), format!("{:+.6}", d.map.max_mm)],
-                vec!["min".into(), format!("{:+.6}", d.map.min_mm)],
-                vec!["mean".into(), format!("{:+.6}", d.map.mean_mm)],
-                vec!["rms".into(), format!("{:.6}", d.map.rms_mm)],
+                vec![
+                    "max".into(),
+                    format!("{:+.6}", d.map.max_mm),
+                    at(&d.map.at_max, d.map.line_at_max),
+                ],
+                vec![
+                    "min".into(),
+                    format!("{:+.6}", d.map.min_mm),
+                    at(&d.map.at_min, d.map.line_at_min),
+                ],
+                vec![
+                    "mean".into(),
+                    format!("{:+.6}", d.map.mean_mm),
+                    String::new(),
+                ],
+                vec!["rms".into(), format!("{:.6}", d.map.rms_mm), String::new()],
             ],
         });
     }
@@ -572,7 +617,7 @@ fn identification_sections(r: &IdentifyReport) -> Vec<Section> {
                     e.monte_carlo_spread
                         .map_or_else(|| "—".into(), |m| format!("{m:.3e}")),
                     e.injected
-                        .map_or_else(|| "—".into(), |i| format!("{i:+.6e}")),
+                        .map_or_else(|| "—".into(), |i| super::deviation_value(&e.name, i)),
                 ]
             })
             .collect()
@@ -1012,11 +1057,11 @@ pub fn circular_sections(f: &CircularFigures) -> Vec<Section> {
     let mut both = vec![
         vec![
             "squareness".into(),
-            diagnosis(&f.squareness_urad, 1.0, "µrad (µm/m)"),
+            diagnosis(&f.squareness_urad, 1.0, "µrad"),
         ],
         vec![
             "servo mismatch".into(),
-            diagnosis(&f.servo_mismatch_urad, 1.0, "µrad (µm/m)"),
+            diagnosis(&f.servo_mismatch_urad, 1.0, "µrad"),
         ],
     ];
     if let Some(h) = f.h {
@@ -1124,7 +1169,7 @@ pub fn amplification_page(
     let sections = vec![Section {
         heading: "Amplification factors".into(),
         intro: format!(
-            "Over {} poses ({} × {} × {} positions and the tilts); {} outside the workspace.",
+            "The nominal machine (its design parameters; the scene's [deviations] are not used), over {} poses ({} × {} × {} positions and the tilts); {} outside the workspace.",
             map.samples.len(),
             map.steps[0],
             map.steps[1],

@@ -81,6 +81,9 @@ pub struct Report {
     /// Deviations this experiment does not identify; held at their known values, never
     /// given an identified value.
     pub not_identified: Vec<String>,
+    /// Why the rotary axis's offset or angle combination was not identified, one sentence
+    /// each (empty when both were).
+    pub why_not_identified: Vec<String>,
     /// The fitted faces.
     pub faces: Vec<FaceReport>,
     /// Identification solver.
@@ -107,7 +110,7 @@ impl Report {
         let inj: Vec<String> = self
             .injected
             .iter()
-            .map(|(k, v)| format!("{k} = {v}"))
+            .map(|(k, v)| format!("{k} = {}", super::deviation_value(k, *v)))
             .collect();
         let _ = writeln!(
             s,
@@ -137,6 +140,9 @@ impl Report {
                 u * unit.1,
                 unit.0
             );
+        }
+        for w in &self.why_not_identified {
+            let _ = writeln!(s, "  not identified {w}");
         }
         for f in &self.faces {
             let _ = writeln!(

@@ -142,15 +142,34 @@ impl CollisionEvent {
     }
 }
 
-/// The cut part's deviation from a design model (signed distances of the part's surface
-/// points: + material left, − gouge).
+/// The cut part's deviation from its reference (signed distances of the part's surface,
+/// positive where material is left, negative at a gouge): the scene's design model, or —
+/// without one — the part the same program cuts on the nominal machine, the deviation the
+/// picture and the page colour the part by.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct DeviationSummary {
-    /// The design mesh file.
-    pub design: String,
-    /// Max, min, mean and RMS of the signed distances, and where the extremes are.
+    /// What the deviation is from: `"design"` (the `[design]` mesh, every dexel crossing of
+    /// the part) or `"nominal part"` (the display surface's corner deviations, mean and RMS
+    /// weighted by area).
+    pub from: &'static str,
+    /// The design mesh file (`from` = `"design"`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub design: Option<String>,
+    /// Max, min, mean and RMS of the signed distances, and where the extremes are (with the
+    /// NC line of the surface there: for the nominal part, of the crossing of the cut part
+    /// nearest to the corner).
     #[serde(flatten)]
     pub map: crate::report::deviation_map::DeviationReport,
+}
+
+impl DeviationSummary {
+    /// The reference in words.
+    pub fn reference(&self) -> String {
+        match &self.design {
+            Some(d) => d.clone(),
+            None => "the nominal part (the program on the nominal machine)".into(),
+        }
+    }
 }
 
 impl SimulationReport {
@@ -193,9 +212,23 @@ impl SimulationReport {
             ));
         }
         if let Some(d) = &self.deviation {
+            let at = |p: &[f64; 3], line: u32| {
+                let by = if line == 0 {
+                    "stock face".to_string()
+                } else {
+                    format!("line {line}")
+                };
+                format!("at [{:.3}, {:.3}, {:.3}], {by}", p[0], p[1], p[2])
+            };
             s.push_str(&format!(
-                "deviation     max {:+.4} mm, min {:+.4} mm, RMS {:.4} mm over {} points from {}\n",
-                d.map.max_mm, d.map.min_mm, d.map.rms_mm, d.map.points, d.design
+                "deviation     max {:+.4} mm ({}), min {:+.4} mm ({}), RMS {:.4} mm over {} points from {}\n",
+                d.map.max_mm,
+                at(&d.map.at_max, d.map.line_at_max),
+                d.map.min_mm,
+                at(&d.map.at_min, d.map.line_at_min),
+                d.map.rms_mm,
+                d.map.points,
+                d.reference()
             ));
         }
         s

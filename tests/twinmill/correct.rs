@@ -293,3 +293,50 @@ fn cli_correct_writes_program_and_report_or_nothing() {
                 .is_none()
     );
 }
+
+/// The whole-part figure is a distance between surfaces: on a 3-axis machine whose X joint
+/// sits 50 µm off, every cut surface of the program as given is the nominal one moved
+/// rigidly by t = (0.05, 0, 0) mm, so its distance from the nominal surface is |n·t| —
+/// 50 µm on the walls across X, 0 on the floors. Two slots side by side at different depths
+/// leave a 0.4 mm step whose edge moves 50 µm across the z rays: there a ray meets the upper
+/// floor in one part and the lower in the other, which is not a surface error of 0.4 mm.
+#[test]
+fn whole_part_error_is_the_distance_between_surfaces_not_the_height_of_a_moved_edge() {
+    let sb = Sandbox::new("correct-part-error");
+    let text = "program = \"p.ngc\"\n\
+        [machine]\n\
+        axes = [\n\
+          { name = \"X\", kind = \"linear\", direction = [1, 0, 0] },\n\
+          { name = \"Y\", kind = \"linear\", direction = [0, 1, 0] },\n\
+          { name = \"Z\", kind = \"linear\", direction = [0, 0, 1] },\n\
+        ]\n\
+        home = { X = 0, Y = 0, Z = 20 }\n\
+        [deviations]\ndx_XY = 0.05\n\
+        [tool]\nkind = \"flat\"\ndiameter_mm = 6.0\nlength_mm = 10.0\n\
+        [stock]\nmin = [-8.0, -4.0, -2.0]\nmax = [8.0, 4.0, 0.0]\npitch_mm = 0.04\n";
+    // Slot A: x in [-6, 0], floor z = -0.2 (line 5); slot B: x in [0, 6], floor z = -0.6
+    // (line 9); both through the stock along Y.
+    let program = "G21 G90\nG0 Z5\nG0 X-3 Y-10\nG0 Z-0.2\nG1 Y10 F600\nG0 Z5\nG0 X3 Y-10\n\
+                   G0 Z-0.6\nG1 Y10 F600\nG0 Z5\nM30\n";
+    sb.write("s.toml", text.as_bytes());
+    sb.write("p.ngc", program.as_bytes());
+    let s = Scene::load(&sb.dir.join("s.toml")).expect("scene");
+    let program = s.load_program().expect("program");
+    let out =
+        twinmill::pipeline::correct(&s, &program, &s.chain, 1e-3, &NoProgress).expect("corrects");
+    let given = &out.report.iterations[0];
+    assert_eq!(given.iteration, 0);
+    // The path is off by |t| everywhere.
+    assert!((given.path.max_mm - 0.05).abs() < 1e-9, "{:?}", given.path);
+    // Every compared surface within |t|, the walls across X at |t|: on an x ray a wall's
+    // crossing moves by exactly 0.05 mm.
+    let part = given.part;
+    assert!(part.crossings > 10_000, "{part:?}");
+    assert!((part.max_mm - 0.05).abs() < 1e-9, "{part:?}");
+    assert!(part.rms_mm <= 0.05 + 1e-12, "{part:?}");
+    // The step's edge crossed z rays (pitch 0.04 < 0.05): seen, counted, not compared.
+    assert!(part.other_surface_crossings > 0, "{part:?}");
+    // Corrected, the part is the nominal one.
+    let last = out.report.iterations.last().expect("a pass");
+    assert!(last.part.max_mm < 1e-6, "{:?}", last.part);
+}

@@ -267,6 +267,42 @@ fn iso230_4_reads_back_squareness_scale_and_reversals() {
     );
 }
 
+/// Squareness and servo mismatch are angles: the JSON names them `_urad`, and the summary
+/// and the page give the same numbers in the same unit (one unit, named once).
+#[test]
+fn iso230_4_gives_squareness_in_urad_in_json_summary_and_page() {
+    let sb = Sandbox::new("iso230-4-units");
+    let alpha_urad = 40.0;
+    sb.write(
+        "bb.csv",
+        ballbar_trace(100.0, alpha_urad * 1e-6, 0.0, [0.0, 0.0]).as_bytes(),
+    );
+    let (code, stdout, stderr) = sb.run(&[
+        "evaluate", "iso230-4", "bb.csv", "--radius", "100", "--html", "bb.html",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let line = |name: &str| {
+        stdout
+            .lines()
+            .find(|l| l.trim_start().starts_with(name))
+            .unwrap_or_else(|| panic!("no {name} line in {stdout}"))
+            .trim()
+            .to_string()
+    };
+    for (name, want) in [("squareness", alpha_urad), ("servo mismatch", 0.0)] {
+        let l = line(name);
+        assert!(l.ends_with(" µrad"), "{l}");
+        let value: f64 = l[name.len()..]
+            .split_whitespace()
+            .next()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or_else(|| panic!("{l}"));
+        assert!((value - want).abs() < 0.5, "{l}");
+    }
+    let page = std::fs::read_to_string(sb.dir.join("bb.html")).expect("page");
+    assert!(!page.contains("µm/m)") && page.contains("µrad"));
+}
+
 #[test]
 fn iso230_4_refuses_bad_traces_with_their_place() {
     let sb = Sandbox::new("iso230-4-bad");

@@ -590,3 +590,106 @@ fn cli_ik_fk_round_trip_and_bad_input() {
             .starts_with(b"\x89PNG")
     );
 }
+
+/// Seed 001's amplification factors are those of the nominal machine (its design): the map
+/// is the same whatever the scene's `[deviations]` — none, as written, ten times larger —
+/// and it says so; the as-built machine's factors differ (so the comparison can fail).
+#[test]
+fn amplification_maps_the_nominal_machine_whatever_the_deviations() {
+    use twinmill::machine::hexapod::Pose;
+    use twinmill::pipeline::hexapod::{AmplificationRequest, hexapod_amplification};
+    let path = scene_path("hexapod-machining-centre.toml");
+    let text = std::fs::read_to_string(&path).expect("scene");
+    let mut doc: toml::Table = text.parse().expect("toml");
+    let scaled = |k: f64| {
+        let mut d = doc.clone();
+        let devs = d["deviations"].as_table_mut().expect("deviations");
+        for (_, v) in devs.iter_mut() {
+            *v = toml::Value::Float(v.as_float().expect("number") * k);
+        }
+        HexapodScene::parse(&d.to_string(), &path).expect("scene")
+    };
+    let req = AmplificationRequest {
+        workspace: None,
+        steps: [3, 3, 2],
+        position_resolution_mm: 1e-3,
+        angle_resolution_deg: 1e-3,
+    };
+    let factors = |s: &HexapodScene| {
+        let o = hexapod_amplification(s, &req).expect("map");
+        assert!(o.summary.contains("nominal machine"), "{}", o.summary);
+        let j = serde_json::to_value(&o).expect("json");
+        assert_eq!(j["machine"], "nominal");
+        o.map
+            .samples
+            .iter()
+            .map(|m| (m.pose, m.factors))
+            .collect::<Vec<_>>()
+    };
+    let as_written = scaled(1.0);
+    let reference = factors(&as_written);
+    assert_eq!(factors(&scaled(10.0)), reference);
+    doc.remove("deviations");
+    let bare = HexapodScene::parse(&doc.to_string(), &path).expect("scene");
+    assert_eq!(bare.nominal, bare.actual, "no deviations: one machine");
+    assert_eq!(factors(&bare), reference);
+    // The as-built machine's factors at a mapped pose are not the reported ones.
+    let (pose, k) = reference
+        .iter()
+        .find_map(|(p, k)| k.map(|k| (*p, k)))
+        .expect("a reachable pose");
+    let built = as_written
+        .actual
+        .amplification(&Pose::from_mm_deg(pose))
+        .expect("regular");
+    assert!(
+        (built.position_mm_per_mm - k.position_mm_per_mm).abs() > 1e-9,
+        "{built:?} vs {k:?}"
+    );
+}
+
+/// The fixed jig-free plan is the one docs/hexapod.md describes: five x–y positions (the
+/// centre and ±0.4 of the half-widths) at three heights; per height the bar at 20°, 30°,
+/// 45° with the platform level, tilted +0.3·tilt about x, tilted −0.3·tilt about y; every
+/// circle swung by 0.36·tilt along the bar.
+#[test]
+fn the_fixed_jig_free_plan_tilts_and_swings_the_platform_as_documented() {
+    use twinmill::calibration::hexapod_calibrate::{DEFAULT_POINTS, Procedure, default_plan};
+    let s = centre();
+    let ws = s.workspace.expect("workspace");
+    let plan = default_plan(Procedure::JigFree, &ws, DEFAULT_POINTS);
+    assert_eq!(plan.circles.len(), 15);
+    let t = ws.tilt_deg;
+    let (cx, cy) = (0.5 * (ws.x_mm.0 + ws.x_mm.1), 0.5 * (ws.y_mm.0 + ws.y_mm.1));
+    let (hx, hy) = (0.5 * (ws.x_mm.1 - ws.x_mm.0), 0.5 * (ws.y_mm.1 - ws.y_mm.0));
+    let near = |a: Real, b: Real| (a - b).abs() < 1e-9;
+    for (k, c) in plan.circles.iter().enumerate() {
+        let (bar, orientation) = match k / 5 {
+            0 => (20.0, [0.0, 0.0, 0.0]),
+            1 => (30.0, [0.3 * t, 0.0, 0.0]),
+            _ => (45.0, [0.0, -0.3 * t, 0.0]),
+        };
+        assert!(near(c.tilt_deg, bar), "circle {k}: bar {}", c.tilt_deg);
+        for (got, want) in c.orientation_deg.iter().zip(orientation) {
+            assert!(near(*got, want), "circle {k}: {:?}", c.orientation_deg);
+        }
+        assert!(
+            near(c.swing_deg, 0.36 * t),
+            "circle {k}: swing {}",
+            c.swing_deg
+        );
+        let (fx, fy) = ((c.centre_mm.x - cx) / hx, (c.centre_mm.y - cy) / hy);
+        assert!(
+            [
+                (0.0, 0.0),
+                (0.4, 0.4),
+                (-0.4, 0.4),
+                (-0.4, -0.4),
+                (0.4, -0.4)
+            ]
+            .iter()
+            .any(|(x, y)| near(fx, *x) && near(fy, *y)),
+            "circle {k} at {fx}, {fy} of the half-widths"
+        );
+    }
+}

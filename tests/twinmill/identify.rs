@@ -423,3 +423,52 @@ fn sc_noise(s: &Scene) -> f64 {
 fn names(e: &[twinmill::report::EstimateReport]) -> Vec<String> {
     e.iter().map(|e| e.name.clone()).collect()
 }
+
+/// What the scene injects into an identified quantity is exactly what this test injects:
+/// `gamma_AY + gamma_YX` is 0 when dy_AY alone is injected (not 1e-19 of dy_AY through a
+/// coefficient that is the elimination's rounding), dy_AY is 0 when only gamma_AY is; the
+/// summary prints them as the values they are.
+#[test]
+fn injected_values_of_what_was_not_injected_are_exactly_zero() {
+    let sb = Sandbox::new("identify-injected");
+    sb.write("mdx50-step.ngc", builtin("mdx50-step.ngc").as_bytes());
+    let params = ["dy_AY", "gamma_AY", "gamma_YX"];
+    for (tag, text, zero, other) in [
+        (
+            "dy",
+            identify_scene_text(&params, ""),
+            "gamma_AY + gamma_YX",
+            ("dy_AY", -0.5),
+        ),
+        (
+            "gamma",
+            identify_scene_text(&params, "").replace("dy_AY = -0.50", "gamma_AY = 3e-4"),
+            "dy_AY",
+            ("gamma_AY + gamma_YX", 3e-4),
+        ),
+    ] {
+        sb.write("s.toml", text.as_bytes());
+        let (code, stdout, stderr) = sb.run(&["identify", "s.toml", "--out", "o", "--json"]);
+        assert_eq!(code, 0, "{tag}: {stderr}");
+        let r: serde_json::Value = serde_json::from_str(&stdout).expect("json");
+        let all: Vec<&serde_json::Value> = ["identified", "combinations"]
+            .iter()
+            .flat_map(|k| r[k].as_array().expect("list"))
+            .collect();
+        let injected = |name: &str| {
+            all.iter()
+                .find(|e| e["name"] == name)
+                .and_then(|e| e["injected"].as_f64())
+                .unwrap_or_else(|| panic!("{tag}: {name} in {all:?}"))
+        };
+        assert_eq!(injected(zero), 0.0, "{tag}");
+        assert!((injected(other.0) - other.1).abs() < 1e-15, "{tag}");
+        let (code, stdout, _) = sb.run(&["identify", "s.toml", "--out", "o"]);
+        assert_eq!(code, 0);
+        let line = stdout
+            .lines()
+            .find(|l| l.contains(zero) && l.contains("[injected"))
+            .unwrap_or_else(|| panic!("{tag}: {stdout}"));
+        assert!(line.ends_with("[injected 0]"), "{tag}: {line}");
+    }
+}

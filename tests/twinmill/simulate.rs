@@ -486,6 +486,64 @@ fn simulate_maps_the_deviation_from_a_design_mesh() {
     }
 }
 
+/// Without a design the part is coloured by its deviation from the nominal part, and the
+/// report carries the numbers: a spindle 20 µm low (dz_ZS) cuts the slot's floor 20 µm deep
+/// and leaves every other surface where the nominal machine does (a vertical shift moves
+/// the slot's walls along themselves), so the deviation is −20 µm on the floor (line 4),
+/// 0 elsewhere: min −0.02 mm on the floor, max 0, and over the part's surface mean
+/// −0.02·A_floor/A and RMS 0.02·√(A_floor/A), the areas written out from the geometry.
+#[test]
+fn simulate_reports_the_deviation_from_the_nominal_part_it_colours() {
+    let sb = Sandbox::new("sim-nominal-deviation");
+    let stock = "min = [0.0, 0.0, 0.0]\nmax = [40.0, 30.0, 20.0]\npitch_mm = 0.25";
+    // A Ø6 flat end mill cuts the slot y 12..18, floor z = 14, straight through along x.
+    let program = "G21 G90\nG0 X-10 Y15 Z60\nG0 Z14\nG1 X50 F600\nG0 Z60\nM30\n";
+    let dz: Real = -0.02;
+    let scene = xyz_scene(FLAT6, stock, &format!("[deviations]\ndz_ZS = {dz}"));
+    let (code, report, stderr) = simulate_in(&sb, &scene, program, &[]);
+    assert_eq!(code, 0, "{stderr}");
+    let d = &report["deviation"];
+    assert_eq!(d["from"], "nominal part", "{d}");
+    let f = |k: &str| d[k].as_f64().unwrap_or_else(|| panic!("{k} in {d}"));
+    // The part's surface: the box, less the slot's opening and the notches in its two end
+    // faces, plus the slot's walls and floor (depth 6 + 0.02).
+    let depth = 6.0 - dz;
+    let floor = 40.0 * 6.0;
+    let area = 2.0 * (40.0 * 30.0 + 40.0 * 20.0 + 30.0 * 20.0) - floor - 2.0 * 6.0 * depth
+        + 2.0 * 40.0 * depth
+        + floor;
+    let (mean, rms) = (dz * floor / area, dz.abs() * (floor / area).sqrt());
+    assert!((f("min_mm") - dz).abs() < 1e-6, "{d}");
+    assert!(f("max_mm").abs() < 1e-6, "{d}");
+    // The slivers where a wall runs 20 µm below the nominal floor: 0.1 % of the area.
+    assert!(
+        (f("mean_mm") - mean).abs() < 0.02 * mean.abs(),
+        "{d} vs {mean}"
+    );
+    assert!((f("rms_mm") - rms).abs() < 0.02 * rms, "{d} vs {rms}");
+    // Where: on the floor, cut by line 4.
+    let at = &d["at_min"];
+    let (y, z) = (at[1].as_f64().expect("y"), at[2].as_f64().expect("z"));
+    assert!(
+        (z - (14.0 + dz)).abs() < 1e-6 && (12.0..=18.0).contains(&y),
+        "{at}"
+    );
+    assert_eq!(d["line_at_min"], 4, "{d}");
+    // The summary line and the page say the same.
+    let (code, stdout, _) = sb.run(&["simulate", "s.toml"]);
+    assert_eq!(code, 0);
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("deviation"))
+        .unwrap_or_else(|| panic!("{stdout}"));
+    assert!(
+        line.contains("min -0.0200 mm") && line.contains("line 4") && line.contains("nominal part"),
+        "{line}"
+    );
+    let page = std::fs::read_to_string(sb.dir.join("out/t-simulate/report.html")).expect("page");
+    assert!(page.contains("Deviation from the nominal part") && page.contains("NC line 4"));
+}
+
 /// Runs `simulate` on a broken scene or program and checks the failure is clean: non-zero
 /// exit, one line naming what is expected, nothing written.
 fn check_bad_simulate(

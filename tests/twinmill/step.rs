@@ -479,3 +479,67 @@ fn a_cut_beside_its_face_region_fails_saying_how_far() {
         "{err}"
     );
 }
+
+/// The 0/180 step on a C table under a vertical spindle (`scenes/c-table-step.toml`): the C
+/// line offset by dy along Y moves the face cut at C = 0 (from y1 = −25) to −22 + dy and the
+/// one cut at C = 180 (from y2 = +25, turned half a revolution) to −22 − dy, so the step is
+/// exactly −2·dy. No angle of the C–X joint turns the faces apart about the tool axis: the
+/// offset is identified from the step alone, within its σ = σ_step/2, and the angles are named
+/// as not identified, with the reason; the identified model can be corrected for.
+#[test]
+fn a_c_table_step_identifies_the_table_offset_from_the_step_alone() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/c-table-step.toml");
+    for (dy, seed) in [(0.013, 2002), (-0.05, 7), (0.2, 11)] {
+        let mut s = Scene::load(&path).expect("scene");
+        set_deviation(&mut s, "dy_CX", dy);
+        s.scanner.as_mut().expect("scanner").seed = seed;
+        let program = s.load_program().expect("program");
+        let out = run(&s, &program, &NoProgress).expect("runs");
+        let r = &out.report;
+        let step = -2.0 * dy;
+        assert!(
+            (r.predicted_step_mm - step).abs() < 1e-9,
+            "{}",
+            r.predicted_step_mm
+        );
+        assert!(
+            (r.step_mm - step).abs() < 4.0 * r.step_sigma_mm,
+            "dy {dy}: step {} ± {} vs {step}",
+            r.step_mm,
+            r.step_sigma_mm
+        );
+        let value = r
+            .identified
+            .get("dy_CX")
+            .copied()
+            .expect("dy_CX identified");
+        let sigma = r.uncertainty["dy_CX"];
+        assert!(
+            (value - dy).abs() < 4.0 * sigma,
+            "dy {dy}: {value} ± {sigma}"
+        );
+        assert!(
+            (sigma - 0.5 * r.step_sigma_mm).abs() < 1e-3 * sigma,
+            "{sigma}"
+        );
+        assert_eq!(r.identified.len(), 1, "{:?}", r.identified);
+        for n in ["alpha_CX", "beta_CX", "gamma_CX", "gamma_XY"] {
+            assert!(
+                r.not_identified.iter().any(|x| x == n),
+                "{n}: {:?}",
+                r.not_identified
+            );
+        }
+        assert_eq!(r.why_not_identified.len(), 1);
+        assert!(
+            r.why_not_identified[0].contains("parallel"),
+            "{:?}",
+            r.why_not_identified
+        );
+        let model = twinmill::pipeline::identified_model(&s, r).expect("a model to correct for");
+        assert_eq!(
+            model.deviation(model.deviation_id("dy_CX").expect("known")),
+            value
+        );
+    }
+}
