@@ -2,11 +2,24 @@
 //! sweep of benchmarks P1-flat, P1-ball (0.05 mm), P3 and P4 (docs/benchmarks.md), the rotary
 //! move of the brute-force test and the programs of the scenes in `scenes/`: changes to the
 //! sweep engine that must not change its results are checked by comparing the digests
-//! before and after. `cargo run --release --example dexel_digest [FILTER]`.
+//! before and after.
+//!
+//! ```text
+//! cargo run --release --example dexel_digest [FILTER] [--check | --record]
+//! ```
 //!
 //! Prints one line per case: the FNV-1a 64 digest, the number of crossings and the time.
+//! The digests of the sweep as it stands are recorded in `examples/dexel_digest.txt`
+//! (digest, crossings, case): `--check` compares every case run with that file and exits 1
+//! naming each case whose digest or count differs or that the file lacks (CI runs it);
+//! `--record` writes the file anew from the cases run (all of them: no FILTER), for a change
+//! that is meant to change the crossings — say so, and why, in its commit.
 
-#![allow(clippy::print_stdout, reason = "an example reports on the terminal")]
+#![allow(
+    clippy::print_stdout,
+    clippy::print_stderr,
+    reason = "an example reports on the terminal"
+)]
 
 use std::path::Path;
 use std::time::Instant;
@@ -53,8 +66,45 @@ fn xyz_chain() -> Chain {
     Chain::cartesian([AxisLetter::Y, AxisLetter::X, AxisLetter::Z]).expect("valid chain")
 }
 
+/// The recorded digests: `examples/dexel_digest.txt`.
+const RECORDED: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/examples/dexel_digest.txt");
+
+/// The recorded file's cases: name → (digest, crossings).
+fn recorded() -> std::collections::BTreeMap<String, (String, usize)> {
+    let text = std::fs::read_to_string(RECORDED)
+        .unwrap_or_else(|e| panic!("{RECORDED}: {e} (write it with --record)"));
+    text.lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty() && !l.starts_with('#'))
+        .map(|(i, l)| {
+            let bad = || panic!("{RECORDED}:{}: expected `digest  crossings  case`", i + 1);
+            let mut w = l.split_whitespace();
+            let (Some(h), Some(n)) = (w.next(), w.next()) else {
+                bad()
+            };
+            let n: usize = n.parse().unwrap_or_else(|_| bad());
+            let name = w.collect::<Vec<_>>().join(" ");
+            if name.is_empty() {
+                bad();
+            }
+            (name, (h.to_string(), n))
+        })
+        .collect()
+}
+
 fn main() {
-    let filter = std::env::args().nth(1).unwrap_or_default();
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let check = args.iter().any(|a| a == "--check");
+    let record = args.iter().any(|a| a == "--record");
+    let filter = args
+        .iter()
+        .find(|a| !a.starts_with("--"))
+        .cloned()
+        .unwrap_or_default();
+    assert!(
+        !(record && (check || !filter.is_empty())),
+        "--record writes every case: no FILTER, no --check"
+    );
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes");
     let mdx = Scene::load(&Path::new(dir).join("mdx50-step.toml")).expect("scene");
     let opts = SweepOptions {
@@ -161,11 +211,57 @@ fn main() {
             }),
         ));
     }
+    let expected = if check {
+        recorded()
+    } else {
+        Default::default()
+    };
+    let (mut lines, mut wrong) = (Vec::new(), Vec::new());
     for (name, run) in cases.iter().filter(|(n, _)| n.contains(&filter)) {
         let t = Instant::now();
         let s = run();
         let dt = t.elapsed().as_secs_f64();
         let (h, n) = digest(&s);
-        println!("{h:016x}  {n:>9} crossings  {dt:7.3} s  {name}");
+        let h = format!("{h:016x}");
+        let verdict = match expected.get(name) {
+            _ if !check => "",
+            Some((eh, en)) if *eh == h && *en == n => "  as recorded",
+            Some((eh, en)) => {
+                wrong.push(format!("{name}: {h} ({n}), recorded {eh} ({en})"));
+                "  DIFFERS"
+            }
+            None => {
+                wrong.push(format!("{name}: not in {RECORDED}"));
+                "  NOT RECORDED"
+            }
+        };
+        println!("{h}  {n:>9} crossings  {dt:7.3} s  {name}{verdict}");
+        lines.push(format!("{h}  {n:>9}  {name}"));
+    }
+    if check && filter.is_empty() {
+        for name in expected.keys() {
+            if !cases.iter().any(|(n, _)| n == name) {
+                wrong.push(format!("{name}: recorded, but no such case"));
+            }
+        }
+    }
+    if record {
+        let head = "# FNV-1a 64 digests of every dexel crossing (coordinates, normal, NC line, bit for\n\
+                    # bit) after each case of examples/dexel_digest.rs: digest, crossings, case.\n\
+                    # Checked by `cargo run --release --example dexel_digest -- --check` (.ci/run);\n\
+                    # written by `-- --record`.\n";
+        std::fs::write(RECORDED, format!("{head}{}\n", lines.join("\n")))
+            .unwrap_or_else(|e| panic!("{RECORDED}: {e}"));
+        println!("recorded {} cases in {RECORDED}", lines.len());
+    }
+    if !wrong.is_empty() {
+        eprintln!(
+            "dexel_digest: {} case(s) differ from {RECORDED}:",
+            wrong.len()
+        );
+        for w in &wrong {
+            eprintln!("  {w}");
+        }
+        std::process::exit(1);
     }
 }

@@ -3,6 +3,7 @@
 
     python3 tools/browser_check.py PAGE.html --screenshot OUT.png [--probe EXPR]
         [--ready EXPR] [--timeout S] [--width PX] [--height PX] [--chromium PATH]
+        [--no-webgl]
 
 Drives Chromium over the DevTools protocol on a pipe (--remote-debugging-pipe: JSON
 messages ended by a NUL byte on file descriptors 3 and 4), with the standard library
@@ -22,7 +23,9 @@ Exit status: 0 when the page got ready, 1 when it did not (the JSON still printe
 Chromium could not be started. It checks nothing itself: the test that runs it decides.
 The browser gets a fresh profile, no network services (background networking, component
 updates, sync off) and a host resolver that resolves nothing, so a page that tries to reach
-the network fails visibly in `requests` instead of waiting.
+the network fails visibly in `requests` instead of waiting. WebGL runs on SwiftShader,
+Chromium's software renderer; `--no-webgl` starts Chromium as a browser without WebGL
+instead (`--disable-gpu --disable-webgl`).
 """
 
 import argparse
@@ -42,7 +45,7 @@ import time
 class Browser:
     """A Chromium process and its DevTools pipe."""
 
-    def __init__(self, chromium, width, height):
+    def __init__(self, chromium, width, height, webgl=True):
         self.profile = tempfile.mkdtemp(prefix="twinmill-chromium-")
         to_child_r, self.to_child = os.pipe()
         self.from_child, from_child_w = os.pipe()
@@ -60,9 +63,13 @@ class Browser:
             "--headless",
             "--remote-debugging-pipe",
             f"--user-data-dir={self.profile}",
-            # WebGL without a GPU: ANGLE on SwiftShader, Chromium's software renderer.
-            "--use-angle=swiftshader",
-            "--enable-unsafe-swiftshader",
+            *(
+                # WebGL without a GPU: ANGLE on SwiftShader, Chromium's software renderer.
+                ["--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
+                if webgl
+                # A browser without WebGL (a remote desktop, some virtual machines).
+                else ["--disable-gpu", "--disable-webgl"]
+            ),
             "--no-first-run",
             "--no-default-browser-check",
             "--disable-background-networking",
@@ -163,10 +170,11 @@ def main():
     ap.add_argument("--width", type=int, default=1280)
     ap.add_argument("--height", type=int, default=900)
     ap.add_argument("--chromium", default=shutil.which("chromium") or "chromium")
+    ap.add_argument("--no-webgl", action="store_true")
     a = ap.parse_args()
     url = pathlib.Path(a.page).resolve().as_uri()
     try:
-        b = Browser(a.chromium, a.width, a.height)
+        b = Browser(a.chromium, a.width, a.height, webgl=not a.no_webgl)
     except OSError as e:
         print(json.dumps({"error": f"cannot start {a.chromium}: {e}"}))
         return 2

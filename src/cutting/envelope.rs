@@ -1465,8 +1465,32 @@ mod tests {
                     }
                 }
             }
-            // Sampling error: the tool moves ≤ M/n between poses.
-            let samp = env.speed_bound() / n as Real * 4.0 + 1e-6;
+            // Sampling error, worked out here and not from the envelope's own speed bound:
+            // between consecutive sampled poses no tool point moves further than
+            // M = max_k |Δc_k| + 2·sin(θ_k/2)·ρ (c the tool's mid point on its axis, θ_k
+            // the rotation between the poses, ρ = √(R² + (L/2)²) the farthest a tool point
+            // lies from c); an interval end moves along the ray by up to a few times that
+            // where the ray meets the surface at a slant: 4·M, and 1 nm for rounding.
+            let mid = Point3::new(0.0, 0.0, tool.length() / 2.0);
+            let rho = tool.radius().hypot(tool.length() / 2.0);
+            let pose = |l: Real| {
+                let mut qq = a;
+                for axis in c.axes() {
+                    let (u, w) = (a.get(axis.letter), b.get(axis.letter));
+                    qq.set(axis.letter, u + (w - u) * l);
+                }
+                c.w_from_t(&qq)
+            };
+            let mut step_max: Real = 0.0;
+            let mut prev = pose(0.0);
+            for k in 1..=n {
+                let next = pose(k as Real / n as Real);
+                let moved = ((next * mid) - (prev * mid)).norm()
+                    + 2.0 * (next.rotation.angle_to(&prev.rotation) / 2.0).sin() * rho;
+                step_max = step_max.max(moved);
+                prev = next;
+            }
+            let samp = 4.0 * step_max + 1e-6;
             for &(t0, t1) in &hits {
                 // Every pose's interval lies inside one of the envelope's intervals.
                 let inside = cuts.iter().any(|c| c.t_in <= t0 + ENVELOPE_TOL && t1 <= c.t_out + ENVELOPE_TOL);

@@ -210,7 +210,7 @@ pub fn run_page(
 ) -> Result<String, PipelineError> {
     let (mesh, _) = super::part_mesh(&outcome.stock, &scene.path.display().to_string())?;
     let shown = display_part(scene, &mesh, || reference_part(scene, &program.moves))?;
-    let v = view(
+    let mut v = view(
         scene,
         Some(&shown),
         Some(&outcome.cloud.points),
@@ -218,6 +218,7 @@ pub fn run_page(
         None,
         Vec::new(),
     )?;
+    v.picture = Some(part_png(scene, &shown)?);
     let plots = vec![crate::report::html::Plot {
         caption: "The scanned faces, each point's distance from the nominal plane (faces.png as SVG, binned).".into(),
         svg: outcome.faces_svg.clone(),
@@ -337,6 +338,7 @@ pub fn scan_page(
     )?;
     let mut v = v;
     v.shown.push("cloud".into());
+    v.picture = Some(part_png(scene, &shown)?);
     Ok(render_page(&page::scan_page(report, Some(v))))
 }
 
@@ -369,6 +371,7 @@ pub fn correct_page(
     })?;
     let v = view(scene, Some(&shown), None, Vec::new(), None, Vec::new())?;
     let mut v = v;
+    v.picture = Some(part_png(scene, &shown)?);
     v.notes.insert(
         0,
         "The corrected program cut on the scene's (deviated) machine.".into(),

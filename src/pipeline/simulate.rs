@@ -210,7 +210,8 @@ pub fn simulate(
             }
         })
         .collect();
-    let view3d = view(scene, Some(&shown), None, Vec::new(), None, markers)?;
+    let mut view3d = view(scene, Some(&shown), None, Vec::new(), None, markers)?;
+    view3d.picture = Some(part_png.clone());
     timings.insert("page".into(), clock.elapsed().as_secs_f64());
     let report = SimulationReport {
         scene: scene.name.clone(),

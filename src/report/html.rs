@@ -9,7 +9,10 @@
 //! `./three.core.min.js` and `../utils/BufferGeometryUtils.js`), then import the viewer.
 //! The viewer sets `window.twinmillReady` once the first frame is drawn and offers
 //! `window.twinmill` (project a point to the screen, show or hide a layer) for the browser
-//! test.
+//! test. In a browser without WebGL 2 (turned off, no graphics driver) the loader says so
+//! in the view's place and shows the part there as a picture (`part.png`, embedded when the
+//! page has a part), as it does when the view fails to start; `window.twinmillReady` then
+//! has `webgl: false`.
 //!
 //! **Invariant:** everything the page shows is escaped text or data this module wrote; the
 //! same input gives the same bytes (no dates, no random identifiers).
@@ -54,12 +57,46 @@ const LOADER: &str = r#"(function () {
   const text = id => document.getElementById(id).textContent;
   const url = s => URL.createObjectURL(new Blob([s], { type: 'text/javascript' }));
   const swap = (s, from, to) => s.split(from).join(JSON.stringify(to));
+  // Without the 3-D view: say why in its place and show the part as a picture there
+  // (part.png, embedded), then tell a waiting test (twinmillReady with webgl: false).
+  const instead = (why, error) => {
+    const box = document.getElementById('view');
+    const v = document.getElementById('view-status');
+    const pic = document.getElementById('twinmill-picture');
+    const done = picture => {
+      window.twinmillReady = { ms: performance.now(), webgl: false, picture, error };
+    };
+    if (box) {
+      for (const c of box.querySelectorAll('canvas')) c.remove();
+      box.classList.add('picture');
+    }
+    if (v) v.textContent = why + (pic ? ' The part is shown below as a picture instead.' : '');
+    if (!box || !pic) { done(false); return; }
+    const img = new Image();
+    img.id = 'view-picture';
+    img.alt = 'the cut part (part.png)';
+    img.onload = () => done(true);
+    img.onerror = () => done(false);
+    img.src = 'data:image/png;base64,' + pic.textContent.trim();
+    box.append(img);
+  };
   const fail = e => {
     window.twinmillError = String(e && e.stack || e);
-    const v = document.getElementById('view-status');
-    if (v) v.textContent = 'The 3-D view could not start: ' + e;
     console.error(e);
+    instead('The 3-D view could not start: ' + e + '.', String(e));
   };
+  // three.js draws with WebGL 2; a browser without it (turned off, no graphics driver, some
+  // remote desktops and virtual machines) is told so in words.
+  const gl = (() => {
+    try { return document.createElement('canvas').getContext('webgl2'); } catch (e) { return null; }
+  })();
+  if (!gl) {
+    instead('This browser has no WebGL, which the 3-D view needs: WebGL 2 is turned off ' +
+            'here, or there is no graphics driver for it.', null);
+    return;
+  }
+  const lose = gl.getExtension('WEBGL_lose_context');
+  if (lose) lose.loseContext();
   try {
     const core = url(text('three-core'));
     const three = url(swap(text('three-module'), '"./three.core.min.js"', core));
@@ -91,6 +128,10 @@ th { background: #f2f2f2; } td.n { text-align: right; font-variant-numeric: tabu
 #pick:empty { display: none; }
 #pick { position: absolute; left: 10px; bottom: 10px; background: rgba(255,255,255,.92); padding: 4px 8px; font-size: 12px; border: 1px solid #ddd; min-height: 1em; }
 #view-status { position: absolute; left: 50%; top: 45%; transform: translate(-50%, -50%); color: #666; }
+#view.picture { height: auto; }
+#view.picture #view-status { position: static; transform: none; padding: 8px 10px; color: #1a1a1a; background: #fff4e5; border-bottom: 1px solid #ddd; }
+#view.picture #legend, #view.picture #layers, #view.picture #pick { display: none; }
+#view-picture { display: block; max-width: 100%; height: auto; margin: 0 auto; }
 .marker { position: absolute; font-size: 11px; color: #b2182b; background: rgba(255,255,255,.85); padding: 0 3px; pointer-events: none; white-space: nowrap; }
 .plot svg { max-width: 100%; height: auto; } figure { margin: 12px 0; } figcaption { color: #555; font-size: 13px; }
 .note { color: #555; font-size: 13px; }
@@ -154,6 +195,9 @@ pub struct View3d {
     pub shown: Vec<String>,
     /// Sentences under the view (what the geometry is, how it was simplified).
     pub notes: Vec<String>,
+    /// The part as a picture (PNG, `part.png`), shown in the view's place when the browser
+    /// cannot draw it (no WebGL 2, or the view failed to start).
+    pub picture: Option<Vec<u8>>,
 }
 
 /// A page.
@@ -344,6 +388,13 @@ pub fn render_page(page: &Page) -> String {
             "<script type=\"text/plain\" id=\"twinmill-glb\">{}</script>",
             base64::engine::general_purpose::STANDARD.encode(&v.glb)
         );
+        if let Some(png) = &v.picture {
+            let _ = writeln!(
+                out,
+                "<script type=\"text/plain\" id=\"twinmill-picture\">{}</script>",
+                base64::engine::general_purpose::STANDARD.encode(png)
+            );
+        }
     }
     for s in &page.sections {
         let _ = writeln!(out, "<h2>{}</h2>", escape(&s.heading));
@@ -469,6 +520,7 @@ mod tests {
                 up: [0.0, 0.0, 1.0],
                 shown: vec!["part".into()],
                 notes: vec!["display mesh".into()],
+                picture: Some(vec![0x89, b'P', b'N', b'G']),
             }),
             sections: vec![Section {
                 heading: "Identified".into(),

@@ -299,6 +299,7 @@ pub fn part_view3d(parts: &View3dParts<'_>) -> Result<View3d, GlbError> {
         up: [up.x, up.y, up.z],
         shown,
         notes,
+        picture: None,
     })
 }
 

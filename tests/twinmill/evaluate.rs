@@ -247,7 +247,23 @@ fn iso230_4_reads_back_squareness_scale_and_reversals() {
         assert!((r2 - b[1]).abs() < 0.02 * b[1], "reversal 2 {r2}");
         assert_eq!(d["points"], 360);
     }
-    assert!(j["H"].as_f64().expect("H") > 0.0);
+    // Hysteresis H, by ISO 230-4's definition worked out here on the trace itself: the
+    // largest radial difference between the two paths at the same angle (both directions
+    // are sampled at the same angles, so no interpolation): 2.987 µm for these reversals.
+    let trace = ballbar_trace(r, alpha, s, b);
+    let mut paths: [std::collections::BTreeMap<String, f64>; 2] = Default::default();
+    for line in trace.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let k = usize::from(f[0] == "cw");
+        paths[k].insert(f[1].to_string(), f[2].parse().expect("µm"));
+    }
+    let h_um = paths[0]
+        .iter()
+        .map(|(angle, d)| (d - paths[1][angle]).abs())
+        .fold(0.0, f64::max);
+    assert!((h_um - 2.987).abs() < 1e-3, "H by hand {h_um} µm");
+    let h = j["H"].as_f64().expect("H");
+    assert!((h * 1e3 - h_um).abs() < 1e-9, "H {h} mm, by hand {h_um} µm");
     // The summary names the figures; --png draws the polar plot as a PNG file.
     let (code, stdout, _) = sb.run(&[
         "evaluate",

@@ -5,11 +5,13 @@
 //! gives them — and what they would not: no console error, no request beyond the page
 //! itself and the module URLs it makes of its own embedded scripts.
 //!
+//! The page without WebGL is opened the same way in a Chromium started without it, where
+//! it must say so and show the part as a picture.
+//!
 //! Chromium is Debian's `chromium` (`.ci/run` installs it); `TWINMILL_CHROMIUM` names
 //! another binary. Without Chromium or Python 3 a test is skipped with the reason — but
-//! under CI (`CI` set) it fails, unless `.ci/run` found that Chromium cannot be installed
-//! there (`TWINMILL_NO_CHROMIUM`, the reason). `TWINMILL_UPDATE_SCREENSHOT=1` copies the
-//! built-in scene's screenshot to `docs/images/report-html.png`.
+//! under CI (`CI` set; `.ci/run` sets it) it fails. `TWINMILL_UPDATE_SCREENSHOT=1` copies
+//! the built-in scene's screenshot to `docs/images/report-html.png`.
 
 use crate::{Sandbox, builtin, files_in};
 use image::RgbImage;
@@ -32,7 +34,8 @@ fn on_path(name: &str) -> Option<PathBuf> {
         .find(|p| p.is_file())
 }
 
-/// Chromium and Python 3, or the reason they are missing. Under CI a missing one fails.
+/// Chromium and Python 3, or the reason they are missing. Under CI (`CI` set, as `.ci/run`
+/// sets it) a missing one fails the test: CI installs both or stops.
 #[expect(clippy::print_stderr, reason = "a skipped test says why")]
 fn browser() -> Option<(PathBuf, PathBuf)> {
     let chromium = std::env::var_os("TWINMILL_CHROMIUM")
@@ -48,15 +51,11 @@ fn browser() -> Option<(PathBuf, PathBuf)> {
             } else {
                 "python3"
             };
-            let cannot = std::env::var("TWINMILL_NO_CHROMIUM").ok();
             assert!(
-                std::env::var_os("CI").is_none() || cannot.is_some(),
-                "{missing} is missing: .ci/run installs it"
+                std::env::var_os("CI").is_none(),
+                "{missing} is missing: under CI the browser tests must run (.ci/run installs it)"
             );
-            eprintln!(
-                "skipped: {missing} is missing ({})",
-                cannot.unwrap_or_else(|| "install it, or run .ci/run, which does".into())
-            );
+            eprintln!("skipped: {missing} is missing (install it, or run .ci/run, which does)");
             None
         }
     }
@@ -70,6 +69,11 @@ struct Seen {
 
 /// Opens `page` in headless Chromium, evaluates `probe` once the view is drawn.
 fn open(page: &Path, probe: &str, browser: &(PathBuf, PathBuf)) -> Seen {
+    open_with(page, probe, browser, &[])
+}
+
+/// [`open`] with more arguments for the driver (`--no-webgl`).
+fn open_with(page: &Path, probe: &str, browser: &(PathBuf, PathBuf), extra: &[&str]) -> Seen {
     let shot = page.with_extension("png");
     let tool = Path::new(env!("CARGO_MANIFEST_DIR")).join("tools/browser_check.py");
     let out = Command::new(&browser.1)
@@ -88,6 +92,7 @@ fn open(page: &Path, probe: &str, browser: &(PathBuf, PathBuf)) -> Seen {
         ])
         .arg("--chromium")
         .arg(&browser.0)
+        .args(extra)
         .output()
         .expect("the browser driver runs");
     let json: Value = serde_json::from_slice(&out.stdout).unwrap_or_else(|e| {
@@ -260,6 +265,108 @@ fn html_report_of_simulate_on_p1_renders_in_chromium() {
     assert_eq!(seen.json["ready"]["markers"], 0);
     let part = std::fs::read(sb.dir.join("out/p1-simulate/part.png")).expect("part.png");
     assert_eq!(&part[..8], b"\x89PNG\r\n\x1a\n");
+}
+
+/// In a browser without WebGL (Chromium with `--disable-gpu --disable-webgl`, as on a remote
+/// desktop or in some virtual machines) the page says so in words where the 3-D view would
+/// be and shows the part there as a picture: the same PNG as `part.png`, drawn on screen.
+#[test]
+fn html_report_without_webgl_says_so_and_shows_the_part_as_a_picture() {
+    let Some(browser) = browser() else { return };
+    let sb = Sandbox::new("html-no-webgl");
+    sb.write("s.toml", builtin("mdx50-step.toml").as_bytes());
+    sb.write("mdx50-step.ngc", builtin("mdx50-step.ngc").as_bytes());
+    let (code, _, stderr) = sb.run(&["simulate", "s.toml"]);
+    assert_eq!(code, 0, "{stderr}");
+    let dir = sb.dir.join("out/mdx50-step-simulate");
+    let page = dir.join("report.html");
+    let probe = "(() => { const i = document.getElementById('view-picture'); \
+        if (i) i.scrollIntoView({block: 'start'}); \
+        const r = i ? i.getBoundingClientRect() : null; \
+        return {status: document.getElementById('view-status').textContent, \
+                canvases: document.querySelectorAll('#view canvas').length, \
+                picture: i && {rect: [r.left, r.top, r.width, r.height], \
+                               natural: [i.naturalWidth, i.naturalHeight], src: i.src}}; })()";
+    let seen = open_with(&page, probe, &browser, &["--no-webgl"]);
+    let j = &seen.json;
+    assert_eq!(j["ready"]["webgl"], false, "{:#}", j["ready"]);
+    assert_eq!(j["ready"]["picture"], true, "{:#}", j["ready"]);
+    // Nothing failed: no error, no exception, no request; the old failure is gone.
+    let errors: Vec<&Value> = j["console"]
+        .as_array()
+        .expect("console")
+        .iter()
+        .filter(|m| m["level"] == "error")
+        .collect();
+    assert!(errors.is_empty(), "console errors: {errors:?}");
+    assert_eq!(j["exceptions"].as_array().map(Vec::len), Some(0), "{j:#}");
+    let own = j["page"].as_str().expect("page URL");
+    for r in j["requests"].as_array().expect("requests") {
+        let r = r.as_str().unwrap_or_default();
+        assert!(r == own || r.starts_with("data:"), "request: {r}");
+    }
+    let p = &j["probe"];
+    let status = p["status"].as_str().expect("status text");
+    assert!(
+        status.starts_with("This browser has no WebGL") && status.contains("as a picture"),
+        "{status}"
+    );
+    assert!(!status.contains("could not start"), "{status}");
+    assert_eq!(p["canvases"], 0, "no 3-D canvas left on the page");
+    // The picture is part.png, byte for byte, at its own size.
+    let png = std::fs::read(dir.join("part.png")).expect("part.png");
+    let src = p["picture"]["src"].as_str().expect("a picture in the view");
+    let b64 = src
+        .strip_prefix("data:image/png;base64,")
+        .expect("an embedded PNG");
+    use base64::Engine as _;
+    let embedded = base64::engine::general_purpose::STANDARD
+        .decode(b64)
+        .expect("base64");
+    assert!(embedded == png, "the picture is not part.png");
+    let want = image::load_from_memory(&png).expect("part.png").to_rgb8();
+    let natural = &p["picture"]["natural"];
+    assert_eq!(natural[0], want.width(), "{natural}");
+    assert_eq!(natural[1], want.height(), "{natural}");
+    // What is on screen is that picture: the screenshot, where the image is, against
+    // part.png sampled at the same places (the picture may be scaled to the page's width).
+    let rect = &p["picture"]["rect"];
+    let f = |i: usize| rect[i].as_f64().expect("rect");
+    let (x0, y0, w, h) = (f(0), f(1), f(2), f(3));
+    assert!(w > 600.0 && h > 400.0, "picture shown {w} × {h}");
+    let (sw, sh) = (f64::from(seen.shot.width()), f64::from(seen.shot.height()));
+    let (mut diff, mut n, mut inked) = (0.0, 0u64, 0u64);
+    for gy in 0..60 {
+        for gx in 0..80 {
+            let (u, v) = ((f64::from(gx) + 0.5) / 80.0, (f64::from(gy) + 0.5) / 60.0);
+            let (sx, sy) = (x0 + u * w, y0 + v * h);
+            if sx < 0.0 || sy < 0.0 || sx >= sw || sy >= sh {
+                continue;
+            }
+            let a = seen.shot.get_pixel(sx as u32, sy as u32).0;
+            let b = want
+                .get_pixel(
+                    (u * f64::from(want.width())) as u32,
+                    (v * f64::from(want.height())) as u32,
+                )
+                .0;
+            diff += (0..3)
+                .map(|k| (f64::from(a[k]) - f64::from(b[k])).abs())
+                .sum::<f64>()
+                / 3.0;
+            n += 1;
+            if b.iter().any(|&c| c < 225) {
+                inked += 1;
+            }
+        }
+    }
+    assert!(n > 4000, "only {n} samples of the picture on screen");
+    assert!(inked * 20 > n, "part.png is blank: {inked} of {n} inked");
+    let mean = diff / n as f64;
+    assert!(
+        mean < 12.0,
+        "the screen differs from part.png by {mean:.1} per channel"
+    );
 }
 
 #[test]

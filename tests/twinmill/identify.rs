@@ -56,14 +56,18 @@ fn designed_cuts_round_trip_over_100_seeded_trials() {
     // trial in which it was not valued (or the identification failed) is a failure: the
     // design determines all nine.
     let mut ok = [0usize; 9];
+    // Per deviation: (value − truth)/σ of each trial in which it was valued, for the spread.
+    let mut z: Vec<Vec<Real>> = vec![Vec::new(); 9];
     let mut failed = Vec::new();
     for t in 0..trials {
         let mut s = base.clone();
         scanner(&mut s).seed = 1000 + t as u64;
+        // The truth: the values drawn and injected here (never the report's "injected").
+        let mut truth = [0.0; 9];
         for (k, name) in NINE.iter().enumerate() {
             // Offsets within ±0.5 mm, angles within ±5e-4 rad.
-            let v = next() * if k < 2 { 0.5 } else { 5e-4 };
-            set_deviation(&mut s, name, v);
+            truth[k] = next() * if k < 2 { 0.5 } else { 5e-4 };
+            set_deviation(&mut s, name, truth[k]);
         }
         let out = match identify_scene(&s, &program, None, Some(0), &NoProgress) {
             Ok(o) => o,
@@ -95,7 +99,8 @@ fn designed_cuts_round_trip_over_100_seeded_trials() {
         for (k, name) in NINE.iter().enumerate() {
             match r.identified.iter().find(|e| e.name == *name) {
                 Some(e) => {
-                    let truth = e.injected.expect("simulated");
+                    let truth = truth[k];
+                    z[k].push((e.value - truth) / e.sigma);
                     if (e.value - truth).abs() <= 3.0 * e.sigma {
                         ok[k] += 1;
                     } else {
@@ -116,6 +121,35 @@ fn designed_cuts_round_trip_over_100_seeded_trials() {
             ok[k]
         );
     }
+    // Both ways: the spread of the errors is the reported σ (the RMS of (value − truth)/σ
+    // within the χ² bounds of 100 trials, [0.774, 1.238]), so an overstated σ fails too.
+    // dz_AY apart: its estimate carries a bias of about half its σ (the model bias of
+    // 20–70 nm named above; the mean of (value − truth)/σ is +0.52 over these trials, +0.35
+    // with the tri-dexel at 0.1 mm, so the discretisation is part of it; cause not yet
+    // found). Its σ is checked against the spread about the trials' mean (χ² with n − 1
+    // degrees of freedom), and the bias held to the half σ it is, so that it cannot grow
+    // unseen.
+    let dz = NINE.iter().position(|n| *n == "dz_AY").expect("dz_AY");
+    let others: Vec<usize> = (0..9).filter(|&k| k != dz).collect();
+    crate::assert_spread_matches_sigma(
+        &others
+            .iter()
+            .map(|&k| NINE[k].to_string())
+            .collect::<Vec<_>>(),
+        &others.iter().map(|&k| z[k].clone()).collect::<Vec<_>>(),
+    );
+    let n = z[dz].len() as Real;
+    let mean = z[dz].iter().sum::<Real>() / n;
+    let centred = (z[dz].iter().map(|x| (x - mean).powi(2)).sum::<Real>() / (n - 1.0)).sqrt();
+    let (lo, hi) = crate::rms_z_bounds(z[dz].len() - 1, 3.29);
+    assert!(
+        (lo..=hi).contains(&centred),
+        "dz_AY: spread about the mean {centred:.3} σ, outside [{lo:.3}, {hi:.3}]"
+    );
+    assert!(
+        mean.abs() <= 0.7,
+        "dz_AY: bias {mean:.3} σ, more than the known half σ"
+    );
 }
 
 /// The built-in step scene with an [identify] section asking for `params`.

@@ -226,3 +226,58 @@ fn prism(poly: &[[Real; 2]], cap: &[[usize; 3]], z0: Real, z1: Real) -> String {
 fn fan(n: usize) -> Vec<[usize; 3]> {
     (1..n - 1).map(|k| [0, k, k + 1]).collect()
 }
+
+// ---------------------------------------------------------------------------------------
+// Reported uncertainties against the spread over seeded trials, both ways.
+
+/// Bounds on the RMS of normalised errors `z = (estimate − truth)/σ` over `n` seeded
+/// trials, two-sided at `z_q` standard normal quantiles each side. If the reported σ is the
+/// estimate's true standard deviation (and the estimate unbiased), `Σz²` follows χ² with `n`
+/// degrees of freedom, so `RMS(z) = √(χ²_n/n)` lies between `√(χ²_{n,q}/n)` and
+/// `√(χ²_{n,1−q}/n)` but with probability `2q`; the quantiles by Wilson and Hilferty,
+/// `χ²_{n,q} ≈ n·(1 − 2/(9n) ± z_q·√(2/(9n)))³` (within 1 % for n ≥ 30, 0.1 % for
+/// n = 100). A σ overstated
+/// by more than the upper margin — which a one-sided "≥ 95 % within 3σ" passes — fails the
+/// lower bound; a σ understated (or a bias) the upper one. The tests use `z_q` = 3.29
+/// (2q = 1e-3 per term): for n = 100 the RMS must lie in [0.774, 1.238].
+fn rms_z_bounds(n: usize, z_q: Real) -> (Real, Real) {
+    let k = 2.0 / (9.0 * n as Real);
+    let q = |z: Real| (1.0 - k + z * k.sqrt()).powi(3).sqrt();
+    (q(-z_q).max(0.0), q(z_q))
+}
+
+/// Per-quantity normalised errors over trials: `z[k]` holds `(estimate − truth)/σ` of
+/// quantity `k`, one per trial in which it was valued. Asserts each quantity's RMS(z) lies
+/// within [`rms_z_bounds`] for its own count at `z_q` = 3.29, naming the quantity.
+fn assert_spread_matches_sigma(names: &[String], z: &[Vec<Real>]) {
+    for (name, z) in names.iter().zip(z) {
+        assert!(z.len() >= 30, "{name}: only {} trials valued", z.len());
+        let rms = (z.iter().map(|x| x * x).sum::<Real>() / z.len() as Real).sqrt();
+        let (lo, hi) = rms_z_bounds(z.len(), 3.29);
+        assert!(
+            (lo..=hi).contains(&rms),
+            "{name}: RMS of (estimate − truth)/σ is {rms:.3} over {} trials, outside \
+             [{lo:.3}, {hi:.3}]: the reported σ does not match the spread",
+            z.len()
+        );
+    }
+}
+
+#[test]
+fn the_spread_bounds_are_the_chi_square_quantiles() {
+    // The χ² quantiles at 0.0005 and 0.9995 (the regularised incomplete gamma function
+    // inverted by bisection: n = 100: 59.896, 153.167; n = 50: 23.461, 89.561; n = 30:
+    // 10.804, 62.162), against the Wilson–Hilferty bounds used above.
+    for (n, lo, hi, tol) in [
+        (100, 59.896, 153.167, 2e-3),
+        (50, 23.461, 89.561, 5e-3),
+        (30, 10.804, 62.162, 1e-2),
+    ] {
+        let (a, b) = rms_z_bounds(n, 3.2905);
+        let (a, b) = (a * a * n as Real, b * b * n as Real);
+        assert!(
+            (a / lo - 1.0).abs() < tol && (b / hi - 1.0).abs() < tol,
+            "{n}: {a} {b}"
+        );
+    }
+}

@@ -293,7 +293,7 @@ fn helix_stock(pitch: Real) -> TriDexel {
 }
 
 /// Golden-section minimum of `f` on [a, b] to a bracket of 1e-12.
-fn golden_min(mut a: Real, mut b: Real, f: impl Fn(Real) -> Real) -> Real {
+pub(crate) fn golden_min(mut a: Real, mut b: Real, f: impl Fn(Real) -> Real) -> Real {
     let g = (5.0f64.sqrt() - 1.0) / 2.0;
     let (mut c, mut d) = (b - g * (b - a), a + g * (b - a));
     let (mut fc, mut fd) = (f(c), f(d));

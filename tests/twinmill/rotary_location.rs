@@ -116,9 +116,11 @@ fn mounting(rng: &CounterRng, trial: u64) -> Vector3 {
 }
 
 /// Runs `trials` identifications with `measure` giving the samples of a trial, and checks
-/// that every identified term is within 3 of its standard uncertainties of the truth in
-/// at least 95 % of them, and that the table's offset along itself and angle zero are
-/// named as not determined.
+/// that every identified term is within 3 of its standard uncertainties of the truth (the
+/// values this test drew and injected) in at least 95 % of them, that the spread of its
+/// errors matches its reported σ both ways (`crate::assert_spread_matches_sigma`: the RMS
+/// of (value − truth)/σ within the χ² bounds of the trial count, [0.774, 1.238] for 100),
+/// and that the table's offset along itself and angle zero are named as not determined.
 fn coverage(
     trials: u64,
     measure: impl Fn(&Chain, &Chain, u64, Vector3) -> Vec<twinmill::metrology::rotary_test::Sample>,
@@ -128,6 +130,7 @@ fn coverage(
     let tool = Tool::try_new(ToolKind::Flat, 6.0, 20.0).expect("tool");
     let rng = CounterRng::new(10791);
     let mut inside = vec![0usize; names.len()];
+    let mut z: Vec<Vec<Real>> = vec![Vec::new(); names.len()];
     for trial in 0..trials {
         let truth = draw(&rng, trial, &names);
         let actual = inject(&nominal, &names, &truth);
@@ -156,6 +159,7 @@ fn coverage(
             if (e.value - truth[k]).abs() <= 3.0 * e.sigma {
                 inside[k] += 1;
             }
+            z[k].push((e.value - truth[k]) / e.sigma);
         }
     }
     for (n, c) in names.iter().zip(&inside) {
@@ -167,6 +171,13 @@ fn coverage(
             "{n}: within 3σ in {c} of {trials} trials"
         );
     }
+    let seen: Vec<usize> = (0..names.len())
+        .filter(|&k| names[k] != "EZ0C" && names[k] != "EC0C")
+        .collect();
+    crate::assert_spread_matches_sigma(
+        &seen.iter().map(|&k| names[k].clone()).collect::<Vec<_>>(),
+        &seen.iter().map(|&k| z[k].clone()).collect::<Vec<_>>(),
+    );
 }
 
 #[test]
@@ -283,15 +294,21 @@ fn measure_ball_sensor_identifies_the_scene_s_location_errors_and_writes_the_tra
         let identified = id["identified"].as_array().expect("list");
         assert_eq!(identified.len(), 8);
         // Each injected term recovered within 4 of its uncertainties (one seed: a single
-        // 3σ miss among 16 would not be a fault).
+        // 3σ miss among 16 would not be a fault). The truth: the scene file's own
+        // [deviations], read here, not the report's "injected".
+        let file: toml::Table = builtin("trunnion-ac.toml").parse().expect("toml");
+        let truth = file["deviations"].as_table().expect("[deviations]");
         for t in identified {
             let (value, sigma) = (
                 t["value"].as_f64().expect("v"),
                 t["sigma"].as_f64().expect("s"),
             );
-            let injected = t["injected"]
-                .as_f64()
+            let name = t["name"].as_str().expect("name");
+            let injected = truth
+                .get(name)
+                .and_then(toml::Value::as_float)
                 .expect("the scene injects every term");
+            assert_eq!(t["injected"].as_f64(), Some(injected), "{name}");
             assert!(
                 (value - injected).abs() <= 4.0 * sigma,
                 "{instrument} {}: {value} vs {injected} ± {sigma}",

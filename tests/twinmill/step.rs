@@ -330,7 +330,14 @@ fn check_faces_exact(s: &Scene) -> Result<(), TestCaseError> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 12, failure_persistence: None, ..ProptestConfig::default() })]
+    // Failing cases are kept in proptest-regressions/twinmill/step.txt and re-run first.
+    #![proptest_config(ProptestConfig {
+        cases: 12,
+        failure_persistence: Some(Box::new(proptest::test_runner::FileFailurePersistence::Direct(
+            concat!(env!("CARGO_MANIFEST_DIR"), "/proptest-regressions/twinmill/step.txt"),
+        ))),
+        ..ProptestConfig::default()
+    })]
     #[test]
     fn simulated_faces_coincide_with_exact_planes(
         dy in -1.0..1.0f64, dz in -0.5..0.5f64,
