@@ -1,0 +1,252 @@
+//! `twinmill identify`: a machine's deviations from what was measured — a serial machine's
+//! from the faces of its cut part (the scene's simulated scan, or a given cloud), a
+//! hexapod's from double-ball-bar traces (its calibration: on the twin, or from traces
+//! measured on the machine). `calibrate` is the hidden old name of the hexapod's.
+
+use super::{
+    Loaded, SceneArgs, bars, fail, load, print_out, procedure_arg, write, write_report_and_cloud,
+};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use twinmill::hexapod_scene::HexapodScene;
+use twinmill::metrology::cloud::read_cloud_file;
+use twinmill::pipeline::dbb::{calibrate_measured, calibrate_scene, load_plan};
+use twinmill::pipeline::identify_scene;
+use twinmill::pipeline::instrument_pages::calibrate_page;
+use twinmill::pipeline::pages::identify_page;
+use twinmill::scene::Need;
+
+/// Identify the deviations: from cut faces, or a hexapod's DBB traces.
+///
+/// Serial machine: identify the scene's `[identify] parameters` from its faces (any number,
+/// flanks and floors) in its simulated scan or in a given cloud: identifiability (singular
+/// values, what is and is not determined), values with uncertainties, the model-correction
+/// loop; write identify.json and cloud.ply.
+///
+/// Hexapod: seed 000's double-ball-bar calibration — measure the procedure's (or the plan's)
+/// circles on the twin, identify with what is not determined, pose errors before and after;
+/// or, with --readings, identify from traces measured on the machine (docs/hexapod.md).
+#[derive(clap::Args)]
+pub struct IdentifyArgs {
+    #[command(flatten)]
+    args: SceneArgs,
+    /// Identify from this cloud (PLY, XYZ/CSV, PTS; workpiece or scanner frame) instead
+    /// of the scene's simulated scan.
+    #[arg(long)]
+    cloud: Option<PathBuf>,
+    /// Monte-Carlo trials over scanner noise (simulated scans only; default: the
+    /// scene's [identify] monte_carlo.trials).
+    #[arg(long, value_name = "N")]
+    monte_carlo: Option<usize>,
+    #[command(flatten)]
+    hexapod: CalibrateOptions,
+}
+
+// The hexapod's calibration options.
+#[derive(clap::Args)]
+#[command(next_help_heading = "Hexapod (double-ball-bar traces)")]
+pub struct CalibrateOptions {
+    /// jig-free (15 circles, 18 parameters) or ball-plate (7 circles, 24); default
+    /// ball-plate.
+    #[arg(long)]
+    procedure: Option<String>,
+    /// Also run this many seeded trials of random deviations (joints ±0.5 mm, struts
+    /// ±0.2 mm).
+    #[arg(long, default_value_t = 0)]
+    trials: usize,
+    /// Measure these circles instead of the procedure's fixed ones (a plan file written by
+    /// `design`).
+    #[arg(long)]
+    plan: Option<PathBuf>,
+    /// Write the page (self-contained HTML: the identified parameters with σ, the singular
+    /// values, what is not determined and why, the pose errors before and after) into this
+    /// file.
+    #[arg(long, value_name = "FILE")]
+    html: Option<PathBuf>,
+    /// Identify from bar readings measured on the machine instead of measuring on the twin:
+    /// one trace file per circle of the plan (`--plan`, or the procedure's fixed one), in
+    /// its order, in the format `measure --instrument ballbar` writes.
+    #[arg(long, value_name = "FILE,…", value_delimiter = ',')]
+    readings: Vec<PathBuf>,
+    /// With `--readings`: write the corrected parameters (a `[deviations]` fragment of the
+    /// scene) into this file.
+    #[arg(long, value_name = "FILE")]
+    corrected: Option<PathBuf>,
+}
+
+/// `calibrate`, the hidden old name of `identify` on a hexapod.
+#[derive(clap::Args)]
+pub struct CalibrateArgs {
+    /// The hexapod scene file (needs [workspace]).
+    scene: PathBuf,
+    #[command(flatten)]
+    options: CalibrateOptions,
+    /// Print the outcome as JSON.
+    #[arg(long)]
+    json: bool,
+}
+
+/// `twinmill calibrate` (hidden): the hexapod's calibration as before.
+pub fn exec_calibrate(a: CalibrateArgs) -> ExitCode {
+    calibrate(&a.scene, &a.options, a.json).unwrap_or_else(fail)
+}
+
+/// `identify` on a hexapod scene: refuses the options of a serial machine's, then
+/// calibrates.
+fn calibrate_hexapod(path: &Path, a: &IdentifyArgs) -> ExitCode {
+    let serial = [
+        ("--cloud", a.cloud.is_some()),
+        ("--monte-carlo", a.monte_carlo.is_some()),
+    ];
+    if let Some((option, _)) = serial.iter().find(|(_, given)| *given) {
+        return fail(format!(
+            "{}: {option} identifies a serial machine from cut faces; a hexapod is identified \
+             from double-ball-bar traces (--readings, or on the twin)",
+            path.display()
+        ));
+    }
+    calibrate(path, &a.hexapod, a.args.json).unwrap_or_else(fail)
+}
+
+/// The hexapod's double-ball-bar calibration: on the twin, or from measured traces.
+fn calibrate(scene: &Path, a: &CalibrateOptions, json: bool) -> Result<ExitCode, String> {
+    let procedure = procedure_arg(a.procedure.as_deref())?;
+    let s = HexapodScene::load(scene).map_err(|e| e.to_string())?;
+    let plan = match &a.plan {
+        None => None,
+        Some(p) => Some(load_plan(p).map_err(|e| e.to_string())?),
+    };
+    let procedure = match (&plan, a.procedure.is_some()) {
+        (Some(p), false) => p.procedure,
+        _ => procedure,
+    };
+    if a.corrected.is_some() && a.readings.is_empty() {
+        return Err(
+            "--corrected needs --readings (the parameters identified from measured circles)".into(),
+        );
+    }
+    if !a.readings.is_empty() {
+        if a.trials > 0 {
+            return Err("--trials runs on the twin; it cannot go with --readings".into());
+        }
+        if a.html.is_some() {
+            return Err("--html is for calibrations on the twin; with --readings the summary, --json and --corrected say it all".into());
+        }
+        let mut files = Vec::with_capacity(a.readings.len());
+        for p in &a.readings {
+            let text = twinmill::scene::read_text(p).map_err(|e| e.to_string())?;
+            files.push((p.clone(), text));
+        }
+        let o = calibrate_measured(&s, procedure, plan, &files).map_err(|e| e.to_string())?;
+        if let Some(out) = &a.corrected {
+            write(out, o.fragment.as_bytes())?;
+        }
+        return Ok(print_out(
+            || o.summary.clone(),
+            json.then(|| serde_json::to_string_pretty(&o)),
+        ));
+    }
+    let o = calibrate_scene(&s, procedure, plan, a.trials).map_err(|e| e.to_string())?;
+    if let Some(html) = &a.html {
+        write(html, calibrate_page(&s.name, &o).as_bytes())?;
+    }
+    Ok(print_out(
+        || o.summary.clone(),
+        json.then(|| serde_json::to_string_pretty(&o)),
+    ))
+}
+
+/// `twinmill identify`.
+pub fn exec(a: IdentifyArgs) -> ExitCode {
+    let h = &a.hexapod;
+    let hexapod = [
+        ("--procedure", h.procedure.is_some()),
+        ("--trials", h.trials != 0),
+        ("--plan", h.plan.is_some()),
+        ("--html", h.html.is_some()),
+        ("--readings", !h.readings.is_empty()),
+        ("--corrected", h.corrected.is_some()),
+    ];
+    // A simulated scan needs the scanner; a given cloud does not.
+    let identify_needs: &[Need] = match a.cloud {
+        Some(_) => &[Need::Parameters],
+        None => &[Need::Parameters, Need::Scanner],
+    };
+    let (scene, program) = match load(&a.args, "identify", identify_needs) {
+        Ok(Loaded::Serial(scene, program)) => {
+            if let Some((option, _)) = hexapod.iter().find(|(_, given)| *given) {
+                return fail(format!(
+                    "{}: {option} is an option of a hexapod's identification from double-ball-bar \
+                 traces; a serial machine is identified from the faces of its cut part",
+                    scene.path.display()
+                ));
+            }
+            (*scene, program)
+        }
+        Ok(Loaded::Hexapod(path)) => return calibrate_hexapod(&path, &a),
+        Err(code) => return code,
+    };
+    let given = match &a.cloud {
+        Some(path) => match read_cloud_file(path) {
+            Ok(c) => Some((c, path.display().to_string())),
+            Err(e) => return fail(e),
+        },
+        None => None,
+    };
+    let bars = bars(a.args.json);
+    let outcome = match identify_scene(
+        &scene,
+        &program,
+        given.as_ref().map(|(c, s)| (c, s.as_str())),
+        a.monte_carlo,
+        &bars,
+    ) {
+        Ok(o) => o,
+        Err(e) => return fail(e),
+    };
+    let dir = a.args.out.join(format!("{}-identify", scene.name));
+    let html = match identify_page(
+        &scene,
+        &outcome.report,
+        &outcome.cloud.points,
+        &outcome.features,
+    ) {
+        Ok(h) => h,
+        Err(e) => return fail(e),
+    };
+    let files =
+        write_report_and_cloud(&dir, "identify.json", &outcome.report, &outcome.cloud, html);
+    if let Err(e) = files {
+        return fail(e);
+    }
+    let code = print_out(
+        || {
+            format!(
+                "{}  wrote         {}/{{identify.json, cloud.ply, report.html}}\n",
+                outcome.report.summary(),
+                dir.display()
+            )
+        },
+        a.args
+            .json
+            .then(|| serde_json::to_string_pretty(&outcome.report)),
+    );
+    if code == ExitCode::SUCCESS && !outcome.report.converged {
+        // Written and reported, but the twin does not reproduce the measured faces.
+        let worst = outcome
+            .report
+            .rounds
+            .last()
+            .map_or(f64::NAN, |r| r.worst_face_mm);
+        let _ = writeln!(
+            std::io::stderr(),
+            "twinmill: the model-correction loop did not converge: after {} rounds the \
+                     twin's faces still differ from the measured ones by up to {worst:.4} mm \
+                     (deviations outside the identified set, or the wrong faces)",
+            outcome.report.rounds.len()
+        );
+        return ExitCode::from(2);
+    }
+    code
+}
