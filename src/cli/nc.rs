@@ -9,6 +9,11 @@ use std::process::ExitCode;
 use twinmill::nc::{Interpreter, LengthUnit, write_jsonl};
 
 /// Interpret NC programs: motion as JSON lines, the benchmark program.
+///
+/// The RS274/NGC interpreter on its own, in LinuxCNC's dialect: `motion` prints a
+/// program's machine-coordinate motion (and with --events its other records) as JSON
+/// lines, as LinuxCNC's `rs274` records them (docs/nc.md); `bench-program` prints the
+/// synthetic benchmark program.
 #[derive(clap::Args)]
 pub struct NcArgs {
     #[command(subcommand)]

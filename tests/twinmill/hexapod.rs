@@ -565,7 +565,10 @@ fn cli_ik_fk_round_trip_and_bad_input() {
     }
     assert!(super::files_in(&sb.dir).is_empty());
     let (_, _, err) = sb.run(&["run", scene]);
-    assert!(err.contains("`run` does not drive a hexapod"), "{err}");
+    assert!(
+        err.contains("`run` does not apply to a hexapod") && err.contains("identify"),
+        "{err}"
+    );
     let (_, _, err) = sb.run(&["simulate", scene]);
     assert!(err.contains("needs program, [tool] and [stock]"), "{err}");
     // The map writes its CSV and PNG.

@@ -569,13 +569,15 @@ fn bad_dbb_set_ups_are_errors_not_panics() {
 }
 
 #[test]
-fn cli_ballbar_and_calibrate_and_bad_input() {
+fn cli_measure_ballbar_and_identify_on_a_hexapod_and_bad_input() {
     let sb = Sandbox::new("hexapod-dbb");
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/hexapod-machining-centre.toml");
     let scene = scene.to_str().expect("utf-8");
     let (code, _, err) = sb.run(&[
-        "ballbar",
+        "measure",
         scene,
+        "--instrument",
+        "ballbar",
         "--centre",
         "0,0,250",
         "--radius",
@@ -593,24 +595,44 @@ fn cli_ballbar_and_calibrate_and_bad_input() {
     assert!(sb.dir.join("trace.csv").exists() && sb.dir.join("trace.png").exists());
     let (code, _, err) = sb.run(&["evaluate", "iso230-4", "trace.csv", "--radius", "100"]);
     assert_eq!(code, 0, "{err}");
-    let (code, out, err) = sb.run(&["calibrate", scene, "--procedure", "ball-plate", "--json"]);
+    let (code, out, err) = sb.run(&["identify", scene, "--procedure", "ball-plate", "--json"]);
     assert_eq!(code, 0, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).expect("json");
     assert_eq!(v["run"]["calibration"]["identifiability"]["rank"], 24);
+    let dbb = ["measure", scene, "--instrument", "ballbar"];
+    let with = |extra: &[&'static str]| [&dbb[..], extra].concat();
     for args in [
-        vec!["ballbar", scene, "--radius", "-1"],
-        vec!["ballbar", scene, "--radius", "nan"],
-        vec!["ballbar", scene, "--plane", "XQ"],
-        vec!["ballbar", scene, "--centre", "1,2"],
-        vec!["ballbar", scene, "--tilt", "95"],
-        vec!["ballbar", scene, "--noise", "inf"],
+        with(&["--radius", "-1"]),
+        with(&["--radius", "nan"]),
+        with(&["--plane", "XQ"]),
+        with(&["--centre", "1,2"]),
+        with(&["--tilt", "95"]),
+        with(&["--noise", "inf"]),
+        with(&["--centre", "0,0,9000"]),
+        // A serial ball bar's option, and an instrument a hexapod has not.
+        with(&["--feed", "500"]),
+        vec![
+            "measure",
+            scene,
+            "--instrument",
+            "laser",
+            "--axis",
+            "X",
+            "--from",
+            "0",
+            "--to",
+            "9",
+        ],
+        vec!["identify", scene, "--procedure", "jig"],
+        vec!["identify", scene, "--cloud", "x.ply"],
+        vec!["identify", "/nonexistent.toml"],
+        // The old names refuse as before.
         vec!["ballbar", scene, "--direction", "up"],
-        vec!["ballbar", scene, "--centre", "0,0,9000"],
+        vec!["ballbar", scene, "--centre", "1,2"],
         vec!["calibrate", scene, "--procedure", "jig"],
-        vec!["calibrate", "/nonexistent.toml"],
     ] {
         let mut a = args.clone();
-        if args[0] == "ballbar" {
+        if args[0] != "identify" && args[0] != "calibrate" {
             a.extend(["--out", "bad.csv", "--png", "bad.png"]);
         }
         let (code, _, err) = sb.run(&a);
@@ -618,6 +640,67 @@ fn cli_ballbar_and_calibrate_and_bad_input() {
         assert_eq!(err.trim().lines().count(), 1, "{args:?}: {err}");
         assert!(!err.contains("panicked"), "{args:?}: {err}");
         assert!(!sb.dir.join("bad.csv").exists() && !sb.dir.join("bad.png").exists());
+        assert!(!sb.dir.join("bad.html").exists());
+    }
+}
+
+/// The old names of the hexapod's verbs — `ballbar`, `calibrate`, `calibrate-design` — are
+/// hidden from `--help` and do what they did: the same trace, calibration and plan as
+/// `measure --instrument ballbar`, `identify` and `design`, written only where asked.
+#[test]
+fn the_old_hexapod_names_still_work_as_hidden_aliases() {
+    let sb = Sandbox::new("hexapod-aliases");
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/hexapod-machining-centre.toml");
+    let scene = scene.to_str().expect("utf-8");
+    let circle = [
+        "--tilt", "30", "--radius", "90", "--noise", "0.7", "--seed", "3",
+    ];
+    let old = [&["ballbar", scene][..], &circle, &["--out", "old.csv"]].concat();
+    let (code, old_out, err) = sb.run(&old);
+    assert_eq!(code, 0, "{err}");
+    let new = [
+        &["measure", scene, "--instrument", "ballbar"][..],
+        &circle,
+        &["--out", "new.csv"],
+    ]
+    .concat();
+    let (code, new_out, err) = sb.run(&new);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(old_out, new_out);
+    let read = |f: &str| std::fs::read(sb.dir.join(f)).expect(f);
+    assert_eq!(read("old.csv"), read("new.csv"));
+    // The old command writes only what is asked; `measure` puts its page beside the trace.
+    assert!(!sb.dir.join("old.html").exists() && sb.dir.join("new.html").exists());
+    let (code, old_out, err) = sb.run(&[
+        "calibrate-design",
+        scene,
+        "--circles",
+        "3",
+        "--out",
+        "plan.toml",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let (code, new_out, err) = sb.run(&["design", scene, "--circles", "3", "--out", "designs"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(new_out.starts_with(&old_out), "{old_out}\n---\n{new_out}");
+    assert_eq!(
+        read("plan.toml"),
+        read("designs/hexapod-machining-centre-design/plan.toml")
+    );
+    let json = |out: &str| -> serde_json::Value { serde_json::from_str(out).expect("json") };
+    let (code, old_out, err) = sb.run(&["calibrate", scene, "--plan", "plan.toml", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let (code, new_out, err) = sb.run(&["identify", scene, "--plan", "plan.toml", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let (o, n) = (json(&old_out), json(&new_out));
+    assert_eq!(o["run"]["calibration"], n["run"]["calibration"]);
+    assert_eq!(o["run"]["circles"], n["run"]["circles"]);
+    let (_, help, _) = sb.run(&["--help"]);
+    for hidden in ["ballbar", "calibrate"] {
+        assert!(
+            !help.lines().any(|l| l.trim_start().starts_with(hidden)),
+            "{hidden} listed: {help}"
+        );
     }
 }
 
@@ -782,23 +865,28 @@ fn plan_files_round_trip_and_bad_ones_name_file_and_line() {
 }
 
 #[test]
-fn cli_calibrate_design_writes_the_plan_calibrate_reads() {
+fn cli_design_writes_the_plan_identify_reads_on_a_hexapod() {
     let sb = Sandbox::new("hexapod-dbb-design");
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/hexapod-machining-centre.toml");
     let scene = scene.to_str().expect("utf-8");
     let (code, out, err) = sb.run(&[
-        "calibrate-design",
+        "design",
         scene,
         "--procedure",
         "ball-plate",
         "--circles",
         "5",
         "--out",
-        "plan.toml",
+        ".",
     ]);
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("designed") && out.contains("fixed"), "{out}");
-    let (code, out, err) = sb.run(&["calibrate", scene, "--plan", "plan.toml", "--json"]);
+    std::fs::rename(
+        sb.dir.join("hexapod-machining-centre-design/plan.toml"),
+        sb.dir.join("plan.toml"),
+    )
+    .expect("the plan is written into <out>/<scene>-design/");
+    let (code, out, err) = sb.run(&["identify", scene, "--plan", "plan.toml", "--json"]);
     assert_eq!(code, 0, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).expect("json");
     assert_eq!(v["work"][1]["circles"], 5);
@@ -808,26 +896,13 @@ fn cli_calibrate_design_writes_the_plan_calibrate_reads() {
     )
     .expect("writes");
     for args in [
+        vec!["design", scene, "--circles", "0", "--out", "p2"],
+        vec!["design", scene, "--procedure", "x", "--out", "p2"],
+        vec!["design", scene, "--params", "dy_AY", "--out", "p2"],
+        vec!["identify", scene, "--plan", "bad.toml"],
+        vec!["identify", scene, "--plan", "missing.toml"],
         vec![
-            "calibrate-design",
-            scene,
-            "--circles",
-            "0",
-            "--out",
-            "p2.toml",
-        ],
-        vec![
-            "calibrate-design",
-            scene,
-            "--procedure",
-            "x",
-            "--out",
-            "p2.toml",
-        ],
-        vec!["calibrate", scene, "--plan", "bad.toml"],
-        vec!["calibrate", scene, "--plan", "missing.toml"],
-        vec![
-            "calibrate",
+            "identify",
             scene,
             "--plan",
             "plan.toml",
@@ -839,12 +914,12 @@ fn cli_calibrate_design_writes_the_plan_calibrate_reads() {
         assert_ne!(code, 0, "{args:?}");
         assert_eq!(err.trim().lines().count(), 1, "{args:?}: {err}");
         assert!(!err.contains("panicked"), "{args:?}: {err}");
-        assert!(!sb.dir.join("p2.toml").exists());
+        assert!(!sb.dir.join("p2").exists());
     }
 }
 
-/// `calibrate --readings`: bar readings measured elsewhere (here on the scene's machine,
-/// written as `twinmill ballbar --out` writes them) identify the parameters the scene file
+/// `identify --readings` on a hexapod: bar readings measured elsewhere (here on the scene's machine,
+/// written as `twinmill measure --instrument ballbar` writes them) identify the parameters the scene file
 /// injects — read from its `[deviations]` table, not from the code — within 3σ; the
 /// corrected-parameters fragment holds the same values; bad files name the file and line,
 /// exit non-zero and write nothing.
@@ -871,7 +946,7 @@ fn calibrate_reads_measured_dbb_files_and_writes_the_corrected_parameters() {
     let list = names.join(",");
     let scene = path.to_str().expect("utf-8");
     let (code, out, err) = sb.run(&[
-        "calibrate",
+        "identify",
         scene,
         "--procedure",
         "ball-plate",
@@ -951,7 +1026,7 @@ fn calibrate_reads_measured_dbb_files_and_writes_the_corrected_parameters() {
         (names[..6].join(","), "6 file(s) for a plan of 7"),
     ] {
         let (code, _, err) = sb.run(&[
-            "calibrate",
+            "identify",
             scene,
             "--procedure",
             "ball-plate",
@@ -969,7 +1044,7 @@ fn calibrate_reads_measured_dbb_files_and_writes_the_corrected_parameters() {
     // A plan whose procedure is not the one asked for is refused, as on the twin.
     std::fs::write(sb.dir.join("plate.toml"), plan_toml(&plan, &[])).expect("writes");
     let (code, _, err) = sb.run(&[
-        "calibrate",
+        "identify",
         scene,
         "--plan",
         "plate.toml",

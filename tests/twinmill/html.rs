@@ -693,14 +693,22 @@ fn evaluate_writes_a_page_with_every_number_of_its_figures() {
 fn the_hexapod_commands_write_a_page_with_every_number_of_their_output() {
     let sb = Sandbox::new("html-hexapod");
     let hex = scene_file("hexapod-machining-centre.toml");
-    let (code, stdout, stderr) = sb.run(&["ballbar", &hex, "--json", "--html", "bb.html"]);
+    let (code, stdout, stderr) = sb.run(&[
+        "measure",
+        &hex,
+        "--instrument",
+        "ballbar",
+        "--json",
+        "--html",
+        "bb.html",
+    ]);
     assert_eq!(code, 0, "{stderr}");
     let html = page_holds(&sb.dir.join("bb.html"), &stdout, &[]);
     assert!(html.contains("polyline"), "the polar plot");
     // Calibration without a jig: the base frame's six rigid motions are not determined,
     // and the page says so and why, beside the parameters with σ and the spectrum.
     let (code, stdout, stderr) = sb.run(&[
-        "calibrate",
+        "identify",
         &hex,
         "--procedure",
         "jig-free",
