@@ -187,6 +187,14 @@ def main():
     job("evaluate iso230-2 --json", ["evaluate", "iso230-2", data, "--json"])
     job("evaluate ball-sensor", ["evaluate", "ball-sensor", "--html", "{out}/bs.html"])
     job("evaluate ball-sensor --json", ["evaluate", "ball-sensor", "--json", "--tolerance", "2"])
+    # A cloud with faces: the built-in scene's scan, made once by the old binary.
+    if not only or "fit" in only:
+        scanned = tempfile.mkdtemp()
+        run(old, ["scan", str(repo / "scenes/mdx50-step.toml"), "--out", scanned], scanned)
+        cloud = str(Path(scanned) / "mdx50-step-scan/cloud.ply")
+        job("fit the scan's faces", ["fit", cloud])
+        job("fit the scan's faces --json", ["fit", cloud, "--json", "--robust"])
+        job("fit --plane --seed", ["fit", cloud, "--plane", "--seed", "0,0,0", "--json"])
     for cloud in ["cloudcompare-small.ply", "open3d-small.ply"]:
         job(f"fit {cloud}", ["fit", str(repo / "tests/data" / cloud)])
         job(f"fit {cloud} --sphere --json", ["fit", str(repo / "tests/data" / cloud), "--sphere", "--json"])
