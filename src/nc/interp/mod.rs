@@ -432,6 +432,9 @@ impl Interpreter {
             // LinuxCNC re-reads the position from the canon after a tool change
             self.resync_pending = false;
             self.cur_off = self.canon_off;
+            // also after G40: the programmed point is forgotten for the canon's, which is
+            // where the compensated tool went (the exit move must still be straight)
+            self.prog_override = None;
         }
         self.line_start = self.tell();
         let mut buf = std::mem::take(&mut self.buf);
