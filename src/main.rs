@@ -139,6 +139,10 @@ enum NcCommand {
         /// Also print non-motion records (tool, spindle, offsets, ...).
         #[arg(long)]
         events: bool,
+        /// Stop as an endless loop after this many lines in a row without motion.
+        #[arg(long, default_value_t = twinmill::nc::DEFAULT_MAX_IDLE_BLOCKS,
+              value_parser = clap::value_parser!(u64).range(1..))]
+        max_idle_blocks: u64,
     },
     /// Print the synthetic benchmark program (G1 with A words, every fifth block a G3).
     BenchProgram {
@@ -1727,7 +1731,15 @@ fn study_command(command: StudyCommand) -> ExitCode {
     }
 }
 
+/// Prints `twinmill: error: MESSAGE` on one line (a line break inside the message, from a
+/// file's text or a library's, is printed as a space) and returns the failure exit code.
 fn fail(msg: impl std::fmt::Display) -> ExitCode {
+    let msg: String = msg
+        .to_string()
+        .trim_end()
+        .chars()
+        .map(|c| if c.is_control() { ' ' } else { c })
+        .collect();
     let _ = writeln!(std::io::stderr(), "twinmill: error: {msg}");
     ExitCode::FAILURE
 }
@@ -1886,6 +1898,7 @@ fn main() -> ExitCode {
                     no_fanuc_subs,
                     jsonl: _,
                     events,
+                    max_idle_blocks,
                 },
         } => {
             let unit = if external_units == "inch" {
@@ -1903,6 +1916,7 @@ fn main() -> ExitCode {
                 Err(e) => return fail(e),
             };
             opts.block_delete = block_delete;
+            opts.max_idle_blocks = max_idle_blocks;
             if no_fanuc_subs {
                 opts.fanuc_subs = false;
             }
@@ -1916,10 +1930,7 @@ fn main() -> ExitCode {
             let _ = out.flush();
             match r {
                 Ok(Ok(())) => ExitCode::SUCCESS,
-                Ok(Err(e)) => {
-                    let _ = write!(std::io::stderr(), "{}", e.full_report());
-                    ExitCode::FAILURE
-                }
+                Ok(Err(e)) => fail(e),
                 Err(e) => fail(e),
             }
         }

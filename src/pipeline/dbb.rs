@@ -652,12 +652,8 @@ pub fn parse_plan(text: &str, path: &Path) -> Result<Plan, SceneError> {
             message,
         }
     };
-    let file: PlanFile = toml::from_str(text).map_err(|e| {
-        err(
-            e.span().map_or(0, |s| s.start),
-            e.message().trim().to_string(),
-        )
-    })?;
+    let file: PlanFile =
+        toml::from_str(text).map_err(|e| crate::scene::toml_error(text, path, &e))?;
     let procedure = Procedure::from_name(file.procedure.get_ref()).ok_or_else(|| {
         err(
             file.procedure.span().start,

@@ -21,6 +21,8 @@ mod hexapod;
 mod html;
 mod hexapod_calibration;
 mod hexapod_cut;
+mod fuzz;
+mod robustness;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};
