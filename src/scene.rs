@@ -537,6 +537,10 @@ pub struct Scene {
     /// `model` are then the controller's Cartesian kinematics ([`HexapodTwin::command_chain`]),
     /// and `injected` the hexapod's deviations by parameter name.
     pub hexapod: Option<HexapodTwin>,
+    /// Keep an identification whose residuals the stated noise cannot explain instead of
+    /// refusing it ([`crate::calibration::goodness`]); its report then says so on its
+    /// first line. Never read from the scene file: the command line's `--accept-misfit`.
+    pub accept_misfit: bool,
 }
 
 /// `[report] view`: `"faces"` (the default: `None`), `"iso"` (from +x, −y, +z), an axis
@@ -1975,6 +1979,7 @@ fn finish<M>(
             face_options: identify.face_options,
             view,
             hexapod,
+            accept_misfit: false,
         })
     }
 }

@@ -21,6 +21,7 @@ mod hexapod;
 mod html;
 mod hexapod_calibration;
 mod hexapod_cut;
+mod misfit;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};
