@@ -399,10 +399,10 @@ fn a_rotary_test_the_model_cannot_explain_is_refused_naming_the_samples() {
         .apply_iso_term("EC0XY", 40e-6)
         .expect("a squareness of the trunnion");
     for instrument in [sensor(), RotaryInstrument::Probe { sigma_mm: 0.5e-3 }] {
-        let err = rotary_test(&scene, &request(instrument))
-            .err()
-            .expect("refused")
-            .to_string();
+        let Err(err) = rotary_test(&scene, &request(instrument)) else {
+            panic!("a squareness the model lacks was accepted");
+        };
+        let err = err.to_string();
         assert_eq!(err.lines().count(), 1, "{err}");
         assert!(err.contains("χ²") && err.contains("dof"), "{err}");
         assert!(err.contains("sweep "), "names samples: {err}");
