@@ -210,6 +210,10 @@ pub struct HexapodScene {
     pub table: Option<Table>,
     /// `[table_axes]`: rotary axes carrying the part (nominal and with their deviations).
     pub table_axes: Option<TableAxes>,
+    /// Keep a calibration whose residuals the stated noise cannot explain instead of
+    /// refusing it ([`crate::calibration::goodness`]); its outcome then says so on its
+    /// first line. Never read from the scene file: the command line's `--accept-misfit`.
+    pub accept_misfit: bool,
 }
 
 struct Ctx<'a> {
@@ -606,6 +610,7 @@ impl HexapodScene {
             table_axes: table_nominal
                 .zip(table_chain)
                 .map(|(nominal, actual)| TableAxes { nominal, actual }),
+            accept_misfit: false,
         })
     }
 

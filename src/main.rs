@@ -41,6 +41,19 @@ use twinmill::scene::{MemoryBudget, Need, Scene, SceneError};
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Keep an identification (run, identify, design, correct --model identified, measure,
+    /// calibrate) whose residuals the stated noise cannot explain, instead of refusing it;
+    /// its report then says so on its first line.
+    #[arg(long, global = true)]
+    accept_misfit: bool,
+}
+
+/// `--accept-misfit`, set once from the command line before any command runs; every
+/// scene a command loads takes it.
+static ACCEPT_MISFIT: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+fn accept_misfit() -> bool {
+    ACCEPT_MISFIT.load(std::sync::atomic::Ordering::Relaxed)
 }
 
 /// What `run` and `scan` share.
@@ -698,6 +711,10 @@ fn prepare(
         }
         r => r.map_err(fail)?,
     };
+    let scene = Scene {
+        accept_misfit: accept_misfit(),
+        ..scene
+    };
     scene.require(command, needs).map_err(fail)?;
     let program = match scene.load_program() {
         Ok(p) => p,
@@ -1096,7 +1113,10 @@ fn measure(a: MeasureArgs) -> ExitCode {
         source: "measure builds no stock".into(),
     };
     let scene = match Scene::load_with(&a.scene, &budget) {
-        Ok(s) => s,
+        Ok(s) => Scene {
+            accept_misfit: accept_misfit(),
+            ..s
+        },
         Err(e) => return fail(e),
     };
     if let Err(e) = scene.require("measure", &[]) {
@@ -1277,6 +1297,9 @@ fn measure_rotary(scene: &Scene, a: &MeasureArgs) -> Result<Measured, String> {
         )
     });
     let mut s = String::new();
+    if let Some(w) = &rep.warning {
+        let _ = writeln!(s, "{w}");
+    }
     let _ = writeln!(s, "scene         {}", rep.scene);
     let _ = writeln!(
         s,
@@ -1340,9 +1363,13 @@ fn measure_rotary(scene: &Scene, a: &MeasureArgs) -> Result<Measured, String> {
         }
         let _ = writeln!(
             s,
-            "fit           chi² {:.1} for {} degrees of freedom; the point at ({:.4}, {:.4}, {:.4}) mm",
-            id.chi2, id.dof, id.fixed_point_mm[0], id.fixed_point_mm[1], id.fixed_point_mm[2]
+            "fit           {}; the point at ({:.4}, {:.4}, {:.4}) mm",
+            id.fit.describe(),
+            id.fixed_point_mm[0],
+            id.fixed_point_mm[1],
+            id.fixed_point_mm[2]
         );
+        let _ = writeln!(s, "rank          {}", id.margin.describe());
     }
     Ok(Measured {
         text: out.trace_csv.clone(),
@@ -1746,6 +1773,7 @@ fn fail(msg: impl std::fmt::Display) -> ExitCode {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    ACCEPT_MISFIT.store(cli.accept_misfit, std::sync::atomic::Ordering::Relaxed);
     match cli.command {
         Command::Hexapod { command } => hexapod_command(command),
         Command::Study { command } => study_command(command),
@@ -2144,21 +2172,22 @@ fn main() -> ExitCode {
                 Err(code) => return code,
             };
             let bars = bars(json);
-            let chain = match model {
-                ModelSource::Injected => scene.chain.clone(),
+            let (chain, warning) = match model {
+                ModelSource::Injected => (scene.chain.clone(), None),
                 ModelSource::Identified => {
-                    match run(&scene, &program, &bars)
-                        .and_then(|o| identified_model(&scene, &o.report))
-                    {
+                    match run(&scene, &program, &bars).and_then(|o| {
+                        identified_model(&scene, &o.report).map(|c| (c, o.report.warning))
+                    }) {
                         Ok(c) => c,
                         Err(e) => return fail(e),
                     }
                 }
             };
-            let outcome = match correct(&scene, &program, &chain, accuracy_mm, &bars) {
+            let mut outcome = match correct(&scene, &program, &chain, accuracy_mm, &bars) {
                 Ok(o) => o,
                 Err(e) => return fail(e),
             };
+            outcome.report.warning = warning;
             let report = &outcome.report;
             let ngc = report.corrected_program.clone();
             let json_name = format!("{}-correct.json", scene.name);
@@ -2986,7 +3015,10 @@ fn dbb_ballbar(a: DbbArgs) -> Result<ExitCode, String> {
 fn dbb_calibrate(a: CalibrateArgs) -> Result<ExitCode, String> {
     use twinmill::hexapod_scene::HexapodScene;
     let procedure = procedure_arg(a.procedure.as_deref())?;
-    let s = HexapodScene::load(&a.scene).map_err(|e| e.to_string())?;
+    let s = HexapodScene {
+        accept_misfit: accept_misfit(),
+        ..HexapodScene::load(&a.scene).map_err(|e| e.to_string())?
+    };
     let plan = match &a.plan {
         None => None,
         Some(p) => Some(twinmill::pipeline::dbb::load_plan(p).map_err(|e| e.to_string())?),

@@ -625,6 +625,10 @@ pub struct Scene {
     /// `model` are then the controller's Cartesian kinematics ([`HexapodTwin::command_chain`]),
     /// and `injected` the hexapod's deviations by parameter name.
     pub hexapod: Option<HexapodTwin>,
+    /// Keep an identification whose residuals the stated noise cannot explain instead of
+    /// refusing it ([`crate::calibration::goodness`]); its report then says so on its
+    /// first line. Never read from the scene file: the command line's `--accept-misfit`.
+    pub accept_misfit: bool,
 }
 
 /// `[report] view`: `"faces"` (the default: `None`), `"iso"` (from +x, −y, +z), an axis
@@ -2245,6 +2249,7 @@ fn finish<M>(
             face_options: identify.face_options,
             view,
             hexapod,
+            accept_misfit: false,
         })
     }
 }
@@ -2369,9 +2374,19 @@ pub fn design_scene_toml(
     let spindle = scene.chain.joint_name(scene.chain.axes().len() - 1);
     let _ = writeln!(s, "]\nspindle = \"{}\"", &spindle[1..]);
     let _ = writeln!(s, "home = {{ Z = {}, A = 0 }}\n", opts.safe_z_mm);
+    // The simulated machine carries only the requested deviations: one outside them is held
+    // at zero by the identification, so its faces could not fit (the misfit refusal), and
+    // the promise is made on a scan the requested model can produce.
     let _ = writeln!(s, "[deviations]");
     for (k, val) in &scene.injected {
-        let _ = writeln!(s, "{k} = {val:e}");
+        if parameters.iter().any(|p| p == k) {
+            let _ = writeln!(s, "{k} = {val:e}");
+        } else {
+            let _ = writeln!(
+                s,
+                "# {k} = {val:e} (not simulated: not among the parameters)"
+            );
+        }
     }
     use crate::cutting::tool::ToolSizes;
     let tool_fields = match scene.tool.sizes() {

@@ -23,6 +23,7 @@ mod hexapod_calibration;
 mod hexapod_cut;
 mod fuzz;
 mod robustness;
+mod misfit;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};
