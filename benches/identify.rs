@@ -77,6 +77,7 @@ fn benches(c: &mut Criterion) {
             black_box(&features),
             scene.registration,
             scene.loop_tolerance_mm,
+            None,
         )
         .expect("identifies")
     };
@@ -104,6 +105,7 @@ fn benches(c: &mut Criterion) {
                     &f,
                     scene.registration,
                     scene.loop_tolerance_mm,
+                    None,
                 )
                 .expect("identifies")
             })

@@ -17,10 +17,12 @@ use crate::machine::hexapod::{
 };
 use crate::machine::hexapod_accuracy::{HomingSetup, Workspace};
 use crate::math::Point3;
-use crate::math::{Real, UnitVector3, Vector3, tol};
+use crate::math::{Real, UnitVector3, Vector3};
 use crate::nc::AxisLetter;
 use crate::scene::{MemoryBudget, Scene};
-use crate::scene::{SceneError, line_col, read_text};
+use crate::scene::{
+    SceneError, check_coordinate, check_direction, line_col, read_text, toml_error,
+};
 use serde::Deserialize;
 use std::collections::BTreeMap;
 use std::ops::Range;
@@ -208,6 +210,10 @@ pub struct HexapodScene {
     pub table: Option<Table>,
     /// `[table_axes]`: rotary axes carrying the part (nominal and with their deviations).
     pub table_axes: Option<TableAxes>,
+    /// Keep a calibration whose residuals the stated noise cannot explain instead of
+    /// refusing it ([`crate::calibration::goodness`]); its outcome then says so on its
+    /// first line. Never read from the scene file: the command line's `--accept-misfit`.
+    pub accept_misfit: bool,
 }
 
 struct Ctx<'a> {
@@ -271,9 +277,22 @@ impl Ctx<'_> {
         }
         let mut out = [Vector3::zeros(); STRUTS];
         for (i, j) in list.iter().enumerate() {
-            out[i] = Vector3::from(self.finite(j, &format!("{what}[{}]", i + 1))?);
+            out[i] = Vector3::from(self.coordinates(j, &format!("machine.{what}[{}]", i + 1))?);
         }
         Ok(out)
+    }
+
+    /// Finite coordinates (mm), each within [`crate::scene::MAX_COORDINATE_MM`].
+    fn coordinates<const N: usize>(
+        &self,
+        v: &Spanned<[Real; N]>,
+        what: &str,
+    ) -> Result<[Real; N], SceneError> {
+        let a = self.finite(v, what)?;
+        for c in a {
+            check_coordinate(c, what).map_err(|e| self.err(v.span(), e))?;
+        }
+        Ok(a)
     }
 
     fn axis(
@@ -283,9 +302,7 @@ impl Ctx<'_> {
         default: UnitVector3,
     ) -> Result<UnitVector3, SceneError> {
         let Some(v) = v else { return Ok(default) };
-        let a = Vector3::from(self.finite(v, what)?);
-        UnitVector3::try_new(a, tol::LENGTH_EPS)
-            .ok_or_else(|| self.err(v.span(), format!("{what} must not be zero")))
+        check_direction(*v.get_ref(), &format!("machine.{what}")).map_err(|e| self.err(v.span(), e))
     }
 
     /// `[table_axes]`: rotary axes A, B or C (the letters the platform then holds at home),
@@ -307,11 +324,13 @@ impl Ctx<'_> {
                     ));
                 }
             };
-            let d = Vector3::from(self.finite(&a.direction, "table_axes direction")?);
-            let direction = UnitVector3::try_new(d, tol::LENGTH_EPS)
-                .ok_or_else(|| self.err(a.direction.span(), "direction must not be zero"))?;
+            let key = format!("table_axes.{}", a.name.get_ref());
+            let direction = check_direction(*a.direction.get_ref(), &format!("{key}.direction"))
+                .map_err(|e| self.err(a.direction.span(), e))?;
             let origin = match &a.origin {
-                Some(o) => Point3::from(Vector3::from(self.finite(o, "table_axes origin")?)),
+                Some(o) => Point3::from(Vector3::from(
+                    self.coordinates(o, &format!("{key}.origin"))?,
+                )),
                 None => Point3::origin(),
             };
             axes.push(Axis {
@@ -348,10 +367,7 @@ impl HexapodScene {
     /// Parses and validates hexapod scene text; `path` locates messages.
     pub fn parse(text: &str, path: &Path) -> Result<HexapodScene, SceneError> {
         let ctx = Ctx { path, text };
-        let file: HexapodFile = toml::from_str(text).map_err(|e| {
-            let span = e.span().unwrap_or(0..0);
-            ctx.err(span, e.message().trim().to_string())
-        })?;
+        let file: HexapodFile = toml::from_str(text).map_err(|e| toml_error(text, path, &e))?;
         let m = &file.machine;
         if m.kind.get_ref() != "hexapod" {
             return Err(ctx.err(
@@ -386,10 +402,21 @@ impl HexapodScene {
         let base = ctx.joints(&m.base_joints, "base_joints")?;
         let platform = ctx.joints(&m.platform_joints, "platform_joints")?;
         let tool = match &m.tool_offset {
-            Some(v) => Vector3::from(ctx.finite(v, "tool_offset")?),
+            Some(v) => Vector3::from(ctx.coordinates(v, "machine.tool_offset")?),
             None => Vector3::zeros(),
         };
-        let home = Pose::from_mm_deg(ctx.finite(&m.home, "home")?);
+        let home = ctx.finite(&m.home, "home")?;
+        for (i, v) in home.iter().enumerate() {
+            if i < 3 {
+                check_coordinate(*v, "machine.home").map_err(|e| ctx.err(m.home.span(), e))?;
+            } else if v.abs() > 180.0 {
+                return Err(ctx.err(
+                    m.home.span(),
+                    format!("machine.home: got the angle {v:e}°, expected within ±180°"),
+                ));
+            }
+        }
+        let home = Pose::from_mm_deg(home);
         let stroke = match &m.stroke_mm {
             Some(v) => {
                 let (lo, hi) = ctx.range(v, "stroke_mm")?;
@@ -419,7 +446,7 @@ impl HexapodScene {
         let unreferenced =
             Hexapod::try_new(base, platform, [0.0; STRUTS], tool, limits).map_err(geometry_err)?;
         let reference: Struts = match &m.strut_reference_mm {
-            Some(v) => ctx.finite(v, "strut_reference_mm")?,
+            Some(v) => ctx.coordinates(v, "machine.strut_reference_mm")?,
             None => unreferenced.strut_lengths(&home),
         };
         let nominal =
@@ -583,6 +610,7 @@ impl HexapodScene {
             table_axes: table_nominal
                 .zip(table_chain)
                 .map(|(nominal, actual)| TableAxes { nominal, actual }),
+            accept_misfit: false,
         })
     }
 

@@ -199,6 +199,8 @@ struct NcFile {
     ini: Option<Spanned<String>>,
     /// Unit of tool-table and var-file lengths: "mm" (default) or "inch".
     external_units: Option<Spanned<String>>,
+    /// Lines in a row without motion before the program is stopped as an endless loop.
+    max_idle_blocks: Option<Spanned<u64>>,
 }
 
 #[derive(Deserialize)]
@@ -409,6 +411,89 @@ struct BoxFile {
 /// tested to.
 pub const DEFAULT_LOOP_TOLERANCE_MM: Real = 5e-4;
 
+/// The largest coordinate a machine may have (mm): 100 m, beyond any machine tool's travel.
+/// A `home` position, an axis origin or a joint beyond it is refused.
+pub const MAX_COORDINATE_MM: Real = 1e5;
+
+/// The largest rotary-axis position a scene may give (degrees): a hundred turns.
+pub const MAX_ANGLE_DEG: Real = 36_000.0;
+
+/// A direction vector's length must lie in `[1 / DIRECTION_SCALE, DIRECTION_SCALE]`: it is
+/// normalised on reading, and a component a million times another's is a typing error, not
+/// a direction.
+pub const DIRECTION_SCALE: Real = 1e3;
+
+/// The smallest angle between two linear axes (and between a linear axis and the plane of
+/// two others), degrees: axes closer to parallel do not span the space a machine moves in.
+pub const MIN_AXIS_ANGLE_DEG: Real = 1.0;
+
+/// A direction given as `[dx, dy, dz]`, normalised; the key names it in messages.
+pub fn check_direction(v: [Real; 3], key: &str) -> Result<UnitVector3, String> {
+    let d = Vector3::new(v[0], v[1], v[2]);
+    // the length without overflow: [1, 1e308, 0] is 1e308 long, not infinite
+    let big = d.amax();
+    let n = if big > 0.0 && big.is_finite() {
+        big * (d / big).norm()
+    } else {
+        big
+    };
+    if !(n.is_finite() && (1.0 / DIRECTION_SCALE..=DIRECTION_SCALE).contains(&n)) {
+        return Err(format!(
+            "{key}: got {v:?} (length {n:e}), expected a direction of length {} to {}",
+            1.0 / DIRECTION_SCALE,
+            DIRECTION_SCALE
+        ));
+    }
+    Ok(UnitVector3::new_normalize(d))
+}
+
+/// A machine coordinate (mm), at most [`MAX_COORDINATE_MM`] from the origin.
+pub fn check_coordinate(v: Real, key: &str) -> Result<Real, String> {
+    if v.is_finite() && v.abs() <= MAX_COORDINATE_MM {
+        Ok(v)
+    } else {
+        Err(format!(
+            "{key}: got {v:e} mm, expected within ±{MAX_COORDINATE_MM} mm (100 m, beyond \
+             any machine's travel)"
+        ))
+    }
+}
+
+/// Checks that the linear axes among `axes` span space: no two within
+/// [`MIN_AXIS_ANGLE_DEG`] of parallel, three not within it of one plane.
+fn linear_axes_span(axes: &[Axis]) -> Result<(), String> {
+    let lin: Vec<&Axis> = axes.iter().filter(|a| a.kind == AxisKind::Linear).collect();
+    let min_sin = MIN_AXIS_ANGLE_DEG.to_radians().sin();
+    for (i, a) in lin.iter().enumerate() {
+        for b in &lin[..i] {
+            let sin = a.direction.cross(&b.direction).norm();
+            if sin < min_sin {
+                return Err(format!(
+                    "axes {} and {} are {:.3}° from parallel, expected linear axes at least \
+                     {MIN_AXIS_ANGLE_DEG}° apart",
+                    b.letter.as_char(),
+                    a.letter.as_char(),
+                    sin.min(1.0).asin().to_degrees()
+                ));
+            }
+        }
+    }
+    if let [a, b, c] = lin[..] {
+        let det = a.direction.dot(&b.direction.cross(&c.direction)).abs();
+        if det < min_sin {
+            return Err(format!(
+                "axes {}, {} and {} lie {:.3}° from one plane, expected linear axes that \
+                 span space (at least {MIN_AXIS_ANGLE_DEG}° from a common plane)",
+                a.letter.as_char(),
+                b.letter.as_char(),
+                c.letter.as_char(),
+                det.min(1.0).asin().to_degrees()
+            ));
+        }
+    }
+    Ok(())
+}
+
 /// Default `[identify] margin_mm`: points kept this far inside a face's edges (mm).
 const DEFAULT_MARGIN_MM: Real = 1.0;
 
@@ -426,6 +511,9 @@ pub struct NcFiles {
     pub ini: Option<PathBuf>,
     /// Unit of tool-table and var-file lengths.
     pub external_unit: LengthUnit,
+    /// Lines in a row without motion before the program is stopped as an endless loop
+    /// (default [`crate::nc::DEFAULT_MAX_IDLE_BLOCKS`]).
+    pub max_idle_blocks: Option<u64>,
 }
 
 /// A file the scene names and reads after loading (the program, the `[nc]` files): its key,
@@ -537,6 +625,10 @@ pub struct Scene {
     /// `model` are then the controller's Cartesian kinematics ([`HexapodTwin::command_chain`]),
     /// and `injected` the hexapod's deviations by parameter name.
     pub hexapod: Option<HexapodTwin>,
+    /// Keep an identification whose residuals the stated noise cannot explain instead of
+    /// refusing it ([`crate::calibration::goodness`]); its report then says so on its
+    /// first line. Never read from the scene file: the command line's `--accept-misfit`.
+    pub accept_misfit: bool,
 }
 
 /// `[report] view`: `"faces"` (the default: `None`), `"iso"` (from +x, −y, +z), an axis
@@ -1008,6 +1100,159 @@ pub fn line_col(text: &str, at: usize) -> (usize, usize) {
     (line, col)
 }
 
+/// A TOML file's error in one line and in our words, located at its line and column:
+/// `key: what is wrong, expected what` (the key as a dotted path, `machine.axes[2].kind`;
+/// none for a syntax error outside any key). Used for every TOML file twinmill reads.
+pub fn toml_error(text: &str, path: &Path, e: &toml::de::Error) -> SceneError {
+    let at = e.span().map_or(0, |s| s.start);
+    let key = toml_key_at(text, at);
+    let what = toml_words(e.message());
+    let (what, key) = match what.strip_prefix("missing field \"") {
+        // the span is the table's: the missing key belongs under it
+        Some(rest) => {
+            let field = rest.split('"').next().unwrap_or("");
+            let key = if key.is_empty() {
+                field.to_string()
+            } else {
+                format!("{key}.{field}")
+            };
+            ("missing, expected a value for this key".to_string(), key)
+        }
+        None => match what
+            .strip_prefix("unknown key \"")
+            .and_then(|r| r.split_once("\", "))
+        {
+            // the span is the key's own: the path already names it
+            Some((k, rest)) if key == k || key.ends_with(&format!(".{k}")) => {
+                (format!("unknown key, {rest}"), key)
+            }
+            _ => (what, key),
+        },
+    };
+    let (line, column) = line_col(text, at);
+    SceneError::Invalid {
+        path: path.to_path_buf(),
+        line,
+        column,
+        message: if key.is_empty() {
+            what
+        } else {
+            format!("{key}: {what}")
+        },
+    }
+}
+
+/// The dotted key of the innermost value or key of `text` that holds byte `at` (empty when
+/// none does, or the text does not parse).
+fn toml_key_at(text: &str, at: usize) -> String {
+    use toml::de::{DeTable, DeValue};
+    let holds = |r: std::ops::Range<usize>| r.start <= at && at < r.end.max(r.start + 1);
+    // The path below `v` to what holds `at`: a `[table]`'s span is its header only, so
+    // tables and arrays are searched whether or not their own span holds it.
+    fn find(v: &DeValue<'_>, holds: &dyn Fn(std::ops::Range<usize>) -> bool) -> Option<String> {
+        let deeper = |v: &DeValue<'_>| matches!(v, DeValue::Table(_) | DeValue::Array(_));
+        match v {
+            DeValue::Table(t) => t.iter().find_map(|(k, v)| {
+                let here = holds(k.span()) || holds(v.span());
+                let below = if here || deeper(v.get_ref()) {
+                    find(v.get_ref(), holds)
+                } else {
+                    None
+                };
+                match below {
+                    Some(sub) if sub.starts_with('[') => Some(format!("{}{sub}", k.get_ref())),
+                    Some(sub) => Some(format!("{}.{sub}", k.get_ref())),
+                    None => here.then(|| k.get_ref().to_string()),
+                }
+            }),
+            DeValue::Array(a) => a.iter().enumerate().find_map(|(i, v)| {
+                let here = holds(v.span());
+                let below = if here || deeper(v.get_ref()) {
+                    find(v.get_ref(), holds)
+                } else {
+                    None
+                };
+                match below {
+                    Some(sub) if sub.starts_with('[') => Some(format!("[{}]{sub}", i + 1)),
+                    Some(sub) => Some(format!("[{}].{sub}", i + 1)),
+                    None => here.then(|| format!("[{}]", i + 1)),
+                }
+            }),
+            _ => None,
+        }
+    }
+    let Ok(doc) = DeTable::parse(text) else {
+        return String::new();
+    };
+    find(&DeValue::Table(doc.into_inner()), &holds).unwrap_or_default()
+}
+
+/// serde's and the TOML parser's wording (`invalid type: string "ball", expected f64`) in
+/// ours (`got the string "ball", expected a number`), on one line.
+fn toml_words(message: &str) -> String {
+    let one_line = message
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect::<Vec<_>>()
+        .join(", ");
+    let expected = |e: &str| -> String {
+        let e = e.trim();
+        match e {
+            "f64" | "f32" => "a number".into(),
+            "u64" | "usize" | "u32" | "u16" | "u8" => "a whole number, 0 or more".into(),
+            "i64" | "i32" | "isize" => "a whole number".into(),
+            "a boolean" | "bool" => "true or false".into(),
+            "a sequence" => "an array".into(),
+            "a map" => "a table".into(),
+            _ if e.starts_with("struct ") || e.starts_with("a map") => "a table".into(),
+            _ => e.replace('`', "\""),
+        }
+    };
+    let got = |g: &str| -> String {
+        let g = g.trim();
+        let words = [
+            ("string ", "the string "),
+            ("integer ", "the integer "),
+            ("floating point ", "the number "),
+            ("boolean ", "the boolean "),
+        ];
+        for (from, to) in words {
+            if let Some(rest) = g.strip_prefix(from) {
+                return format!("{to}{}", rest.replace('`', ""));
+            }
+        }
+        match g {
+            "sequence" => "an array".into(),
+            "map" => "a table".into(),
+            _ => g.replace('`', "\""),
+        }
+    };
+    for prefix in ["invalid type: ", "invalid value: "] {
+        if let Some(rest) = one_line.strip_prefix(prefix)
+            && let Some((g, e)) = rest.rsplit_once(", expected ")
+        {
+            return format!("got {}, expected {}", got(g), expected(e));
+        }
+    }
+    if let Some(rest) = one_line.strip_prefix("invalid length ")
+        && let Some((n, e)) = rest.split_once(", expected ")
+    {
+        return format!("got {n} values, expected {}", expected(e));
+    }
+    if let Some(rest) = one_line.strip_prefix("unknown field `")
+        && let Some((k, e)) = rest.split_once("`, expected ")
+    {
+        return format!("unknown key \"{k}\", expected {}", expected(e));
+    }
+    if let Some(rest) = one_line.strip_prefix("unknown variant `")
+        && let Some((k, e)) = rest.split_once("`, expected ")
+    {
+        return format!("unknown value \"{k}\", expected {}", expected(e));
+    }
+    one_line.replace('`', "\"")
+}
+
 /// Reads a scene file as UTF-8 text.
 pub fn read_text(path: &Path) -> Result<String, SceneError> {
     let bytes = std::fs::read(path).map_err(|source| SceneError::Io {
@@ -1332,10 +1577,8 @@ impl Scene {
                 path: path.to_path_buf(),
             });
         }
-        let file: SceneFile<MachineFile> = toml::from_str(text).map_err(|e| {
-            let span = e.span().unwrap_or(0..0);
-            ctx.err(span, e.message().trim().to_string())
-        })?;
+        let file: SceneFile<MachineFile> =
+            toml::from_str(text).map_err(|e| toml_error(text, path, &e))?;
         for (section, v) in [
             ("workspace", &file.workspace),
             ("drives", &file.drives),
@@ -1403,11 +1646,17 @@ impl Scene {
                     ),
                 ));
             }
-            let d = ctx.vec3(&a.direction, "direction")?;
-            let direction = UnitVector3::try_new(d, tol::LENGTH_EPS)
-                .ok_or_else(|| ctx.err(a.direction.span(), "direction must not be zero"))?;
+            let key = |what: &str| format!("machine.axes.{}.{what}", letter.as_char());
+            let direction = check_direction(*a.direction.get_ref(), &key("direction"))
+                .map_err(|e| ctx.err(a.direction.span(), e))?;
             let origin = match &a.origin {
-                Some(o) => Point3::from(ctx.vec3(o, "origin")?),
+                Some(o) => {
+                    let v = ctx.vec3(o, &key("origin"))?;
+                    for c in v.iter() {
+                        check_coordinate(*c, &key("origin")).map_err(|e| ctx.err(o.span(), e))?;
+                    }
+                    Point3::from(v)
+                }
                 None => Point3::origin(),
             };
             axes.push(Axis {
@@ -1417,6 +1666,8 @@ impl Scene {
                 origin,
             });
         }
+        linear_axes_span(&axes)
+            .map_err(|e| ctx.err(file.machine.axes.span(), format!("machine.axes: {e}")))?;
         let mut chain = Chain::new(axes, &file.machine.spindle)
             .map_err(|e| ctx.err(file.machine.axes.span(), e.to_string()))?;
         let mut home = AxisValues::default();
@@ -1431,7 +1682,23 @@ impl Scene {
                     format!("home: '{k}' is not an axis of this machine"),
                 )
             })?;
-            home.set(letter, ctx.finite(v, &format!("home.{k}"))?);
+            let x = ctx.finite(v, &format!("home.{k}"))?;
+            let x = if letter.is_rotary() {
+                if x.abs() > MAX_ANGLE_DEG {
+                    return Err(ctx.err(
+                        v.span(),
+                        format!(
+                            "machine.home.{k}: got {x:e}°, expected within ±{MAX_ANGLE_DEG}° \
+                             (a hundred turns)"
+                        ),
+                    ));
+                }
+                x
+            } else {
+                check_coordinate(x, &format!("machine.home.{k}"))
+                    .map_err(|e| ctx.err(v.span(), e))?
+            };
+            home.set(letter, x);
         }
         let model_nominal = chain.nominal();
         let injected = deviation_map(&ctx, &mut chain, &file.deviations)?;
@@ -1473,10 +1740,8 @@ impl Scene {
         injected: BTreeMap<String, Real>,
     ) -> Result<Scene, SceneError> {
         let ctx = Ctx { path, text };
-        let file: SceneFile<toml::Value> = toml::from_str(text).map_err(|e| {
-            let span = e.span().unwrap_or(0..0);
-            ctx.err(span, e.message().trim().to_string())
-        })?;
+        let file: SceneFile<toml::Value> =
+            toml::from_str(text).map_err(|e| toml_error(text, path, &e))?;
         let refuse = |span: Option<Range<usize>>, what: &str| match span {
             Some(span) => Err(ctx.err(span, format!("{what} does not apply to a hexapod scene"))),
             None => Ok(()),
@@ -1928,6 +2193,15 @@ fn finish<M>(
             nc_files.tool_table = resolve("nc.tool_table", &nc.tool_table);
             nc_files.var_file = resolve("nc.var_file", &nc.var_file);
             nc_files.ini = resolve("nc.ini", &nc.ini);
+            if let Some(n) = &nc.max_idle_blocks {
+                if *n.get_ref() == 0 {
+                    return Err(ctx.err(
+                        n.span(),
+                        "nc.max_idle_blocks: got 0, expected 1 or more lines",
+                    ));
+                }
+                nc_files.max_idle_blocks = Some(*n.get_ref());
+            }
             if let Some(u) = &nc.external_units {
                 nc_files.external_unit = match u.get_ref().as_str() {
                     "mm" => LengthUnit::Mm,
@@ -1975,6 +2249,7 @@ fn finish<M>(
             face_options: identify.face_options,
             view,
             hexapod,
+            accept_misfit: false,
         })
     }
 }
@@ -2029,6 +2304,7 @@ impl Scene {
             &self.program_path,
             InterpOptions {
                 start: self.home,
+                max_idle_blocks: f.max_idle_blocks.unwrap_or(opts.max_idle_blocks),
                 ..opts
             },
         )
@@ -2098,9 +2374,19 @@ pub fn design_scene_toml(
     let spindle = scene.chain.joint_name(scene.chain.axes().len() - 1);
     let _ = writeln!(s, "]\nspindle = \"{}\"", &spindle[1..]);
     let _ = writeln!(s, "home = {{ Z = {}, A = 0 }}\n", opts.safe_z_mm);
+    // The simulated machine carries only the requested deviations: one outside them is held
+    // at zero by the identification, so its faces could not fit (the misfit refusal), and
+    // the promise is made on a scan the requested model can produce.
     let _ = writeln!(s, "[deviations]");
     for (k, val) in &scene.injected {
-        let _ = writeln!(s, "{k} = {val:e}");
+        if parameters.iter().any(|p| p == k) {
+            let _ = writeln!(s, "{k} = {val:e}");
+        } else {
+            let _ = writeln!(
+                s,
+                "# {k} = {val:e} (not simulated: not among the parameters)"
+            );
+        }
     }
     use crate::cutting::tool::ToolSizes;
     let tool_fields = match scene.tool.sizes() {

@@ -1,5 +1,6 @@
 //! **Calibration**: from measurements back to the machine, and from the machine to a
-//! corrected program. The 0°/180° step experiment ([`identify`]), general identification
+//! corrected program. The goodness of fit every identification checks its result with
+//! ([`goodness`]), the 0°/180° step experiment ([`identify`]), general identification
 //! of any set of deviations with its identifiability report ([`calibrate`]), test-cut design
 //! ([`design`]) and NC-program correction with its verification ([`correct`]), and a hexapod's kinematic
 //! parameters from double-ball-bar lengths ([`hexapod_calibrate`]).
@@ -9,6 +10,7 @@
 //! [`crate::metrology`] (fits and face selection). Never values what the measurements do not
 //! determine; never opens files.
 
+pub mod goodness;
 pub mod identify;
 pub mod calibrate;
 pub mod design;

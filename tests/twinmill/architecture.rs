@@ -52,6 +52,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
     (
         "calibration",
         &[
+            "goodness",
             "identify",
             "calibrate",
             "design",

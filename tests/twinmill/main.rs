@@ -22,6 +22,9 @@ mod html;
 mod hexapod_calibration;
 mod hexapod_cut;
 mod verbs;
+mod fuzz;
+mod robustness;
+mod misfit;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};

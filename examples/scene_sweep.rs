@@ -1,0 +1,83 @@
+//! A scene's program swept into its stock once, for profiling and for measuring peak memory:
+//! `cargo run --release --example scene_sweep -- SCENE [MOVES] [PITCH]`.
+//!
+//! `MOVES` keeps the program's first moves only (all by default), `PITCH` replaces the
+//! scene's `pitch_mm`. Prints the sweep's wall time, moves per second, the crossings'
+//! digest (as `dexel_digest` computes it) and the bytes the tri-dexel holds.
+
+#![allow(clippy::print_stdout, reason = "an example reports on the terminal")]
+
+use std::path::Path;
+use std::time::Instant;
+use twinmill::cutting::stock::TriDexel;
+use twinmill::cutting::sweep::sweep_program;
+use twinmill::progress::NoProgress;
+use twinmill::scene::Scene;
+
+/// FNV-1a over the crossings of the three grids, in the grids' fixed order (the digest of
+/// `dexel_digest`).
+fn digest(stock: &TriDexel) -> (u64, usize) {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |bytes: &[u8]| {
+        for &b in bytes {
+            h ^= b as u64;
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+    };
+    let mut count = 0;
+    for g in stock.grids() {
+        g.for_each_crossing(|p, c| {
+            count += 1;
+            for k in 0..3 {
+                eat(&p[k].to_bits().to_le_bytes());
+                eat(&c.normal[k].to_bits().to_le_bytes());
+            }
+            eat(&c.line.to_le_bytes());
+        });
+    }
+    (h, count)
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let Some(path) = args.get(1) else {
+        println!("usage: scene_sweep SCENE [MOVES] [PITCH]");
+        return;
+    };
+    let mut scene = Scene::load(Path::new(path)).expect("scene loads");
+    if let Some(p) = args.get(3).and_then(|s| s.parse().ok()) {
+        scene.pitch_mm = p;
+    }
+    let program = scene.load_program().expect("program");
+    let n = args
+        .get(2)
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(program.moves.len())
+        .min(program.moves.len());
+    let moves = &program.moves[..n];
+    let mut stock = twinmill::pipeline::make_stock(&scene).expect("stock");
+    let t = Instant::now();
+    let rep = sweep_program(
+        &mut stock,
+        scene.kinematics(),
+        &scene.tool,
+        moves,
+        &scene.sweep,
+        &NoProgress,
+    )
+    .expect("sweeps");
+    let dt = t.elapsed().as_secs_f64();
+    let (h, count) = digest(&stock);
+    println!(
+        "{}: {n} moves at {} mm in {dt:.3} s, {:.0} moves/s, {} cutting, {} sweeps",
+        scene.name,
+        scene.pitch_mm,
+        n as f64 / dt,
+        rep.cutting_moves,
+        rep.sweeps
+    );
+    println!(
+        "digest {h:016x}, {count} crossings, stock {:.1} MiB",
+        stock.memory_bytes() as f64 / 1048576.0
+    );
+}
