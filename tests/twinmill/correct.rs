@@ -399,14 +399,10 @@ fn head_table_programs_at_b_zero_are_corrected_not_refused() {
         };
         for i in 0..=8 {
             let t = i as Real / 8.0;
-            let q = from
-                .to_array()
-                .iter()
-                .zip(b.end.to_array())
-                .map(|(a, e)| a + (e - a) * t);
-            let q = twinmill::nc::AxisValues::from_array(
-                q.collect::<Vec<_>>().try_into().expect("six axes"),
-            );
+            let (f, e) = (from.to_array(), b.end.to_array());
+            let q = twinmill::nc::AxisValues::from_array(std::array::from_fn(|k| {
+                f[k] + (e[k] - f[k]) * t
+            }));
             let cmd = twinmill::calibration::correct::path_point(src, b.s.0 + (b.s.1 - b.s.0) * t);
             for h in [0.0, l / 2.0, l] {
                 let d = head_table_oracle(&s.chain, &axes(&q), h);
