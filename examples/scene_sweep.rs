@@ -9,34 +9,13 @@
 
 use std::path::Path;
 use std::time::Instant;
-use twinmill::cutting::stock::TriDexel;
 use twinmill::cutting::sweep::sweep_program;
 use twinmill::progress::NoProgress;
 use twinmill::scene::Scene;
 
-/// FNV-1a over the crossings of the three grids, in the grids' fixed order (the digest of
-/// `dexel_digest`).
-fn digest(stock: &TriDexel) -> (u64, usize) {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut eat = |bytes: &[u8]| {
-        for &b in bytes {
-            h ^= b as u64;
-            h = h.wrapping_mul(0x0100_0000_01b3);
-        }
-    };
-    let mut count = 0;
-    for g in stock.grids() {
-        g.for_each_crossing(|p, c| {
-            count += 1;
-            for k in 0..3 {
-                eat(&p[k].to_bits().to_le_bytes());
-                eat(&c.normal[k].to_bits().to_le_bytes());
-            }
-            eat(&c.line.to_le_bytes());
-        });
-    }
-    (h, count)
-}
+#[path = "support/crossing_digest.rs"]
+mod crossing_digest;
+use crossing_digest::digest;
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();

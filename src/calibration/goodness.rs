@@ -956,6 +956,138 @@ mod tests {
         assert!(c.describe().contains("one of a"), "{}", c.describe());
     }
 
+    /// The refusal threshold in closed form: a line through four samples leaves 2 dof, whose
+    /// χ² tail is `e^{−χ²/2}`, so the limit is `−2 ln 1e-6` = 27.631; each of two parts (its
+    /// two rows see both of the line's directions, so 2 dof each) is held at `−2 ln(1e-6/2)`.
+    /// A residual orthogonal to the line, scaled to χ² 27.0, fits; scaled to 28.5, refused.
+    #[test]
+    fn the_threshold_is_one_in_a_million_in_closed_form() {
+        let j = DMatrix::from_fn(4, 2, |i, c| if c == 0 { 1.0 } else { i as Real });
+        // Orthogonal to 1 and x = 0..3: (1, −1, −1, 1), norm 2.
+        let v = DVector::from_vec(vec![0.5, -0.5, -0.5, 0.5]);
+        let parts = vec![("a".to_string(), 0..2), ("b".to_string(), 2..4)];
+        let limit = -2.0 * (1e-6 as Real).ln();
+        let part_limit = -2.0 * (0.5e-6 as Real).ln();
+        for (chi2, fits) in [(27.0 as Real, true), (28.5, false)] {
+            let r = &v * chi2.sqrt() + &j * DVector::from_vec(vec![3.0, -0.7]);
+            let c = least_squares_check("x", &r, &j, &parts);
+            assert!((c.chi2.expect("χ²") - chi2).abs() < 1e-9, "{c:?}");
+            assert_eq!(c.dof, 2.0);
+            let l = c.limit.expect("limit");
+            assert!((l - limit).abs() < 1e-6 * limit, "limit {l} vs {limit}");
+            let p = c.p_value.expect("p");
+            assert!((p / (-chi2 / 2.0).exp() - 1.0).abs() < 1e-9, "p {p}");
+            assert_eq!(c.fits, fits, "χ² {chi2}: {}", c.describe());
+            for part in &c.parts {
+                // Left out, the other two rows fit a line exactly: χ² drops by all of it.
+                assert!((part.value - chi2).abs() < 1e-9, "{part:?}");
+                assert_eq!(part.expected, 2.0);
+                assert!(
+                    (part.limit - part_limit).abs() < 1e-6 * part_limit,
+                    "{part:?} vs {part_limit}"
+                );
+            }
+        }
+    }
+
+    /// The χ² quantile by bisection on the Poisson sum (even dof only): the test's own.
+    fn even_quantile(p: Real, dof: usize) -> Real {
+        let (mut lo, mut hi) = (0.0, 10_000.0);
+        for _ in 0..200 {
+            let mid = 0.5 * (lo + hi);
+            if even_tail(mid, dof / 2) > p {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
+    }
+
+    /// The blame, against a brute force of the test's own: refit the line by its normal
+    /// equations without each part still in, leave out the one whose removal lowers the
+    /// residual sum most against its limit (Poisson-sum quantile at 1e-6 / parts), and
+    /// repeat until the rest fits, or until several parts would each, left out alone,
+    /// leave a rest that fits (named together). Two culprits, one at the end of the range
+    /// (where it tilts the line and every other part then misses): the blame is the brute
+    /// force's, step for step.
+    #[test]
+    fn the_blame_is_the_greedy_leave_one_out_refit() {
+        let rng = CounterRng::new(41);
+        let xs: Vec<Real> = (0..60).map(|i| i as Real * 0.1).collect();
+        let mut ys: Vec<Real> = (0..60).map(|i| rng.normal(i as u64)).collect();
+        for y in &mut ys[10..20] {
+            *y -= 6.0;
+        }
+        for y in &mut ys[50..60] {
+            *y += 5.0;
+        }
+        let parts: Vec<(String, Range<usize>)> = (0..6)
+            .map(|k| (format!("part {k}"), 10 * k..10 * k + 10))
+            .collect();
+        let r = DVector::from_vec(ys.iter().map(|y| -y).collect());
+        let j = DMatrix::from_fn(60, 2, |i, c| if c == 0 { 1.0 } else { xs[i] });
+        let c = least_squares_check("samples", &r, &j, &parts);
+        assert!(!c.fits);
+        // The oracle.
+        let p_limit = 1e-6 / parts.len() as Real;
+        let rss_of = |active: &[bool]| {
+            let rows: Vec<usize> = parts
+                .iter()
+                .zip(active)
+                .filter(|(_, a)| **a)
+                .flat_map(|((_, q), _)| q.clone())
+                .collect();
+            let (x, y): (Vec<Real>, Vec<Real>) = rows.iter().map(|&i| (xs[i], ys[i])).unzip();
+            (line_rss(&x, &y), rows.len())
+        };
+        let mut active = vec![true; parts.len()];
+        let mut want = Vec::new();
+        loop {
+            let (rss, n) = rss_of(&active);
+            if even_tail(rss, (n - 2) / 2) >= 1e-6 {
+                break;
+            }
+            // Parts each of which, left out alone, leaves a rest that fits: the data cannot
+            // tell which is wrong, and they are named together.
+            let explains: Vec<String> = (0..parts.len())
+                .filter(|&k| active[k])
+                .filter(|&k| {
+                    let mut without = active.clone();
+                    without[k] = false;
+                    let (rest, m) = rss_of(&without);
+                    even_tail(rest, (m - 2) / 2) >= 1e-6
+                })
+                .map(|k| parts[k].0.clone())
+                .collect();
+            if explains.len() > 1 {
+                want.push(explains);
+                break;
+            }
+            let best = (0..parts.len())
+                .filter(|&k| active[k])
+                .map(|k| {
+                    let mut without = active.clone();
+                    without[k] = false;
+                    let drop = rss - rss_of(&without).0;
+                    (k, drop / even_quantile(p_limit, parts[k].1.len()))
+                })
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .expect("a part");
+            want.push(vec![parts[best.0].0.clone()]);
+            active[best.0] = false;
+        }
+        let mut two: Vec<String> = want.iter().flatten().cloned().collect();
+        two.sort();
+        assert!(
+            two.contains(&"part 1".to_string()),
+            "the oracle names the culprit"
+        );
+        assert_eq!(c.blame, want, "{}", c.describe());
+        let named: Vec<&str> = c.culprits().iter().map(|p| p.name.as_str()).collect();
+        assert_eq!(named.len(), two.len(), "{named:?}");
+    }
+
     #[test]
     fn good_data_are_accepted_in_all_but_a_millionth_of_trials() {
         // 1,000 seeded trials of a 3-parameter fit to 50 samples in 5 parts.

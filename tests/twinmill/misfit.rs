@@ -7,14 +7,17 @@
 //! Good data at the stated noise pass in all but a thousandth of seeded trials. And measured
 //! readings never meet the scene's simulated machine.
 
-use super::Sandbox;
+use super::{
+    HEXAPOD_CENTRE, Sandbox, dbb_readings, draw, hexapod_centre as centre, inject, mounting,
+    rotary_sweeps, setup, terms, trunnion_chain,
+};
 use std::path::{Path, PathBuf};
 use twinmill::calibration::calibrate::{
-    Feature, IsoTerm, Model, Registration, ball_features, identify, synthetic_plane_feature,
+    Feature, Model, Registration, ball_features, identify, synthetic_plane_feature,
 };
 use twinmill::calibration::goodness::{REFUSE_P, ScanNoise, face_rms_check};
 use twinmill::calibration::hexapod_calibrate::{
-    CircleReadings, DEFAULT_POINTS, Plan, Procedure, calibrate, default_plan,
+    DEFAULT_POINTS, Plan, Procedure, calibrate, default_plan,
 };
 use twinmill::calibration::hexapod_design::design;
 use twinmill::cutting::tool::{Tool, ToolKind};
@@ -23,9 +26,8 @@ use twinmill::machine::hexapod::Hexapod;
 use twinmill::math::{CounterRng, Point3, Real, UnitVector3, Vector3};
 use twinmill::metrology::ball_sensor::BallSensor;
 use twinmill::metrology::fit::{Plane, RobustRule, fit_plane_robust};
-use twinmill::metrology::hexapod_dbb::{DbbCircle, DbbInstrument, measure};
-use twinmill::metrology::rotary_test::{Setup, Sweep, probe_test, sensor_test};
-use twinmill::nc::{AxisLetter, AxisValues};
+use twinmill::metrology::hexapod_dbb::{DbbInstrument, measure};
+use twinmill::metrology::rotary_test::{probe_test, sensor_test};
 use twinmill::pipeline::dbb::{CALIBRATION_NOISE_MM, trial_machine};
 use twinmill::pipeline::{RotaryInstrument, RotaryRequest, default_setup, rotary_test};
 use twinmill::scene::Scene;
@@ -33,11 +35,7 @@ use twinmill::scene::Scene;
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
 
 fn centre_path() -> PathBuf {
-    Path::new(ROOT).join("scenes/hexapod-machining-centre.toml")
-}
-
-fn centre() -> HexapodScene {
-    HexapodScene::load(&centre_path()).expect("machining-centre scene loads")
+    PathBuf::from(HEXAPOD_CENTRE)
 }
 
 /// The circles of `plan` measured on `actual` with the DBB's noise (seed `seed`), each
@@ -102,6 +100,76 @@ fn assert_refused(code: i32, out: &str, err: &str, what: &str) {
     assert!(!err.contains("panicked"), "{what}: {err}");
     assert_eq!(err.trim_end().lines().count(), 1, "{what}: {err}");
     assert!(out.is_empty(), "{what}: {out}");
+}
+
+/// The χ² quantile at upper-tail probability 1e-6 by the Wilson–Hilferty cube (an
+/// approximation of the test's own, independent of the library's incomplete gamma
+/// function): `k (1 − 2/(9k) + z √(2/(9k)))³`, z = 4.7534 the normal's 1e-6 quantile. Its
+/// relative error is below 0.22/k at that tail (1 % at 20 dof, 0.02 % at 600).
+fn limit_at_one_in_a_million(dof: Real) -> Real {
+    wilson_hilferty(dof, 4.753_424_308_822_899)
+}
+
+/// The χ² quantile of `dof` degrees of freedom where the normal's is `z` (Wilson–Hilferty).
+fn wilson_hilferty(dof: Real, z: Real) -> Real {
+    let a = 2.0 / (9.0 * dof);
+    dof * (1.0 - a + z * a.sqrt()).powi(3)
+}
+
+/// A fit's limit is the χ² its degrees of freedom reach once in a million.
+fn assert_limit(limit: Real, dof: Real, what: &str) {
+    let want = limit_at_one_in_a_million(dof);
+    assert!(
+        (limit / want - 1.0).abs() < 0.3 / dof + 1e-3,
+        "{what}: limit {limit} for {dof} dof, the 1e-6 quantile is {want}"
+    );
+}
+
+/// The statistic of a refusal's line: `χ² C for D dof (p P; at the stated noise χ² stays
+/// below L)`, checked: C beyond L, P below 1e-6, L the 1e-6 quantile of D dof.
+fn assert_refused_statistic(err: &str, what: &str) -> (Real, Real) {
+    let num = |s: &str| -> Real {
+        s.trim()
+            .parse()
+            .unwrap_or_else(|_| panic!("{what}: a number, not {s:?}: {err}"))
+    };
+    let after = |key: &str| {
+        err.split_once(key)
+            .unwrap_or_else(|| panic!("{what}: no {key:?} in {err}"))
+            .1
+    };
+    let chi2 = num(after("χ² ").split(" for ").next().expect("χ²"));
+    let dof = num(after(" for ").split(" dof").next().expect("dof"));
+    let p = num(after("(p ").split(';').next().expect("p"));
+    let limit = num(after("stays below ").split(')').next().expect("limit"));
+    assert!(chi2 > limit && p < 1e-6, "{what}: {err}");
+    assert_limit(limit, dof, what);
+    (chi2, dof)
+}
+
+/// Good fits over many trials: each limit is the 1e-6 quantile of its dof, and the pooled
+/// χ² over the pooled dof is 1 within five of its standard deviations (√(2/Σdof)), so a
+/// σ stated 20 % off (a ratio of 0.69 or 1.44) or a misweighted residual cannot pass.
+fn assert_pooled_chi2(fits: &[(Real, Real, Real)], what: &str) {
+    let (mut chi2, mut dof) = (0.0, 0.0);
+    for &(c, d, l) in fits {
+        assert_limit(l, d, what);
+        chi2 += c;
+        dof += d;
+    }
+    let sd = (2.0 / dof).sqrt();
+    assert!(
+        (chi2 / dof - 1.0).abs() < 5.0 * sd,
+        "{what}: pooled χ²/dof {} over {} trials (1 ± {:.4} expected)",
+        chi2 / dof,
+        fits.len(),
+        5.0 * sd
+    );
+}
+
+/// The whole χ², its dof and limit of a fit that has them.
+fn statistic(fit: &twinmill::calibration::goodness::FitCheck) -> (Real, Real, Real) {
+    (fit.chi2.expect("χ²"), fit.dof, fit.limit.expect("a limit"))
 }
 
 #[test]
@@ -213,7 +281,28 @@ fn the_designed_plans_traces_given_to_the_fixed_plan_are_refused() {
     let files = write_traces(&sb, &s, &s.actual, &d.plan, 23, "designed-", false);
     let (code, out, err) = calibrate_readings(&sb, &centre_path(), "ball-plate", &files, &[]);
     assert_refused(code, &out, &err, "another plan's files");
-    assert!(err.contains("χ²") && err.contains("designed-"), "{err}");
+    assert!(err.contains("designed-"), "{err}");
+    // The statistic's degrees of freedom: the fixed plan's samples less its unknowns (at
+    // most the 42 joint and length deviations and three coordinates of each circle's ball).
+    let (_, dof) = assert_refused_statistic(&err, "another plan's files");
+    let samples: usize = fixed.circles.iter().map(|c| c.angles().len()).sum();
+    let unknowns = 42 + 3 * fixed.circles.len();
+    assert!(
+        dof <= samples as Real && dof >= (samples - unknowns) as Real,
+        "{dof} dof for {samples} samples: {err}"
+    );
+    // With the headers `ballbar --out` writes, the first file is refused before any fit,
+    // naming its header's line and the plan's circle it should have been.
+    let files = write_traces(&sb, &s, &s.actual, &d.plan, 23, "headed-", true);
+    let (code, out, err) = calibrate_readings(&sb, &centre_path(), "ball-plate", &files, &[]);
+    assert_refused(code, &out, &err, "another plan's headed files");
+    assert!(
+        err.contains(
+            "headed-1.csv:2: the trace's header records another circle than circle 1 of the plan"
+        ),
+        "{err}"
+    );
+    assert!(!err.contains("χ²"), "refused before fitting: {err}");
 }
 
 #[test]
@@ -237,8 +326,21 @@ fn jig_free_files_in_reverse_order_are_refused() {
         &["--corrected", "c.toml"],
     );
     assert_refused(code, &out, &err, "reversed");
-    assert!(err.contains("χ²") && err.contains(".csv"), "{err}");
+    assert!(err.contains(".csv"), "{err}");
+    assert_refused_statistic(&err, "reversed");
     assert!(!sb.dir.join("c.toml").exists());
+    // Headed traces reversed: the first file holds the last circle, named from its header.
+    let mut files = write_traces(&sb, &s, &s.actual, &plan, 24, "h", true);
+    files.reverse();
+    let last = plan.circles.len();
+    let (code, out, err) = calibrate_readings(&sb, &centre_path(), "jig-free", &files, &[]);
+    assert_refused(code, &out, &err, "reversed headed");
+    assert!(
+        err.contains(&format!(
+            "h{last}.csv:2: the trace's header records another circle than circle 1 of the plan"
+        )),
+        "{err}"
+    );
 }
 
 /// Good readings at the stated σ: 1,000 seeded trials of the ball plate (36 samples a
@@ -249,32 +351,25 @@ fn good_dbb_readings_are_accepted_in_999_of_1000_trials() {
     let s = centre();
     let plan = default_plan(Procedure::BallPlate, &s.workspace.expect("ws"), 36);
     let mut refused = Vec::new();
+    let mut stats = Vec::new();
     for t in 0..1000u64 {
         let actual = trial_machine(&s, 5000 + t).expect("machine");
-        let readings: Vec<CircleReadings> = plan
-            .circles
-            .iter()
-            .enumerate()
-            .map(|(j, c)| {
-                let inst = DbbInstrument {
-                    mount_mm: Vector3::zeros(),
-                    noise_sigma_mm: CALIBRATION_NOISE_MM,
-                    seed: 9000 + t,
-                    stream: (j as u64) << 32,
-                };
-                let m = measure(&s.nominal, &actual, c, &inst).expect("measures");
-                CircleReadings {
-                    lengths_mm: m.lengths_mm(c.radius_mm),
-                    commands: m.commands,
-                }
-            })
-            .collect();
+        let readings = dbb_readings(
+            &s.nominal,
+            &actual,
+            &plan.circles,
+            CALIBRATION_NOISE_MM,
+            9000 + t,
+            |_| Vector3::zeros(),
+        );
         let cal =
             calibrate(&s.nominal, &actual, &plan, &readings, CALIBRATION_NOISE_MM).expect("solves");
         if !cal.fit.fits {
             refused.push((t, cal.fit.describe()));
         }
+        stats.push(statistic(&cal.fit));
     }
+    assert_pooled_chi2(&stats, "ball plate");
     assert!(
         refused.len() <= 1,
         "{} of 1000 refused: {refused:?}",
@@ -426,73 +521,26 @@ fn a_rotary_test_the_model_cannot_explain_is_refused_naming_the_samples() {
     assert!(id.fit.fits, "{}", id.fit.describe());
 }
 
-fn letter(c: char) -> AxisLetter {
-    AxisLetter::from_char(c).expect("letter")
-}
-
-/// The rotary location test of `rotary_location.rs`: C at A = 0 and −30°, A swept, A and C
-/// together.
-fn sweeps() -> Vec<Sweep> {
-    let at = |a: Real| AxisValues::default().with(letter('A'), a);
-    let sweep = |axis: char, from: Real, to: Real, positions: usize, a: Real| Sweep {
-        axis: letter(axis),
-        from,
-        to,
-        positions,
-        at: at(a),
-        also: vec![],
-    };
-    let mut both = sweep('A', -45.0, 45.0, 13, 0.0);
-    both.also = vec![(letter('C'), 0.0, 180.0)];
-    vec![
-        sweep('C', 0.0, 330.0, 12, 0.0),
-        sweep('C', 0.0, 330.0, 12, -30.0),
-        sweep('A', -60.0, 60.0, 9, 0.0),
-        both,
-    ]
-}
-
 /// 1,000 seeded trials of each instrument on machines with random location errors
 /// (offsets ±50 µm, tilts ±100 µrad, the sensor's point mounted ±0.2 mm off): all but one
 /// at most fit.
 #[test]
 fn good_rotary_tests_are_accepted_in_999_of_1000_trials() {
-    let nominal = trunnion().chain.nominal();
-    let names = nominal.rotary_location_terms();
-    let terms: Vec<IsoTerm> = names
-        .iter()
-        .map(|n| IsoTerm::parse(&nominal, n).expect("term"))
-        .collect();
+    let nominal = trunnion_chain();
+    let (names, terms) = terms(&nominal);
     let tool = Tool::try_new(ToolKind::Flat, 6.0, 20.0).expect("tool");
     let sensor = BallSensor::seed003(8.0);
     let rng = CounterRng::new(26);
     for probe in [false, true] {
         let mut refused = Vec::new();
+        let mut stats = Vec::new();
         for t in 0..1000u64 {
-            let mut actual = nominal.clone();
-            for (k, n) in names.iter().enumerate() {
-                let u = 2.0 * rng.uniform(t, k as u64) - 1.0;
-                let v = match n.as_str() {
-                    "EZ0C" | "EC0C" => 0.0,
-                    _ if matches!(n.as_bytes()[1], b'A' | b'B' | b'C') => 100e-6 * u,
-                    _ => 0.05 * u,
-                };
-                if v != 0.0 {
-                    actual.apply_iso_term(n, v).expect("term");
-                }
-            }
-            let setup = Setup {
-                point_w: Point3::new(60.0, 0.0, 30.0),
-                mounting_mm: Vector3::from_fn(|k, _| {
-                    0.2 * (2.0 * rng.uniform(t, 100 + k as u64) - 1.0)
-                }),
-                tool_offset: Vector3::zeros(),
-                seed: 77_000 + t,
-            };
+            let actual = inject(&nominal, &names, &draw(&rng, t, &names));
+            let setup = setup(77_000 + t, mounting(&rng, t));
             let samples = if probe {
-                probe_test(&actual, 0.5e-3, &setup, &sweeps())
+                probe_test(&actual, 0.5e-3, &setup, &rotary_sweeps())
             } else {
-                sensor_test(&actual, &nominal, &sensor, 1.0, &setup, &sweeps())
+                sensor_test(&actual, &nominal, &sensor, 1.0, &setup, &rotary_sweeps())
             }
             .expect("measured");
             let feats = ball_features(&samples, Vector3::zeros(), 0);
@@ -508,7 +556,9 @@ fn good_rotary_tests_are_accepted_in_999_of_1000_trials() {
             if !r.fit.fits {
                 refused.push((t, r.fit.describe()));
             }
+            stats.push(statistic(&r.fit));
         }
+        assert_pooled_chi2(&stats, if probe { "probe" } else { "ball sensor" });
         assert!(
             refused.len() <= 1,
             "probe {probe}: {} of 1000 refused: {refused:?}",
@@ -543,6 +593,7 @@ fn good_faces_are_accepted_in_999_of_1000_trials() {
     let (sigma_off, sigma_slope) = (0.5e-3, [2e-5, 1e-4]);
     let rng = CounterRng::new(27);
     let mut refused = Vec::new();
+    let mut stats = Vec::new();
     for t in 0..1000u64 {
         let mut truth = model.clone();
         for (k, id) in ids.iter().enumerate() {
@@ -600,7 +651,9 @@ fn good_faces_are_accepted_in_999_of_1000_trials() {
         if !r.fit.fits {
             refused.push((t, r.fit.describe()));
         }
+        stats.push(statistic(&r.fit));
     }
+    assert_pooled_chi2(&stats, "faces");
     assert!(
         refused.len() <= 1,
         "{} of 1000 refused: {refused:?}",
@@ -635,14 +688,35 @@ fn good_face_points_pass_the_rms_check_in_999_of_1000_trials() {
             })
             .collect()
     };
-    let check = |pts: &[Point3]| {
+    let checked = |pts: &[Point3]| {
         let fit = fit_plane_robust(pts, &robust).expect("a plane");
-        face_rms_check("face", fit.rms_mm, fit.n_used, 1.0, &noise, REFUSE_P)
+        let c = face_rms_check("face", fit.rms_mm, fit.n_used, 1.0, &noise, REFUSE_P);
+        (c, fit.n_used)
     };
+    let check = |pts: &[Point3]| checked(pts).0;
     let refused = (0..1000u64)
         .filter(|&t| check(&grid(t, ray, sigma)).out_of_line)
         .count();
     assert!(refused <= 1, "{refused} of 1000 good faces refused");
+    // Along the normal at the scanner's σ: n·RMS²/σ² is χ² with n − 3 dof (a little less
+    // after the 3σ clipping), held at its quantile 5e-7 (half of 1e-6: the views' share
+    // takes the other half) — normal quantile z = 4.8916 — so the RMS limit is
+    // σ·√(q/n) in closed form, and 1,000 such faces are refused once at most.
+    let mut refused = 0;
+    for t in 0..1000u64 {
+        let (c, n) = checked(&grid(t, Vector3::z(), sigma));
+        refused += usize::from(c.out_of_line);
+        if t < 10 {
+            let q = wilson_hilferty((n - 3) as Real, 4.891_638_475_698_85);
+            let want = sigma * (q / n as Real).sqrt();
+            assert!(
+                (c.limit / want - 1.0).abs() < 1e-3,
+                "RMS limit {} for {n} points at σ {sigma}: {want} in closed form",
+                c.limit
+            );
+        }
+    }
+    assert!(refused <= 1, "{refused} of 1000 faces at σ refused");
     // Across the face, 10 % above the scanner's σ: refused.
     let too_rough = (0..20u64)
         .filter(|&t| check(&grid(t, Vector3::z(), 1.1 * sigma)).out_of_line)
@@ -733,8 +807,16 @@ fn identify_refuses_a_cloud_cut_by_another_line() {
     let cloud = "s/mdx50-nine-scan/cloud.ply";
     let (code, out, err) = sb.run(&["identify", "nine.toml", "--cloud", cloud, "--out", "o"]);
     assert_refused(code, &out, &err, "identify");
+    assert_refused_statistic(&err, "identify");
+    // The moved face is named first, in the group of the faces any one of which, left out,
+    // leaves a fit (the flanks that alone tie the moved offset to the others).
+    let named = err
+        .split("out of line, worst first: ")
+        .nth(1)
+        .unwrap_or_else(|| panic!("names the faces: {err}"));
+    let first = named.split(" (each alone explains").next().expect("first");
     assert!(
-        err.contains("χ²") && err.contains("a180-xm-d8-flank"),
+        first.contains("a180-xm-d8-flank") && !first.contains("-d8-face"),
         "{err}"
     );
     assert!(!sb.dir.join("o").exists(), "a refusal writes nothing");
@@ -771,23 +853,9 @@ fn without_a_jig_the_gauge_is_rounding_on_the_jacobians_own_svd() {
         &s.workspace.expect("ws"),
         DEFAULT_POINTS,
     );
-    let quiet = DbbInstrument {
-        mount_mm: Vector3::zeros(),
-        noise_sigma_mm: 0.0,
-        seed: 1,
-        stream: 0,
-    };
-    let readings: Vec<CircleReadings> = plan
-        .circles
-        .iter()
-        .map(|c: &DbbCircle| {
-            let m = measure(&s.nominal, &s.actual, c, &quiet).expect("measures");
-            CircleReadings {
-                lengths_mm: m.lengths_mm(c.radius_mm),
-                commands: m.commands,
-            }
-        })
-        .collect();
+    let readings = dbb_readings(&s.nominal, &s.actual, &plan.circles, 0.0, 1, |_| {
+        Vector3::zeros()
+    });
     let cal = calibrate(
         &s.nominal,
         &s.actual,
@@ -810,4 +878,31 @@ fn without_a_jig_the_gauge_is_rounding_on_the_jacobians_own_svd() {
     assert_eq!(m.last_kept, Some(sv[id.rank - 1]));
     assert_eq!(m.first_dropped, Some(sv[id.rank]));
     assert!(m.ratio > 1e8, "margin ×{:e}", m.ratio);
+}
+
+/// The C-table step experiment with its two cuts made as chamfers on opposite corners —
+/// the first at C = 45°, the second at C = 225° from the same side — where the scene
+/// expects one face cut twice: the second cut leaves nothing within the band of the face
+/// it is declared to make, and `run` refuses naming that face and its NC line before any
+/// step is measured, writing nothing.
+#[test]
+fn run_refuses_two_chamfers_declared_as_one_face() {
+    let sb = Sandbox::new("misfit-chamfers");
+    let scene = std::fs::read_to_string(Path::new(ROOT).join("scenes/c-table-step.toml"))
+        .expect("scene")
+        .replace("program = \"c-table-step.ngc\"", "program = \"two.ngc\"");
+    sb.write("c.toml", scene.as_bytes());
+    let program = std::fs::read_to_string(Path::new(ROOT).join("scenes/c-table-step.ngc"))
+        .expect("program")
+        .replace("G0 Z60 C0\n", "G0 Z60 C45\n")
+        .replace("G0 X-30 Y25\nG0 C180", "G0 X-30 Y-25\nG0 C225");
+    assert!(program.contains("C225"), "the program was changed");
+    sb.write("two.ngc", program.as_bytes());
+    let (code, out, err) = sb.run(&["run", "c.toml", "--out", "o"]);
+    assert_refused(code, &out, &err, "run");
+    assert!(
+        err.contains("face 'C180': line 14 cut nothing inside the face region"),
+        "{err}"
+    );
+    assert!(!sb.dir.join("o").exists(), "a refusal writes nothing");
 }
