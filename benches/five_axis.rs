@@ -11,88 +11,39 @@
 //!   C table, C turning 0.25° a move and A oscillating ±5° twice a turn, the axis values
 //!   solved on the nominal chain so that the ball's centre follows a helix 0.2 mm inside the
 //!   cylinder, descending 0.2 mm a turn: half a turn (720 moves).
+//! - **Hexapod side cut**: the hexapod machining centre (`benches/data/hexapod-side-cut.toml`,
+//!   the machine of `scenes/hexapod-machining-centre.toml` with a flat Ø6 × 25 mm end mill)
+//!   circling a Ø40 mm cylinder, its tool tilted ±8° three times a turn: a quarter turn
+//!   (180 moves), every move's poses sampled and cut in bounded sub-steps.
+//!
+//! The programs are those of `benches/support/five_axis.rs`, which also writes them as the NC
+//! of the scenes in `benches/data/` for timing the whole `twinmill simulate` command.
 
 use criterion::{BatchSize, Criterion, Throughput, criterion_main};
 use std::path::Path;
 use twinmill::cutting::shape::Cylinder;
 use twinmill::cutting::stock::TriDexel;
-use twinmill::cutting::sweep::sweep_program;
+use twinmill::cutting::sweep::{Kinematics, sweep_program};
 use twinmill::cutting::tool::{Tool, ToolKind};
+use twinmill::hexapod_scene::HexapodScene;
 use twinmill::math::{Aabb, Point3, Real, Vector3};
-use twinmill::nc::{AxisLetter, AxisValues, Move, MoveKind};
 use twinmill::progress::NoProgress;
-use twinmill::scene::Scene;
+use twinmill::scene::{MemoryBudget, Scene};
+use twinmill::{cutting, machine, math, nc};
+
+#[path = "support/five_axis.rs"]
+mod five_axis;
+#[path = "support/rotary.rs"]
+mod rotary;
+use five_axis::{FEED, blade, hexapod_side, side_cut};
+use rotary::polyline;
 
 const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/trunnion-ac.toml");
+const HEXAPOD: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/benches/data/hexapod-side-cut.toml"
+);
 const PITCH: Real = 0.1;
-
-/// Feed moves through `points`, the k-th move on line k (from 1).
-fn polyline(points: &[AxisValues]) -> Vec<Move> {
-    points
-        .windows(2)
-        .enumerate()
-        .map(|(k, w)| Move {
-            kind: MoveKind::Linear,
-            start: w[0],
-            end: w[1],
-            feed_mm_per_min: Some(2000.0),
-            line: k + 1,
-        })
-        .collect()
-}
-
-/// The first `n` of the side cut's 7,200 moves: move k ends at Z = 40 − 36·k/7200,
-/// A = 8·sin(1.5·k°), C = 0.5·k°.
-fn side_cut(n: usize) -> Vec<Move> {
-    let at = |k: usize| {
-        let k = k as Real;
-        AxisValues::default()
-            .with(AxisLetter::X, 0.0)
-            .with(AxisLetter::Y, -19.0)
-            .with(AxisLetter::Z, 40.0 - 36.0 * k / 7200.0)
-            .with(AxisLetter::A, 8.0 * (1.5 * k).to_radians().sin())
-            .with(AxisLetter::C, 0.5 * k)
-    };
-    polyline(&(0..=n).map(at).collect::<Vec<_>>())
-}
-
-/// The blade-like path's `n` moves: the machine axes that put the ball's centre (the tool
-/// point plus `r` along the tool axis) at radius 22.8 mm from C's line at the angle of C,
-/// 35 mm high descending 0.2 mm a turn, with A = 5·sin(2·C); solved on the nominal chain
-/// `r_W = RotZ(c)·RotX(a about z = −50)·(x, y, z)` and checked against the scene's chain.
-fn blade(scene: &Scene, r: Real, n: usize) -> Vec<Move> {
-    let nominal = scene.chain.nominal();
-    let pivot = Vector3::new(0.0, 0.0, -50.0);
-    let at = |k: usize| {
-        let c_deg = 0.25 * k as Real;
-        let a_deg = 5.0 * (2.0 * c_deg).to_radians().sin();
-        let rz = nalgebra::Rotation3::from_axis_angle(&Vector3::z_axis(), c_deg.to_radians());
-        let rx = nalgebra::Rotation3::from_axis_angle(&Vector3::x_axis(), a_deg.to_radians());
-        let phi = c_deg.to_radians() - std::f64::consts::FRAC_PI_2;
-        let centre = Vector3::new(
-            22.8 * phi.cos(),
-            22.8 * phi.sin(),
-            35.0 - 0.2 * c_deg / 360.0,
-        );
-        let axis_w = rz * rx * Vector3::z();
-        let tip_w = centre - axis_w * r;
-        let v = pivot + rx.inverse() * (rz.inverse() * tip_w - pivot);
-        let q = AxisValues::default()
-            .with(AxisLetter::X, v.x)
-            .with(AxisLetter::Y, v.y)
-            .with(AxisLetter::Z, v.z)
-            .with(AxisLetter::A, a_deg)
-            .with(AxisLetter::C, c_deg);
-        let pose = nominal.w_from_t(&q);
-        let got = pose * Point3::new(0.0, 0.0, r);
-        assert!(
-            (got.coords - centre).norm() < 1e-9,
-            "the blade path's ball centre lands where it was solved for"
-        );
-        q
-    };
-    polyline(&(0..=n).map(at).collect::<Vec<_>>())
-}
 
 /// A Ø40 mm cylinder, 40 mm high, on the C table (z from 0), as a tri-dexel at `pitch`.
 fn cylinder(pitch: Real) -> TriDexel {
@@ -111,7 +62,7 @@ fn benches(c: &mut Criterion) {
     let mut g = c.benchmark_group("five_axis");
     g.sample_size(10);
 
-    let moves = side_cut(720);
+    let moves = polyline(&side_cut(720), FEED);
     g.throughput(Throughput::Elements(moves.len() as u64));
     let ball = Tool::try_new(ToolKind::Ball, 6.0, 25.0).expect("valid");
     for (name, tool) in [("flat", scene.tool.clone()), ("ball", ball.clone())] {
@@ -138,7 +89,7 @@ fn benches(c: &mut Criterion) {
         );
     }
 
-    let moves = blade(&scene, ball.radius(), 720);
+    let moves = polyline(&blade(&scene.chain.nominal(), ball.radius(), 720), FEED);
     g.throughput(Throughput::Elements(moves.len() as u64));
     g.bench_function(
         format!("blade-like finishing, ball, {PITCH} mm, 720 moves (moves)"),
@@ -152,6 +103,35 @@ fn benches(c: &mut Criterion) {
                         &ball,
                         &moves,
                         &scene.sweep,
+                        &NoProgress,
+                    )
+                    .expect("sweeps")
+                },
+                BatchSize::LargeInput,
+            )
+        },
+    );
+
+    let hexapod = HexapodScene::load_cut(Path::new(HEXAPOD), &MemoryBudget::installed())
+        .expect("hexapod scene");
+    let twin = hexapod.hexapod.clone().expect("a hexapod scene");
+    let moves = polyline(&hexapod_side(180), FEED);
+    g.throughput(Throughput::Elements(moves.len() as u64));
+    g.bench_function(
+        format!(
+            "hexapod side cut, flat, {} mm, 180 moves (moves)",
+            hexapod.pitch_mm
+        ),
+        |b| {
+            b.iter_batched(
+                || twinmill::pipeline::make_stock(&hexapod).expect("stock"),
+                |mut stock| {
+                    sweep_program(
+                        &mut stock,
+                        Kinematics::Poses(&twin),
+                        &hexapod.tool,
+                        &moves,
+                        &hexapod.sweep,
                         &NoProgress,
                     )
                     .expect("sweeps")

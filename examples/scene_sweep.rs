@@ -1,5 +1,6 @@
 //! A scene's program swept into its stock once, for profiling and for measuring peak memory:
-//! `cargo run --release --example scene_sweep -- SCENE [MOVES] [PITCH]`.
+//! `cargo run --release --example scene_sweep -- SCENE [MOVES] [PITCH]` (a chain scene, or a
+//! hexapod scene that cuts).
 //!
 //! `MOVES` keeps the program's first moves only (all by default), `PITCH` replaces the
 //! scene's `pitch_mm`. Prints the sweep's wall time, moves per second, the crossings'
@@ -10,8 +11,9 @@
 use std::path::Path;
 use std::time::Instant;
 use twinmill::cutting::sweep::sweep_program;
+use twinmill::hexapod_scene::HexapodScene;
 use twinmill::progress::NoProgress;
-use twinmill::scene::Scene;
+use twinmill::scene::{MemoryBudget, Scene, SceneError};
 
 #[path = "support/crossing_digest.rs"]
 mod crossing_digest;
@@ -23,7 +25,13 @@ fn main() {
         println!("usage: scene_sweep SCENE [MOVES] [PITCH]");
         return;
     };
-    let mut scene = Scene::load(Path::new(path)).expect("scene loads");
+    let mut scene = match Scene::load(Path::new(path)) {
+        Err(SceneError::Hexapod { .. }) => {
+            HexapodScene::load_cut(Path::new(path), &MemoryBudget::installed())
+        }
+        other => other,
+    }
+    .expect("scene loads");
     if let Some(p) = args.get(3).and_then(|s| s.parse().ok()) {
         scene.pitch_mm = p;
     }
