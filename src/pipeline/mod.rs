@@ -4,7 +4,8 @@
 //! [`simulate()`], [`run()`] (and [`scanner_study`]), [`fit_cloud`], [`correct()`],
 //! [`identify_scene`], [`design_scene`], [`rotary_test()`]; [`pages`] makes what their
 //! `report.html` and `part.png` need (the reference part, the display mesh, the 3-D view),
-//! [`instrument_pages`] the pages of the instrument commands;
+//! [`instrument_pages`] the pages of the instrument commands, [`measurements`] the
+//! identification from several instruments' files;
 //! this file holds what they share: the stock, the sweep of the program through the deviated
 //! machine, and the errors.
 //!
@@ -22,6 +23,7 @@ mod rotary;
 pub mod hexapod;
 pub mod dbb;
 pub mod instrument_pages;
+pub mod measurements;
 
 pub use correct::{CorrectOutcome, correct, identified_model};
 pub use design::{DesignOutcome, MAX_DESIGN_ROUNDS, design_scene};

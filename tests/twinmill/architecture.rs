@@ -59,6 +59,8 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "correct",
             "hexapod_calibrate",
             "hexapod_design",
+            "engine",
+            "instruments",
         ],
     ),
     (
@@ -99,6 +101,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "hexapod",
             "dbb",
             "instrument_pages",
+            "measurements",
         ],
     ),
     ("output", &[]),
