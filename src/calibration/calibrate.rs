@@ -1128,8 +1128,6 @@ pub fn identifiability(
     model: &Model,
     x: &DVector<Real>,
 ) -> Result<Identifiability, CalibrateError> {
-    let names = model.param_names();
-    let np = model.params();
     let j = model.jacobian(x).ok_or_else(|| {
         CalibrateError::Degenerate(
             model
@@ -1138,7 +1136,26 @@ pub fn identifiability(
                 .map_or(String::new(), |f| f.name().to_string()),
         )
     })?;
-    let scale = model.param_scales();
+    Ok(identifiability_of(
+        &j,
+        &model.param_names(),
+        &model.param_scales(),
+        &model.nuisance_names(),
+    ))
+}
+
+/// What a whitened Jacobian `j` determines: its first `names.len()` columns are the
+/// parameters (physical units, realistic magnitudes `scale`), the rest nuisance unknowns
+/// (`nuisance_names`), projected out before the parameters' SVD (see the module
+/// documentation). Every identification's report of what is and is not determined.
+pub fn identifiability_of(
+    j: &DMatrix<Real>,
+    names: &[String],
+    scale: &[Real],
+    nuisance_names: &[String],
+) -> Identifiability {
+    let names = names.to_vec();
+    let np = names.len();
     let mut jp = j.columns(0, np).into_owned();
     for (k, s) in scale.iter().enumerate() {
         jp.column_mut(k).scale_mut(*s);
@@ -1186,7 +1203,7 @@ pub fn identifiability(
     } else {
         DMatrix::zeros(0, np)
     };
-    let determined_combinations = named_combinations(&reduced, &scale, &names);
+    let determined_combinations = named_combinations(&reduced, scale, &names);
     // Undetermined: the complement of the determined subspace.
     let complement = {
         let mut eye = DMatrix::<Real>::identity(np, np);
@@ -1200,7 +1217,7 @@ pub fn identifiability(
             .collect();
         DMatrix::from_fn(keep.len(), np, |r, c| vt[(keep[r], c)])
     };
-    let undetermined_combinations = named_combinations(&complement, &scale, &names);
+    let undetermined_combinations = named_combinations(&complement, scale, &names);
     let borderline = order
         .iter()
         .filter(|&&i| {
@@ -1209,7 +1226,7 @@ pub fn identifiability(
         })
         .filter_map(|&i| {
             let row = DMatrix::from_fn(1, np, |_, c| vt[(i, c)]);
-            named_combinations(&row, &scale, &names)
+            named_combinations(&row, scale, &names)
                 .pop()
                 .map(|c| (c, svd.singular_values[i]))
         })
@@ -1218,7 +1235,7 @@ pub fn identifiability(
     // reproduces best (least squares), if it does so well.
     let mut registration_absorbs = Vec::new();
     if jr.ncols() > 0 {
-        let reg_names = model.nuisance_names();
+        let reg_names = nuisance_names;
         let pinv = jp.clone().pseudo_inverse(RANK_EPS).ok();
         for (k, reg_name) in reg_names.iter().enumerate().take(jr.ncols()) {
             let col = jr.column(k).into_owned();
@@ -1231,7 +1248,7 @@ pub fn identifiability(
                     if resid < 0.1 {
                         let c: Vec<Real> = coef
                             .iter()
-                            .zip(&scale)
+                            .zip(scale)
                             .map(|(a, s)| {
                                 if a.abs() < COMBINATION_CUTOFF * coef.amax() {
                                     0.0
@@ -1260,7 +1277,7 @@ pub fn identifiability(
     } else {
         cond(&full_sv)
     };
-    Ok(Identifiability {
+    Identifiability {
         parameters: names.clone(),
         margin: RankMargin::new(&full_sv, rank, threshold),
         singular_values: full_sv,
@@ -1282,7 +1299,7 @@ pub fn identifiability(
             .collect(),
         determined_basis: basis,
         leakage,
-    })
+    }
 }
 
 /// One identified quantity: a parameter or a determined combination.
@@ -1470,50 +1487,12 @@ pub fn identify_with(
         .or_else(|| info.pseudo_inverse(RANK_EPS).ok())
         .ok_or_else(|| CalibrateError::NotConverged("singular normal equations".into()))?;
     let cov_x = &dirs * cov_z * dirs.transpose();
-    let estimate = |name: String, c: Vec<Real>| {
-        let cv = DVector::from_iterator(np, c.iter().copied());
-        let xp = x.rows(0, np);
-        let value = cv.dot(&xp);
-        let cp = cov_x.view((0, 0), (np, np));
-        let var = (cv.transpose() * cp * &cv)[0];
-        Estimate {
-            name,
-            value,
-            sigma: var.max(0.0).sqrt(),
-            coefficients: c,
-        }
-    };
-    // A parameter identified on its own is valued as the determined combination nearest to
-    // it (its projection on the determined subspace), whose other coefficients are below
-    // LEAKAGE in scaled units: so its value does not depend on the undetermined directions.
-    let basis = &ident.determined_basis;
-    let parameters = ident
-        .identified
-        .iter()
-        .map(|name| {
-            let k = ident.parameters.iter().position(|n| n == name).unwrap_or(0);
-            let a = basis * basis.row(k).transpose();
-            let c = (0..np)
-                .map(|j| {
-                    // A coupling below the numerical rank's resolution is the projection's
-                    // rounding, not a coupling: exactly 0 (a parameter nothing couples to is
-                    // valued, and compared with the truth, on its own).
-                    let r = a[j] / a[k];
-                    if j != k && r.abs() < RANK_EPS {
-                        0.0
-                    } else {
-                        scale[k] * r / scale[j]
-                    }
-                })
-                .collect();
-            estimate(name.clone(), c)
-        })
-        .collect();
-    let combinations = ident
-        .determined_combinations
-        .iter()
-        .map(|c| estimate(c.name.clone(), c.coefficients.clone()))
-        .collect();
+    let (parameters, combinations) = estimates_of(
+        &ident,
+        &x.as_slice()[..np],
+        &cov_x.view((0, 0), (np, np)).into_owned(),
+        &scale,
+    );
     let mut registration = [0.0; 6];
     for (c, r) in registration.iter_mut().enumerate().take(model.reg_cols()) {
         *r = x[np + c];
@@ -1554,6 +1533,62 @@ pub fn identify_with(
         residuals,
         fit,
     })
+}
+
+/// The values with σ of what an identification determines, at the solution `x` (the
+/// parameters, physical units) with the parameters' covariance `cov` and realistic
+/// magnitudes `scale`: each parameter identified on its own, valued as the determined
+/// combination nearest to it (its projection on the determined subspace, whose other
+/// coefficients are below [`LEAKAGE`] in scaled units, so its value does not depend on the
+/// undetermined directions), then each determined combination.
+pub fn estimates_of(
+    ident: &Identifiability,
+    x: &[Real],
+    cov: &DMatrix<Real>,
+    scale: &[Real],
+) -> (Vec<Estimate>, Vec<Estimate>) {
+    let np = x.len();
+    let xp = DVector::from_column_slice(x);
+    let estimate = |name: String, c: Vec<Real>| {
+        let cv = DVector::from_iterator(np, c.iter().copied());
+        let value = cv.dot(&xp);
+        let var = (cv.transpose() * cov * &cv)[0];
+        Estimate {
+            name,
+            value,
+            sigma: var.max(0.0).sqrt(),
+            coefficients: c,
+        }
+    };
+    let basis = &ident.determined_basis;
+    let parameters = ident
+        .identified
+        .iter()
+        .map(|name| {
+            let k = ident.parameters.iter().position(|n| n == name).unwrap_or(0);
+            let a = basis * basis.row(k).transpose();
+            let c = (0..np)
+                .map(|j| {
+                    // A coupling below the numerical rank's resolution is the projection's
+                    // rounding, not a coupling: exactly 0 (a parameter nothing couples to is
+                    // valued, and compared with the truth, on its own).
+                    let r = a[j] / a[k];
+                    if j != k && r.abs() < RANK_EPS {
+                        0.0
+                    } else {
+                        scale[k] * r / scale[j]
+                    }
+                })
+                .collect();
+            estimate(name.clone(), c)
+        })
+        .collect();
+    let combinations = ident
+        .determined_combinations
+        .iter()
+        .map(|c| estimate(c.name.clone(), c.coefficients.clone()))
+        .collect();
+    (parameters, combinations)
 }
 
 /// What the features' residual χ² is of, in words.

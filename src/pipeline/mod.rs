@@ -6,7 +6,8 @@
 //! `report.html` and `part.png` need (the reference part, the display mesh, the 3-D view),
 //! [`instrument_pages`] the pages of the instrument commands; [`evaluate`] the standards'
 //! evaluations of measurement files, [`measure`] the virtual instruments on a scene's machine
-//! (serial or hexapod) as plain requests and outcomes;
+//! (serial or hexapod) as plain requests and outcomes, [`measurements`] the identification
+//! from several instruments' files;
 //! this file holds what they share: the stock, the sweep of the program through the deviated
 //! machine, and the errors.
 //!
@@ -26,6 +27,7 @@ pub mod dbb;
 pub mod instrument_pages;
 pub mod evaluate;
 pub mod measure;
+pub mod measurements;
 
 pub use correct::{CorrectOutcome, correct, identified_model};
 pub use design::{DesignOutcome, MAX_DESIGN_ROUNDS, design_scene};

@@ -59,6 +59,8 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "correct",
             "hexapod_calibrate",
             "hexapod_design",
+            "engine",
+            "instruments",
         ],
     ),
     (
@@ -101,6 +103,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "instrument_pages",
             "evaluate",
             "measure",
+            "measurements",
         ],
     ),
     ("output", &[]),
