@@ -14,6 +14,8 @@ use std::process::ExitCode;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Keep an identification the stated noise cannot explain
+    ///
     /// Keep an identification (run, identify, design, correct --model identified, measure)
     /// whose residuals the stated noise cannot explain, instead of refusing it; its report
     /// then says so on its first line.
