@@ -313,6 +313,83 @@ impl DexelGrid {
         }
     }
 
+    /// The ray window `(iu, iv)` around `p`'s projection: the rays within `w` indices of the
+    /// nearest one, clamped to the grid.
+    fn window(
+        &self,
+        p: &Point3,
+        w: usize,
+    ) -> (
+        std::ops::RangeInclusive<usize>,
+        std::ops::RangeInclusive<usize>,
+    ) {
+        let near = |x: Real, x0: Real, dx: Real, n: usize| {
+            let i = ((x - x0) / dx).round().clamp(0.0, (n - 1) as Real) as usize;
+            i.saturating_sub(w)..=(i + w).min(n - 1)
+        };
+        (
+            near(p[self.u], self.u0, self.du, self.nu),
+            near(p[self.v], self.v0, self.dv, self.nv),
+        )
+    }
+
+    /// The surface of this grid's material along its rays at `p`, seen from the side the
+    /// outward normal `n` faces: the coordinate along the rays of the material ends facing
+    /// like `n` (upper ends where `n` points along +ray, lower ends where −ray, their stored
+    /// normals within 60° of `n`) nearest `p` within `reach`, on the four rays around `p`,
+    /// interpolated bilinearly at `p` (rays without such an end left out, the weights of
+    /// the others renormalised); `None` where no ray has one.
+    fn surface_along(&self, p: &Point3, n: &Vector3, reach: Real) -> Option<Real> {
+        let a = self.axis;
+        let up = n[a] > 0.0;
+        let fu = ((p[self.u] - self.u0) / self.du).clamp(0.0, (self.nu - 1) as Real);
+        let fv = ((p[self.v] - self.v0) / self.dv).clamp(0.0, (self.nv - 1) as Real);
+        let (iu, iv) = (fu.floor() as usize, fv.floor() as usize);
+        let (wu, wv) = (fu - iu as Real, fv - iv as Real);
+        let (mut sum, mut weight) = (0.0, 0.0);
+        for (ju, wu) in [(iu, 1.0 - wu), (iu + 1, wu)] {
+            for (jv, wv) in [(iv, 1.0 - wv), (iv + 1, wv)] {
+                let w = wu * wv;
+                if ju >= self.nu || jv >= self.nv || w == 0.0 {
+                    continue;
+                }
+                let best = self
+                    .ray(ju, jv)
+                    .iter()
+                    .map(|s| if up { &s.hi } else { &s.lo })
+                    .filter(|c| c.normal().dot(n) >= 0.5 && (c.t - p[a]).abs() <= reach)
+                    .map(|c| c.t)
+                    .min_by(|x, y| (x - p[a]).abs().total_cmp(&(y - p[a]).abs()));
+                if let Some(t) = best {
+                    sum += w * t;
+                    weight += w;
+                }
+            }
+        }
+        (weight > 0.0).then(|| sum / weight)
+    }
+
+    /// The crossing nearest `p` among the rays within `w` indices of it, as
+    /// (squared distance, crossing point, outward normal).
+    fn nearest_crossing(&self, p: &Point3, w: usize) -> Option<(Real, Point3, Vector3)> {
+        let (us, vs) = self.window(p, w);
+        let mut best: Option<(Real, Point3, Vector3)> = None;
+        for iv in vs {
+            for iu in us.clone() {
+                let o = self.ray_origin(iu, iv);
+                for c in self.ray(iu, iv).iter().flat_map(|s| [&s.lo, &s.hi]) {
+                    let mut q = o;
+                    q[self.axis] = c.t;
+                    let d = (q - p).norm_squared();
+                    if best.is_none_or(|b| d < b.0) {
+                        best = Some((d, q, c.normal()));
+                    }
+                }
+            }
+        }
+        best
+    }
+
     /// Material volume measured by this grid (mm³): summed lengths times the ray cell area.
     pub fn volume(&self) -> Real {
         let fill = self.fill[0].hi.t - self.fill[0].lo.t;
@@ -828,6 +905,53 @@ impl TriDexel {
             .iter()
             .map(|g| g.du.max(g.dv))
             .fold(0.0, Real::max)
+    }
+
+    /// How far the surface point `p` of another part, with outward unit normal `n`, lies
+    /// outside this part's surface (mm; − inside), measured along the rays of the grid most
+    /// nearly along `n`: with `t` this part's surface along those rays at `p` (its crossings
+    /// facing like `n` within `reach` of `p` on the four rays around it, interpolated
+    /// bilinearly), `(p_a − t)·n_a` — the distance between two parallel planes offset by
+    /// `p_a − t` along the axis. `None` where no ray near `p` has such a crossing (a face
+    /// this part does not have).
+    pub fn offset_along(&self, p: &Point3, n: &Vector3, reach: Real) -> Option<Real> {
+        let a = (0..3)
+            .max_by(|&i, &j| n[i].abs().total_cmp(&n[j].abs()))
+            .unwrap_or(2);
+        let t = self.grids[a].surface_along(p, n, reach / n[a].abs().max(0.5))?;
+        Some((p[a] - t) * n[a])
+    }
+
+    /// The signed distance of `p` from this part's surface as its nearest crossing sees it
+    /// (mm; + outside, − inside): the distance of `p` from the tangent plane at the
+    /// crossing nearest it (by its outward normal) among the three grids' rays within
+    /// `reach` of `p` (searched from the two nearest rays outwards); `None` without a
+    /// crossing there.
+    pub fn nearest_offset(&self, p: &Point3, reach: Real) -> Option<Real> {
+        // Rays within `w` indices hold every crossing within `w` pitches of `p`.
+        let pitch = self
+            .grids
+            .iter()
+            .map(|g| g.du.min(g.dv))
+            .fold(Real::INFINITY, Real::min);
+        let wide = (reach / pitch).ceil().max(2.0) as usize;
+        let mut w = 2usize;
+        loop {
+            let best = self
+                .grids
+                .iter()
+                .filter_map(|g| g.nearest_crossing(p, w))
+                .min_by(|x, y| x.0.total_cmp(&y.0));
+            let covered = |d2: Real| d2.sqrt() <= w as Real * pitch;
+            match best {
+                Some((d2, q, n)) if covered(d2) || w >= wide => {
+                    return (d2.sqrt() <= reach).then(|| (p - q).dot(&n));
+                }
+                Some((d2, _, _)) => w = ((d2.sqrt() / pitch).ceil() as usize).clamp(w + 1, wide),
+                None if w >= wide => return None,
+                None => w = (2 * w).min(wide),
+            }
+        }
     }
 
     /// The three grids (rays along x, y, z).

@@ -17,9 +17,8 @@ use crate::machine::hexapod::{HexapodTwin, TableAxes};
 use crate::math::{Point3, Real, UnitVector3, Vector3};
 use crate::nc::Move;
 use crate::progress::NoProgress;
-use crate::report::deviation_map::DeviationError;
-use crate::report::display::ReferenceSurface;
 use crate::report::display::{self, DisplayMesh};
+use crate::report::display::{ReferenceModel, ReferenceSurface};
 use crate::report::html::{Marker, View3d, render_page};
 use crate::report::pages::{self as page, FittedPlane, PartGeometry, View3dParts};
 use crate::report::part_view::{PartViewOptions, render_part_view};
@@ -29,15 +28,16 @@ use crate::scene::Scene;
 
 /// What a part's deviation is measured from.
 pub struct Reference {
-    /// The reference surface; `None` when the deviation is not computed.
-    pub model: Option<ReferenceSurface>,
+    /// The reference (the design's surface, or the nominal part's tri-dexel); `None` when
+    /// the deviation is not computed.
+    pub model: Option<ReferenceModel>,
     /// Its name ("the nominal part", the design file) or why there is none.
     pub what: String,
 }
 
 /// The part the deviations are measured from: the scene's design model if it has one; else,
 /// when the scene's machine has deviations or error motions, the same program cut on the
-/// nominal machine (swept, meshed and closed like the part itself); else none, since the
+/// nominal machine (swept like the part itself, kept as its tri-dexel); else none, since the
 /// part is then the nominal part (deviation 0 everywhere).
 pub fn reference_part(scene: &Scene, moves: &[Move]) -> Result<Reference, PipelineError> {
     if let Some((path, design)) = &scene.design {
@@ -47,7 +47,8 @@ pub fn reference_part(scene: &Scene, moves: &[Move]) -> Result<Reference, Pipeli
         );
         let m = design.mesh();
         return Ok(Reference {
-            model: ReferenceSurface::new(m.vertices().to_vec(), m.triangles().to_vec()),
+            model: ReferenceSurface::new(m.vertices().to_vec(), m.triangles().to_vec())
+                .map(ReferenceModel::Surface),
             what: format!("the design {name}"),
         });
     }
@@ -90,14 +91,9 @@ pub fn reference_part(scene: &Scene, moves: &[Move]) -> Result<Reference, Pipeli
         location: format!("{spath}: nominal part"),
         source,
     })?;
-    let (mesh, _) = super::part_mesh(&stock, &spath)?;
-    let model =
-        ReferenceSurface::new(mesh.vertices, mesh.triangles).ok_or(PipelineError::Deviation {
-            path: spath,
-            source: DeviationError::BadDesign,
-        })?;
+    // Not meshed: the deviations are read from its crossings (display::part_deviations).
     Ok(Reference {
-        model: Some(model),
+        model: Some(ReferenceModel::Part(stock)),
         what: "the nominal part".into(),
     })
 }
@@ -128,10 +124,7 @@ pub fn display_part(
         reference,
     );
     let reference = reference?;
-    let deviations = reference
-        .model
-        .as_ref()
-        .map(|m| display::deviations(&shown, m));
+    let deviations = reference.model.as_ref().map(|m| m.deviations(&shown));
     let view = match scene.view {
         Some(eye) => (eye, display::view_up(&eye)),
         None => display::view_direction(&shown, &scene.stock_box),
