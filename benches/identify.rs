@@ -71,7 +71,7 @@ fn benches(c: &mut Criterion) {
     let features = extract_features(&scene, &program, &cloud.points, None).expect("features");
     let solve = || {
         correction_loop(
-            &scene.model,
+            scene.model(),
             &ids,
             &scene.tool,
             black_box(&features),
@@ -98,7 +98,7 @@ fn benches(c: &mut Criterion) {
                 let f = extract_features(&scene, &program, black_box(&cloud.points), None)
                     .expect("features");
                 correction_loop(
-                    &scene.model,
+                    scene.model(),
                     &ids,
                     &scene.tool,
                     &f,
@@ -125,11 +125,11 @@ fn rotary_location(c: &mut Criterion) {
     use twinmill::pipeline::default_setup;
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/trunnion-ac.toml");
     let scene = Scene::load(&path).expect("scene");
-    let sweeps = default_sweeps(&scene.chain);
+    let sweeps = default_sweeps(scene.chain());
     let setup = default_setup(1);
     let samples = sensor_test(
-        &scene.chain,
-        &scene.model,
+        scene.chain(),
+        scene.model(),
         &BallSensor::seed003(8.0),
         1.0,
         &setup,
@@ -141,11 +141,11 @@ fn rotary_location(c: &mut Criterion) {
         .model
         .rotary_location_terms()
         .iter()
-        .map(|n| IsoTerm::parse(&scene.model, n).expect("term"))
+        .map(|n| IsoTerm::parse(scene.model(), n).expect("term"))
         .collect();
     let tool = Tool::try_new(ToolKind::Ball, 1.0, 1.0).expect("tool");
     let model = Model {
-        chain: &scene.model,
+        chain: scene.model(),
         ids: &[],
         iso_terms: &terms,
         tool: &tool,

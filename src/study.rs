@@ -238,7 +238,7 @@ pub fn plan(study_file: &Path, shards: usize) -> Result<Manifest, StudyError> {
     }
     for (name, d) in &f.vary.deviations {
         scene
-            .chain
+            .chain()
             .deviation_id(name)
             .map_err(|e| input(study_file, format!("[vary.deviations] {e}")))?;
         d.check()
@@ -381,13 +381,16 @@ pub fn run_shard(m: &Manifest, shard: usize) -> Result<Vec<Row>, StudyError> {
     for t in m.trials.iter().filter(|t| t.shard == shard) {
         let clock = Instant::now();
         let mut s = base.clone();
+        let machine = s
+            .serial_mut()
+            .ok_or_else(|| input(&m.scene, "a study varies a serial machine's deviations"))?;
         for (name, v) in &t.deviations {
-            let id = s
+            let id = machine
                 .chain
                 .deviation_id(name)
                 .map_err(|e| input(&m.scene, e.to_string()))?;
-            s.chain.set_deviation(id, *v);
-            s.injected.insert(name.clone(), *v);
+            machine.chain.set_deviation(id, *v);
+            machine.injected.insert(name.clone(), *v);
         }
         if let Some(sc) = s.scanner.as_mut() {
             sc.seed = t.scanner_seed;
@@ -397,9 +400,9 @@ pub fn run_shard(m: &Manifest, shard: usize) -> Result<Vec<Row>, StudyError> {
             .parameters
             .iter()
             .map(|p| {
-                s.chain
+                s.chain()
                     .deviation_id(p)
-                    .map_or(Real::NAN, |id| s.chain.deviation(id))
+                    .map_or(Real::NAN, |id| s.chain().deviation(id))
             })
             .collect();
         let row = match identify_scene(&s, &program, None, Some(0), &NoProgress) {

@@ -7,11 +7,10 @@ use super::Sandbox;
 use nalgebra::{Matrix3, Matrix6, Vector6};
 use std::path::{Path, PathBuf};
 use twinmill::cutting::stock::TriDexel;
-use twinmill::hexapod_scene::HexapodScene;
 use twinmill::math::{Real, Vector3};
 use twinmill::pipeline::machine_part;
 use twinmill::progress::NoProgress;
-use twinmill::scene::{MemoryBudget, Scene};
+use twinmill::scene::{HexapodScene, Machine, MemoryBudget, Scene, SceneError};
 
 fn scene_path(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -145,7 +144,7 @@ fn z_top(stock: &TriDexel, x: Real, y: Real) -> (Real, Real, Real) {
 }
 
 fn load(path: &Path) -> (Scene, HexapodScene) {
-    let scene = HexapodScene::load_cut(path, &MemoryBudget::installed()).expect("scene loads");
+    let scene = Scene::load_hexapod_cut(path, &MemoryBudget::installed()).expect("scene loads");
     let hex = HexapodScene::load(path).expect("hexapod loads");
     (scene, hex)
 }
@@ -247,8 +246,10 @@ fn a_table_axis_turns_the_part_and_its_tilt_shows_between_the_faces() {
         b"G21 G90\nG0 X-70 Y20 Z200 A0 B0 C0\nG0 Z159\nG1 X70 F600\nG0 Z200\nG0 C180\nG0 X-70\nG0 Z159\nG1 X70\nG0 Z200\nM2\n",
     );
     let (scene, hex) = load(&path);
-    let twin = scene.hexapod.as_ref().expect("a hexapod");
-    assert!(twin.table.is_some());
+    let Machine::Hexapod(h) = &scene.machine else {
+        panic!("a hexapod")
+    };
+    assert!(h.twin.table.is_some());
     let program = scene.load_program().expect("program parses");
     let part = machine_part(&scene, &program, &NoProgress).expect("cuts");
     let nominal = Oracle::new(&hex.nominal.parameters(), hex.nominal.tool_offset());
@@ -375,5 +376,55 @@ fn cli_simulates_a_hexapod_and_refuses_bad_input_with_the_nc_line() {
         assert!(err.contains("bad.toml:"), "{err}");
         assert!(err.contains(what), "{err}");
         assert!(!sb.dir.join("out").exists());
+    }
+}
+
+/// One reader for both machine kinds: a hexapod scene that cuts takes `[report] view` as a
+/// serial scene does (the hexapod verbs read the same file), its machine is the hexapod
+/// variant with the twin the hexapod verbs get, and a bad view is refused at its line and
+/// column with the serial scene's message.
+#[test]
+fn a_hexapod_scene_takes_report_view_like_a_serial_one() {
+    let path = scene_path("hexapod-step.toml");
+    let text = std::fs::read_to_string(&path).expect("scene");
+    let budget = MemoryBudget::installed();
+    let with_view = format!("{text}\n[report]\nview = \"+x\"\n");
+    let scene = Scene::parse_hexapod_cut(&with_view, &path, &budget).expect("[report] accepted");
+    // "+x": the eye on the +x axis, looking back at the part.
+    let v = scene.view.expect("a view").into_inner();
+    assert!((v - Vector3::x()).norm() < 1e-15, "{v:?}");
+    assert!(
+        Scene::parse_hexapod_cut(&text, &path, &budget)
+            .expect("loads")
+            .view
+            .is_none(),
+        "no [report]: the default view"
+    );
+    // The hexapod verbs read the same file, and see the same machine.
+    let hex = HexapodScene::parse(&with_view, &path).expect("the hexapod verbs accept [report]");
+    let Machine::Hexapod(h) = &scene.machine else {
+        panic!("a hexapod scene's machine is the hexapod variant")
+    };
+    assert_eq!(h.twin, hex.twin());
+    assert_eq!(h.injected, hex.injected);
+    // A bad view: three lines below the end of the text (a blank line, `[report]`, the
+    // key), at column 8 (after `view = `), with the message a serial scene gives.
+    let bad_view = "\n[report]\nview = \"+w\"\n";
+    let (line, column, message) =
+        match Scene::parse_hexapod_cut(&format!("{text}{bad_view}"), &path, &budget) {
+            Err(SceneError::Invalid {
+                line,
+                column,
+                message,
+                ..
+            }) => (line, column, message),
+            other => panic!("expected a located error, got {:?}", other.map(|s| s.name)),
+        };
+    assert_eq!((line, column), (text.lines().count() + 3, 8), "{message}");
+    let serial_path = scene_path("xyz-pocket.toml");
+    let serial = std::fs::read_to_string(&serial_path).expect("serial scene");
+    match Scene::parse_with(&format!("{serial}{bad_view}"), &serial_path, &budget) {
+        Err(SceneError::Invalid { message: m, .. }) => assert_eq!(m, message),
+        other => panic!("expected a located error, got {:?}", other.map(|s| s.name)),
     }
 }

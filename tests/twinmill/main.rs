@@ -54,9 +54,10 @@ fn scanner(scene: &mut Scene) -> &mut ScannerConfig {
 }
 
 fn set_deviation(scene: &mut Scene, name: &str, value: Real) {
-    let id = scene.chain.deviation_id(name).expect("known name");
-    scene.chain.set_deviation(id, value);
-    scene.injected.insert(name.to_string(), value);
+    let m = scene.serial_mut().expect("a serial machine");
+    let id = m.chain.deviation_id(name).expect("known name");
+    m.chain.set_deviation(id, value);
+    m.injected.insert(name.to_string(), value);
 }
 
 // ---------------------------------------------------------------------------------------
@@ -115,7 +116,7 @@ fn exact_face(dev: &[[Real; 6]; 4], y: Real, a_deg: Real, r: Real) -> (Vector3, 
 }
 
 fn mdx50_deviations(scene: &Scene) -> [[Real; 6]; 4] {
-    std::array::from_fn(|j| scene.chain.deviations()[j].values)
+    std::array::from_fn(|j| scene.chain().deviations()[j].values)
 }
 
 // ---------------------------------------------------------------------------------------
