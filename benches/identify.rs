@@ -36,17 +36,18 @@ const NINE: [(&str, f64); 9] = [
 fn benches(c: &mut Criterion) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/mdx50-step.toml");
     let mut base = Scene::load(&path).expect("scene");
+    let m = base.serial_mut().expect("a serial machine");
     for (n, v) in NINE {
-        let id = base.chain.deviation_id(n).expect("known");
-        base.chain.set_deviation(id, v);
-        base.injected.insert(n.into(), v);
+        let id = m.chain.deviation_id(n).expect("known");
+        m.chain.set_deviation(id, v);
+        m.injected.insert(n.into(), v);
     }
     let ids: Vec<_> = NINE
         .iter()
-        .map(|(n, _)| base.model.deviation_id(n).expect("known"))
+        .map(|(n, _)| base.model().deviation_id(n).expect("known"))
         .collect();
     let opts = DesignOptions::standard();
-    let d = design(&base.model, &base.tool, &ids, &opts).expect("design");
+    let d = design(base.model(), &base.tool, &ids, &opts).expect("design");
     let params: Vec<String> = NINE.iter().map(|(n, _)| n.to_string()).collect();
     let toml = design_scene_toml(&base, &d, &opts, &params, "bench-design", "bench.ngc")
         .expect("the scene has a [scanner]");
@@ -77,6 +78,7 @@ fn benches(c: &mut Criterion) {
             black_box(&features),
             scene.registration,
             scene.loop_tolerance_mm,
+            None,
         )
         .expect("identifies")
     };
@@ -104,6 +106,7 @@ fn benches(c: &mut Criterion) {
                     &f,
                     scene.registration,
                     scene.loop_tolerance_mm,
+                    None,
                 )
                 .expect("identifies")
             })
@@ -138,7 +141,7 @@ fn rotary_location(c: &mut Criterion) {
     .expect("trace");
     let features = ball_features(&samples, setup.tool_offset, 0);
     let terms: Vec<IsoTerm> = scene
-        .model
+        .model()
         .rotary_location_terms()
         .iter()
         .map(|n| IsoTerm::parse(scene.model(), n).expect("term"))

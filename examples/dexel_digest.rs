@@ -33,34 +33,14 @@ use twinmill::progress::NoProgress;
 use twinmill::scene::Scene;
 use twinmill::{cutting, math, nc};
 
+#[path = "support/crossing_digest.rs"]
+mod crossing_digest;
+use crossing_digest::digest;
 #[path = "../benches/support/p1.rs"]
 mod p1;
 #[path = "../benches/support/rotary.rs"]
 mod rotary;
 use rotary::{bar, helix, hexagon};
-
-/// FNV-1a over the crossings of the three grids, in the grids' fixed order.
-fn digest(stock: &TriDexel) -> (u64, usize) {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut eat = |bytes: &[u8]| {
-        for &b in bytes {
-            h ^= b as u64;
-            h = h.wrapping_mul(0x0100_0000_01b3);
-        }
-    };
-    let mut count = 0;
-    for g in stock.grids() {
-        g.for_each_crossing(|p, c| {
-            count += 1;
-            for k in 0..3 {
-                eat(&p[k].to_bits().to_le_bytes());
-                eat(&c.normal[k].to_bits().to_le_bytes());
-            }
-            eat(&c.line.to_le_bytes());
-        });
-    }
-    (h, count)
-}
 
 fn xyz_chain() -> Chain {
     Chain::cartesian([AxisLetter::Y, AxisLetter::X, AxisLetter::Z]).expect("valid chain")
@@ -135,7 +115,7 @@ fn main() {
         ));
     }
     for pitch in [0.2, 0.1] {
-        let chain = mdx.chain.clone();
+        let chain = mdx.chain().clone();
         cases.push((
             format!("P4 helical groove {pitch} mm"),
             Box::new(move || {
@@ -148,7 +128,7 @@ fn main() {
         ));
     }
     {
-        let (chain, tool) = (mdx.chain.clone(), mdx.tool.clone());
+        let (chain, tool) = (mdx.chain().clone(), mdx.tool.clone());
         cases.push((
             "P3 hexagon 0.1 mm".into(),
             Box::new(move || {
@@ -162,7 +142,7 @@ fn main() {
     }
     {
         // tests/twinmill/rotary.rs: rotary_move_surface_agrees_with_brute_force.
-        let chain = mdx.chain.nominal();
+        let chain = mdx.chain().nominal();
         cases.push((
             "rotary move A 0-90 0.4 mm".into(),
             Box::new(move || {

@@ -14,6 +14,11 @@ use std::process::ExitCode;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Keep an identification (run, identify, design, correct --model identified, measure)
+    /// whose residuals the stated noise cannot explain, instead of refusing it; its report
+    /// then says so on its first line.
+    #[arg(long, global = true)]
+    accept_misfit: bool,
 }
 
 // The verbs, in pipeline order (each one's help: its file in `cli/`).
@@ -43,7 +48,9 @@ enum Command {
 }
 
 fn main() -> ExitCode {
-    match Cli::parse().command {
+    let parsed = Cli::parse();
+    cli::set_accept_misfit(parsed.accept_misfit);
+    match parsed.command {
         Command::Nc(a) => cli::nc::exec(a),
         Command::Simulate(a) => cli::simulate::exec(a),
         Command::Scan(a) => cli::scan::exec(a),

@@ -8,7 +8,10 @@
 //!
 //! Files are written into a fresh staging folder beside the target, which replaces the
 //! target only when every file is complete; a failure leaves the previous outputs (if any)
-//! untouched and removes the staging folder.
+//! untouched and removes the staging folder. An output path that is a symbolic link is
+//! written through to its target; one that is a FIFO, a device or a socket (or a file where
+//! a folder goes, and the reverse) is refused, never replaced; messages name the path the
+//! user gave, never a temporary one.
 //!
 //! **Invariant:** with [`crate::scene`], the only module that touches files.
 
@@ -35,35 +38,143 @@ fn io<T>(path: &Path, r: std::io::Result<T>) -> Result<T, OutputError> {
     })
 }
 
-/// Writes named files into `dir`, created or replaced as a whole: all of them or none.
-pub fn write_files(dir: &Path, files: &[(&str, Vec<u8>)]) -> Result<PathBuf, OutputError> {
-    let parent = dir
-        .parent()
+/// An error about `path` (the path the user gave) in our words.
+fn refuse(path: &Path, message: String) -> OutputError {
+    OutputError {
+        path: path.to_path_buf(),
+        source: std::io::Error::other(message),
+    }
+}
+
+/// The folder `path` is in (`.` for a bare name).
+fn parent_of(path: &Path) -> &Path {
+    path.parent()
         .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    io(parent, std::fs::create_dir_all(parent))?;
-    let name = dir
+        .unwrap_or(Path::new("."))
+}
+
+/// What a path that exists but is no regular file or folder is, in words.
+fn kind_of(meta: &std::fs::Metadata) -> &'static str {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        let t = meta.file_type();
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if meta.is_dir() {
+        "a folder"
+    } else if meta.is_file() {
+        "a file"
+    } else {
+        "not a regular file"
+    }
+}
+
+/// Where an output the user named as `path` is written: `path` itself, or the end of the
+/// chain of symbolic links it starts (written through, as a shell's `>` does). `folder`
+/// says whether a folder is wanted there (else a regular file). Anything else already there
+/// — a FIFO, a device, a socket, a file where a folder is wanted and the reverse — is
+/// refused: renaming over it would replace it. Errors name `path`.
+fn target_of(path: &Path, folder: bool) -> Result<PathBuf, OutputError> {
+    let mut at = path.to_path_buf();
+    for _ in 0..40 {
+        let meta = match std::fs::symlink_metadata(&at) {
+            Ok(m) => m,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(at),
+            Err(e) => return io(path, Err(e)),
+        };
+        if meta.file_type().is_symlink() {
+            let link = io(path, std::fs::read_link(&at))?;
+            at = parent_of(&at).join(link);
+            continue;
+        }
+        let fits = if folder {
+            meta.is_dir()
+        } else {
+            meta.is_file()
+        };
+        if fits {
+            return Ok(at);
+        }
+        let leads = if at == path {
+            String::new()
+        } else {
+            format!("it leads to {}, ", at.display())
+        };
+        let want = if folder { "a folder" } else { "a regular file" };
+        return Err(refuse(
+            path,
+            format!(
+                "{leads}{} that twinmill will not replace, expected {want} or nothing there",
+                kind_of(&meta)
+            ),
+        ));
+    }
+    Err(refuse(
+        path,
+        "more than 40 symbolic links in a row, expected a file at the end".into(),
+    ))
+}
+
+/// Checks that the folder a file is written into exists (errors name `path`, the file).
+fn folder_exists(path: &Path, target: &Path) -> Result<(), OutputError> {
+    let dir = parent_of(target);
+    match std::fs::metadata(dir) {
+        Ok(m) if m.is_dir() => Ok(()),
+        Ok(_) => Err(refuse(
+            path,
+            format!(
+                "{} is not a folder, expected an existing folder",
+                dir.display()
+            ),
+        )),
+        Err(_) => Err(refuse(
+            path,
+            format!(
+                "the folder {} does not exist, expected an existing folder",
+                dir.display()
+            ),
+        )),
+    }
+}
+
+/// Writes named files into `dir`, created or replaced as a whole: all of them or none. A
+/// symbolic link `dir` is written through (its target folder is replaced); a file or
+/// anything else that is not a folder at `dir` is refused. Errors name `dir` or its files.
+pub fn write_files(dir: &Path, files: &[(&str, Vec<u8>)]) -> Result<PathBuf, OutputError> {
+    let target = target_of(dir, true)?;
+    let parent = parent_of(&target);
+    io(dir, std::fs::create_dir_all(parent))?;
+    let name = target
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "out".into());
     let staging = parent.join(format!(".{name}.partial-{}", std::process::id()));
     let result = (|| {
         if staging.exists() {
-            io(&staging, std::fs::remove_dir_all(&staging))?;
+            io(dir, std::fs::remove_dir_all(&staging))?;
         }
-        io(&staging, std::fs::create_dir(&staging))?;
+        io(dir, std::fs::create_dir(&staging))?;
         for (file, bytes) in files {
             let p = staging.join(file);
             io(
-                &p,
+                &dir.join(file),
                 std::fs::File::create(&p)
                     .and_then(|mut f| f.write_all(bytes).and_then(|_| f.sync_all())),
             )?;
         }
-        if dir.exists() {
-            io(dir, std::fs::remove_dir_all(dir))?;
+        if target.exists() {
+            io(dir, std::fs::remove_dir_all(&target))?;
         }
-        io(dir, std::fs::rename(&staging, dir))?;
+        io(dir, std::fs::rename(&staging, &target))?;
         Ok(dir.to_path_buf())
     })();
     if result.is_err() {
@@ -73,23 +184,23 @@ pub fn write_files(dir: &Path, files: &[(&str, Vec<u8>)]) -> Result<PathBuf, Out
 }
 
 /// Writes one file whole or not at all: into a temporary sibling first, then renamed over
-/// `path`.
+/// `path` — over the end of its chain of symbolic links when `path` is one. A folder that
+/// does not exist, and a FIFO, device, socket or folder at `path`, are refused. Errors name
+/// `path`, never the temporary file.
 pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
-    let parent = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let name = path
+    let target = target_of(path, false)?;
+    folder_exists(path, &target)?;
+    let name = target
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_else(|| "out".into());
-    let staging = parent.join(format!(".{name}.partial-{}", std::process::id()));
+    let staging = parent_of(&target).join(format!(".{name}.partial-{}", std::process::id()));
     let result = io(
-        &staging,
+        path,
         std::fs::File::create(&staging)
             .and_then(|mut f| f.write_all(bytes).and_then(|_| f.sync_all())),
     )
-    .and_then(|()| io(path, std::fs::rename(&staging, path)));
+    .and_then(|()| io(path, std::fs::rename(&staging, &target)));
     if result.is_err() {
         let _ = std::fs::remove_file(&staging);
     }
@@ -204,27 +315,36 @@ pub fn write_streamed(
     files: Vec<StreamedFile<'_>>,
 ) -> Result<Vec<PathBuf>, OutputError> {
     io(dir, std::fs::create_dir_all(dir))?;
-    let mut staged: Vec<(PathBuf, PathBuf)> = Vec::new();
+    // (staging file, where it goes, the path named in messages and returned)
+    let mut staged: Vec<(PathBuf, PathBuf, PathBuf)> = Vec::new();
     let result = (|| {
         for (name, write) in files {
-            let target = dir.join(&name);
-            let staging = dir.join(format!(".{name}.partial-{}", std::process::id()));
-            staged.push((staging.clone(), target));
-            let file = io(&staging, std::fs::File::create(&staging))?;
+            let path = dir.join(&name);
+            let target = target_of(&path, false)?;
+            folder_exists(&path, &target)?;
+            let staging = parent_of(&target).join(format!(
+                ".{}.partial-{}",
+                target
+                    .file_name()
+                    .map_or(name.clone(), |n| n.to_string_lossy().into_owned()),
+                std::process::id()
+            ));
+            staged.push((staging.clone(), target, path.clone()));
+            let file = io(&path, std::fs::File::create(&staging))?;
             let mut buf = std::io::BufWriter::new(file);
-            io(&staging, write(&mut buf))?;
-            let file = io(&staging, buf.into_inner().map_err(|e| e.into_error()))?;
-            io(&staging, file.sync_all())?;
+            io(&path, write(&mut buf))?;
+            let file = io(&path, buf.into_inner().map_err(|e| e.into_error()))?;
+            io(&path, file.sync_all())?;
         }
         let mut done = Vec::new();
-        for (staging, target) in &staged {
-            io(target, std::fs::rename(staging, target))?;
-            done.push(target.clone());
+        for (staging, target, path) in &staged {
+            io(path, std::fs::rename(staging, target))?;
+            done.push(path.clone());
         }
         Ok(done)
     })();
     if result.is_err() {
-        for (staging, _) in &staged {
+        for (staging, _, _) in &staged {
             let _ = std::fs::remove_file(staging);
         }
     }

@@ -33,6 +33,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
+use toml::Spanned;
 
 /// Errors of a study.
 #[derive(Debug, thiserror::Error)]
@@ -45,6 +46,10 @@ pub enum StudyError {
         /// What is wrong.
         message: String,
     },
+    /// The study file or its scene is not valid, at a line and column (`file:line:col:
+    /// key: what is wrong, what is expected`).
+    #[error("{0}")]
+    Located(#[from] crate::scene::SceneError),
     /// A shard file is missing, foreign or incomplete.
     #[error("{path}: {message}")]
     Shard {
@@ -76,17 +81,19 @@ pub enum Distribution {
 
 impl Distribution {
     fn check(&self) -> Result<(), String> {
-        let ok = match self {
-            Distribution::Fixed(v) => v.is_finite(),
-            Distribution::Uniform([a, b]) => a.is_finite() && b.is_finite() && a <= b,
-            Distribution::Normal([m, s]) => m.is_finite() && s.is_finite() && *s >= 0.0,
-        };
-        if ok {
-            Ok(())
-        } else {
-            Err(format!(
-                "{self:?} is not a valid distribution (finite values, lo ≤ hi, σ ≥ 0)"
-            ))
+        match *self {
+            Distribution::Fixed(v) if !v.is_finite() => {
+                Err(format!("got fixed = {v}, expected a finite value"))
+            }
+            Distribution::Uniform([a, b]) if !(a.is_finite() && b.is_finite() && a <= b) => Err(
+                format!("got uniform = [{a}, {b}], expected finite [lo, hi] with lo ≤ hi"),
+            ),
+            Distribution::Normal([m, sd]) if !(m.is_finite() && sd.is_finite() && sd >= 0.0) => {
+                Err(format!(
+                    "got normal = [{m}, {sd}], expected a finite mean and σ ≥ 0"
+                ))
+            }
+            _ => Ok(()),
         }
     }
 
@@ -105,9 +112,9 @@ impl Distribution {
 #[serde(deny_unknown_fields)]
 struct StudyFile {
     /// The base scene, relative to the study file.
-    scene: String,
+    scene: Spanned<String>,
     /// Number of trials.
-    trials: usize,
+    trials: Spanned<usize>,
     /// Seed of every draw.
     #[serde(default = "default_seed")]
     seed: u64,
@@ -129,10 +136,10 @@ fn default_seed() -> u64 {
 struct VaryFile {
     /// Deviations by name (the base scene's `[deviations]` are replaced by the draws).
     #[serde(default)]
-    deviations: BTreeMap<String, Distribution>,
+    deviations: BTreeMap<Spanned<String>, Spanned<Distribution>>,
     /// The scanner's Gaussian range noise σ (mm).
     #[serde(default)]
-    scanner_noise_sigma_mm: Option<Distribution>,
+    scanner_noise_sigma_mm: Option<Spanned<Distribution>>,
 }
 
 /// One trial's inputs.
@@ -173,6 +180,9 @@ pub struct Manifest {
 
 const FORMAT: &str = "twinmill-study-1";
 
+/// Most trials a study may plan: ten million (a manifest of some 2 GB).
+pub const MAX_TRIALS: usize = 10_000_000;
+
 /// FNV-1a over bytes: a fingerprint to notice changed inputs, not a security measure.
 fn fnv(bytes: &[u8], mut h: u64) -> u64 {
     for b in bytes {
@@ -184,6 +194,58 @@ fn fnv(bytes: &[u8], mut h: u64) -> u64 {
 
 const FNV_START: u64 = 0xcbf2_9ce4_8422_2325;
 
+/// The key of a shard's row fingerprint in its Parquet (Arrow schema) metadata.
+const ROWS_KEY: &str = "twinmill.rows";
+
+/// A fingerprint of rows, every stored value bit for bit (FNV-1a over a canonical byte
+/// string): a shard carries its rows', and reading checks it, so damage that still decodes —
+/// a flipped bit in a value, or in the metadata that leads the reader elsewhere — is noticed.
+fn rows_fingerprint(rows: &[Row]) -> String {
+    let mut h = FNV_START;
+    let mut put = |bytes: &[u8]| h = fnv(bytes, h);
+    let opt_f = |v: Option<Real>| {
+        v.map_or([0xff; 9], |x| {
+            let mut b = [0u8; 9];
+            b[1..].copy_from_slice(&x.to_bits().to_le_bytes());
+            b
+        })
+    };
+    let opt_u = |v: Option<u64>| {
+        v.map_or([0xff; 9], |x| {
+            let mut b = [0u8; 9];
+            b[1..].copy_from_slice(&x.to_le_bytes());
+            b
+        })
+    };
+    for r in rows {
+        put(&r.inputs.trial.to_le_bytes());
+        put(&(r.inputs.shard as u64).to_le_bytes());
+        put(&r.inputs.scanner_seed.to_le_bytes());
+        put(&r.inputs.noise_sigma_mm.to_bits().to_le_bytes());
+        for (_, v) in &r.inputs.deviations {
+            put(&v.to_bits().to_le_bytes());
+        }
+        for (e, t) in r.estimates.iter().zip(&r.injected) {
+            put(&opt_f(e.map(|e| e.0)));
+            put(&opt_f(e.map(|e| e.1)));
+            put(&t.to_bits().to_le_bytes());
+        }
+        put(&opt_f(r.chi2));
+        put(&opt_u(r.dof));
+        put(&opt_u(r.rounds));
+        put(&[r.converged.map_or(2, u8::from)]);
+        match &r.error {
+            Some(e) => {
+                put(&(e.len() as u64).to_le_bytes());
+                put(e.as_bytes());
+            }
+            None => put(&[0xff; 8]),
+        }
+        put(&r.seconds.to_bits().to_le_bytes());
+    }
+    format!("{h:016x}")
+}
+
 fn scene_fingerprint(scene: &Path) -> Result<String, StudyError> {
     let s = Scene::load(scene).map_err(|e| input(scene, e.to_string()))?;
     let text = std::fs::read(scene).map_err(|e| input(scene, e.to_string()))?;
@@ -194,36 +256,40 @@ fn scene_fingerprint(scene: &Path) -> Result<String, StudyError> {
 
 /// Plans the study in `study_file` into `shards` shards (see the module documentation).
 pub fn plan(study_file: &Path, shards: usize) -> Result<Manifest, StudyError> {
-    let text = std::fs::read_to_string(study_file).map_err(|e| input(study_file, e.to_string()))?;
-    let f: StudyFile = toml::from_str(&text).map_err(|e| {
-        let at = e
-            .span()
-            .map(|s| {
-                let line = text[..s.start].matches('\n').count() + 1;
-                let col = s.start - text[..s.start].rfind('\n').map_or(0, |i| i + 1) + 1;
-                format!("{line}:{col}: ")
-            })
-            .unwrap_or_default();
-        input(study_file, format!("{at}{}", e.message()))
-    })?;
-    if f.trials == 0 {
-        return Err(input(study_file, "trials must be at least 1"));
+    let text = crate::scene::read_text(study_file)?;
+    let f: StudyFile =
+        toml::from_str(&text).map_err(|e| crate::scene::toml_error(&text, study_file, &e))?;
+    let at = |span: std::ops::Range<usize>, message: String| {
+        let (line, column) = crate::scene::line_col(&text, span.start);
+        StudyError::Located(crate::scene::SceneError::Invalid {
+            path: study_file.to_path_buf(),
+            line,
+            column,
+            message,
+        })
+    };
+    let trials = *f.trials.get_ref();
+    if !(1..=MAX_TRIALS).contains(&trials) {
+        return Err(at(
+            f.trials.span(),
+            format!("trials: got {trials}, expected 1 to {MAX_TRIALS}"),
+        ));
     }
-    if shards == 0 || shards > f.trials {
+    if shards == 0 || shards > trials {
         return Err(input(
             study_file,
-            format!(
-                "--shards must be between 1 and the number of trials ({}), got {shards}",
-                f.trials
-            ),
+            format!("--shards must be between 1 and the number of trials ({trials}), got {shards}"),
         ));
     }
     let base = study_file.parent().unwrap_or(Path::new("."));
-    let scene_path = base.join(&f.scene);
-    let scene_path = scene_path
-        .canonicalize()
-        .map_err(|e| input(study_file, format!("scene '{}': {e}", scene_path.display())))?;
-    let scene = Scene::load(&scene_path).map_err(|e| input(&scene_path, e.to_string()))?;
+    let scene_path = base.join(f.scene.get_ref());
+    let scene_path = scene_path.canonicalize().map_err(|e| {
+        at(
+            f.scene.span(),
+            format!("scene: {}: cannot read: {e}", scene_path.display()),
+        )
+    })?;
+    let scene = Scene::load(&scene_path)?;
     if scene.parameters.is_empty() {
         return Err(input(
             &scene_path,
@@ -237,28 +303,32 @@ pub fn plan(study_file: &Path, shards: usize) -> Result<Manifest, StudyError> {
         ));
     }
     for (name, d) in &f.vary.deviations {
+        let key = format!("vary.deviations.{}", name.get_ref());
         scene
             .chain()
-            .deviation_id(name)
-            .map_err(|e| input(study_file, format!("[vary.deviations] {e}")))?;
-        d.check()
-            .map_err(|e| input(study_file, format!("[vary.deviations] {name}: {e}")))?;
+            .deviation_id(name.get_ref())
+            .map_err(|e| at(name.span(), format!("{key}: {e}")))?;
+        d.get_ref()
+            .check()
+            .map_err(|e| at(d.span(), format!("{key}: {e}")))?;
     }
     if let Some(d) = &f.vary.scanner_noise_sigma_mm {
-        d.check()
-            .map_err(|e| input(study_file, format!("[vary] scanner_noise_sigma_mm: {e}")))?;
+        d.get_ref()
+            .check()
+            .map_err(|e| at(d.span(), format!("vary.scanner_noise_sigma_mm: {e}")))?;
     }
     let scanner = scene.scanner.as_ref().map(|s| (s.seed, s.noise_sigma_mm));
     let (seed0, noise0) = scanner.unwrap_or((0, 0.0));
     let rng = CounterRng::new(f.seed);
-    let n = f.trials;
+    let n = trials;
     let trials = (0..n)
         .map(|k| {
             let t = k as u64;
             let noise = f
                 .vary
                 .scanner_noise_sigma_mm
-                .map_or(noise0, |d| d.draw(&rng, t, 0).max(0.0));
+                .as_ref()
+                .map_or(noise0, |d| d.get_ref().draw(&rng, t, 0).max(0.0));
             TrialInputs {
                 trial: t,
                 shard: k * shards / n,
@@ -272,7 +342,12 @@ pub fn plan(study_file: &Path, shards: usize) -> Result<Manifest, StudyError> {
                     .deviations
                     .iter()
                     .enumerate()
-                    .map(|(j, (name, d))| (name.clone(), d.draw(&rng, t, 1 + j as u64)))
+                    .map(|(j, (name, d))| {
+                        (
+                            name.get_ref().clone(),
+                            d.get_ref().draw(&rng, t, 1 + j as u64),
+                        )
+                    })
                     .collect(),
             }
         })
@@ -283,7 +358,12 @@ pub fn plan(study_file: &Path, shards: usize) -> Result<Manifest, StudyError> {
         scene: scene_path.clone(),
         inputs_fingerprint: scene_fingerprint(&scene_path)?,
         parameters: scene.parameters.clone(),
-        varied: f.vary.deviations.keys().cloned().collect(),
+        varied: f
+            .vary
+            .deviations
+            .keys()
+            .map(|k| k.get_ref().clone())
+            .collect(),
         shards,
         trials,
     };
@@ -496,7 +576,10 @@ pub fn schema(m: &Manifest) -> Schema {
 
 /// One shard's rows as a Parquet file's bytes.
 pub fn shard_parquet(m: &Manifest, rows: &[Row]) -> Result<Vec<u8>, StudyError> {
-    let schema = Arc::new(schema(m));
+    let schema = schema(m);
+    let mut meta = schema.metadata().clone();
+    meta.insert(ROWS_KEY.into(), rows_fingerprint(rows));
+    let schema = Arc::new(schema.with_metadata(meta));
     let f64s = |f: &dyn Fn(&Row) -> Option<Real>| -> ArrayRef {
         Arc::new(rows.iter().map(f).collect::<Float64Array>())
     };
@@ -547,15 +630,185 @@ pub fn shard_parquet(m: &Manifest, rows: &[Row]) -> Result<Vec<u8>, StudyError> 
     Ok(out)
 }
 
-/// Reads a shard file back into rows, checking that it belongs to `m`.
+/// Parquet's magic number, at both ends of a file.
+const PARQUET_MAGIC: &[u8; 4] = b"PAR1";
+
+/// Checks a Parquet file's frame before any decoding: the magic number at both ends and a
+/// footer whose stated metadata length fits in the file. Returns the metadata's length.
+fn check_frame(bytes: &[u8]) -> Result<usize, String> {
+    let n = bytes.len();
+    if n < 12 || &bytes[..4] != PARQUET_MAGIC || &bytes[n - 4..] != PARQUET_MAGIC {
+        return Err(format!(
+            "not a Parquet file ({n} bytes): expected one starting and ending with PAR1"
+        ));
+    }
+    let mut len = [0u8; 4];
+    len.copy_from_slice(&bytes[n - 8..n - 4]);
+    let meta = u32::from_le_bytes(len) as usize;
+    if meta == 0 || meta > n - 12 {
+        return Err(format!(
+            "damaged footer: it gives the metadata {meta} bytes, expected 1 to {} in a \
+             file of {n} bytes",
+            n - 12
+        ));
+    }
+    Ok(meta)
+}
+
+/// Checks the decoded metadata against the file it came from before the reader trusts it:
+/// row counts not negative and adding up, every column chunk inside the data part of the
+/// file, uncompressed or Snappy (what twinmill writes), with as many columns as the schema.
+fn check_metadata(
+    meta: &parquet::file::metadata::ParquetMetaData,
+    data_end: u64,
+) -> Result<(), String> {
+    use parquet::basic::Compression;
+    let file = meta.file_metadata();
+    let columns = file.schema_descr().num_columns();
+    let mut rows: i64 = 0;
+    for (g, rg) in meta.row_groups().iter().enumerate() {
+        if rg.num_rows() < 0 || rg.num_columns() != columns {
+            return Err(format!(
+                "damaged metadata: row group {g} has {} rows in {} columns, expected \
+                 0 or more rows in {columns}",
+                rg.num_rows(),
+                rg.num_columns()
+            ));
+        }
+        rows = rows.saturating_add(rg.num_rows());
+        for c in rg.columns() {
+            // the chunk's first page (the reader's `byte_range`, which asserts instead)
+            let start = c.dictionary_page_offset().unwrap_or(c.data_page_offset());
+            let len = c.compressed_size();
+            let inside = start >= PARQUET_MAGIC.len() as i64
+                && len >= 0
+                && start
+                    .checked_add(len)
+                    .is_some_and(|end| end as u64 <= data_end)
+                && (c.data_page_offset() >= start && c.data_page_offset() < start + len);
+            if !inside || c.num_values() < 0 {
+                return Err(format!(
+                    "damaged metadata: column {} of row group {g} lies at bytes {start}+{len}, \
+                     expected within 4..{data_end}",
+                    c.column_path()
+                ));
+            }
+            if !matches!(
+                c.compression(),
+                Compression::UNCOMPRESSED | Compression::SNAPPY
+            ) {
+                return Err(format!(
+                    "damaged metadata: column {} is compressed with {}, expected none or Snappy",
+                    c.column_path(),
+                    c.compression()
+                ));
+            }
+        }
+    }
+    if file.num_rows() != rows {
+        return Err(format!(
+            "damaged metadata: the file has {} rows, its row groups {rows}",
+            file.num_rows()
+        ));
+    }
+    Ok(())
+}
+
+thread_local! {
+    /// Set while [`contained`] runs: the panic hook stays silent on this thread.
+    static SILENT: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Runs `f`; a panic inside it becomes `Err` with the panic's message, printed nowhere.
+/// The Parquet and Arrow readers panic on some damaged files (`capacity overflow`, an
+/// `unwrap` on `None`, an unsupported bit width) instead of returning an error.
+fn contained<T>(f: impl FnOnce() -> T) -> Result<T, String> {
+    static HOOK: std::sync::Once = std::sync::Once::new();
+    HOOK.call_once(|| {
+        let previous = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            if !SILENT.with(std::cell::Cell::get) {
+                previous(info);
+            }
+        }));
+    });
+    let was = SILENT.with(|s| s.replace(true));
+    let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(f));
+    SILENT.with(|s| s.set(was));
+    r.map_err(|p| {
+        one_line(
+            &p.downcast_ref::<&str>()
+                .map(|s| (*s).to_string())
+                .or_else(|| p.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "a panic".into()),
+        )
+    })
+}
+
+/// A library's message on one line, at most 160 characters.
+fn one_line(text: &str) -> String {
+    let flat: String = text.split_whitespace().collect::<Vec<_>>().join(" ");
+    if flat.chars().count() > 160 {
+        format!("{}…", flat.chars().take(160).collect::<String>())
+    } else {
+        flat
+    }
+}
+
+/// Reads a shard file back into rows, checking that it belongs to `m`. A damaged file is
+/// one error naming it, whatever the damage: the frame and the metadata are checked before
+/// the rows are decoded, and a panic of the Parquet reader is caught.
 pub fn read_shard(m: &Manifest, path: &Path) -> Result<Vec<Row>, StudyError> {
     let err = |message: String| StudyError::Shard {
         path: path.display().to_string(),
         message,
     };
+    let rerun = |what: String| {
+        err(format!(
+            "{what}; run the shard again (`twinmill study run MANIFEST --shard I`)"
+        ))
+    };
+    let bytes = std::fs::read(path).map_err(|e| err(format!("cannot read: {e}")))?;
+    let meta_len = check_frame(&bytes).map_err(rerun)?;
+    let data_end = (bytes.len() - 8 - meta_len) as u64;
     let file = std::fs::File::open(path).map_err(|e| err(format!("cannot open: {e}")))?;
-    let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)
-        .map_err(|e| err(format!("not a Parquet file: {e}")))?;
+    let builder =
+        contained(|| parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file))
+            .map_err(|p| rerun(format!("damaged Parquet metadata (the reader failed: {p})")))?
+            .map_err(|e| {
+                rerun(format!(
+                    "damaged Parquet metadata ({})",
+                    one_line(&e.to_string())
+                ))
+            })?;
+    check_metadata(builder.metadata(), data_end).map_err(rerun)?;
+    let want = builder.schema().metadata().get(ROWS_KEY).cloned();
+    let rows = match contained(|| decode_shard(m, builder, &err)) {
+        Ok(r) => r?,
+        Err(p) => {
+            return Err(rerun(format!(
+                "damaged Parquet data (the reader failed: {p})"
+            )));
+        }
+    };
+    let got = rows_fingerprint(&rows);
+    match want {
+        Some(w) if w == got => Ok(rows),
+        Some(w) => Err(rerun(format!(
+            "damaged: its rows read back with fingerprint {got}, the shard was written with {w}"
+        ))),
+        None => Err(rerun(format!(
+            "holds no {ROWS_KEY} fingerprint of its rows"
+        ))),
+    }
+}
+
+/// The rows of a shard whose frame and metadata were checked ([`read_shard`]).
+fn decode_shard(
+    m: &Manifest,
+    builder: parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder<std::fs::File>,
+    err: &dyn Fn(String) -> StudyError,
+) -> Result<Vec<Row>, StudyError> {
     let meta = builder.schema().metadata().get("twinmill.study").cloned();
     if meta.as_deref() != Some(m.id.as_str()) {
         return Err(err(format!(
@@ -568,10 +821,20 @@ pub fn read_shard(m: &Manifest, path: &Path) -> Result<Vec<Row>, StudyError> {
     if builder.schema().fields() != want.fields() {
         return Err(err("its columns are not this study's".into()));
     }
-    let reader = builder.build().map_err(|e| err(e.to_string()))?;
+    let reader = builder.build().map_err(|e| {
+        err(format!(
+            "damaged Parquet data ({})",
+            one_line(&e.to_string())
+        ))
+    })?;
     let mut rows = Vec::new();
     for batch in reader {
-        let b = batch.map_err(|e| err(e.to_string()))?;
+        let b = batch.map_err(|e| {
+            err(format!(
+                "damaged Parquet data ({})",
+                one_line(&e.to_string())
+            ))
+        })?;
         let col = |name: &str| b.column_by_name(name).cloned();
         let f = |name: &str| -> Result<Float64Array, StudyError> {
             col(name)

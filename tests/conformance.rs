@@ -26,8 +26,8 @@ const TOL_INCH_PROGRAM: f64 = 3e-3;
 const NOT_MATCHED: &[(&str, &str)] = &[];
 
 /// Programs in the corpus (LinuxCNC's 132 interpreter tests and 50 example programs, and the
-/// project's 83 samples): the test runs every one, so a program that goes missing fails it.
-const PROGRAMS: usize = 265;
+/// project's 98 samples): the test runs every one, so a program that goes missing fails it.
+const PROGRAMS: usize = 280;
 
 fn corpus_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus")

@@ -18,8 +18,8 @@ use crate::cutting::stock::TriDexel;
 use crate::math::{Aabb, Point3, Real, Vector3};
 use crate::nc::{AxisLetter, AxisValues, Move, MoveKind};
 
-/// Feed moves through `points`, the k-th move on line k (from 1).
-pub fn polyline(points: &[AxisValues]) -> Vec<Move> {
+/// Feed moves at `feed` mm/min through `points`, the k-th move on line k (from 1).
+pub fn polyline(points: &[AxisValues], feed: Real) -> Vec<Move> {
     points
         .windows(2)
         .enumerate()
@@ -27,7 +27,7 @@ pub fn polyline(points: &[AxisValues]) -> Vec<Move> {
             kind: MoveKind::Linear,
             start: w[0],
             end: w[1],
-            feed_mm_per_min: Some(600.0),
+            feed_mm_per_min: Some(feed),
             line: k + 1,
         })
         .collect()
@@ -60,7 +60,7 @@ pub fn hexagon(r: Real) -> Vec<Move> {
         points.push(p.with(AxisLetter::X, 30.0));
         points.push(p);
     }
-    polyline(&points)
+    polyline(&points, 600.0)
 }
 
 /// P4: one turn of the helical groove (the bar: `bar(8.0, -10.0, 20.0, …)`, ball Ø4 × 12).
@@ -74,5 +74,5 @@ pub fn helix() -> Vec<Move> {
                 .with(AxisLetter::A, 360.0 * f)
         })
         .collect();
-    polyline(&points)
+    polyline(&points, 600.0)
 }

@@ -59,6 +59,10 @@
 //! touches files; never gives a value to a parameter or combination the features do not
 //! determine.
 
+use crate::calibration::goodness::{
+    FitCheck, MODEL_ACCURACY_MM, PartFit, REFUSE_P, RankMargin, ScanNoise, face_rms_check,
+    least_squares_check,
+};
 use crate::calibration::identify::{
     FaceDesign, FaceOptions, FaceSelection, FaceSpec, extent, face_design, fit_face, fit_selection,
     flank, select_face, used_points,
@@ -407,6 +411,8 @@ pub struct PlaneFeature {
     pub points: usize,
     /// RMS residual of the fit (mm).
     pub rms_mm: Real,
+    /// The fit's variance inflation for correlated residuals (≥ 1; [`FaceDesign`]).
+    pub correlation_inflation: Real,
 }
 
 /// A measured ball centre: the tool-side point at axis values `q`, relative to a point
@@ -523,6 +529,7 @@ impl PlaneFeature {
             cross_moments: None,
             points: 0,
             rms_mm: 0.0,
+            correlation_inflation: 1.0,
         }
     }
 
@@ -555,6 +562,7 @@ impl PlaneFeature {
             cross_moments: None,
             points: design.n,
             rms_mm: fit.rms_mm,
+            correlation_inflation: design.correlation_inflation,
         }
     }
 }
@@ -977,6 +985,9 @@ pub struct Identifiability {
     pub determined_basis: DMatrix<Real>,
     /// Per parameter, the leakage of its direction outside the determined subspace.
     pub leakage: Vec<Real>,
+    /// How clearly the determined subspace is separated: the singular values either side
+    /// of the threshold of determination.
+    pub margin: RankMargin,
 }
 
 /// Projects the columns of `a` onto the orthogonal complement of the column space of `b`.
@@ -1117,8 +1128,6 @@ pub fn identifiability(
     model: &Model,
     x: &DVector<Real>,
 ) -> Result<Identifiability, CalibrateError> {
-    let names = model.param_names();
-    let np = model.params();
     let j = model.jacobian(x).ok_or_else(|| {
         CalibrateError::Degenerate(
             model
@@ -1127,7 +1136,26 @@ pub fn identifiability(
                 .map_or(String::new(), |f| f.name().to_string()),
         )
     })?;
-    let scale = model.param_scales();
+    Ok(identifiability_of(
+        &j,
+        &model.param_names(),
+        &model.param_scales(),
+        &model.nuisance_names(),
+    ))
+}
+
+/// What a whitened Jacobian `j` determines: its first `names.len()` columns are the
+/// parameters (physical units, realistic magnitudes `scale`), the rest nuisance unknowns
+/// (`nuisance_names`), projected out before the parameters' SVD (see the module
+/// documentation). Every identification's report of what is and is not determined.
+pub fn identifiability_of(
+    j: &DMatrix<Real>,
+    names: &[String],
+    scale: &[Real],
+    nuisance_names: &[String],
+) -> Identifiability {
+    let names = names.to_vec();
+    let np = names.len();
     let mut jp = j.columns(0, np).into_owned();
     for (k, s) in scale.iter().enumerate() {
         jp.column_mut(k).scale_mut(*s);
@@ -1175,7 +1203,7 @@ pub fn identifiability(
     } else {
         DMatrix::zeros(0, np)
     };
-    let determined_combinations = named_combinations(&reduced, &scale, &names);
+    let determined_combinations = named_combinations(&reduced, scale, &names);
     // Undetermined: the complement of the determined subspace.
     let complement = {
         let mut eye = DMatrix::<Real>::identity(np, np);
@@ -1189,7 +1217,7 @@ pub fn identifiability(
             .collect();
         DMatrix::from_fn(keep.len(), np, |r, c| vt[(keep[r], c)])
     };
-    let undetermined_combinations = named_combinations(&complement, &scale, &names);
+    let undetermined_combinations = named_combinations(&complement, scale, &names);
     let borderline = order
         .iter()
         .filter(|&&i| {
@@ -1198,7 +1226,7 @@ pub fn identifiability(
         })
         .filter_map(|&i| {
             let row = DMatrix::from_fn(1, np, |_, c| vt[(i, c)]);
-            named_combinations(&row, &scale, &names)
+            named_combinations(&row, scale, &names)
                 .pop()
                 .map(|c| (c, svd.singular_values[i]))
         })
@@ -1207,7 +1235,7 @@ pub fn identifiability(
     // reproduces best (least squares), if it does so well.
     let mut registration_absorbs = Vec::new();
     if jr.ncols() > 0 {
-        let reg_names = model.nuisance_names();
+        let reg_names = nuisance_names;
         let pinv = jp.clone().pseudo_inverse(RANK_EPS).ok();
         for (k, reg_name) in reg_names.iter().enumerate().take(jr.ncols()) {
             let col = jr.column(k).into_owned();
@@ -1220,7 +1248,7 @@ pub fn identifiability(
                     if resid < 0.1 {
                         let c: Vec<Real> = coef
                             .iter()
-                            .zip(&scale)
+                            .zip(scale)
                             .map(|(a, s)| {
                                 if a.abs() < COMBINATION_CUTOFF * coef.amax() {
                                     0.0
@@ -1249,8 +1277,9 @@ pub fn identifiability(
     } else {
         cond(&full_sv)
     };
-    Ok(Identifiability {
+    Identifiability {
         parameters: names.clone(),
+        margin: RankMargin::new(&full_sv, rank, threshold),
         singular_values: full_sv,
         condition_number,
         condition_number_determined: cond(&sv[..rank]),
@@ -1270,7 +1299,7 @@ pub fn identifiability(
             .collect(),
         determined_basis: basis,
         leakage,
-    })
+    }
 }
 
 /// One identified quantity: a parameter or a determined combination.
@@ -1323,6 +1352,10 @@ pub struct Identification {
     pub solver: SolveReport,
     /// Per feature: whitened residuals after the solve.
     pub residuals: Vec<(String, [Real; 3])>,
+    /// Whether the features can come from the model at their stated uncertainties
+    /// ([`feature_fit`] without a scanner's account; a command measuring a scan checks
+    /// again with it). Callers refuse a misfit with [`FitCheck::enforce`].
+    pub fit: FitCheck,
 }
 
 struct Subspace<'a> {
@@ -1360,8 +1393,18 @@ impl LeastSquaresProblem<Real, Dyn, Dyn> for Subspace<'_> {
 /// Identifies the deviations `model.ids` from `model.features`, starting at the chain's
 /// current values: decides what is determined, solves by Levenberg–Marquardt in the
 /// determined subspace (with the registration if estimated), and propagates the features'
-/// uncertainties. Never gives a value to what is not determined.
+/// uncertainties. Never gives a value to what is not determined. Its goodness of fit
+/// ([`Identification::fit`]) takes the features' uncertainties as stated.
 pub fn identify(model: &Model) -> Result<Identification, CalibrateError> {
+    identify_with(model, None)
+}
+
+/// [`identify`], the goodness of fit accounting for the views `scan` merged its cloud
+/// from ([`feature_fit`]).
+pub fn identify_with(
+    model: &Model,
+    scan: Option<&ScanNoise>,
+) -> Result<Identification, CalibrateError> {
     if model.params() == 0 {
         return Err(CalibrateError::NoParameters);
     }
@@ -1432,10 +1475,11 @@ pub fn identify(model: &Model) -> Result<Identification, CalibrateError> {
     let r = model.residuals(&x).ok_or_else(|| {
         CalibrateError::NotConverged("residuals undefined at the solution".into())
     })?;
-    let jz = model
+    let j_full = model
         .jacobian(&x)
-        .ok_or_else(|| CalibrateError::NotConverged("Jacobian undefined at the solution".into()))?
-        * &dirs;
+        .ok_or_else(|| CalibrateError::NotConverged("Jacobian undefined at the solution".into()))?;
+    let fit = fit_of(model, &r, &j_full, scan);
+    let jz = &j_full * &dirs;
     let info = jz.transpose() * &jz;
     let cov_z = info
         .clone()
@@ -1443,50 +1487,12 @@ pub fn identify(model: &Model) -> Result<Identification, CalibrateError> {
         .or_else(|| info.pseudo_inverse(RANK_EPS).ok())
         .ok_or_else(|| CalibrateError::NotConverged("singular normal equations".into()))?;
     let cov_x = &dirs * cov_z * dirs.transpose();
-    let estimate = |name: String, c: Vec<Real>| {
-        let cv = DVector::from_iterator(np, c.iter().copied());
-        let xp = x.rows(0, np);
-        let value = cv.dot(&xp);
-        let cp = cov_x.view((0, 0), (np, np));
-        let var = (cv.transpose() * cp * &cv)[0];
-        Estimate {
-            name,
-            value,
-            sigma: var.max(0.0).sqrt(),
-            coefficients: c,
-        }
-    };
-    // A parameter identified on its own is valued as the determined combination nearest to
-    // it (its projection on the determined subspace), whose other coefficients are below
-    // LEAKAGE in scaled units: so its value does not depend on the undetermined directions.
-    let basis = &ident.determined_basis;
-    let parameters = ident
-        .identified
-        .iter()
-        .map(|name| {
-            let k = ident.parameters.iter().position(|n| n == name).unwrap_or(0);
-            let a = basis * basis.row(k).transpose();
-            let c = (0..np)
-                .map(|j| {
-                    // A coupling below the numerical rank's resolution is the projection's
-                    // rounding, not a coupling: exactly 0 (a parameter nothing couples to is
-                    // valued, and compared with the truth, on its own).
-                    let r = a[j] / a[k];
-                    if j != k && r.abs() < RANK_EPS {
-                        0.0
-                    } else {
-                        scale[k] * r / scale[j]
-                    }
-                })
-                .collect();
-            estimate(name.clone(), c)
-        })
-        .collect();
-    let combinations = ident
-        .determined_combinations
-        .iter()
-        .map(|c| estimate(c.name.clone(), c.coefficients.clone()))
-        .collect();
+    let (parameters, combinations) = estimates_of(
+        &ident,
+        &x.as_slice()[..np],
+        &cov_x.view((0, 0), (np, np)).into_owned(),
+        &scale,
+    );
     let mut registration = [0.0; 6];
     for (c, r) in registration.iter_mut().enumerate().take(model.reg_cols()) {
         *r = x[np + c];
@@ -1525,7 +1531,192 @@ pub fn identify(model: &Model) -> Result<Identification, CalibrateError> {
             dof,
         },
         residuals,
+        fit,
     })
+}
+
+/// The values with σ of what an identification determines, at the solution `x` (the
+/// parameters, physical units) with the parameters' covariance `cov` and realistic
+/// magnitudes `scale`: each parameter identified on its own, valued as the determined
+/// combination nearest to it (its projection on the determined subspace, whose other
+/// coefficients are below [`LEAKAGE`] in scaled units, so its value does not depend on the
+/// undetermined directions), then each determined combination.
+pub fn estimates_of(
+    ident: &Identifiability,
+    x: &[Real],
+    cov: &DMatrix<Real>,
+    scale: &[Real],
+) -> (Vec<Estimate>, Vec<Estimate>) {
+    let np = x.len();
+    let xp = DVector::from_column_slice(x);
+    let estimate = |name: String, c: Vec<Real>| {
+        let cv = DVector::from_iterator(np, c.iter().copied());
+        let value = cv.dot(&xp);
+        let var = (cv.transpose() * cov * &cv)[0];
+        Estimate {
+            name,
+            value,
+            sigma: var.max(0.0).sqrt(),
+            coefficients: c,
+        }
+    };
+    let basis = &ident.determined_basis;
+    let parameters = ident
+        .identified
+        .iter()
+        .map(|name| {
+            let k = ident.parameters.iter().position(|n| n == name).unwrap_or(0);
+            let a = basis * basis.row(k).transpose();
+            let c = (0..np)
+                .map(|j| {
+                    // A coupling below the numerical rank's resolution is the projection's
+                    // rounding, not a coupling: exactly 0 (a parameter nothing couples to is
+                    // valued, and compared with the truth, on its own).
+                    let r = a[j] / a[k];
+                    if j != k && r.abs() < RANK_EPS {
+                        0.0
+                    } else {
+                        scale[k] * r / scale[j]
+                    }
+                })
+                .collect();
+            estimate(name.clone(), c)
+        })
+        .collect();
+    let combinations = ident
+        .determined_combinations
+        .iter()
+        .map(|c| estimate(c.name.clone(), c.coefficients.clone()))
+        .collect();
+    (parameters, combinations)
+}
+
+/// What the features' residual χ² is of, in words.
+fn feature_statistic(features: &[Feature]) -> &'static str {
+    let planes = features.iter().any(|f| matches!(f, Feature::Plane(_)));
+    let balls = features.iter().any(|f| matches!(f, Feature::Ball(_)));
+    match (planes, balls) {
+        (true, false) => "faces' offsets and slopes at their fits' σ",
+        (false, true) => "ball centres at their stated σ",
+        _ => "faces' offsets and slopes at their fits' σ and ball centres at their stated σ",
+    }
+}
+
+/// The goodness of fit of the features at the unknowns `x` (deviations, ISO terms,
+/// registration, fixed points): their whitened residuals after the best fit over every
+/// unknown (see [`crate::calibration::goodness`]), one part per feature. Faces' and balls'
+/// uncertainties are taken as stated, with two additions: the twin's own accuracy
+/// ([`MODEL_ACCURACY_MM`] per face point for faces, [`tol::LENGTH_EPS`] for balls, whose
+/// prediction is the chain alone), and — with `scan` a cloud merged from several views with
+/// a registration error — each view's offset and tilt, added to every face's offset and
+/// slope variance (as if each face were seen by its own view: the faces of one view share
+/// that view's error, which the registration takes up in part, so this errs towards
+/// accepting). `None` if the model cannot be evaluated at `x`.
+pub fn feature_fit(model: &Model, x: &DVector<Real>, scan: Option<&ScanNoise>) -> Option<FitCheck> {
+    let r = model.residuals(x)?;
+    let j = model.jacobian(x)?;
+    Some(fit_of(model, &r, &j, scan))
+}
+
+fn fit_of(
+    model: &Model,
+    r: &DVector<Real>,
+    j: &DMatrix<Real>,
+    scan: Option<&ScanNoise>,
+) -> FitCheck {
+    let (mut r, mut j) = (r.clone(), j.clone());
+    let mut parts = Vec::with_capacity(model.features.len());
+    let mut row = 0;
+    for f in model.features {
+        let n = f.residual_count();
+        let t = match f {
+            Feature::Plane(p) => plane_rewhitening(p, scan),
+            Feature::Ball(b) => {
+                let s = |k: usize| b.sigma_mm[k] / b.sigma_mm[k].hypot(tol::LENGTH_EPS);
+                nalgebra::Matrix3::from_diagonal(&Vector3::new(s(0), s(1), s(2)))
+            }
+        };
+        let rows = r.rows(row, 3).into_owned();
+        r.rows_mut(row, 3).copy_from(&(t * rows));
+        let jr = j.rows(row, 3).into_owned();
+        j.rows_mut(row, 3).copy_from(&(t * jr));
+        parts.push((f.name().to_string(), row..row + n));
+        row += n;
+    }
+    least_squares_check(feature_statistic(model.features), &r, &j, &parts)
+}
+
+/// Each scanned face's points against the scanner's noise ([`face_rms_check`]): one part
+/// per plane feature fitted in a scan (synthetic features, with no points, have none).
+pub fn face_rms_parts(features: &[Feature], scan: &ScanNoise) -> Vec<PartFit> {
+    let faces: Vec<&PlaneFeature> = features
+        .iter()
+        .filter_map(|f| match f {
+            Feature::Plane(p) if p.points > 0 => Some(p),
+            _ => None,
+        })
+        .collect();
+    let p_limit = REFUSE_P / faces.len().max(1) as Real;
+    faces
+        .iter()
+        .map(|p| {
+            face_rms_check(
+                &p.name,
+                p.rms_mm,
+                p.points,
+                p.correlation_inflation,
+                scan,
+                p_limit,
+            )
+        })
+        .collect()
+}
+
+/// The map from a plane feature's whitened residuals (offset, two slopes) to the same
+/// residuals whitened by the uncertainties the goodness of fit uses: per-point σ with the
+/// twin's accuracy added, and the views' misregistration (see [`feature_fit`]).
+fn plane_rewhitening(p: &PlaneFeature, scan: Option<&ScanNoise>) -> nalgebra::Matrix3<Real> {
+    // The fit's σ per point, and the offset and slope covariances it implies.
+    let acc2 = MODEL_ACCURACY_MM * MODEL_ACCURACY_MM;
+    let (off_var, floor) = if p.points > 0 {
+        let sp2 = p.offset_sigma_mm.powi(2) * p.points as Real;
+        // Every uncertainty of a scanned face scales with its per-point σ.
+        (p.offset_sigma_mm.powi(2), (sp2 / (sp2 + acc2)).sqrt())
+    } else {
+        (p.offset_sigma_mm.powi(2), 1.0)
+    };
+    let mut off_new = if p.points > 0 {
+        off_var / (floor * floor)
+    } else {
+        off_var + acc2
+    };
+    let w = p.slope_whitening * floor;
+    let Some(w_inv) = p.slope_whitening.try_inverse() else {
+        return nalgebra::Matrix3::identity();
+    };
+    // Slope covariance the goodness of fit uses: (WᵀW)⁻¹/floor², plus the views' tilt.
+    let mut cov = (w.transpose() * w)
+        .try_inverse()
+        .unwrap_or_else(Matrix2::zeros);
+    if let Some(s) = scan.filter(|s| s.views >= 2) {
+        off_new += s.translation_sigma_mm.powi(2) + (s.rotation_sigma_rad * s.lever_mm).powi(2);
+        cov += Matrix2::identity() * s.rotation_sigma_rad.powi(2);
+    }
+    // New whitening: W' with W'ᵀW' = cov⁻¹ (upper Cholesky factor of the inverse).
+    let w_new = cov
+        .try_inverse()
+        .and_then(|i| i.cholesky())
+        .map(|c| c.l().transpose())
+        .unwrap_or(w);
+    let t = w_new * w_inv;
+    let mut m = nalgebra::Matrix3::zeros();
+    m[(0, 0)] = (off_var / off_new).sqrt();
+    for a in 0..2 {
+        for b in 0..2 {
+            m[(1 + a, 1 + b)] = t[(a, b)];
+        }
+    }
+    m
 }
 
 /// Relative singular value below which a registration direction counts as unconstrained

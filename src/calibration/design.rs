@@ -458,8 +458,10 @@ fn evaluate(
     for (k, id) in ids.iter().enumerate() {
         js.column_mut(k).scale_mut(magnitude(*id));
     }
-    let info = js.transpose() * &js;
-    let cov = info.pseudo_inverse(1e-12).ok()?;
+    // (JᵀJ)⁺ = J⁺·J⁺ᵀ, the rank from J's own singular values (a whitened direction below
+    // 1e-6 is not seen: the 1e-12 of JᵀJ's eigenvalues it stands for).
+    let pinv = js.pseudo_inverse(1e-6).ok()?;
+    let cov = &pinv * pinv.transpose();
     let rel = (0..np)
         .filter(|&k| ident.identified.contains(&ident.parameters[k]))
         .map(|k| (ident.parameters[k].clone(), cov[(k, k)].max(0.0).sqrt()))
@@ -674,8 +676,11 @@ pub fn lever_notes(
             features,
             registration: Registration::Estimate,
         };
+        // (JᵀJ)⁺ = J⁺·J⁺ᵀ from J's own singular values (a whitened direction below 1e-6
+        // is not seen: the 1e-12 of JᵀJ's eigenvalues it stands for).
         m.jacobian(&m.start())
-            .and_then(|j| (j.transpose() * &j).pseudo_inverse(1e-12).ok())
+            .and_then(|j| j.pseudo_inverse(1e-6).ok())
+            .map(|p| &p * p.transpose())
     };
     let mut out = Vec::new();
     for (a, b, across_x) in LEVER_PAIRS {

@@ -26,19 +26,29 @@
 //! *Ball plate* (seed 000 §4): the 7 balls' centres are known in the table frame, so no
 //! centre is estimated and the table frame fixes the gauge: all 24 parameters determined.
 //!
-//! **Identifiability.** The eigen-decomposition of the scaled, whitened normal matrix: a
-//! direction whose singular value is below [`RANK_TOLERANCE`] of the largest is not
-//! determined (without a jig exactly the six gauge directions) and is held at the prior
-//! (nominal) value, never given a value; the solve runs in the rest. Directions the readings
-//! see only weakly — standard uncertainty above [`DETERMINED_FRACTION`] of the magnitude,
-//! typically a base joint moved along its strut against that strut's reference length,
-//! which the strut directions' small variation over the workspace barely separates — are
-//! named as *weak*; they are solved and their large σ carried into the parameters'.
+//! **Identifiability.** The singular value decomposition of the scaled, whitened Jacobian
+//! itself (never of the normal matrix `AᵀA`, whose spectrum is the square of it and whose
+//! rounding would lift the null directions to about 1e-8 of the largest): a direction whose
+//! singular value is below [`RANK_TOLERANCE`] of the largest is not determined (without a
+//! jig exactly the six gauge directions, which a direct SVD puts near 1e-16) and is held at
+//! the prior (nominal) value, never given a value; the solve runs in the rest, and the
+//! report gives the margin (the gap between the last kept and the first dropped singular
+//! value). Directions the readings see only weakly — standard uncertainty above
+//! [`DETERMINED_FRACTION`] of the magnitude, typically a base joint moved along its strut
+//! against that strut's reference length, which the strut directions' small variation over
+//! the workspace barely separates — are named as *weak*; they are solved and their large σ
+//! carried into the parameters'.
+//!
+//! **Goodness of fit.** The lengths' residuals at the stated σ after the solve, whole and
+//! circle by circle ([`crate::calibration::goodness`]): readings that cannot come from the
+//! machine at that noise — a circle's file swapped with another's, another plan's circles —
+//! are named in [`HexapodCalibration::fit`] for the caller to refuse.
 //!
 //! **Invariant:** reads readings and hexapods; never touches files; a parameter direction
 //! the readings do not determine is named, never valued.
 
 use crate::calibration::calibrate::DETERMINED_FRACTION;
+use crate::calibration::goodness::{FitCheck, RankMargin, least_squares_check};
 use crate::machine::hexapod::{Hexapod, HexapodError, PARAMETERS, ParameterId, Pose, twin_pose};
 use crate::machine::hexapod_accuracy::{Workspace, level_positioning, pivot_test};
 use crate::math::{Matrix3, Real, Vector3};
@@ -55,7 +65,8 @@ pub const STRUT_MAGNITUDE_MM: Real = 0.2;
 pub const BALL_MAGNITUDE_MM: Real = 0.5;
 /// Relative singular value below which a direction of the scaled, whitened Jacobian is
 /// numerically null (not determined at all): far above the rounding of the lengths'
-/// Jacobian (FK to 1e-9 mm on 1e3 mm struts), far below any direction a circle sees.
+/// Jacobian (FK to 1e-9 mm on 1e3 mm struts; a direct SVD puts the gauge near 1e-16), far
+/// below any direction a circle sees (the weakest about 1e-4 of the largest).
 pub const RANK_TOLERANCE: Real = 1e-7;
 /// Gauss–Newton stops when a step lowers the whitened sum of squares by less than this
 /// fraction: what is left is the lengths' rounding (FK to 1e-9 mm) seen through the weak
@@ -285,8 +296,11 @@ pub struct HexapodIdentifiability {
     /// Rank of the 24 parameters' part in the report's gauge (18 without a jig, 24 with
     /// the plate).
     pub parameters_determined: usize,
-    /// Singular values of the scaled, whitened Jacobian (descending).
+    /// Singular values of the scaled, whitened Jacobian (descending), from its SVD.
     pub singular_values: Vec<Real>,
+    /// How clearly the rank was decided: the singular values either side of
+    /// [`RANK_TOLERANCE`] of the largest.
+    pub margin: RankMargin,
     /// Condition number within the determined subspace.
     pub condition_number: Real,
     /// The named gauge directions (the base frame's rigid motions), when the table balls
@@ -323,6 +337,10 @@ pub struct HexapodCalibration {
     /// Jig-free: RMS σ of the 24 parameters with the ball centres estimated over the same
     /// with them known (what removing the centre offsets costs).
     pub centre_removal_cost: Option<Real>,
+    /// Whether the lengths can come from the identified machine at the stated σ, circle by
+    /// circle ([`crate::calibration::goodness`]); callers refuse a misfit with
+    /// [`FitCheck::enforce`].
+    pub fit: FitCheck,
 }
 
 /// The six rigid motions of the base (translations x, y, z; rotations about x, y, z through
@@ -480,90 +498,67 @@ pub fn calibrate(
             source,
         }
     };
-    // Normal equations (scaled, whitened) and the sum of squares at x.
-    let normal = |x: &DVector<Real>,
+    // The whitened residuals (and the scaled, whitened Jacobian) at x: one row a reading,
+    // the circles in order.
+    let m: usize = readings.iter().map(|r| r.lengths_mm.len()).sum();
+    let system = |x: &DVector<Real>,
                   with_jacobian: bool|
-     -> Result<(DMatrix<Real>, DVector<Real>, Real), HexapodCalibrationError> {
+     -> Result<(DMatrix<Real>, DVector<Real>), HexapodCalibrationError> {
         let (model, balls) = model_at(x).map_err(kin(0, 0))?;
-        let mut a = DMatrix::zeros(if with_jacobian { n } else { 0 }, n);
-        let mut g = DVector::zeros(n);
-        let mut ss = 0.0;
-        let mut row = DVector::zeros(n);
+        let mut a = DMatrix::zeros(if with_jacobian { m } else { 0 }, n);
+        let mut res = DVector::zeros(m);
         let idx: Vec<usize> = ids.iter().map(|id| id.index()).collect();
+        let mut i = 0;
         for (j, r) in readings.iter().enumerate() {
             for (k, (cmd, len)) in r.commands.iter().zip(&r.lengths_mm).enumerate() {
                 let reached = twin_pose(nominal, &model, cmd).map_err(kin(j, k))?;
                 let d = reached.position - balls[j];
                 let l = d.norm();
-                let res = (l - len) / sigma_mm;
-                ss += res * res;
-                if !with_jacobian {
-                    continue;
-                }
-                let u = d / l;
-                let jp = model.pose_parameter_jacobian(&reached).map_err(kin(j, k))?;
-                row.fill(0.0);
-                for (c, &pi) in idx.iter().enumerate() {
-                    let v = u.x * jp[(0, pi)] + u.y * jp[(1, pi)] + u.z * jp[(2, pi)];
-                    row[c] = v * scale[c] / sigma_mm;
-                }
-                if nb > 0 {
-                    for q in 0..3 {
-                        row[SOLVED + 3 * j + q] = -u[q] * BALL_MAGNITUDE_MM / sigma_mm;
+                res[i] = (l - len) / sigma_mm;
+                if with_jacobian {
+                    let u = d / l;
+                    let jp = model.pose_parameter_jacobian(&reached).map_err(kin(j, k))?;
+                    for (c, &pi) in idx.iter().enumerate() {
+                        let v = u.x * jp[(0, pi)] + u.y * jp[(1, pi)] + u.z * jp[(2, pi)];
+                        a[(i, c)] = v * scale[c] / sigma_mm;
                     }
-                }
-                // Rank-one update of the normal matrix (upper triangle; mirrored below).
-                let nz: Vec<usize> = (0..SOLVED)
-                    .chain(if nb > 0 {
-                        SOLVED + 3 * j..SOLVED + 3 * j + 3
-                    } else {
-                        0..0
-                    })
-                    .collect();
-                for &p in &nz {
-                    let rp = row[p];
-                    if rp == 0.0 {
-                        continue;
-                    }
-                    g[p] += rp * res;
-                    for &q in &nz {
-                        if q >= p {
-                            a[(p, q)] += rp * row[q];
+                    if nb > 0 {
+                        for q in 0..3 {
+                            a[(i, SOLVED + 3 * j + q)] = -u[q] * BALL_MAGNITUDE_MM / sigma_mm;
                         }
                     }
                 }
+                i += 1;
             }
         }
-        if with_jacobian {
-            for p in 0..n {
-                for q in 0..p {
-                    a[(p, q)] = a[(q, p)];
-                }
-            }
-        }
-        Ok((a, g, ss))
+        Ok((a, res))
     };
     let weak_below = 1.0 / DETERMINED_FRACTION;
     let mut x = DVector::zeros(n);
     let mut iterations = 0;
     let mut ss;
-    let mut eig;
-    let mut last_a;
+    let mut spectrum;
+    let mut jac;
+    let mut res;
     loop {
-        let (a, g, s) = normal(&x, true)?;
-        ss = s;
-        if !a.iter().all(|v| v.is_finite()) {
+        let (a, r) = system(&x, true)?;
+        ss = r.norm_squared();
+        if !a.iter().all(|v| v.is_finite()) || !ss.is_finite() {
             return Err(HexapodCalibrationError::Degenerate);
         }
-        last_a = a.clone();
-        eig = a.symmetric_eigen();
-        let threshold = eig.eigenvalues.amax().max(0.0).sqrt() * RANK_TOLERANCE;
-        // Step in the determined subspace: −Σ v·vᵀ·g / λ.
+        // The rank from the Jacobian's own singular values (never from AᵀA, whose
+        // spectrum squares the condition number).
+        let svd = a.clone().svd(false, true);
+        let g = a.transpose() * &r;
+        spectrum = Spectrum::of(svd);
+        jac = a;
+        res = r;
+        let threshold = spectrum.largest() * RANK_TOLERANCE;
+        // Gauss–Newton step in the determined subspace: −Σ v·(vᵀ·Aᵀr)/s².
         let mut dx = DVector::zeros(n);
-        for (k, &lam) in eig.eigenvalues.iter().enumerate() {
-            if lam.max(0.0).sqrt() > threshold {
-                let v = eig.eigenvectors.column(k);
-                dx -= v * (v.dot(&g) / lam);
+        for (sv, v) in spectrum.pairs() {
+            if sv > threshold {
+                dx -= &v * (v.dot(&g) / (sv * sv));
             }
         }
         // Halve the step while it worsens the fit.
@@ -572,11 +567,11 @@ pub fn calibrate(
         let before = ss;
         for _ in 0..6 {
             let trial = &x + &dx * step;
-            if let Ok((_, _, st)) = normal(&trial, false)
-                && st <= ss * (1.0 + 1e-12)
+            if let Ok((_, rt)) = system(&trial, false)
+                && rt.norm_squared() <= ss * (1.0 + 1e-12)
             {
                 x = trial;
-                ss = st;
+                ss = rt.norm_squared();
                 accepted = true;
                 break;
             }
@@ -589,14 +584,17 @@ pub fn calibrate(
             break;
         }
     }
+    // The Jacobian and residuals at the solution (the last step moved x by less than the
+    // noise; the spectrum is that of the last linearisation).
+    let (jac, res) = match system(&x, true) {
+        Ok((a, r)) if a.iter().all(|v| v.is_finite()) => {
+            spectrum = Spectrum::of(a.clone().svd(false, true));
+            (a, r)
+        }
+        _ => (jac, res),
+    };
     // Identifiability at the solution.
-    let mut sv: Vec<(Real, usize)> = eig
-        .eigenvalues
-        .iter()
-        .enumerate()
-        .map(|(k, l)| (l.max(0.0).sqrt(), k))
-        .collect();
-    sv.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let sv: Vec<(Real, usize)> = spectrum.sorted();
     let threshold = sv.first().map_or(0.0, |s| s.0) * RANK_TOLERANCE;
     let determined: Vec<usize> = sv
         .iter()
@@ -613,7 +611,7 @@ pub fn calibrate(
         .iter()
         .filter(|(s, _)| *s > threshold && *s <= weak_below)
         .map(|&(s, k)| {
-            let v = eig.eigenvectors.column(k);
+            let v = spectrum.vector(k);
             let big = v.amax();
             let mut terms: Vec<(Real, usize)> = (0..n)
                 .filter(|&c| v[c].abs() >= 0.2 * big)
@@ -628,26 +626,41 @@ pub fn calibrate(
             format!("{} (σ {:.3} mm)", t.join(" "), JOINT_MAGNITUDE_MM / s)
         })
         .collect();
-    let m = readings.iter().map(|r| r.lengths_mm.len()).sum::<usize>();
     let dof = m.saturating_sub(rank).max(1);
     let residual_rms_mm = (ss / m as Real).sqrt() * sigma_mm;
     let sigma_post = (ss / dof as Real).sqrt() * sigma_mm;
-    // Covariance (physical units) of the 24 parameters.
-    let cov_of = |dirs: &[usize], vecs: &DMatrix<Real>, vals: &DVector<Real>, cols: usize| {
+    // Goodness of fit at the stated σ, one part per circle.
+    let mut parts = Vec::with_capacity(readings.len());
+    let mut row = 0;
+    for (j, r) in readings.iter().enumerate() {
+        parts.push((format!("circle {}", j + 1), row..row + r.lengths_mm.len()));
+        row += r.lengths_mm.len();
+    }
+    let fit = least_squares_check(
+        &format!("bar lengths at the stated σ {} µm", sigma_mm * 1e3),
+        &res,
+        &jac,
+        &parts,
+    );
+    // Covariance (physical units) of the 24 parameters: Σ v·vᵀ/s² over the determined
+    // directions, scaled by the residuals' σ.
+    let cov_of = |dirs: &[(Real, DVector<Real>)]| {
         let mut c = DMatrix::zeros(SOLVED, SOLVED);
-        for &k in dirs {
-            let v = vecs.column(k);
-            let w = (sigma_post / sigma_mm).powi(2) / vals[k];
+        for (s, v) in dirs {
+            let w = (sigma_post / sigma_mm).powi(2) / (s * s);
             for p in 0..SOLVED {
                 for q in 0..SOLVED {
                     c[(p, q)] += w * v[p] * v[q] * scale[p] * scale[q];
                 }
             }
         }
-        let _ = cols;
         c
     };
-    let cov = cov_of(&determined, &eig.eigenvectors, &eig.eigenvalues, n);
+    let det_dirs: Vec<(Real, DVector<Real>)> = determined
+        .iter()
+        .map(|&k| (spectrum.value(k), spectrum.vector(k)))
+        .collect();
+    let cov = cov_of(&det_dirs);
     // The report's gauge: without a jig, project the base joints' rigid motion out.
     let nominal_base = base_of(nominal);
     let mut proj = DMatrix::<Real>::identity(SOLVED, SOLVED);
@@ -679,25 +692,33 @@ pub fn calibrate(
             if s > threshold {
                 continue;
             }
-            let v = eig.eigenvectors.column(k).into_owned();
+            let v = spectrum.vector(k);
             let out = &v - &qg * (qg.transpose() * &v);
             outside = outside.max(out.norm());
         }
     } else {
         for &(s, k) in &sv {
             if s <= threshold {
-                let v = eig.eigenvectors.column(k).into_owned();
+                let v = spectrum.vector(k);
                 outside = outside.max(v.norm());
             }
         }
     }
     let cov_g = &proj * &cov * proj.transpose();
+    // The rank of the 24 parameters' part in the gauge: of the square root of cov_g,
+    // P·V·S⁻¹ over the determined directions (scaled units), by its own singular values.
     let parameters_determined = {
-        let e = cov_g.clone().symmetric_eigen();
-        let big = e.eigenvalues.amax();
-        e.eigenvalues
-            .iter()
-            .filter(|l| **l > big * 1e-12 && big > 0.0)
+        let mut root = DMatrix::zeros(SOLVED, det_dirs.len());
+        for (c, (s, v)) in det_dirs.iter().enumerate() {
+            for p in 0..SOLVED {
+                root[(p, c)] = v[p] / s;
+            }
+        }
+        let root = &proj * root;
+        let sv = root.singular_values();
+        let big = sv.amax();
+        sv.iter()
+            .filter(|l| **l > big * GAUGE_RANK_EPS && big > 0.0)
             .count()
     };
     let (model, _) = model_at(&x).map_err(kin(0, 0))?;
@@ -718,19 +739,11 @@ pub fn calibrate(
         .collect();
     // What removing the centre offsets costs: the same circles with the centres known.
     let centre_removal_cost = if nb > 0 {
-        // The normal matrix of the last iteration (its step is below the noise).
-        let sub = last_a
-            .view((0, 0), (SOLVED, SOLVED))
-            .into_owned()
-            .symmetric_eigen();
-        let dirs: Vec<usize> = (0..SOLVED)
-            .filter(|&k| {
-                sub.eigenvalues[k].max(0.0).sqrt()
-                    > threshold.max(sub.eigenvalues.amax().max(0.0).sqrt() * RANK_TOLERANCE)
-            })
-            .collect();
-        let ck =
-            &proj * cov_of(&dirs, &sub.eigenvectors, &sub.eigenvalues, SOLVED) * proj.transpose();
+        // The parameters' columns alone: the balls' centres taken as known.
+        let sub = Spectrum::of(jac.columns(0, SOLVED).into_owned().svd(false, true));
+        let cut = threshold.max(sub.largest() * RANK_TOLERANCE);
+        let dirs: Vec<(Real, DVector<Real>)> = sub.pairs().filter(|(s, _)| *s > cut).collect();
+        let ck = &proj * cov_of(&dirs) * proj.transpose();
         let rms = |c: &DMatrix<Real>| (c.trace() / SOLVED as Real).sqrt();
         let known_rms = rms(&ck);
         (known_rms > 0.0).then(|| rms(&cov_g) / known_rms)
@@ -740,8 +753,9 @@ pub fn calibrate(
     let smax = sv.first().map_or(0.0, |s| s.0);
     let smin = determined
         .iter()
-        .map(|&k| eig.eigenvalues[k].max(0.0).sqrt())
+        .map(|&k| spectrum.value(k))
         .fold(Real::INFINITY, Real::min);
+    let all_sv: Vec<Real> = sv.iter().map(|s| s.0).collect();
     Ok(HexapodCalibration {
         procedure: plan.procedure,
         identifiability: HexapodIdentifiability {
@@ -749,7 +763,8 @@ pub fn calibrate(
             ball_unknowns: 3 * nb,
             rank,
             parameters_determined,
-            singular_values: sv.iter().map(|s| s.0).collect(),
+            margin: RankMargin::new(&all_sv, rank, threshold),
+            singular_values: all_sv,
             condition_number: smax / smin,
             gauge,
             undetermined_outside_gauge: outside,
@@ -761,7 +776,53 @@ pub fn calibrate(
         sigma_mm: sigma_post,
         iterations,
         centre_removal_cost,
+        fit,
     })
+}
+
+/// Relative singular value of the gauge-projected covariance root below which a direction
+/// of the 24 parameters is not determined in the report's gauge: the rigid motion projected
+/// out leaves exact zeros there (rounding, 1e-16), the weakest determined direction about
+/// 1e-4 of the strongest.
+const GAUGE_RANK_EPS: Real = 1e-9;
+
+/// The singular values and right singular vectors of a whitened, scaled Jacobian.
+struct Spectrum {
+    values: DVector<Real>,
+    v_t: DMatrix<Real>,
+}
+
+impl Spectrum {
+    fn of(svd: nalgebra::SVD<Real, nalgebra::Dyn, nalgebra::Dyn>) -> Self {
+        let values = svd.singular_values;
+        let v_t = svd
+            .v_t
+            .unwrap_or_else(|| DMatrix::zeros(values.len(), values.len()));
+        Spectrum { values, v_t }
+    }
+    fn largest(&self) -> Real {
+        self.values.amax()
+    }
+    fn value(&self, k: usize) -> Real {
+        self.values[k]
+    }
+    fn vector(&self, k: usize) -> DVector<Real> {
+        self.v_t.row(k).transpose()
+    }
+    /// Every (singular value, right singular vector); a Jacobian with fewer rows than
+    /// columns has `n − m` further null directions, which the SVD does not list and
+    /// nothing here needs (they are never solved).
+    fn pairs(&self) -> impl Iterator<Item = (Real, DVector<Real>)> + '_ {
+        (0..self.values.len()).map(|k| (self.value(k), self.vector(k)))
+    }
+    /// (value, index), descending.
+    fn sorted(&self) -> Vec<(Real, usize)> {
+        let mut sv: Vec<(Real, usize)> = (0..self.values.len())
+            .map(|k| (self.values[k], k))
+            .collect();
+        sv.sort_by(|a, b| b.0.total_cmp(&a.0));
+        sv
+    }
 }
 
 /// The true deviations of the 24 parameters in the report's gauge (jig-free: the actual
@@ -903,6 +964,49 @@ pub fn calibrated_model(
             }
         }
     }
+}
+
+/// The identified machine as measured readings alone give it, with no simulated truth: the
+/// identified parameters; jig-free, with the base frame — which lengths cannot see — placed
+/// so that the tool, commanded through the `nominal` controller to the table calibration's
+/// reference corners ([`table_points`]), best fits the commanded positions (the table frame
+/// the machine was aligned in before calibration). A rigid motion of the base moves every
+/// reached pose by that motion, so one placement fits exactly; a second pass checks it.
+/// Also returns the placement's rotation (rad) and largest joint displacement (mm).
+pub fn measured_model(
+    identified: &HexapodCalibration,
+    known: &Hexapod,
+    nominal: &Hexapod,
+    ws: &Workspace,
+) -> Result<(Hexapod, Option<(Real, Real)>), HexapodError> {
+    let machine = known.with_parameters(&identified.parameters)?;
+    if identified.procedure == Procedure::BallPlate {
+        return Ok((machine, None));
+    }
+    let points = table_points(nominal, ws);
+    if points.len() < 4 {
+        return Err(HexapodError::Geometry(format!(
+            "the table frame is fixed on {} of the workspace's 8 reference corners: fewer than 4",
+            points.len()
+        )));
+    }
+    let commanded: Vec<Vector3> = points.iter().map(|p| p.position).collect();
+    let mut m = machine.clone();
+    for _ in 0..2 {
+        let reached = points
+            .iter()
+            .map(|p| twin_pose(nominal, &m, p).map(|r| r.position))
+            .collect::<Result<Vec<_>, _>>()?;
+        let (q, t) = best_fit(&reached, &commanded);
+        m = moved_base(&m, &q, &t)?;
+    }
+    let b0 = base_of(&machine);
+    let (q, t) = best_fit(&b0, &base_of(&m));
+    let angle = nalgebra::Rotation3::from_matrix_unchecked(q).angle();
+    let shift = (0..6)
+        .map(|i| (q * b0[i] + t - b0[i]).norm())
+        .fold(0.0, Real::max);
+    Ok((m, Some((angle, shift))))
 }
 
 /// The pose errors a controller model leaves on the actual machine.

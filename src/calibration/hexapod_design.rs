@@ -9,9 +9,11 @@
 //! (scaled, whitened rows of [`super::hexapod_calibrate`]'s Jacobian, linearised at the
 //! nominal machine; 24 samples per circle weighted to its readings). Without a jig the
 //! circle's table-ball centre is estimated with the parameters, so its three unknowns are
-//! eliminated: `Mⱼ = AⱼᵀAⱼ − AⱼᵀBⱼ·(BⱼᵀBⱼ)⁺·BⱼᵀAⱼ` (the Schur complement: what removing the
-//! centre offset costs, circle by circle). The parameters' covariance is `C = M⁺` in the
-//! determined subspace.
+//! eliminated: `Mⱼ = ÃⱼᵀÃⱼ` with `Ãⱼ = (I − Pⱼ)·Aⱼ`, `Pⱼ` the projection onto the ball's
+//! columns `Bⱼ` (the Schur complement `AⱼᵀAⱼ − AⱼᵀBⱼ·(BⱼᵀBⱼ)⁺·BⱼᵀAⱼ`: what removing the
+//! centre offset costs, circle by circle). A plan's rank, condition number and covariance
+//! `C = M⁺` in the determined subspace come from the singular values of its stacked rows
+//! `Ãⱼ` (never from `M`'s eigenvalues, which square the condition number).
 //!
 //! The criterion is the **mean predicted variance of the tool position error after
 //! calibration** over check poses of the workspace (a 5 × 5 × 3 level grid and pivot poses
@@ -41,15 +43,16 @@
 //! **Invariant:** reads hexapods and circles; never touches files; a plan is returned only
 //! with every circle reachable on the nominal machine.
 
+use crate::calibration::goodness::RankMargin;
 use crate::calibration::hexapod_calibrate::{
     BALL_MAGNITUDE_MM, JOINT_MAGNITUDE_MM, PIVOT_TILT_DEG, Plan, Procedure, RANK_TOLERANCE, SOLVED,
     STRUT_MAGNITUDE_MM, plate_balls, rigid_fields, solved_parameters, table_points, xy_circle,
 };
 use crate::machine::hexapod::{Hexapod, HexapodError, Pose};
 use crate::machine::hexapod_accuracy::Workspace;
-use crate::math::{Matrix3, Real, Vector3};
+use crate::math::{Real, Vector3};
 use crate::metrology::hexapod_dbb::DbbCircle;
-use nalgebra::{DMatrix, SMatrix, SVector};
+use nalgebra::{DMatrix, SMatrix};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -98,53 +101,72 @@ pub fn reachable(nominal: &Hexapod, circle: &DbbCircle) -> bool {
 }
 
 /// The information `circle` gives on the 24 solved parameters (scaled, whitened by
-/// `sigma_mm`), its table ball eliminated unless `balls_known`.
+/// `sigma_mm`), its table ball eliminated unless `balls_known`: `rowsᵀ·rows` of
+/// [`circle_rows`].
 pub fn circle_information(
     nominal: &Hexapod,
     circle: &DbbCircle,
     balls_known: bool,
     sigma_mm: Real,
 ) -> Result<Information, HexapodError> {
+    let rows = circle_rows(nominal, circle, balls_known, sigma_mm)?;
+    let m = rows.transpose() * rows;
+    Ok(Information::from_fn(|i, j| m[(i, j)]))
+}
+
+/// The rows of `circle`'s whitened, scaled Jacobian over the 24 solved parameters
+/// ([`DESIGN_SAMPLES`] of them, weighted to its readings), with — unless `balls_known` —
+/// its table ball's three columns projected out, so that `rowsᵀ·rows` is its information
+/// (the Schur complement of [`circle_information`]). Stacked over a plan, these rows are
+/// what its rank is decided on, by their own singular values.
+pub fn circle_rows(
+    nominal: &Hexapod,
+    circle: &DbbCircle,
+    balls_known: bool,
+    sigma_mm: Real,
+) -> Result<DMatrix<Real>, HexapodError> {
     let idx: Vec<usize> = solved_parameters().iter().map(|id| id.index()).collect();
     let readings = (circle.points * circle.turns.runs().len()) as Real;
-    let weight = readings / DESIGN_SAMPLES as Real;
-    let mut ata = Information::zeros();
-    let mut atb = SMatrix::<Real, SOLVED, 3>::zeros();
-    let mut btb = Matrix3::zeros();
+    let weight = (readings / DESIGN_SAMPLES as Real).sqrt();
+    let mut a = DMatrix::zeros(DESIGN_SAMPLES, SOLVED);
+    let mut b = DMatrix::zeros(DESIGN_SAMPLES, 3);
     for k in 0..DESIGN_SAMPLES {
         let theta = std::f64::consts::TAU * k as Real / DESIGN_SAMPLES as Real;
         let cmd = circle.command(theta);
         let jp = nominal.pose_parameter_jacobian(&cmd)?;
         let d = cmd.position - circle.centre_mm;
         let u = d / d.norm();
-        let a = SVector::<Real, SOLVED>::from_fn(|c, _| {
-            let i = idx[c];
-            (u.x * jp[(0, i)] + u.y * jp[(1, i)] + u.z * jp[(2, i)]) * scale(c) / sigma_mm
-        });
-        let b = -u * BALL_MAGNITUDE_MM / sigma_mm;
-        ata += a * a.transpose();
-        atb += a * b.transpose();
-        btb += b * b.transpose();
-    }
-    ata *= weight;
-    if balls_known {
-        return Ok(ata);
-    }
-    atb *= weight;
-    btb *= weight;
-    // Pseudo-inverse: a level bar sees its ball's z only to second order.
-    let e = btb.symmetric_eigen();
-    let big = e.eigenvalues.amax();
-    let mut pinv = Matrix3::zeros();
-    for k in 0..3 {
-        let l = e.eigenvalues[k];
-        if l > big * 1e-12 {
-            let v = e.eigenvectors.column(k);
-            pinv += v * v.transpose() / l;
+        for (c, &i) in idx.iter().enumerate() {
+            a[(k, c)] =
+                (u.x * jp[(0, i)] + u.y * jp[(1, i)] + u.z * jp[(2, i)]) * scale(c) / sigma_mm;
+        }
+        for q in 0..3 {
+            b[(k, q)] = -u[q] * BALL_MAGNITUDE_MM / sigma_mm;
         }
     }
-    Ok(ata - atb * pinv * atb.transpose())
+    a *= weight;
+    if balls_known {
+        return Ok(a);
+    }
+    // Project out the ball's columns (a level bar sees its ball's z only to second order:
+    // a direction of B below BALL_RANK_EPS of its largest is not one).
+    let svd = b.svd(true, false);
+    let big = svd.singular_values.amax();
+    if let Some(u) = svd.u {
+        for k in 0..3 {
+            if svd.singular_values[k] > big * BALL_RANK_EPS {
+                let uk = u.column(k);
+                let proj = uk.transpose() * &a;
+                a -= uk * proj;
+            }
+        }
+    }
+    Ok(a)
 }
+
+/// Relative singular value below which a direction of a circle's ball columns is not seen
+/// (the square root of the 1e-12 its information's eigenvalues are cut at).
+const BALL_RANK_EPS: Real = 1e-6;
 
 /// The check poses of the criterion: a 5 × 5 × 3 level grid of the workspace and, at its
 /// centre and four points half way to its corners (mid height), a and b at −t, 0, +t
@@ -247,6 +269,9 @@ pub struct Prediction {
     pub rank: usize,
     /// Condition number of the information's determined part (scaled units).
     pub condition_number: Real,
+    /// How clearly the rank was decided: the stacked rows' singular values either side of
+    /// [`RANK_TOLERANCE`] of the largest.
+    pub margin: RankMargin,
     /// The largest predicted σ of the tool position error after calibration over the check
     /// poses (3-D, mm).
     pub worst_position_sigma_mm: Real,
@@ -256,34 +281,52 @@ pub struct Prediction {
     pub max_parameter_sigma_mm: Real,
 }
 
-fn pinv(m: &Information, ridge: Real) -> (Information, usize, Real) {
+/// `(m + ridge·I)⁻¹` for the selection's criterion (a unit prior: positive definite, so no
+/// rank is decided here; plans are predicted by [`predict`] on their rows).
+fn regularised_inverse(m: &Information, ridge: Real) -> Information {
     let e = (m + Information::identity() * ridge).symmetric_eigen();
     let big = e.eigenvalues.amax().max(0.0);
     let tol = big * RANK_TOLERANCE * RANK_TOLERANCE;
     let mut c = Information::zeros();
-    let mut rank = 0;
-    let mut smallest = Real::INFINITY;
     for k in 0..SOLVED {
         let l = e.eigenvalues[k];
         if l > tol && l > 0.0 {
             let v = e.eigenvectors.column(k);
             c += v * v.transpose() / l;
-            rank += 1;
-            smallest = smallest.min(l);
         }
     }
-    (c, rank, (big / smallest).sqrt())
+    c
 }
 
-/// The prediction of information `m` (no prior) through the check sensitivity `e`.
+/// The prediction of a plan whose stacked Jacobian rows ([`circle_rows`]) are `rows` (no
+/// prior) through the check sensitivity `e`: its rank and covariance from the rows' own
+/// singular values.
 pub fn predict(
-    m: &Information,
+    rows: &DMatrix<Real>,
     e: &DMatrix<Real>,
     jig_free: bool,
     nominal: &Hexapod,
 ) -> Prediction {
-    let (c, rank, condition_number) = pinv(m, 0.0);
-    let cd = DMatrix::from_fn(SOLVED, SOLVED, |i, j| c[(i, j)]);
+    let svd = rows.clone().svd(false, true);
+    let mut order: Vec<usize> = (0..svd.singular_values.len()).collect();
+    order.sort_by(|a, b| svd.singular_values[*b].total_cmp(&svd.singular_values[*a]));
+    let sv: Vec<Real> = order.iter().map(|&k| svd.singular_values[k]).collect();
+    let big = sv.first().copied().unwrap_or(0.0);
+    let cut = big * RANK_TOLERANCE;
+    let rank = sv.iter().filter(|s| **s > cut && **s > 0.0).count();
+    let mut cd = DMatrix::zeros(SOLVED, SOLVED);
+    if let Some(vt) = &svd.v_t {
+        for &k in order.iter().take(rank) {
+            let s = svd.singular_values[k];
+            let v = vt.row(k).transpose();
+            cd += &v * v.transpose() / (s * s);
+        }
+    }
+    let condition_number = match rank.checked_sub(1) {
+        Some(last) if sv[last] > 0.0 => big / sv[last],
+        _ => Real::INFINITY,
+    };
+    let margin = RankMargin::new(&sv, rank, cut);
     let ec = e * &cd;
     let k = e.nrows() / 3;
     let mut worst: Real = 0.0;
@@ -310,6 +353,7 @@ pub fn predict(
     Prediction {
         rank,
         condition_number,
+        margin,
         worst_position_sigma_mm: worst.sqrt(),
         rms_position_sigma_mm: (sum / k.max(1) as Real).sqrt(),
         max_parameter_sigma_mm,
@@ -450,10 +494,7 @@ pub fn design(
         Information::from_fn(|i, j| w[(i, j)])
     };
     // I-criterion with a unit prior (scaled units): finite while directions are unseen.
-    let score = |m: &Information| -> Real {
-        let (c, _, _) = pinv(m, 1.0);
-        c.component_mul(&w).sum()
-    };
+    let score = |m: &Information| -> Real { regularised_inverse(m, 1.0).component_mul(&w).sum() };
     let mut chosen: Vec<usize> = Vec::with_capacity(circles);
     let mut m = Information::zeros();
     for _ in 0..circles {
@@ -492,12 +533,17 @@ pub fn design(
         procedure,
         circles: chosen.iter().map(|&k| usable[k].clone()).collect(),
     };
-    let predicted = predict(&m, &e, jig_free, nominal);
-    let mut mf = Information::zeros();
-    for c in &fixed.circles {
-        mf += circle_information(nominal, c, balls_known, sigma_mm)?;
-    }
-    let fixed = predict(&mf, &e, jig_free, nominal);
+    let stacked = |circles: &[DbbCircle]| -> Result<DMatrix<Real>, HexapodError> {
+        let mut out = DMatrix::zeros(DESIGN_SAMPLES * circles.len(), SOLVED);
+        for (j, c) in circles.iter().enumerate() {
+            let r = circle_rows(nominal, c, balls_known, sigma_mm)?;
+            out.view_mut((DESIGN_SAMPLES * j, 0), (DESIGN_SAMPLES, SOLVED))
+                .copy_from(&r);
+        }
+        Ok(out)
+    };
+    let predicted = predict(&stacked(&plan.circles)?, &e, jig_free, nominal);
+    let fixed = predict(&stacked(&fixed.circles)?, &e, jig_free, nominal);
     Ok(CircleDesign {
         plan,
         candidates: generated,

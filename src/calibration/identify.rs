@@ -30,6 +30,7 @@
 //! **Invariant:** identification reads a cloud and the program's moves; it never runs the
 //! sweep or the scanner (it must work on clouds twinmill did not make).
 
+use crate::calibration::goodness::{FitCheck, REFUSE_P, RankMargin, ScanNoise, face_rms_check};
 use crate::cutting::stock::TriDexel;
 use crate::cutting::tool::Tool;
 use crate::machine::chain::{AxisKind, Chain, Component, DeviationId};
@@ -774,6 +775,9 @@ pub struct StepIdentification {
     pub angle_name: String,
     /// Singular values of the 2×2 Jacobian (step, tilt) w.r.t. (offset, angle).
     pub singular_values: [Real; 2],
+    /// How clearly the pair's rank was decided (cut: [`IDENTIFIABLE_RATIO`] of the larger
+    /// singular value).
+    pub margin: RankMargin,
     /// Levenberg–Marquardt evaluations and final residual norm.
     pub solver: (usize, Real),
     /// Deviation names this experiment does not identify (alone or separably): held at
@@ -847,7 +851,34 @@ impl LeastSquaresProblem<Real, U2, U2> for StepProblem<'_> {
 }
 
 /// Relative singular value below which a parameter combination counts as not identifiable.
-const IDENTIFIABLE_RATIO: Real = 1e-8;
+pub const IDENTIFIABLE_RATIO: Real = 1e-8;
+
+/// The faces' goodness of fit: each face's points against the scanner's noise
+/// ([`face_rms_check`]). The step and tilt are matched exactly by the two unknowns, so the
+/// faces' shapes are what can contradict the model: a face that is not one plane (two
+/// chamfers, a face of another cut) leaves residuals far beyond the scanner's noise.
+pub fn faces_fit(faces: &[Face], scan: &ScanNoise) -> FitCheck {
+    let p_limit = REFUSE_P / faces.len().max(1) as Real;
+    let parts = faces
+        .iter()
+        .map(|f| {
+            face_rms_check(
+                &format!("face '{}' (NC line {})", f.name, f.cut.line),
+                f.fit.rms_mm,
+                f.design.n,
+                f.design.correlation_inflation,
+                scan,
+                p_limit,
+            )
+        })
+        .collect();
+    FitCheck::new(
+        "faces' points against the scanner's range noise",
+        None,
+        0.0,
+        parts,
+    )
+}
 
 /// Identifies the rotary axis's offset and the angle sum from two faces cut 180° apart.
 pub fn identify_step(
@@ -1052,6 +1083,11 @@ pub fn identify_step(
         offset_name,
         angle_name,
         singular_values: [smax, smin],
+        margin: RankMargin::new(
+            &[smax, smin],
+            if identifiable { 2 } else { 1 },
+            smax * IDENTIFIABLE_RATIO,
+        ),
         solver,
         not_identified,
         why_not,

@@ -1,17 +1,23 @@
 //! **Calibration**: from measurements back to the machine, and from the machine to a
-//! corrected program. The 0°/180° step experiment ([`identify`]), general identification
+//! corrected program. The goodness of fit every identification checks its result with
+//! ([`goodness`]), the 0°/180° step experiment ([`identify`]), general identification
 //! of any set of deviations with its identifiability report ([`calibrate`]), test-cut design
 //! ([`design`]) and NC-program correction with its verification ([`correct`]), and a hexapod's kinematic
-//! parameters from double-ball-bar lengths ([`hexapod_calibrate`]).
+//! parameters from double-ball-bar lengths ([`hexapod_calibrate`]); one engine for any
+//! forward model ([`engine`]) and a serial machine identified on it from laser readings and
+//! ball-bar circles together ([`instruments`]).
 //!
 //! May use everything below it: [`crate::math`], [`crate::nc`], [`crate::machine`],
 //! [`crate::cutting`] (the verification sweeps the corrected program) and
 //! [`crate::metrology`] (fits and face selection). Never values what the measurements do not
 //! determine; never opens files.
 
+pub mod goodness;
 pub mod identify;
 pub mod calibrate;
 pub mod design;
 pub mod correct;
 pub mod hexapod_calibrate;
 pub mod hexapod_design;
+pub mod engine;
+pub mod instruments;

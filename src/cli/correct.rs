@@ -61,19 +61,22 @@ pub fn exec(a: CorrectArgs) -> ExitCode {
         Err(code) => return code,
     };
     let bars = bars(a.args.json);
-    let chain = match a.model {
-        ModelSource::Injected => scene.chain().clone(),
+    let (chain, warning) = match a.model {
+        ModelSource::Injected => (scene.chain().clone(), None),
         ModelSource::Identified => {
-            match run(&scene, &program, &bars).and_then(|o| identified_model(&scene, &o.report)) {
+            match run(&scene, &program, &bars)
+                .and_then(|o| identified_model(&scene, &o.report).map(|c| (c, o.report.warning)))
+            {
                 Ok(c) => c,
                 Err(e) => return fail(e),
             }
         }
     };
-    let outcome = match correct(&scene, &program, &chain, a.accuracy_mm, &bars) {
+    let mut outcome = match correct(&scene, &program, &chain, a.accuracy_mm, &bars) {
         Ok(o) => o,
         Err(e) => return fail(e),
     };
+    outcome.report.warning = warning;
     let report = &outcome.report;
     let ngc = report.corrected_program.clone();
     let json_name = format!("{}-correct.json", scene.name);

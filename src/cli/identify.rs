@@ -112,7 +112,10 @@ fn calibrate_hexapod(path: &Path, a: &IdentifyArgs) -> ExitCode {
 /// The hexapod's double-ball-bar calibration: on the twin, or from measured traces.
 fn calibrate(scene: &Path, a: &CalibrateOptions, json: bool) -> Result<ExitCode, String> {
     let procedure = procedure_arg(a.procedure.as_deref())?;
-    let s = HexapodScene::load(scene).map_err(|e| e.to_string())?;
+    let s = HexapodScene {
+        accept_misfit: super::accept_misfit(),
+        ..HexapodScene::load(scene).map_err(|e| e.to_string())?
+    };
     let plan = match &a.plan {
         None => None,
         Some(p) => Some(load_plan(p).map_err(|e| e.to_string())?),

@@ -387,6 +387,7 @@ pub fn exec(a: MeasureArgs) -> ExitCode {
     }
     let (l, b, r) = (a.laser, a.ballbar, a.rotary);
     let request = MeasureRequest {
+        accept_misfit: super::accept_misfit(),
         scene: a.scene,
         instrument: a.instrument.request(),
         out: a.out,

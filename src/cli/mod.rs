@@ -31,6 +31,20 @@ use twinmill::output::{json_bytes, ply_bytes, write_files};
 use twinmill::progress::Progress;
 use twinmill::scene::{MemoryBudget, Need, Scene, SceneError};
 
+/// `--accept-misfit`, set once from the command line before any verb runs; every scene a
+/// verb loads takes it.
+static ACCEPT_MISFIT: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Sets `--accept-misfit` for the verb about to run.
+pub fn set_accept_misfit(accept: bool) {
+    ACCEPT_MISFIT.store(accept, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// `--accept-misfit`: keep an identification whose residuals the stated noise cannot explain.
+pub fn accept_misfit() -> bool {
+    ACCEPT_MISFIT.load(std::sync::atomic::Ordering::Relaxed)
+}
+
 /// What the scene verbs (`simulate`, `scan`, `identify`, `design`, `run`) share.
 #[derive(clap::Args)]
 pub struct SceneArgs {
@@ -92,6 +106,10 @@ pub fn load(a: &SceneArgs, command: &str, needs: &[Need]) -> Result<Loaded, Exit
         Err(SceneError::Hexapod { path }) => return Ok(Loaded::Hexapod(path)),
         r => r.map_err(fail)?,
     };
+    let scene = Scene {
+        accept_misfit: accept_misfit(),
+        ..scene
+    };
     scene.require(command, needs).map_err(fail)?;
     let program = match scene.load_program() {
         Ok(p) => p,
@@ -143,8 +161,15 @@ pub fn print_out(
     }
 }
 
-/// Says what went wrong on stderr, one line; the failure exit code.
+/// Prints `twinmill: error: MESSAGE` on one line (a line break inside the message, from a
+/// file's text or a library's, is printed as a space) and returns the failure exit code.
 pub fn fail(msg: impl std::fmt::Display) -> ExitCode {
+    let msg: String = msg
+        .to_string()
+        .trim_end()
+        .chars()
+        .map(|c| if c.is_control() { ' ' } else { c })
+        .collect();
     let _ = writeln!(std::io::stderr(), "twinmill: error: {msg}");
     ExitCode::FAILURE
 }

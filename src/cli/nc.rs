@@ -52,6 +52,10 @@ pub enum NcCommand {
         /// Also print non-motion records (tool, spindle, offsets, ...).
         #[arg(long)]
         events: bool,
+        /// Stop as an endless loop after this many lines in a row without motion.
+        #[arg(long, default_value_t = twinmill::nc::DEFAULT_MAX_IDLE_BLOCKS,
+              value_parser = clap::value_parser!(u64).range(1..))]
+        max_idle_blocks: u64,
     },
     /// Print the synthetic benchmark program (G1 with A words, every fifth block a G3).
     BenchProgram {
@@ -82,6 +86,7 @@ pub fn exec(a: NcArgs) -> ExitCode {
             no_fanuc_subs,
             jsonl: _,
             events,
+            max_idle_blocks,
         } => {
             let unit = if external_units == "inch" {
                 LengthUnit::Inch
@@ -98,6 +103,7 @@ pub fn exec(a: NcArgs) -> ExitCode {
                 Err(e) => return fail(e),
             };
             opts.block_delete = block_delete;
+            opts.max_idle_blocks = max_idle_blocks;
             if no_fanuc_subs {
                 opts.fanuc_subs = false;
             }
@@ -111,10 +117,7 @@ pub fn exec(a: NcArgs) -> ExitCode {
             let _ = out.flush();
             match r {
                 Ok(Ok(())) => ExitCode::SUCCESS,
-                Ok(Err(e)) => {
-                    let _ = write!(std::io::stderr(), "{}", e.full_report());
-                    ExitCode::FAILURE
-                }
+                Ok(Err(e)) => fail(e),
                 Err(e) => fail(e),
             }
         }

@@ -789,6 +789,30 @@ impl RotaryEnvelope {
             if apart {
                 return;
             }
+            // Between two misses the ray can only come to meet the tool where it passes
+            // through an edge circle or touches the tool's smooth part (the capsule of radius
+            // R about the axis from `z[0]` to the top, which holds the tool). An edge crossing
+            // is solved for like one between hits: the ray meets the tool there, if at all.
+            let mut crossing = false;
+            for edge in 0..2 {
+                let (fa, fb) = (a.phi[edge], b.phi[edge]);
+                if !fa.is_nan() && !fb.is_nan() && (fa < 0.0) != (fb < 0.0) {
+                    let phi = move |p: &Probe| Some(p.phi[edge]);
+                    if let Some((lo, hi)) = self.solve(ray, a, b, phi, Stop::Crossing, acc) {
+                        self.refine(ray, a, &lo, acc, depth + 1);
+                        self.refine(ray, &hi, b, acc, depth + 1);
+                        return;
+                    }
+                    crossing = true;
+                }
+            }
+            // Without one, a ray that stays inside the capsule (its distance from the axis
+            // segment below R at both ends, by more than the segment can move) touches no
+            // smooth face in between: it misses throughout.
+            let inside = |p: &Probe| self.r - line_segment_distance(&p.p, &p.u, z[0], self.l);
+            if !crossing && inside(a) + inside(b) > self.speed * w {
+                return;
+            }
             // And the grown tool about the middle to meet it.
             let mid = 0.5 * (a.lambda + b.lambda);
             let s = self.sample_at(mid);

@@ -42,6 +42,9 @@
 //! positive, too few points, a non-finite value) is an error before any sample is taken.
 
 use super::circular::{Sample, Turn, trace_csv};
+use super::table::{
+    axis_values_record, number, parse_axis_values_record, parse_vector_record, setup_record,
+};
 use crate::machine::chain::{AxisKind, Chain};
 use crate::machine::error_motion::Directions;
 use crate::math::{CounterRng, Point3, Real, Vector3};
@@ -195,6 +198,78 @@ impl BallBarSetup {
         }
     }
 
+    /// The set-up as the trace file records it (see [`super::table::SETUP_MARKER`]):
+    /// `ballbar plane=XY centre=X:0.0,… radius_mm=100.0 turns=both overshoot_deg=180.0
+    /// points=360 tool_ball_mm=0.0,0.0,0.0 noise_um=0.5`, every number exact. The centre
+    /// ball's mounting error is not recorded: the user does not know it, and an
+    /// identification estimates it.
+    pub fn record(&self) -> String {
+        let t = self.tool_ball_mm;
+        format!(
+            "ballbar plane={} centre={} radius_mm={:?} turns={} overshoot_deg={:?} points={} tool_ball_mm={:?},{:?},{:?} noise_um={:?}",
+            self.plane.name(),
+            axis_values_record(&self.centre),
+            self.radius_mm,
+            match self.turns {
+                Turns::Ccw => "ccw",
+                Turns::Cw => "cw",
+                Turns::Both => "both",
+            },
+            self.overshoot_deg,
+            self.points,
+            t.x,
+            t.y,
+            t.z,
+            self.noise_um
+        )
+    }
+
+    /// The set-up a trace file records ([`BallBarSetup::record`]), the mounting error
+    /// zero: `None` without a record, or the record's line and what is wrong.
+    pub fn from_record(text: &str) -> Option<Result<BallBarSetup, (usize, String)>> {
+        let (line, pairs) = setup_record(text, "ballbar")?;
+        let parse = || -> Result<BallBarSetup, String> {
+            let mut s = BallBarSetup::new(Plane::Xy, AxisValues::default(), 0.0);
+            let (mut plane, mut radius) = (false, false);
+            for (k, v) in &pairs {
+                match k.as_str() {
+                    "plane" => {
+                        s.plane = Plane::from_name(v)
+                            .ok_or_else(|| format!("plane '{v}': expected XY, YZ or ZX"))?;
+                        plane = true;
+                    }
+                    "centre" => s.centre = parse_axis_values_record(v)?,
+                    "radius_mm" => {
+                        s.radius_mm = number(v, "radius_mm")?;
+                        radius = true;
+                    }
+                    "turns" => {
+                        s.turns = match v.as_str() {
+                            "ccw" => Turns::Ccw,
+                            "cw" => Turns::Cw,
+                            "both" => Turns::Both,
+                            _ => return Err(format!("turns '{v}': expected ccw, cw or both")),
+                        }
+                    }
+                    "overshoot_deg" => s.overshoot_deg = number(v, "overshoot_deg")?,
+                    "points" => {
+                        s.points = v
+                            .parse()
+                            .map_err(|_| format!("points '{v}' is not a count"))?
+                    }
+                    "tool_ball_mm" => s.tool_ball_mm = parse_vector_record(v, "tool_ball_mm")?,
+                    "noise_um" => s.noise_um = number(v, "noise_um")?,
+                    other => return Err(format!("unknown set-up key '{other}'")),
+                }
+            }
+            if !(plane && radius) {
+                return Err("the record needs plane and radius_mm".into());
+            }
+            Ok(s)
+        };
+        Some(parse().map_err(|m| (line, m)))
+    }
+
     /// One line describing the set-up on `chain` (for reports and the trace file).
     pub fn describe(&self, chain: &Chain) -> String {
         let centre: Vec<String> = chain
@@ -336,12 +411,17 @@ pub struct BallBarMeasurement {
     pub samples: Vec<Sample>,
     /// Where the centre ball is, in W (mm).
     pub centre_ball: Point3,
+    /// The set-up measured.
+    pub setup: BallBarSetup,
 }
 
 impl BallBarMeasurement {
-    /// The trace file (`circular`'s CSV) with `comments` as `#` lines above it.
+    /// The trace file (`circular`'s CSV) with `comments` as `#` lines above it, then the
+    /// set-up record ([`BallBarSetup::record`]).
     pub fn csv(&self, comments: &[String]) -> String {
-        trace_csv(&self.samples, comments)
+        let mut c = comments.to_vec();
+        c.push(format!("set-up: {}", self.setup.record()));
+        trace_csv(&self.samples, &c)
     }
 }
 
@@ -448,6 +528,7 @@ pub fn measure(chain: &Chain, setup: &BallBarSetup) -> Result<BallBarMeasurement
     Ok(BallBarMeasurement {
         samples,
         centre_ball,
+        setup: setup.clone(),
     })
 }
 

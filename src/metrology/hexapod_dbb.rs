@@ -242,6 +242,111 @@ impl DbbCircle {
     }
 }
 
+/// The circle a trace file's header records: its `#` line in [`DbbCircle::describe`]'s
+/// form, which `twinmill ballbar --out` writes (the centre to 0.1 mm, the rest as given).
+#[derive(Clone, Debug, PartialEq)]
+pub struct RecordedCircle {
+    /// 1-based line of the header line in the file.
+    pub line: usize,
+    /// The line as written (without the `#`).
+    pub text: String,
+    /// The table ball's nominal centre (mm, to 0.1 mm).
+    pub centre_mm: Vector3,
+    /// Bar length (mm).
+    pub radius_mm: Real,
+    /// The plane.
+    pub plane: DbbPlane,
+    /// Bar tilt (degrees).
+    pub tilt_deg: Real,
+    /// Platform orientation a, b, c (degrees).
+    pub orientation_deg: [Real; 3],
+    /// Swing (degrees).
+    pub swing_deg: Real,
+}
+
+impl RecordedCircle {
+    /// The first `#` line of `text` that describes a circle, or `None` (a trace from
+    /// another instrument's software records none).
+    pub fn from_header(text: &str) -> Option<RecordedCircle> {
+        text.lines().enumerate().find_map(|(i, l)| {
+            let body = l.trim().strip_prefix('#')?.trim();
+            Self::parse(body).map(|mut r| {
+                r.line = i + 1;
+                r
+            })
+        })
+    }
+
+    fn parse(body: &str) -> Option<RecordedCircle> {
+        // centre (x, y, z) mm, R r mm, P plane, tilt t°, platform a A° b B° c C°, swing S°
+        let num = |t: &str| t.trim().parse::<Real>().ok().filter(|v| v.is_finite());
+        let (centre, rest) = body.strip_prefix("centre (")?.split_once(") mm, R ")?;
+        let c: Vec<Real> = centre.split(',').map(num).collect::<Option<_>>()?;
+        let [x, y, z] = c[..] else { return None };
+        let (r, rest) = rest.split_once(" mm, ")?;
+        let (plane, rest) = rest.split_once(" plane, tilt ")?;
+        let (tilt, rest) = rest.split_once("°, platform a ")?;
+        let (a, rest) = rest.split_once("° b ")?;
+        let (b, rest) = rest.split_once("° c ")?;
+        let (cc, rest) = rest.split_once("°, swing ")?;
+        let swing = rest.strip_suffix('°')?;
+        Some(RecordedCircle {
+            line: 0,
+            text: body.to_string(),
+            centre_mm: Vector3::new(x, y, z),
+            radius_mm: num(r)?,
+            plane: DbbPlane::from_name(plane.trim())?,
+            tilt_deg: num(tilt)?,
+            orientation_deg: [num(a)?, num(b)?, num(cc)?],
+            swing_deg: num(swing)?,
+        })
+    }
+
+    /// How the recorded circle differs from `circle`, in words (empty: it is that circle).
+    /// The centre is compared to the 0.1 mm it is written to, the rest to 1e-9.
+    pub fn differences(&self, circle: &DbbCircle) -> Vec<String> {
+        let mut out = Vec::new();
+        let same = |a: Real, b: Real| (a - b).abs() <= 1e-9 * (1.0 + b.abs());
+        if (self.centre_mm - circle.centre_mm)
+            .iter()
+            .any(|d| d.abs() > 0.05 + 1e-9)
+        {
+            let c = circle.centre_mm;
+            out.push(format!(
+                "centre ({:.1}, {:.1}, {:.1}) mm, not ({:.1}, {:.1}, {:.1})",
+                self.centre_mm.x, self.centre_mm.y, self.centre_mm.z, c.x, c.y, c.z
+            ));
+        }
+        if !same(self.radius_mm, circle.radius_mm) {
+            out.push(format!("R {} mm, not {}", self.radius_mm, circle.radius_mm));
+        }
+        if self.plane != circle.plane {
+            out.push(format!(
+                "{} plane, not {}",
+                self.plane.name(),
+                circle.plane.name()
+            ));
+        }
+        if !same(self.tilt_deg, circle.tilt_deg) {
+            out.push(format!("tilt {}°, not {}°", self.tilt_deg, circle.tilt_deg));
+        }
+        let (o, p) = (self.orientation_deg, circle.orientation_deg);
+        if !(0..3).all(|k| same(o[k], p[k])) {
+            out.push(format!(
+                "platform a {}° b {}° c {}°, not a {}° b {}° c {}°",
+                o[0], o[1], o[2], p[0], p[1], p[2]
+            ));
+        }
+        if !same(self.swing_deg, circle.swing_deg) {
+            out.push(format!(
+                "swing {}°, not {}°",
+                self.swing_deg, circle.swing_deg
+            ));
+        }
+        out
+    }
+}
+
 impl DbbInstrument {
     /// Checks the mounting error and the noise.
     pub fn validate(&self) -> Result<(), DbbError> {

@@ -42,6 +42,9 @@
 //! a non-finite value) is an error before any reading is taken.
 
 use super::positioning::{Direction as Approach, Reading, readings_csv};
+use super::table::{
+    axis_values_record, number, parse_axis_values_record, parse_vector_record, setup_record,
+};
 use crate::machine::chain::{AxisKind, Chain};
 use crate::machine::error_motion::{Direction, Directions};
 use crate::math::{CounterRng, Point3, Real, UnitVector3, Vector3};
@@ -220,6 +223,71 @@ impl LaserSetup {
         )
     }
 
+    /// The set-up as the readings file records it (see [`super::table::SETUP_MARKER`]):
+    /// `laser axis=X runs=5 overshoot_mm=5.0 held=X:0.0,… abbe_mm=0.0,0.0,0.0
+    /// noise_um=0.5 drift_um_per_run=0.0`, every number exact. The targets are the
+    /// readings' own.
+    pub fn record(&self) -> String {
+        let h = self.abbe_offset_mm;
+        format!(
+            "laser axis={} runs={} overshoot_mm={:?} held={} abbe_mm={:?},{:?},{:?} noise_um={:?} drift_um_per_run={:?}",
+            self.axis.as_char(),
+            self.runs,
+            self.overshoot_mm,
+            axis_values_record(&self.held),
+            h.x,
+            h.y,
+            h.z,
+            self.noise_um,
+            self.drift_um_per_run
+        )
+    }
+
+    /// The set-up a readings file records ([`LaserSetup::record`]) with the targets of
+    /// its readings: `None` without a record, or the record's line and what is wrong.
+    pub fn from_record(
+        text: &str,
+        readings: &[Reading],
+    ) -> Option<Result<LaserSetup, (usize, String)>> {
+        let (line, pairs) = setup_record(text, "laser")?;
+        let parse = || -> Result<LaserSetup, String> {
+            let mut targets: Vec<Real> = readings.iter().map(|r| r.target_mm).collect();
+            targets.sort_by(Real::total_cmp);
+            targets.dedup();
+            let mut s =
+                LaserSetup::new(AxisLetter::X, Targets::List(targets), AxisValues::default());
+            let mut axis = None;
+            for (k, v) in &pairs {
+                match k.as_str() {
+                    "axis" => {
+                        let mut c = v.chars();
+                        axis = match (c.next(), c.next()) {
+                            (Some(c), None) => AxisLetter::from_char(c),
+                            _ => None,
+                        };
+                        s.axis = axis.ok_or_else(|| format!("axis '{v}' is not an axis letter"))?;
+                    }
+                    "runs" => {
+                        s.runs = v
+                            .parse()
+                            .map_err(|_| format!("runs '{v}' is not a count"))?
+                    }
+                    "overshoot_mm" => s.overshoot_mm = number(v, "overshoot_mm")?,
+                    "held" => s.held = parse_axis_values_record(v)?,
+                    "abbe_mm" => s.abbe_offset_mm = parse_vector_record(v, "abbe_mm")?,
+                    "noise_um" => s.noise_um = number(v, "noise_um")?,
+                    "drift_um_per_run" => s.drift_um_per_run = number(v, "drift_um_per_run")?,
+                    other => return Err(format!("unknown set-up key '{other}'")),
+                }
+            }
+            if axis.is_none() {
+                return Err("the record names no axis".into());
+            }
+            Ok(s)
+        };
+        Some(parse().map_err(|m| (line, m)))
+    }
+
     /// Checks the set-up against `chain`; the targets in ascending order.
     fn validate(&self, chain: &Chain) -> Result<Vec<Real>, LaserError> {
         let letters: Vec<String> = chain
@@ -306,12 +374,17 @@ pub struct LaserMeasurement {
     /// Where the set-up falls short of ISO 230-2 (fewer than 5 runs, fewer than 5 targets
     /// per metre); empty when it conforms.
     pub notes: Vec<String>,
+    /// The set-up measured.
+    pub setup: LaserSetup,
 }
 
 impl LaserMeasurement {
-    /// The readings file (`positioning`'s long CSV) with `comments` as `#` lines above it.
+    /// The readings file (`positioning`'s long CSV) with `comments` as `#` lines above it,
+    /// then the set-up record ([`LaserSetup::record`]).
     pub fn csv(&self, comments: &[String]) -> String {
-        readings_csv(&self.readings, comments)
+        let mut c = comments.to_vec();
+        c.push(format!("set-up: {}", self.setup.record()));
+        readings_csv(&self.readings, &c)
     }
 }
 
@@ -384,6 +457,7 @@ pub fn measure(chain: &Chain, setup: &LaserSetup) -> Result<LaserMeasurement, La
         targets_mm: targets,
         beam,
         notes,
+        setup: setup.clone(),
     })
 }
 

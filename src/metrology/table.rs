@@ -92,6 +92,68 @@ pub fn number(s: &str, what: &str) -> Result<Real, String> {
     }
 }
 
+/// The marker of a set-up record: a `#` line `# set-up: <instrument> key=value …` that a
+/// twin's instrument writes above its readings, so an identification can model the test
+/// from the file alone (the comment lines are skipped by every reader of the data).
+pub const SETUP_MARKER: &str = "# set-up:";
+
+/// The set-up record of `instrument` in `text`: its 1-based line and its `key=value`
+/// pairs in order; `None` when the file has none (a real instrument's export).
+pub fn setup_record(text: &str, instrument: &str) -> Option<(usize, Vec<(String, String)>)> {
+    text.lines().enumerate().find_map(|(k, l)| {
+        let rest = l.trim().strip_prefix(SETUP_MARKER)?.trim();
+        let mut words = rest.split_whitespace();
+        (words.next()? == instrument).then(|| {
+            let pairs = words
+                .map(|w| match w.split_once('=') {
+                    Some((a, b)) => (a.to_string(), b.to_string()),
+                    None => (w.to_string(), String::new()),
+                })
+                .collect();
+            (k + 1, pairs)
+        })
+    })
+}
+
+/// Axis values as a record writes them: `X:0.0,Y:0.0,…` (every axis, exact).
+pub fn axis_values_record(v: &crate::nc::AxisValues) -> String {
+    crate::nc::AxisLetter::ALL
+        .iter()
+        .map(|a| format!("{}:{:?}", a.as_char(), v.get(*a)))
+        .collect::<Vec<_>>()
+        .join(",")
+}
+
+/// Reads [`axis_values_record`]'s form.
+pub fn parse_axis_values_record(s: &str) -> Result<crate::nc::AxisValues, String> {
+    let mut v = crate::nc::AxisValues::default();
+    for part in s.split(',') {
+        let (a, x) = part
+            .split_once(':')
+            .ok_or_else(|| format!("'{part}' is not AXIS:VALUE"))?;
+        let mut c = a.chars();
+        let letter = match (c.next(), c.next()) {
+            (Some(c), None) => crate::nc::AxisLetter::from_char(c),
+            _ => None,
+        }
+        .ok_or_else(|| format!("'{a}' is not an axis letter"))?;
+        v.set(letter, number(x, a)?);
+    }
+    Ok(v)
+}
+
+/// Reads three comma-separated numbers (`0.0,0.0,30.0`).
+pub fn parse_vector_record(s: &str, what: &str) -> Result<crate::math::Vector3, String> {
+    let v: Vec<Real> = s
+        .split(',')
+        .map(|x| number(x, what))
+        .collect::<Result<_, _>>()?;
+    match v[..] {
+        [a, b, c] => Ok(crate::math::Vector3::new(a, b, c)),
+        _ => Err(format!("{what}: three numbers expected, got '{s}'")),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

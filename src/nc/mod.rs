@@ -133,7 +133,14 @@ pub struct InterpOptions {
     pub start: AxisValues,
     /// Stop with an error after this many executed lines (endless loops).
     pub max_blocks: u64,
+    /// Stop with an error after this many executed lines in a row that move the machine
+    /// nowhere (endless loops without motion: `o100 while [1]`, `M98 L100000000`).
+    pub max_idle_blocks: u64,
 }
+
+/// Default [`InterpOptions::max_idle_blocks`]: a million lines without motion, about half a
+/// second of interpretation; no part program computes that long between two moves.
+pub const DEFAULT_MAX_IDLE_BLOCKS: u64 = 1_000_000;
 
 impl Default for InterpOptions {
     fn default() -> Self {
@@ -146,6 +153,7 @@ impl Default for InterpOptions {
             fanuc_subs: true,
             start: AxisValues::default(),
             max_blocks: 100_000_000,
+            max_idle_blocks: DEFAULT_MAX_IDLE_BLOCKS,
         }
     }
 }

@@ -301,6 +301,7 @@ pub fn correct(
     }
     header.push("each block names its source line, subdivided moves also their part k/n".into());
     let report = CorrectReport {
+        warning: None,
         scene: scene.name.clone(),
         program: program.path.display().to_string(),
         corrected_program: file,

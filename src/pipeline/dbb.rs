@@ -6,8 +6,8 @@
 use super::hexapod::HexapodCommandError;
 use crate::calibration::hexapod_calibrate::{
     CircleReadings, DEFAULT_POINTS, HexapodCalibration, Plan, PoseErrors, Procedure,
-    TableCalibration, WORK, WorkTime, calibrate, calibrated_model, default_plan, pose_errors,
-    true_deviations, work_time,
+    TableCalibration, WORK, WorkTime, calibrate, calibrated_model, default_plan, measured_model,
+    pose_errors, true_deviations, work_time,
 };
 use crate::calibration::hexapod_design::{CircleDesign, design};
 use crate::machine::hexapod::{Hexapod, ParameterId};
@@ -16,7 +16,7 @@ use crate::math::{CounterRng, Real, Vector3};
 use crate::metrology::ballbar::Turns;
 use crate::metrology::circular::{CircularFigures, CircularOptions, evaluate};
 use crate::metrology::hexapod_dbb::DbbPlane;
-use crate::metrology::hexapod_dbb::{DbbCircle, DbbInstrument, measure};
+use crate::metrology::hexapod_dbb::{DbbCircle, DbbInstrument, RecordedCircle, measure};
 use crate::report::plots::polar_plot;
 use crate::scene::HexapodScene;
 use crate::scene::{SceneError, line_col, read_text};
@@ -166,7 +166,7 @@ pub fn calibration_run(
             commands: m.commands,
         });
     }
-    let cal = calibrate(
+    let mut cal = calibrate(
         &scene.nominal,
         actual,
         plan,
@@ -174,6 +174,9 @@ pub fn calibration_run(
         CALIBRATION_NOISE_MM,
     )
     .map_err(|e| error(scene, e.to_string()))?;
+    cal.fit
+        .enforce("calibrate", scene.accept_misfit)
+        .map_err(|e| error(scene, e.to_string()))?;
     let truth = true_deviations(&scene.nominal, actual, procedure);
     let parameters: Vec<ParameterRow> = cal
         .estimates
@@ -268,6 +271,10 @@ pub struct TrialSummary {
 /// `twinmill calibrate`'s outcome.
 #[derive(Clone, Debug, Serialize)]
 pub struct CalibrateOutcome {
+    /// Set when the lengths do not fit the model at the stated noise and the misfit was
+    /// accepted on request: the outcome's first word.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub warning: Option<String>,
     /// The procedure.
     pub procedure: Procedure,
     /// The calibration of the scene's machine.
@@ -388,8 +395,13 @@ pub fn calibrate_scene(
     } else {
         None
     };
-    let summary = calibration_summary(&scene.name, procedure, &run, &work, trials.as_ref());
+    let warning = run.calibration.fit.accepted_line();
+    let mut summary = calibration_summary(&scene.name, procedure, &run, &work, trials.as_ref());
+    if let Some(w) = &warning {
+        summary.insert_str(0, &format!("twinmill: {w}\n"));
+    }
     Ok(CalibrateOutcome {
+        warning,
         procedure,
         run,
         work,
@@ -485,12 +497,14 @@ fn calibration_summary(
     for w in &id.weak {
         let _ = writeln!(t, "  weak          {w}");
     }
+    let _ = writeln!(t, "  rank          {}", id.margin.describe());
     let _ = writeln!(
         t,
         "  residual      rms {:.3} µm after {} Gauss–Newton steps",
         c.residual_rms_mm * 1e3,
         c.iterations
     );
+    let _ = writeln!(t, "  fit           {}", c.fit.describe());
     let _ = writeln!(t, "  parameter     injected mm  identified mm   σ µm");
     for p in &run.parameters {
         let _ = writeln!(
@@ -652,12 +666,8 @@ pub fn parse_plan(text: &str, path: &Path) -> Result<Plan, SceneError> {
             message,
         }
     };
-    let file: PlanFile = toml::from_str(text).map_err(|e| {
-        err(
-            e.span().map_or(0, |s| s.start),
-            e.message().trim().to_string(),
-        )
-    })?;
+    let file: PlanFile =
+        toml::from_str(text).map_err(|e| crate::scene::toml_error(text, path, &e))?;
     let procedure = Procedure::from_name(file.procedure.get_ref()).ok_or_else(|| {
         err(
             file.procedure.span().start,
@@ -838,6 +848,10 @@ fn design_summary(
 /// corrected parameters as a scene fragment, and the summary.
 #[derive(Clone, Debug, Serialize)]
 pub struct MeasuredCalibrationOutcome {
+    /// Set when the lengths do not fit the model at the stated noise and the misfit was
+    /// accepted on request: the outcome's first word.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub warning: Option<String>,
     /// The procedure.
     pub procedure: Procedure,
     /// The trace file read for each circle, in the plan's order.
@@ -847,7 +861,10 @@ pub struct MeasuredCalibrationOutcome {
     /// How far the identified machine's tool is from where the nominal controller puts it
     /// (largest level positioning and pivot errors over the workspace): the error the
     /// calibration removes, if the identified machine is the real one. Jig-free with the
-    /// base frame placed by the tool table calibration.
+    /// base frame — which lengths cannot see — placed so that the tool at the table
+    /// calibration's reference corners is where the nominal controller puts it, on
+    /// average ([`measured_model`]): the readings alone decide it, never the scene's
+    /// simulated machine.
     pub predicted_correction: PoseErrors,
     /// The corrected parameters as a `[deviations]` fragment of the hexapod scene (TOML).
     pub fragment: String,
@@ -859,8 +876,12 @@ pub struct MeasuredCalibrationOutcome {
 /// of the plan (`plan`, whose procedure must agree, or `procedure`'s fixed plan), in its
 /// order, in the format `twinmill ballbar --out` writes (`circular`'s
 /// CSV: turn, angle, deviation = bar length − radius). Each file must hold the circle's
-/// samples in the plan's order (its turns and angles, to 1e-6 rad); the platform joints are
-/// taken from the scene (known from a CMM, as in seed 000).
+/// samples in the plan's order (its turns and angles, to 1e-6 rad), and a file whose header
+/// records its circle (as `ballbar --out` writes it) must record the plan's circle; the
+/// platform joints are taken from the scene (known from a CMM, as in seed 000), nothing else
+/// of the scene's machine is used. The identification is refused when the lengths cannot
+/// come from the identified machine at the DBB's σ ([`crate::calibration::goodness`]),
+/// naming the files out of line, unless the scene accepts misfits.
 pub fn calibrate_measured(
     scene: &HexapodScene,
     procedure: Procedure,
@@ -884,6 +905,20 @@ pub fn calibrate_measured(
     let mut readings = Vec::with_capacity(files.len());
     for (j, ((path, text), c)) in files.iter().zip(&plan.circles).enumerate() {
         let at = path.display();
+        if let Some(rec) = RecordedCircle::from_header(text) {
+            let diffs = rec.differences(c);
+            if !diffs.is_empty() {
+                return Err(error(
+                    scene,
+                    format!(
+                        "{at}:{}: the trace's header records another circle than circle {} of the plan: {}",
+                        rec.line,
+                        j + 1,
+                        diffs.join("; ")
+                    ),
+                ));
+            }
+        }
         let samples = parse_trace(text, path).map_err(|e| error(scene, e.to_string()))?;
         let angles = c.angles();
         if samples.len() != angles.len() {
@@ -925,7 +960,8 @@ pub fn calibrate_measured(
             commands: angles.iter().map(|&(_, t)| c.command(t)).collect(),
         });
     }
-    let cal = calibrate(
+    // The platform joints (the CMM's) are the scene's; nothing else of its machine is used.
+    let mut cal = calibrate(
         &scene.nominal,
         &scene.actual,
         plan,
@@ -933,16 +969,18 @@ pub fn calibrate_measured(
         CALIBRATION_NOISE_MM,
     )
     .map_err(|e| error(scene, e.to_string()))?;
+    cal.fit.rename_parts(|name| {
+        let k = name.strip_prefix("circle ")?.parse::<usize>().ok()?;
+        let (path, _) = files.get(k.checked_sub(1)?)?;
+        Some(format!("circle {k} ({})", path.display()))
+    });
+    cal.fit
+        .enforce("calibrate --readings", scene.accept_misfit)
+        .map_err(|e| error(scene, e.to_string()))?;
     // The identified machine stands in for the real one: its tool against the nominal
     // controller's is the correction the calibration makes.
-    let (identified, _) = calibrated_model(
-        &cal,
-        &scene.actual,
-        &scene.actual,
-        &ws,
-        TableCalibration::Tool,
-    )
-    .map_err(|e| error(scene, e.to_string()))?;
+    let (identified, _) = measured_model(&cal, &scene.actual, &scene.nominal, &ws)
+        .map_err(|e| error(scene, e.to_string()))?;
     let predicted_correction = pose_errors(&scene.nominal, &identified, &ws)
         .map_err(|e| error(scene, format!("pose errors of the identified machine: {e}")))?;
     let mut fragment = format!(
@@ -973,7 +1011,11 @@ pub fn calibrate_measured(
             e.name, e.value_mm, e.sigma_mm
         );
     }
-    let mut summary = format!(
+    let warning = cal.fit.accepted_line();
+    let mut summary = warning
+        .as_ref()
+        .map_or(String::new(), |w| format!("twinmill: {w}\n"));
+    summary += &format!(
         "twinmill: calibrate {} from {} measured circles ({})\n  unknowns      {}, rank {}, condition {:.3e}\n  determined    {} of the {} parameters\n",
         scene.name,
         plan.circles.len(),
@@ -989,10 +1031,16 @@ pub fn calibrate_measured(
     }
     let _ = writeln!(
         summary,
+        "  rank          {}",
+        cal.identifiability.margin.describe()
+    );
+    let _ = writeln!(
+        summary,
         "  residual      rms {:.3} µm after {} Gauss–Newton steps",
         cal.residual_rms_mm * 1e3,
         cal.iterations
     );
+    let _ = writeln!(summary, "  fit           {}", cal.fit.describe());
     for e in &cal.estimates {
         let _ = writeln!(
             summary,
@@ -1008,6 +1056,7 @@ pub fn calibrate_measured(
         predicted_correction.position_mm, predicted_correction.pivot_mm
     );
     Ok(MeasuredCalibrationOutcome {
+        warning,
         procedure: plan.procedure,
         files: files.iter().map(|(p, _)| p.display().to_string()).collect(),
         calibration: cal,

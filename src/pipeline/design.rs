@@ -128,6 +128,7 @@ pub fn design_scene(
             .map(|f| (f.name.clone(), kind_name(f.kind).to_string()))
             .collect(),
         singular_values: i.singular_values.clone(),
+        margin: i.margin,
         condition_number: i.condition_number,
         identified: i.identified.clone(),
         determined_combinations: i

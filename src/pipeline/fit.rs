@@ -99,7 +99,7 @@ pub fn fit_cloud(
         circle: None,
     };
     // RANSAC first on an unselected cloud: the shape is somewhere in it.
-    let candidates = |found: Result<Vec<u32>, crate::metrology::segment::SegmentError>| -> Result<Vec<Point3>, PipelineError> {
+    let candidates = |found: Result<Vec<u32>, SearchError>| -> Result<Vec<Point3>, PipelineError> {
         let idx = found.map_err(|e| err(e.to_string()))?;
         Ok(idx.iter().map(|&i| selected[i as usize]).collect())
     };
@@ -132,9 +132,11 @@ pub fn fit_cloud(
         }
         Shape::Sphere => {
             let pts = match req.selection {
-                Selection::All => {
-                    candidates(ransac_sphere(&selected, &req.ransac).map(|m| m.inliers))?
-                }
+                Selection::All => candidates(
+                    ransac_sphere(&selected, &req.ransac)
+                        .map(|m| m.inliers)
+                        .map_err(|e| nothing_found(e, "sphere", &selected, &req.ransac)),
+                )?,
                 _ => selected.clone(),
             };
             let fit = if req.robust {
@@ -148,6 +150,7 @@ pub fn fit_cloud(
             let normals = estimate_normals(&selected, req.normal_neighbours, None)
                 .map_err(|e| err(e.to_string()))?;
             let found = ransac_cylinder(&selected, &normals, &req.ransac)
+                .map_err(|e| nothing_found(e, "cylinder", &selected, &req.ransac))
                 .map_err(|e| err(e.to_string()))?;
             let axis = found.model.axis;
             let pts = candidates(Ok(found.inliers))?;
@@ -168,4 +171,58 @@ pub fn fit_cloud(
         }
     }
     Ok(report)
+}
+
+/// Why a RANSAC search failed, in words that say what the points are and what the search
+/// needed (`SegmentError::NothingFound` alone says nothing of either).
+#[derive(Debug)]
+struct SearchError(String);
+
+impl std::fmt::Display for SearchError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+fn nothing_found(
+    e: crate::metrology::segment::SegmentError,
+    shape: &str,
+    points: &[Point3],
+    opts: &crate::metrology::segment::RansacOptions,
+) -> SearchError {
+    use crate::metrology::segment::SegmentError;
+    if e != SegmentError::NothingFound {
+        return SearchError(e.to_string());
+    }
+    let n = points.len();
+    // RMS distance from the points' best plane: the smallest principal spread
+    let thickness = if n >= 3 {
+        let mean = points
+            .iter()
+            .fold(crate::math::Vector3::zeros(), |a, p| a + p.coords)
+            / n as Real;
+        let cov = points
+            .iter()
+            .fold(nalgebra::Matrix3::<Real>::zeros(), |a, p| {
+                let d = p.coords - mean;
+                a + d * d.transpose()
+            })
+            / n as Real;
+        cov.symmetric_eigenvalues().min().max(0.0).sqrt()
+    } else {
+        0.0
+    };
+    if n >= 3 && thickness <= opts.distance_mm {
+        SearchError(format!(
+            "no {shape} found: the {n} points lie in one plane (RMS {thickness:.3e} mm off it, \
+             within the {} mm tolerance), expected points on a {shape}, off any one plane",
+            opts.distance_mm
+        ))
+    } else {
+        SearchError(format!(
+            "no {shape} found: none holds {} of the {n} points within {} mm (--distance), \
+             expected points on a {shape}",
+            opts.min_inliers, opts.distance_mm
+        ))
+    }
 }

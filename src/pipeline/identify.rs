@@ -2,12 +2,13 @@
 //! faces, in a simulated scan or a given cloud, with the model-correction loop and
 //! Monte-Carlo trials over scanner noise.
 
-use super::{PipelineError, machine_part};
+use super::{PipelineError, machine_part, scan_noise};
 use crate::calibration::calibrate::{
-    CalibrateError, Feature, Identification, Model, PlaneFeature, Registration, plane_feature,
-    predicted_plane, select_plane_face,
+    CalibrateError, Feature, Identification, Model, PlaneFeature, Registration, face_rms_parts,
+    plane_feature, predicted_plane, select_plane_face,
 };
 use crate::calibration::design::kind_name;
+use crate::calibration::goodness::ScanNoise;
 use crate::calibration::identify::check_cut;
 use crate::cutting::stock::TriDexel;
 use crate::machine::chain::{Chain, DeviationId};
@@ -159,6 +160,9 @@ fn face_match(
 /// repeat, re-identifying from the updated twin, until every face agrees within
 /// `tolerance_mm` or what its scan noise allows (a twin cannot match noise better than the
 /// noise).
+///
+/// Each round's goodness of fit accounts for the views `scan` merged the cloud from
+/// ([`crate::calibration::calibrate::feature_fit`]); the caller judges the last.
 pub fn correction_loop(
     model: &Chain,
     ids: &[DeviationId],
@@ -166,6 +170,7 @@ pub fn correction_loop(
     features: &[Feature],
     registration: Registration,
     tolerance_mm: Real,
+    scan: Option<&ScanNoise>,
 ) -> Result<(Identification, Chain, Vec<LoopRound>, bool), CalibrateError> {
     let mut twin = model.clone();
     let mut rounds = Vec::new();
@@ -180,7 +185,7 @@ pub fn correction_loop(
             features,
             registration,
         };
-        let ident = crate::calibration::calibrate::identify(&m)?;
+        let ident = crate::calibration::calibrate::identify_with(&m, scan)?;
         for (id, v) in ids.iter().zip(&ident.solution) {
             twin.set_deviation(*id, *v);
         }
@@ -284,15 +289,33 @@ pub fn identify_scene(
     lap("scan", &mut timings);
     let features = extract_features(scene, program, &cloud.points, stock.as_ref())?;
     lap("fit", &mut timings);
-    let (ident, twin, rounds, converged) = correction_loop(
+    // The scanner's account of its points: stated by the scene's [scanner] (for a given
+    // cloud too, if the scene has one); without it the faces are judged against each other
+    // only, at their fits' own σ.
+    let noise = scene
+        .scanner
+        .as_ref()
+        .map(|s| scan_noise(s, &scene.stock_box));
+    let (mut ident, twin, rounds, converged) = correction_loop(
         scene.model(),
         &ids,
         &scene.tool,
         &features,
         scene.registration,
         scene.loop_tolerance_mm,
+        noise.as_ref(),
     )
     .map_err(cal)?;
+    if let Some(n) = &noise {
+        ident.fit.add_parts(face_rms_parts(&features, n));
+    }
+    ident
+        .fit
+        .enforce("identify", scene.accept_misfit)
+        .map_err(|source| PipelineError::Misfit {
+            path: spath.clone(),
+            source,
+        })?;
     lap("identify", &mut timings);
     // Monte Carlo over scanner noise: rescan with other seeds, identify from the model.
     let trials = monte_carlo.unwrap_or(scene.monte_carlo_trials);
@@ -348,6 +371,7 @@ pub fn identify_scene(
     };
     let id = &ident.identifiability;
     let report = IdentifyReport {
+        warning: ident.fit.accepted_line(),
         scene: scene.name.clone(),
         chain: scene.chain().to_string(),
         cloud: source,
@@ -363,6 +387,7 @@ pub fn identify_scene(
             .map(|(f, (_, r))| feature_report(f, *r))
             .collect(),
         singular_values: id.singular_values.clone(),
+        margin: id.margin,
         condition_number: id.condition_number,
         condition_number_determined: id.condition_number_determined,
         identified: ident.parameters.iter().map(estimate).collect(),
@@ -388,6 +413,7 @@ pub fn identify_scene(
             chi2: ident.solver.chi2,
             dof: ident.solver.dof,
         },
+        fit: ident.fit.clone(),
         rounds,
         converged,
         monte_carlo_trials: mc_trials,

@@ -125,6 +125,7 @@ pub fn rotary_page(out: &super::rotary::RotaryOutcome, summary: &str) -> String 
         ));
         let threshold = 1.0 / crate::calibration::calibrate::DETERMINED_FRACTION;
         let mut sv = page::singular_value_rows(&id.singular_values, threshold);
+        sv.push(page::margin_row(&id.margin));
         sv.push(vec![
             "χ²".into(),
             format!("{:.6e}", id.chi2),
@@ -148,6 +149,7 @@ pub fn rotary_page(out: &super::rotary::RotaryOutcome, summary: &str) -> String 
                 .map(|(k, c)| vec![(*c).into(), format!("{:+.6}", p[k]), format!("{:.3e}", sp[k])])
                 .collect(),
         });
+        sections.push(page::fit_section(&id.fit));
         plots.extend(page::spectrum_plot(
             &id.singular_values,
             Some(threshold),
@@ -201,6 +203,7 @@ pub fn calibrate_page(scene: &str, o: &super::dbb::CalibrateOutcome) -> String {
         columns: vec!["figure".into(), "value".into()],
         rows: vec![
             vec!["rank".into(), id.rank.to_string()],
+            vec!["rank margin".into(), id.margin.describe()],
             vec![
                 "parameters determined".into(),
                 format!("{} of 24", id.parameters_determined),
@@ -224,6 +227,7 @@ pub fn calibrate_page(scene: &str, o: &super::dbb::CalibrateOutcome) -> String {
             vec!["Gauss–Newton iterations".into(), c.iterations.to_string()],
         ],
     }];
+    sections.push(page::fit_section(&c.fit));
     if id.gauge.is_empty() {
         sections.push(Section {
             heading: "Not determined".into(),

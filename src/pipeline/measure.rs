@@ -142,6 +142,9 @@ pub struct MeasureRequest {
     pub ballbar: BallbarOptions,
     /// The rotary tests' options.
     pub rotary: RotaryOptions,
+    /// Keep an identification whose residuals the stated noise cannot explain (its report
+    /// then says so first) instead of refusing it.
+    pub accept_misfit: bool,
 }
 
 /// What an instrument measured, evaluated and ready to write (in this order: the readings,
@@ -224,6 +227,10 @@ pub fn measure(r: &MeasureRequest) -> Result<Measured, String> {
         }
         Err(e) => return Err(e.to_string()),
         Ok(scene) => {
+            let scene = Scene {
+                accept_misfit: r.accept_misfit,
+                ..scene
+            };
             scene.require("measure", &[]).map_err(|e| e.to_string())?;
             refuse_given(
                 &[
@@ -516,6 +523,9 @@ fn measure_rotary(scene: &Scene, r: &MeasureRequest) -> Result<Reading, String> 
         )
     });
     let mut s = String::new();
+    if let Some(w) = &rep.warning {
+        let _ = writeln!(s, "{w}");
+    }
     let _ = writeln!(s, "scene         {}", rep.scene);
     let _ = writeln!(
         s,
@@ -579,9 +589,13 @@ fn measure_rotary(scene: &Scene, r: &MeasureRequest) -> Result<Reading, String> 
         }
         let _ = writeln!(
             s,
-            "fit           chi² {:.1} for {} degrees of freedom; the point at ({:.4}, {:.4}, {:.4}) mm",
-            id.chi2, id.dof, id.fixed_point_mm[0], id.fixed_point_mm[1], id.fixed_point_mm[2]
+            "fit           {}; the point at ({:.4}, {:.4}, {:.4}) mm",
+            id.fit.describe(),
+            id.fixed_point_mm[0],
+            id.fixed_point_mm[1],
+            id.fixed_point_mm[2]
         );
+        let _ = writeln!(s, "rank          {}", id.margin.describe());
     }
     Ok(Reading {
         text: out.trace_csv.clone(),

@@ -6,7 +6,8 @@
 //! `report.html` and `part.png` need (the reference part, the display mesh, the 3-D view),
 //! [`instrument_pages`] the pages of the instrument commands; [`evaluate`] the standards'
 //! evaluations of measurement files, [`measure`] the virtual instruments on a scene's machine
-//! (serial or hexapod) as plain requests and outcomes;
+//! (serial or hexapod) as plain requests and outcomes, [`measurements`] the identification
+//! from several instruments' files;
 //! this file holds what they share: the stock, the sweep of the program through the deviated
 //! machine, and the errors.
 //!
@@ -26,6 +27,7 @@ pub mod dbb;
 pub mod instrument_pages;
 pub mod evaluate;
 pub mod measure;
+pub mod measurements;
 
 pub use correct::{CorrectOutcome, correct, identified_model};
 pub use design::{DesignOutcome, MAX_DESIGN_ROUNDS, design_scene};
@@ -40,12 +42,13 @@ pub use simulate::{Simulation, simulate};
 
 use crate::calibration::calibrate::CalibrateError;
 use crate::calibration::correct::CorrectError;
+use crate::calibration::goodness::{Misfit, ScanNoise};
 use crate::calibration::identify::IdentifyError;
 use crate::cutting::mesh::MeshError;
 use crate::cutting::stock::{StockError, TriDexel};
 use crate::cutting::sweep::{SweepError, SweepReport, sweep_program};
 use crate::math::Real;
-use crate::metrology::scan::ScanError;
+use crate::metrology::scan::{ScanError, ScannerConfig};
 use crate::nc::Program;
 use crate::progress::Progress;
 use crate::report::deviation_map::DeviationError;
@@ -163,6 +166,48 @@ pub enum PipelineError {
         /// What went wrong.
         message: String,
     },
+    /// The measurements cannot come from the model at the stated noise: the
+    /// identification is refused ([`crate::calibration::goodness`]).
+    #[error("{path}: {source}")]
+    Misfit {
+        /// Scene file.
+        path: String,
+        /// The statistic, its expected range and what is out of line.
+        source: Misfit,
+    },
+}
+
+/// What the scanner of `scanner` states about a cloud's points of faces within `stock`
+/// (see [`face_rms_check`](crate::calibration::goodness::face_rms_check)): its range noise,
+/// the views merged (the turntable's, or one), each view's registration error and the lever
+/// it turns over — the farthest corner of the stock from the view's target or the
+/// turntable's axis point.
+pub fn scan_noise(scanner: &ScannerConfig, stock: &crate::math::Aabb) -> ScanNoise {
+    let mut centres = vec![scanner.target];
+    if let Some(t) = &scanner.turntable {
+        centres.push(t.axis_point);
+    }
+    let mut lever: Real = 0.0;
+    for i in 0..8 {
+        let corner = crate::math::Point3::new(
+            if i & 1 == 0 { stock.min.x } else { stock.max.x },
+            if i & 2 == 0 { stock.min.y } else { stock.max.y },
+            if i & 4 == 0 { stock.min.z } else { stock.max.z },
+        );
+        for c in &centres {
+            lever = lever.max((corner - c).norm());
+        }
+    }
+    ScanNoise {
+        sigma_mm: scanner.noise_sigma_mm,
+        views: scanner
+            .turntable
+            .as_ref()
+            .map_or(1, |t| t.angles_deg.len().max(1)),
+        translation_sigma_mm: scanner.misregistration.translation_sigma_mm,
+        rotation_sigma_rad: scanner.misregistration.rotation_sigma_rad,
+        lever_mm: lever,
+    }
 }
 
 /// The part as the deviated machine cuts it.

@@ -14,6 +14,7 @@ use super::PipelineError;
 use crate::calibration::calibrate::{
     IsoTerm, Model, Registration, ball_features, identify as solve,
 };
+use crate::calibration::goodness::{FitCheck, RankMargin};
 use crate::cutting::tool::{Tool, ToolKind};
 use crate::machine::chain::Chain;
 use crate::math::{Point3, Real, Vector3};
@@ -92,6 +93,9 @@ pub struct LocationReport {
     pub no_data: Vec<String>,
     /// Singular values of the scaled, whitened Jacobian (descending).
     pub singular_values: Vec<Real>,
+    /// How clearly the determined subspace was decided: the gap between the last
+    /// determined and the first undetermined singular value.
+    pub margin: RankMargin,
     /// The table-side point as estimated (workpiece frame, mm) and its uncertainty.
     pub fixed_point_mm: [Real; 3],
     /// Standard uncertainty of each coordinate (mm).
@@ -100,11 +104,18 @@ pub struct LocationReport {
     pub chi2: Real,
     /// Degrees of freedom.
     pub dof: usize,
+    /// Goodness of fit: the ball centres' residuals at the instrument's stated σ, whole
+    /// and sample by sample.
+    pub fit: FitCheck,
 }
 
 /// The report of a rotary-axis test.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct RotaryReport {
+    /// Set when the measurements do not fit the model at the instrument's noise and the
+    /// misfit was accepted on request: the report's first word.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub warning: Option<String>,
     /// Scene name.
     pub scene: String,
     /// `ball-sensor` or `probe`.
@@ -168,6 +179,7 @@ pub fn rotary_test(scene: &Scene, req: &RotaryRequest) -> Result<RotaryOutcome, 
         Some(names) => Some(identify_location(scene, names, &samples, &req.setup).map_err(err)?),
     };
     let report = RotaryReport {
+        warning: identification.as_ref().and_then(|i| i.fit.accepted_line()),
         scene: scene.name.clone(),
         instrument: instrument.into(),
         samples: samples.len(),
@@ -208,7 +220,10 @@ fn identify_location(
         features: &features,
         registration: Registration::Workpiece,
     };
-    let r = solve(&model).map_err(|e| format!("identification: {e}"))?;
+    let mut r = solve(&model).map_err(|e| format!("identification: {e}"))?;
+    r.fit
+        .enforce("measure", scene.accept_misfit)
+        .map_err(|e| e.to_string())?;
     let injected = |n: &str| scene.injected().get(n).copied();
     let term = |e: &crate::calibration::calibrate::Estimate| TermReport {
         name: e.name.clone(),
@@ -233,10 +248,12 @@ fn identify_location(
             .collect(),
         no_data: ident.no_data.clone(),
         singular_values: ident.singular_values.clone(),
+        margin: ident.margin,
         fixed_point_mm: [p.x, p.y, p.z],
         fixed_point_sigma_mm: s,
         chi2: r.solver.chi2,
         dof: r.solver.dof,
+        fit: r.fit.clone(),
     })
 }
 

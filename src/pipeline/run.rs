@@ -4,7 +4,7 @@
 //! itself is made by [`super::pages::run_page`], so library callers that want only the
 //! figures do not pay for it) — and the scanner-effects study of `scan --study`.
 
-use super::{PipelineError, machine_part};
+use super::{PipelineError, machine_part, scan_noise};
 use crate::calibration::identify::{self, Face};
 use crate::cutting::stock::TriDexel;
 use crate::math::{Point3, Real};
@@ -136,6 +136,13 @@ pub fn run(
 
     let points = &scanned.cloud.points;
     let faces = extract_faces(scene, program, points, Some(&stock))?;
+    // A face that is not the one plane its cut makes refuses the run.
+    let mut fit = identify::faces_fit(&faces, &scan_noise(scanner, &scene.stock_box));
+    fit.enforce("run", scene.accept_misfit)
+        .map_err(|source| PipelineError::Misfit {
+            path: spath.clone(),
+            source,
+        })?;
     lap("fit", &mut timings);
 
     let id_err = |source| PipelineError::Identify {
@@ -244,6 +251,7 @@ pub fn run(
         not_identified.extend(names);
     }
     let report = Report {
+        warning: fit.accepted_line(),
         scene: scene.name.clone(),
         machine: scene.machine_name().to_string(),
         chain: scene.chain().to_string(),
@@ -261,6 +269,7 @@ pub fn run(
         not_identified,
         why_not_identified: ident.why_not.clone(),
         faces: faces.iter().zip(&scene.faces).map(|(f, s)| face_report(f, s.line)).collect(),
+        fit,
         solver: SolverReport {
             method: if ident.offset.is_some() && ident.angle_sum.is_none() {
                 "Newton on the exact chain (the step alone: the tilt sees no angle of the joint)"
@@ -269,6 +278,7 @@ pub fn run(
             }
             .into(),
             singular_values: ident.singular_values,
+            margin: ident.margin,
             evaluations: ident.solver.0,
             residual: ident.solver.1,
         },

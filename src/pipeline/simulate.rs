@@ -5,8 +5,10 @@
 
 use super::pages::{display_part, part_png, reference_part, view};
 use super::{PipelineError, make_stock, sweep_failed};
+use crate::cutting::adaptive::AdaptiveReport;
 use crate::cutting::collide::{CollisionReport, sweep_with_checks};
 use crate::cutting::mesh::TriMesh;
+use crate::cutting::stock::TriDexel;
 use crate::cutting::sweep::{Kinematics, sweep_program};
 use crate::math::Real;
 use crate::nc::Program;
@@ -74,49 +76,27 @@ pub fn simulate(
     let mut stock = make_stock(scene)?;
     let volume0 = stock.volume();
     timings.insert("stock".into(), clock.elapsed().as_secs_f64());
-    let clock = Instant::now();
-    // A hexapod scene has no holder or fixtures (refused on loading): its sweep runs
-    // without the collision checks, which drive a chain.
-    let checked = match &scene.machine {
-        Machine::Hexapod(h) => {
-            let sweep = sweep_program(
-                &mut stock,
-                Kinematics::Poses(&h.twin),
-                &scene.tool,
-                &program.moves,
-                &scene.sweep,
-                progress,
-            )
-            .map_err(sweep_failed(program, &path))?;
-            CollisionReport {
-                events: Vec::new(),
-                moves: sweep.moves,
-                sweep,
-                check_error_bound_mm: 0.0,
-            }
-        }
-        Machine::Serial(m) => sweep_with_checks(
-            &mut stock,
-            &m.chain,
-            &scene.tool,
-            scene.holder.as_ref(),
-            &scene.fixtures,
-            &program.moves,
-            &scene.sweep,
-            progress,
-        )
-        .map_err(sweep_failed(program, &path))?,
-    };
-    timings.insert("sweep".into(), clock.elapsed().as_secs_f64());
-    let clock = Instant::now();
-    let (mesh, mesh_report) = super::part_mesh(&stock, &path)?;
-    timings.insert("mesh".into(), clock.elapsed().as_secs_f64());
+    // The part the deviations are measured from (the program cut on the nominal machine,
+    // when there is no design model) is made beside the cut: the two sweeps are
+    // independent, and each alone leaves a core idle between the rays of a move.
+    let (cut, reference) = rayon::join(
+        || cut_part(scene, program, progress, &mut stock),
+        || {
+            let clock = Instant::now();
+            (reference_part(scene, &program.moves), clock.elapsed())
+        },
+    );
+    let (checked, [sweep_time, mesh_time], mesh, mesh_report) = cut?;
+    timings.insert("sweep".into(), sweep_time);
+    timings.insert("mesh".into(), mesh_time);
+    let (reference, reference_time) = (reference.0?, reference.1);
+    timings.insert("reference".into(), reference_time.as_secs_f64());
     let clock = Instant::now();
     let render_err = |source| PipelineError::Render {
         path: path.clone(),
         source,
     };
-    let shown = display_part(scene, &mesh, || reference_part(scene, &program.moves))?;
+    let shown = display_part(scene, &mesh, || Ok(reference))?;
     let part_png = part_png(scene, &shown)?;
     timings.insert("render".into(), clock.elapsed().as_secs_f64());
     let mut plots = Vec::new();
@@ -247,4 +227,53 @@ pub fn simulate(
         html,
         deviation_png,
     })
+}
+
+/// The program cut into `stock` on the scene's deviated machine (with the collision checks
+/// on a chain), the seconds of the sweep and the mesh, and the cut part's surface mesh.
+fn cut_part(
+    scene: &Scene,
+    program: &Program,
+    progress: &dyn Progress,
+    stock: &mut TriDexel,
+) -> Result<(CollisionReport, [Real; 2], TriMesh, AdaptiveReport), PipelineError> {
+    let path = scene.path.display().to_string();
+    let clock = Instant::now();
+    // A hexapod scene has no holder or fixtures (refused on loading): its sweep runs
+    // without the collision checks, which drive a chain.
+    let checked = match &scene.machine {
+        Machine::Hexapod(h) => {
+            let sweep = sweep_program(
+                stock,
+                Kinematics::Poses(&h.twin),
+                &scene.tool,
+                &program.moves,
+                &scene.sweep,
+                progress,
+            )
+            .map_err(sweep_failed(program, &path))?;
+            CollisionReport {
+                events: Vec::new(),
+                moves: sweep.moves,
+                sweep,
+                check_error_bound_mm: 0.0,
+            }
+        }
+        Machine::Serial(m) => sweep_with_checks(
+            stock,
+            &m.chain,
+            &scene.tool,
+            scene.holder.as_ref(),
+            &scene.fixtures,
+            &program.moves,
+            &scene.sweep,
+            progress,
+        )
+        .map_err(sweep_failed(program, &path))?,
+    };
+    let sweep_time = clock.elapsed().as_secs_f64();
+    let clock = Instant::now();
+    let (mesh, mesh_report) = super::part_mesh(stock, &path)?;
+    let mesh_time = clock.elapsed().as_secs_f64();
+    Ok((checked, [sweep_time, mesh_time], mesh, mesh_report))
 }

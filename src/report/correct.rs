@@ -46,6 +46,10 @@ pub struct UncorrectableReport {
 /// What `twinmill correct` writes to `<scene>-correct.json`.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct CorrectReport {
+    /// Set when the model corrected for was identified from data that do not fit it at the
+    /// stated noise and the misfit was accepted on request: the report's first word.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub warning: Option<String>,
     /// Scene name.
     pub scene: String,
     /// Source program file.
@@ -78,6 +82,9 @@ impl CorrectReport {
     /// The short human summary.
     pub fn summary(&self) -> String {
         let mut s = String::new();
+        if let Some(w) = &self.warning {
+            let _ = writeln!(s, "twinmill correct: {w}");
+        }
         let _ = writeln!(
             s,
             "twinmill correct: {} ({}) for accuracy {} mm",

@@ -17,6 +17,9 @@ pub struct DesignReport {
     pub faces: Vec<(String, String)>,
     /// Singular values of the scaled Jacobian on the designed scene's simulated scan.
     pub singular_values: Vec<f64>,
+    /// How clearly the determined subspace was decided there: the gap between the last
+    /// determined and the first undetermined singular value.
+    pub margin: crate::calibration::goodness::RankMargin,
     /// Condition number.
     pub condition_number: f64,
     /// Parameters the design identifies on their own.
@@ -67,6 +70,7 @@ impl DesignReport {
             let _ = writeln!(s, "  {}", super::identify::borderline_line(c, *sv));
         }
         let _ = writeln!(s, "  condition     {:.3e}", self.condition_number);
+        let _ = writeln!(s, "  rank          {}", self.margin.describe());
         let _ = writeln!(s, "  verified      {}", self.verified);
         for n in &self.notes {
             let _ = writeln!(s, "  lever         {n}");

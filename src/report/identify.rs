@@ -2,6 +2,7 @@
 //! combinations with their uncertainties, what is not determined, the model-correction
 //! loop's rounds and the Monte-Carlo spread.
 
+use crate::calibration::goodness::{FitCheck, RankMargin};
 use serde::Serialize;
 use std::fmt::Write as _;
 
@@ -60,6 +61,10 @@ pub struct LoopRound {
 /// What `twinmill identify` reports.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct IdentifyReport {
+    /// Set when the features do not fit the model at their stated noise and the misfit
+    /// was accepted on request: the report's first word.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub warning: Option<String>,
     /// Scene name.
     pub scene: String,
     /// The chain.
@@ -74,6 +79,9 @@ pub struct IdentifyReport {
     pub features: Vec<FeatureReport>,
     /// Singular values of the scaled Jacobian (registration projected out).
     pub singular_values: Vec<f64>,
+    /// How clearly the determined subspace was decided: the gap between the last
+    /// determined and the first undetermined singular value.
+    pub margin: RankMargin,
     /// Condition number (infinite: some direction not seen at all).
     pub condition_number: f64,
     /// Condition number within the determined subspace.
@@ -97,6 +105,9 @@ pub struct IdentifyReport {
     pub registration_estimate: [f64; 6],
     /// Solver: evaluations, termination, χ² before and after, degrees of freedom.
     pub solver: IdentifySolverReport,
+    /// Goodness of fit: the features against each other at their stated σ, each face's
+    /// points against the scanner's noise.
+    pub fit: FitCheck,
     /// The model-correction loop.
     pub rounds: Vec<LoopRound>,
     /// Whether the loop met its tolerance.
@@ -126,6 +137,9 @@ impl IdentifyReport {
     /// The short human summary.
     pub fn summary(&self) -> String {
         let mut s = String::new();
+        if let Some(w) = &self.warning {
+            let _ = writeln!(s, "twinmill identify: {w}");
+        }
         let _ = writeln!(
             s,
             "twinmill identify: {} — {} faces, registration {}, cloud {}",
@@ -171,6 +185,8 @@ impl IdentifyReport {
                 .collect::<Vec<_>>()
                 .join(" ")
         );
+        let _ = writeln!(s, "  rank          {}", self.margin.describe());
+        let _ = writeln!(s, "  fit           {}", self.fit.describe());
         let _ = writeln!(
             s,
             "  solver        {} evaluations, {}, χ² {:.3e} → {:.3e} ({} dof)",

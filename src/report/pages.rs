@@ -21,6 +21,7 @@
 //! colours, extents and formatting.
 
 use crate::calibration::calibrate::DETERMINED_FRACTION;
+use crate::calibration::goodness::{FitCheck, RankMargin};
 use crate::machine::hexapod_accuracy::AmplificationMap;
 use crate::math::{Point3, Real, UnitVector3, Vector3};
 use crate::metrology::circular::{CircularFigures, Diagnosis, Sample};
@@ -415,6 +416,7 @@ pub fn run_page(r: &Report, view: Option<View3d>, mut plots: Vec<Plot>) -> Page 
         .enumerate()
         .map(|(i, s)| vec![format!("{}", i + 1), format!("{s:.6e}")])
         .collect();
+    sv_rows.push(vec!["rank margin".into(), r.solver.margin.describe()]);
     sv_rows.push(vec!["method".into(), r.solver.method.clone()]);
     sv_rows.push(vec!["evaluations".into(), r.solver.evaluations.to_string()]);
     sv_rows.push(vec![
@@ -457,6 +459,7 @@ pub fn run_page(r: &Report, view: Option<View3d>, mut plots: Vec<Plot>) -> Page 
             })
             .collect(),
     });
+    sections.push(fit_section(&r.fit));
     sections.push(timings(&r.timings_s));
     plots.extend(spectrum_plot(
         &r.solver.singular_values,
@@ -688,6 +691,7 @@ fn identification_sections(r: &IdentifyReport) -> Vec<Section> {
         format!("{:.6e}", r.condition_number_determined),
         String::new(),
     ]);
+    rows.push(margin_row(&r.margin));
     out.push(Section {
         heading: "Identifiability".into(),
         intro: format!("Singular values of the Jacobian scaled by each parameter's realistic magnitude (registration projected out); a direction is determined from {threshold}."),
@@ -722,6 +726,7 @@ fn identification_sections(r: &IdentifyReport) -> Vec<Section> {
             })
             .collect(),
     });
+    out.push(fit_section(&r.fit));
     out.push(Section {
         heading: "Features".into(),
         intro: "The measured faces.".into(),
@@ -1185,6 +1190,84 @@ pub fn amplification_page(
         "K_p and K_a over the x–y grid: each cell the largest over z and the orientations; grey where no pose is reachable.",
     )];
     instrument_page(title.into(), summary.into(), sections, plots, report)
+}
+
+/// The goodness-of-fit table: the whole χ² with its limit and probability, then each part
+/// (file, circle, face) with its statistic, what the stated noise leads one to expect, the
+/// limit and whether it is out of line.
+pub fn fit_section(fit: &FitCheck) -> Section {
+    let mut rows = Vec::new();
+    if let Some(c) = fit.chi2 {
+        rows.push(vec![
+            "whole fit".into(),
+            "χ²".into(),
+            format!("{c:.6e}"),
+            format!("{} dof", fit.dof),
+            fit.limit.map_or_else(|| "—".into(), |l| format!("{l:.6e}")),
+            fit.p_value
+                .map_or_else(|| "—".into(), |p| format!("{p:.3e}")),
+            if fit
+                .p_value
+                .is_some_and(|p| p < crate::calibration::goodness::REFUSE_P)
+            {
+                "out of line".into()
+            } else {
+                "fits".into()
+            },
+        ]);
+    }
+    for p in &fit.parts {
+        let rms = p.kind == "rms";
+        rows.push(vec![
+            p.name.clone(),
+            if rms { "RMS (mm)" } else { "χ² left out" }.into(),
+            if rms {
+                format!("{:.6}", p.value)
+            } else {
+                format!("{:.6e}", p.value)
+            },
+            if rms {
+                format!("σ {:.6}", p.expected)
+            } else {
+                format!("{} dof", p.expected)
+            },
+            if rms {
+                format!("{:.6}", p.limit)
+            } else {
+                format!("{:.6e}", p.limit)
+            },
+            format!("{:.3e}", p.p_value),
+            if p.out_of_line { "out of line" } else { "fits" }.into(),
+        ]);
+    }
+    let verdict = if fit.fits {
+        "The data fit the model at the stated noise."
+    } else if fit.misfit_accepted {
+        "MISFIT ACCEPTED on request (--accept-misfit): the data do not fit the model at the stated noise, and every figure on this page stands on that model."
+    } else {
+        "The data do not fit the model at the stated noise."
+    };
+    Section {
+        heading: "Goodness of fit".into(),
+        intro: format!(
+            "{verdict} Whole: {}. A fit is refused when the probability of its χ² (or of one part's, left out, at 1e-6 over the parts) is below 1e-6.",
+            fit.describe()
+        ),
+        columns: ["part", "statistic", "value", "expected", "limit", "p", ""]
+            .map(String::from)
+            .to_vec(),
+        rows,
+    }
+}
+
+/// The rank margin's row for an identifiability table: the gap between the last kept and
+/// the first dropped singular value.
+pub fn margin_row(m: &RankMargin) -> Vec<String> {
+    vec![
+        "rank margin".into(),
+        format!("×{:.3e}", m.ratio),
+        m.describe(),
+    ]
 }
 
 /// The identifiability table's rows: each singular value (1-based index, value) and whether

@@ -3,6 +3,7 @@
 
 use super::scan::ScanReport;
 use super::simulate::StockReport;
+use crate::calibration::goodness::{FitCheck, RankMargin};
 use crate::cutting::sweep::SweepReport;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -40,6 +41,9 @@ pub struct SolverReport {
     pub method: String,
     /// Singular values of the Jacobian of (step, tilt) w.r.t. the two parameters.
     pub singular_values: [f64; 2],
+    /// How clearly the pair's rank was decided: the gap between the last kept and the
+    /// first dropped singular value.
+    pub margin: RankMargin,
     /// Residual evaluations.
     pub evaluations: usize,
     /// Final residual norm.
@@ -49,6 +53,10 @@ pub struct SolverReport {
 /// The whole report.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Report {
+    /// Set when the faces do not fit the model at the scanner's noise and the misfit was
+    /// accepted on request: the report's first word.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub warning: Option<String>,
     /// Scene name.
     pub scene: String,
     /// Machine name.
@@ -86,6 +94,8 @@ pub struct Report {
     pub why_not_identified: Vec<String>,
     /// The fitted faces.
     pub faces: Vec<FaceReport>,
+    /// The faces' goodness of fit: each face's points against the scanner's noise.
+    pub fit: FitCheck,
     /// Identification solver.
     pub solver: SolverReport,
     /// Stock.
@@ -102,6 +112,9 @@ impl Report {
     /// The short human summary.
     pub fn summary(&self) -> String {
         let mut s = String::new();
+        if let Some(w) = &self.warning {
+            let _ = writeln!(s, "twinmill: {w}");
+        }
         let _ = writeln!(
             s,
             "twinmill: {} on {} ({} moves)",
@@ -144,13 +157,19 @@ impl Report {
         for w in &self.why_not_identified {
             let _ = writeln!(s, "  not identified {w}");
         }
-        for f in &self.faces {
+        for (f, p) in self.faces.iter().zip(&self.fit.parts) {
             let _ = writeln!(
                 s,
-                "  face {:<8} {} points, rms {:.4} mm",
-                f.name, f.points, f.rms_mm
+                "  face {:<8} {} points, rms {:.4} mm (the scanner's noise allows ≤ {:.4})",
+                f.name, f.points, f.rms_mm, p.limit
             );
         }
+        let _ = writeln!(
+            s,
+            "  rank          {} of 2, {}",
+            self.identified.len(),
+            self.solver.margin.describe()
+        );
         let _ = writeln!(
             s,
             "  scan          {} points ({} shadowed), σ = {} mm; sweep bound on rotary moves {:.1e} mm",

@@ -138,6 +138,8 @@ pub(super) struct NcFile {
     pub ini: Option<Spanned<String>>,
     /// Unit of tool-table and var-file lengths: "mm" (default) or "inch".
     pub external_units: Option<Spanned<String>>,
+    /// Lines in a row without motion before the program is stopped as an endless loop.
+    pub max_idle_blocks: Option<Spanned<u64>>,
 }
 
 #[derive(Deserialize)]
@@ -170,7 +172,7 @@ pub(super) struct SerialMachineFile {
 
 /// `[machine] kind` of a scene text, if it has one (read leniently: the full parse reports
 /// any other problem).
-pub(super) fn machine_kind(text: &str) -> Option<String> {
+pub fn machine_kind(text: &str) -> Option<String> {
     #[derive(Deserialize)]
     struct Peek {
         machine: Option<KindPeek>,

@@ -10,6 +10,7 @@
 
 use super::Ctx;
 use super::SceneError;
+use super::check::{check_coordinate, check_direction};
 use super::file::{HexapodMachineFile, SceneFile, TableAxesFile};
 use super::machine::HexapodMachine;
 use crate::machine::chain::{Axis, AxisKind, Chain};
@@ -17,7 +18,7 @@ use crate::machine::hexapod::{
     Hexapod, HexapodTwin, Limits, ParameterId, Pose, STRUTS, Struts, TableAxes, twin_pose,
 };
 use crate::machine::hexapod_accuracy::{HomingSetup, Workspace};
-use crate::math::{Point3, Real, UnitVector3, Vector3, tol};
+use crate::math::{Point3, Real, Vector3};
 use crate::nc::AxisLetter;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -83,6 +84,10 @@ pub struct HexapodScene {
     pub table: Option<Table>,
     /// `[table_axes]`: rotary axes carrying the part (nominal and with their deviations).
     pub table_axes: Option<TableAxes>,
+    /// Keep a calibration whose residuals the stated noise cannot explain instead of
+    /// refusing it ([`crate::calibration::goodness`]); its outcome then says so on its
+    /// first line. Never read from the scene file: the command line's `--accept-misfit`.
+    pub accept_misfit: bool,
 }
 
 impl Ctx<'_> {
@@ -101,7 +106,7 @@ impl Ctx<'_> {
         }
         let mut out = [Vector3::zeros(); STRUTS];
         for (i, j) in list.iter().enumerate() {
-            out[i] = Vector3::from(self.finite_array(j, &format!("{what}[{}]", i + 1))?);
+            out[i] = Vector3::from(self.coordinates(j, &format!("machine.{what}[{}]", i + 1))?);
         }
         Ok(out)
     }
@@ -125,11 +130,13 @@ impl Ctx<'_> {
                     ));
                 }
             };
-            let d = Vector3::from(self.finite_array(&a.direction, "table_axes direction")?);
-            let direction = UnitVector3::try_new(d, tol::LENGTH_EPS)
-                .ok_or_else(|| self.err(a.direction.span(), "direction must not be zero"))?;
+            let key = format!("table_axes.{}", a.name.get_ref());
+            let direction = check_direction(*a.direction.get_ref(), &format!("{key}.direction"))
+                .map_err(|e| self.err(a.direction.span(), e))?;
             let origin = match &a.origin {
-                Some(o) => Point3::from(Vector3::from(self.finite_array(o, "table_axes origin")?)),
+                Some(o) => Point3::from(Vector3::from(
+                    self.coordinates(o, &format!("{key}.origin"))?,
+                )),
                 None => Point3::origin(),
             };
             axes.push(Axis {
@@ -197,10 +204,21 @@ pub(super) fn read_hexapod(
     let base = ctx.joints(&m.base_joints, "base_joints")?;
     let platform = ctx.joints(&m.platform_joints, "platform_joints")?;
     let tool = match &m.tool_offset {
-        Some(v) => Vector3::from(ctx.finite_array(v, "tool_offset")?),
+        Some(v) => Vector3::from(ctx.coordinates(v, "machine.tool_offset")?),
         None => Vector3::zeros(),
     };
-    let home = Pose::from_mm_deg(ctx.finite_array(&m.home, "home")?);
+    let home = ctx.finite_array(&m.home, "home")?;
+    for (i, v) in home.iter().enumerate() {
+        if i < 3 {
+            check_coordinate(*v, "machine.home").map_err(|e| ctx.err(m.home.span(), e))?;
+        } else if v.abs() > 180.0 {
+            return Err(ctx.err(
+                m.home.span(),
+                format!("machine.home: got the angle {v:e}°, expected within ±180°"),
+            ));
+        }
+    }
+    let home = Pose::from_mm_deg(home);
     let stroke = match &m.stroke_mm {
         Some(v) => {
             let (lo, hi) = ctx.range(v, "stroke_mm")?;
@@ -230,7 +248,7 @@ pub(super) fn read_hexapod(
     let unreferenced =
         Hexapod::try_new(base, platform, [0.0; STRUTS], tool, limits).map_err(geometry_err)?;
     let reference: Struts = match &m.strut_reference_mm {
-        Some(v) => ctx.finite_array(v, "strut_reference_mm")?,
+        Some(v) => ctx.coordinates(v, "machine.strut_reference_mm")?,
         None => unreferenced.strut_lengths(&home),
     };
     let nominal =
@@ -392,6 +410,7 @@ pub(super) fn read_hexapod(
         table_axes: table_nominal
             .zip(table_chain)
             .map(|(nominal, actual)| TableAxes { nominal, actual }),
+        accept_misfit: false,
     })
 }
 

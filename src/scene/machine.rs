@@ -6,12 +6,13 @@
 use super::Ctx;
 use super::Scene;
 use super::SceneError;
+use super::check::{MAX_ANGLE_DEG, check_coordinate, check_direction, linear_axes_span};
 use super::file::{MotionFile, SceneFile, SerialMachineFile};
 use crate::cutting::sweep::Kinematics;
 use crate::machine::chain::{Axis, AxisKind, Chain};
 use crate::machine::error_motion::{self, AxisErrorMotions};
 use crate::machine::hexapod::HexapodTwin;
-use crate::math::{Point3, Real, UnitVector3, tol};
+use crate::math::{Point3, Real};
 use crate::nc::{AxisLetter, AxisValues};
 use std::collections::BTreeMap;
 use std::ops::Range;
@@ -21,7 +22,7 @@ use toml::Spanned;
 #[derive(Clone, Debug)]
 pub enum Machine {
     /// `kind = "serial"` (the default): a chain of linear and rotary axes.
-    Serial(SerialMachine),
+    Serial(Box<SerialMachine>),
     /// `kind = "hexapod"`: a Stewart platform, driven pose by pose.
     Hexapod(Box<HexapodMachine>),
 }
@@ -125,7 +126,7 @@ impl Scene {
     /// The serial machine, to change (a hexapod: `None`).
     pub fn serial_mut(&mut self) -> Option<&mut SerialMachine> {
         match &mut self.machine {
-            Machine::Serial(m) => Some(m),
+            Machine::Serial(m) => Some(m.as_mut()),
             Machine::Hexapod(_) => None,
         }
     }
@@ -188,11 +189,17 @@ pub(super) fn read_serial(
                 ),
             ));
         }
-        let d = ctx.vec3(&a.direction, "direction")?;
-        let direction = UnitVector3::try_new(d, tol::LENGTH_EPS)
-            .ok_or_else(|| ctx.err(a.direction.span(), "direction must not be zero"))?;
+        let key = |what: &str| format!("machine.axes.{}.{what}", letter.as_char());
+        let direction = check_direction(*a.direction.get_ref(), &key("direction"))
+            .map_err(|e| ctx.err(a.direction.span(), e))?;
         let origin = match &a.origin {
-            Some(o) => Point3::from(ctx.vec3(o, "origin")?),
+            Some(o) => {
+                let v = ctx.vec3(o, &key("origin"))?;
+                for c in v.iter() {
+                    check_coordinate(*c, &key("origin")).map_err(|e| ctx.err(o.span(), e))?;
+                }
+                Point3::from(v)
+            }
             None => Point3::origin(),
         };
         axes.push(Axis {
@@ -202,6 +209,8 @@ pub(super) fn read_serial(
             origin,
         });
     }
+    linear_axes_span(&axes)
+        .map_err(|e| ctx.err(file.machine.axes.span(), format!("machine.axes: {e}")))?;
     let mut chain = Chain::new(axes, &file.machine.spindle)
         .map_err(|e| ctx.err(file.machine.axes.span(), e.to_string()))?;
     let mut home = AxisValues::default();
@@ -216,7 +225,22 @@ pub(super) fn read_serial(
                 format!("home: '{k}' is not an axis of this machine"),
             )
         })?;
-        home.set(letter, ctx.finite(v, &format!("home.{k}"))?);
+        let x = ctx.finite(v, &format!("home.{k}"))?;
+        let x = if letter.is_rotary() {
+            if x.abs() > MAX_ANGLE_DEG {
+                return Err(ctx.err(
+                    v.span(),
+                    format!(
+                        "machine.home.{k}: got {x:e}°, expected within ±{MAX_ANGLE_DEG}° \
+                         (a hundred turns)"
+                    ),
+                ));
+            }
+            x
+        } else {
+            check_coordinate(x, &format!("machine.home.{k}")).map_err(|e| ctx.err(v.span(), e))?
+        };
+        home.set(letter, x);
     }
     let model_nominal = chain.nominal();
     let injected = deviation_map(&ctx, &mut chain, &file.deviations)?;

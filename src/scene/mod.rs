@@ -8,7 +8,8 @@
 //! Every value is checked when the scene loads; an error names the file, line and column
 //! of the offending value. TOML accepts `nan` and `inf`: they are rejected here.
 //!
-//! The folder, in reading order: [`file`] (the serde structs of the format), [`memory`]
+//! The folder, in reading order: [`file`] (the serde structs of the format), [`check`] (the
+//! bounds of coordinates, angles and directions), [`memory`]
 //! (the stock's memory budget), [`machine`] (a serial chain, and the [`Machine`] variants),
 //! [`hexapod`] (a hexapod and its sections), [`cut`] (tool, holder, stock, fixtures, design
 //! model, sweep), [`scanner`] (the virtual scanner and the scanner-effects study),
@@ -20,6 +21,7 @@
 //! a scene file is parsed once, whatever its machine kind.
 
 mod file;
+mod check;
 mod memory;
 mod machine;
 mod hexapod;
@@ -31,6 +33,11 @@ mod program;
 mod read;
 mod write;
 
+pub use check::{
+    DIRECTION_SCALE, MAX_ANGLE_DEG, MAX_COORDINATE_MM, MIN_AXIS_ANGLE_DEG, check_coordinate,
+    check_direction,
+};
+pub use file::machine_kind;
 pub use hexapod::{DEFAULT_TRIP_SIGMA_MM, Drives, HexapodScene, Table};
 pub use identify::DEFAULT_LOOP_TOLERANCE_MM;
 pub use machine::{HexapodMachine, Machine, SerialMachine};
@@ -44,7 +51,7 @@ use crate::cutting::collide::{Fixture, Holder};
 use crate::cutting::shape::{ClosedMesh, Cylinder, read_obj, read_stl};
 use crate::cutting::sweep::SweepOptions;
 use crate::cutting::tool::Tool;
-use crate::math::{Aabb, Real, UnitVector3, Vector3, tol};
+use crate::math::{Aabb, Real, UnitVector3, Vector3};
 use crate::metrology::scan::{ScannerConfig, StudyOptions};
 use crate::nc::NcError;
 use crate::report::deviation_map::DesignModel;
@@ -190,6 +197,10 @@ pub struct Scene {
     /// view (`[report] view`); `None`: the direction the machined faces face
     /// ([`crate::report::display::view_direction`]).
     pub view: Option<UnitVector3>,
+    /// Keep an identification whose residuals the stated noise cannot explain instead of
+    /// refusing it ([`crate::calibration::goodness`]); its report then says so on its
+    /// first line. Never read from the scene file: the command line's `--accept-misfit`.
+    pub accept_misfit: bool,
 }
 
 /// Where messages point: the scene file and its text.
@@ -357,9 +368,20 @@ impl Ctx<'_> {
         default: UnitVector3,
     ) -> Result<UnitVector3, SceneError> {
         let Some(v) = v else { return Ok(default) };
-        let a = Vector3::from(self.finite_array(v, what)?);
-        UnitVector3::try_new(a, tol::LENGTH_EPS)
-            .ok_or_else(|| self.err(v.span(), format!("{what} must not be zero")))
+        check_direction(*v.get_ref(), &format!("machine.{what}")).map_err(|e| self.err(v.span(), e))
+    }
+
+    /// Finite coordinates (mm), each within [`MAX_COORDINATE_MM`].
+    fn coordinates<const N: usize>(
+        &self,
+        v: &Spanned<[Real; N]>,
+        what: &str,
+    ) -> Result<[Real; N], SceneError> {
+        let a = self.finite_array(v, what)?;
+        for c in a {
+            check_coordinate(c, what).map_err(|e| self.err(v.span(), e))?;
+        }
+        Ok(a)
     }
 }
 
@@ -370,6 +392,159 @@ pub fn line_col(text: &str, at: usize) -> (usize, usize) {
     let line = before.matches('\n').count() + 1;
     let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
     (line, col)
+}
+
+/// A TOML file's error in one line and in our words, located at its line and column:
+/// `key: what is wrong, expected what` (the key as a dotted path, `machine.axes[2].kind`;
+/// none for a syntax error outside any key). Used for every TOML file twinmill reads.
+pub fn toml_error(text: &str, path: &Path, e: &toml::de::Error) -> SceneError {
+    let at = e.span().map_or(0, |s| s.start);
+    let key = toml_key_at(text, at);
+    let what = toml_words(e.message());
+    let (what, key) = match what.strip_prefix("missing field \"") {
+        // the span is the table's: the missing key belongs under it
+        Some(rest) => {
+            let field = rest.split('"').next().unwrap_or("");
+            let key = if key.is_empty() {
+                field.to_string()
+            } else {
+                format!("{key}.{field}")
+            };
+            ("missing, expected a value for this key".to_string(), key)
+        }
+        None => match what
+            .strip_prefix("unknown key \"")
+            .and_then(|r| r.split_once("\", "))
+        {
+            // the span is the key's own: the path already names it
+            Some((k, rest)) if key == k || key.ends_with(&format!(".{k}")) => {
+                (format!("unknown key, {rest}"), key)
+            }
+            _ => (what, key),
+        },
+    };
+    let (line, column) = line_col(text, at);
+    SceneError::Invalid {
+        path: path.to_path_buf(),
+        line,
+        column,
+        message: if key.is_empty() {
+            what
+        } else {
+            format!("{key}: {what}")
+        },
+    }
+}
+
+/// The dotted key of the innermost value or key of `text` that holds byte `at` (empty when
+/// none does, or the text does not parse).
+fn toml_key_at(text: &str, at: usize) -> String {
+    use toml::de::{DeTable, DeValue};
+    let holds = |r: std::ops::Range<usize>| r.start <= at && at < r.end.max(r.start + 1);
+    // The path below `v` to what holds `at`: a `[table]`'s span is its header only, so
+    // tables and arrays are searched whether or not their own span holds it.
+    fn find(v: &DeValue<'_>, holds: &dyn Fn(std::ops::Range<usize>) -> bool) -> Option<String> {
+        let deeper = |v: &DeValue<'_>| matches!(v, DeValue::Table(_) | DeValue::Array(_));
+        match v {
+            DeValue::Table(t) => t.iter().find_map(|(k, v)| {
+                let here = holds(k.span()) || holds(v.span());
+                let below = if here || deeper(v.get_ref()) {
+                    find(v.get_ref(), holds)
+                } else {
+                    None
+                };
+                match below {
+                    Some(sub) if sub.starts_with('[') => Some(format!("{}{sub}", k.get_ref())),
+                    Some(sub) => Some(format!("{}.{sub}", k.get_ref())),
+                    None => here.then(|| k.get_ref().to_string()),
+                }
+            }),
+            DeValue::Array(a) => a.iter().enumerate().find_map(|(i, v)| {
+                let here = holds(v.span());
+                let below = if here || deeper(v.get_ref()) {
+                    find(v.get_ref(), holds)
+                } else {
+                    None
+                };
+                match below {
+                    Some(sub) if sub.starts_with('[') => Some(format!("[{}]{sub}", i + 1)),
+                    Some(sub) => Some(format!("[{}].{sub}", i + 1)),
+                    None => here.then(|| format!("[{}]", i + 1)),
+                }
+            }),
+            _ => None,
+        }
+    }
+    let Ok(doc) = DeTable::parse(text) else {
+        return String::new();
+    };
+    find(&DeValue::Table(doc.into_inner()), &holds).unwrap_or_default()
+}
+
+/// serde's and the TOML parser's wording (`invalid type: string "ball", expected f64`) in
+/// ours (`got the string "ball", expected a number`), on one line.
+fn toml_words(message: &str) -> String {
+    let one_line = message
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .collect::<Vec<_>>()
+        .join(", ");
+    let expected = |e: &str| -> String {
+        let e = e.trim();
+        match e {
+            "f64" | "f32" => "a number".into(),
+            "u64" | "usize" | "u32" | "u16" | "u8" => "a whole number, 0 or more".into(),
+            "i64" | "i32" | "isize" => "a whole number".into(),
+            "a boolean" | "bool" => "true or false".into(),
+            "a sequence" => "an array".into(),
+            "a map" => "a table".into(),
+            _ if e.starts_with("struct ") || e.starts_with("a map") => "a table".into(),
+            _ => e.replace('`', "\""),
+        }
+    };
+    let got = |g: &str| -> String {
+        let g = g.trim();
+        let words = [
+            ("string ", "the string "),
+            ("integer ", "the integer "),
+            ("floating point ", "the number "),
+            ("boolean ", "the boolean "),
+        ];
+        for (from, to) in words {
+            if let Some(rest) = g.strip_prefix(from) {
+                return format!("{to}{}", rest.replace('`', ""));
+            }
+        }
+        match g {
+            "sequence" => "an array".into(),
+            "map" => "a table".into(),
+            _ => g.replace('`', "\""),
+        }
+    };
+    for prefix in ["invalid type: ", "invalid value: "] {
+        if let Some(rest) = one_line.strip_prefix(prefix)
+            && let Some((g, e)) = rest.rsplit_once(", expected ")
+        {
+            return format!("got {}, expected {}", got(g), expected(e));
+        }
+    }
+    if let Some(rest) = one_line.strip_prefix("invalid length ")
+        && let Some((n, e)) = rest.split_once(", expected ")
+    {
+        return format!("got {n} values, expected {}", expected(e));
+    }
+    if let Some(rest) = one_line.strip_prefix("unknown field `")
+        && let Some((k, e)) = rest.split_once("`, expected ")
+    {
+        return format!("unknown key \"{k}\", expected {}", expected(e));
+    }
+    if let Some(rest) = one_line.strip_prefix("unknown variant `")
+        && let Some((k, e)) = rest.split_once("`, expected ")
+    {
+        return format!("unknown value \"{k}\", expected {}", expected(e));
+    }
+    one_line.replace('`', "\"")
 }
 
 /// Reads a scene file as UTF-8 text.

@@ -22,6 +22,9 @@ pub struct NcFiles {
     pub ini: Option<PathBuf>,
     /// Unit of tool-table and var-file lengths.
     pub external_unit: LengthUnit,
+    /// Lines in a row without motion before the program is stopped as an endless loop
+    /// (default [`crate::nc::DEFAULT_MAX_IDLE_BLOCKS`]).
+    pub max_idle_blocks: Option<u64>,
 }
 
 /// A file the scene names and reads after loading (the program, the `[nc]` files): its key,
@@ -67,6 +70,15 @@ pub(super) fn named_files(
         nc_files.tool_table = resolve("nc.tool_table", &nc.tool_table);
         nc_files.var_file = resolve("nc.var_file", &nc.var_file);
         nc_files.ini = resolve("nc.ini", &nc.ini);
+        if let Some(n) = &nc.max_idle_blocks {
+            if *n.get_ref() == 0 {
+                return Err(ctx.err(
+                    n.span(),
+                    "nc.max_idle_blocks: got 0, expected 1 or more lines",
+                ));
+            }
+            nc_files.max_idle_blocks = Some(*n.get_ref());
+        }
         if let Some(u) = &nc.external_units {
             nc_files.external_unit = match u.get_ref().as_str() {
                 "mm" => LengthUnit::Mm,
@@ -125,6 +137,7 @@ impl Scene {
             &self.program_path,
             InterpOptions {
                 start: self.home(),
+                max_idle_blocks: f.max_idle_blocks.unwrap_or(opts.max_idle_blocks),
                 ..opts
             },
         )

@@ -19,6 +19,7 @@ use super::program::named_files;
 use super::read_text;
 use super::report::report_view;
 use super::scanner::{scanner_config, study_options};
+use super::toml_error;
 use crate::metrology::scan::ScannerConfig;
 use serde::de::DeserializeOwned;
 use std::path::Path;
@@ -27,10 +28,7 @@ use toml::Spanned;
 /// Parses scene text as a [`SceneFile`] whose `[machine]` is an `M`; a TOML or format error
 /// names its line and column.
 fn parse_file<M: DeserializeOwned>(ctx: &Ctx) -> Result<SceneFile<M>, SceneError> {
-    toml::from_str(ctx.text).map_err(|e| {
-        let span = e.span().unwrap_or(0..0);
-        ctx.err(span, e.message().trim().to_string())
-    })
+    toml::from_str(ctx.text).map_err(|e| toml_error(ctx.text, ctx.path, &e))
 }
 
 /// A serial scene's program, `[tool]` and `[stock]`: the first one missing is reported as
@@ -52,10 +50,7 @@ fn required<'f, M>(
 fn parse_file_required(ctx: &Ctx) -> Result<(), SceneError> {
     toml::from_str::<Required>(ctx.text)
         .map(|_| ())
-        .map_err(|e| {
-            let span = e.span().unwrap_or(0..0);
-            ctx.err(span, e.message().trim().to_string())
-        })
+        .map_err(|e| toml_error(ctx.text, ctx.path, &e))
 }
 
 /// The scene's name (`name`, or the file's stem): it names the output folder.
@@ -188,7 +183,7 @@ impl Scene {
         finish(
             &ctx,
             &file,
-            Machine::Serial(machine),
+            Machine::Serial(Box::new(machine)),
             (program, tool, stock),
             memory,
         )
@@ -352,6 +347,7 @@ fn finish<M>(
         study,
         face_options: identify.face_options,
         view,
+        accept_misfit: false,
     })
 }
 

@@ -48,9 +48,19 @@ pub fn design_scene_toml(
     let spindle = scene.chain().joint_name(scene.chain().axes().len() - 1);
     let _ = writeln!(s, "]\nspindle = \"{}\"", &spindle[1..]);
     let _ = writeln!(s, "home = {{ Z = {}, A = 0 }}\n", opts.safe_z_mm);
+    // The simulated machine carries only the requested deviations: one outside them is held
+    // at zero by the identification, so its faces could not fit (the misfit refusal), and
+    // the promise is made on a scan the requested model can produce.
     let _ = writeln!(s, "[deviations]");
     for (k, val) in scene.injected() {
-        let _ = writeln!(s, "{k} = {val:e}");
+        if parameters.iter().any(|p| p == k) {
+            let _ = writeln!(s, "{k} = {val:e}");
+        } else {
+            let _ = writeln!(
+                s,
+                "# {k} = {val:e} (not simulated: not among the parameters)"
+            );
+        }
     }
     use crate::cutting::tool::ToolSizes;
     let tool_fields = match scene.tool.sizes() {

@@ -52,12 +52,15 @@ const LAYOUT: &[(&str, &[&str])] = &[
     (
         "calibration",
         &[
+            "goodness",
             "identify",
             "calibrate",
             "design",
             "correct",
             "hexapod_calibrate",
             "hexapod_design",
+            "engine",
+            "instruments",
         ],
     ),
     (
@@ -105,6 +108,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "instrument_pages",
             "evaluate",
             "measure",
+            "measurements",
         ],
     ),
     ("output", &[]),

@@ -5,7 +5,7 @@
 //! over seeded trials — machines drawn, measured and graded by the test, pose errors from
 //! its own kinematics — and bad input.
 
-use super::Sandbox;
+use super::{Sandbox, dbb_readings, hexapod_centre as centre};
 use std::path::Path;
 use twinmill::calibration::hexapod_calibrate::{
     CircleReadings, DEFAULT_POINTS, Plan, Procedure, TableCalibration, calibrate, calibrated_model,
@@ -20,13 +20,6 @@ use twinmill::metrology::circular::{CircularOptions, evaluate, parse_trace};
 use twinmill::metrology::hexapod_dbb::{DbbCircle, DbbInstrument, DbbPlane, measure};
 use twinmill::pipeline::dbb::{CALIBRATION_NOISE_MM, parse_plan, plan_toml, trial_machine};
 use twinmill::scene::HexapodScene;
-
-fn centre() -> HexapodScene {
-    HexapodScene::load(
-        &Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/hexapod-machining-centre.toml"),
-    )
-    .expect("machining-centre scene loads")
-}
 
 fn workspace(s: &HexapodScene) -> Workspace {
     s.workspace.expect("the scene has a [workspace]")
@@ -147,16 +140,9 @@ impl CosSin for Real {
 
 fn readings(s: &HexapodScene, actual: &Hexapod, procedure: Procedure) -> Vec<CircleReadings> {
     let plan = default_plan(procedure, &workspace(s), DEFAULT_POINTS);
-    plan.circles
-        .iter()
-        .map(|c| {
-            let m = measure(&s.nominal, actual, c, &quiet()).expect("measurable");
-            CircleReadings {
-                lengths_mm: m.lengths_mm(c.radius_mm),
-                commands: m.commands,
-            }
-        })
-        .collect()
+    dbb_readings(&s.nominal, actual, &plan.circles, 0.0, 1, |_| {
+        Vector3::zeros()
+    })
 }
 
 #[test]
@@ -397,29 +383,13 @@ fn round_trip_with(s: &HexapodScene, plan: &Plan, trials: u64, after: (Real, Rea
             p[k] = pn[k] + uniform() * if k < 18 { 0.5 } else { 0.2 };
         }
         let actual = s.nominal.with_parameters(&p).expect("a machine");
-        let readings: Vec<CircleReadings> = plan
-            .circles
-            .iter()
-            .enumerate()
-            .map(|(j, c)| {
-                let mount = if plan.balls_known() {
-                    Vector3::zeros()
-                } else {
-                    Vector3::new(uniform(), uniform(), uniform()) * 0.05
-                };
-                let inst = DbbInstrument {
-                    mount_mm: mount,
-                    noise_sigma_mm: 0.5e-3,
-                    seed: 7000 + t,
-                    stream: (j as u64) << 32,
-                };
-                let m = measure(&s.nominal, &actual, c, &inst).expect("measurable");
-                CircleReadings {
-                    lengths_mm: m.lengths_mm(c.radius_mm),
-                    commands: m.commands,
-                }
-            })
-            .collect();
+        let readings = dbb_readings(&s.nominal, &actual, &plan.circles, 0.5e-3, 7000 + t, |_| {
+            if plan.balls_known() {
+                Vector3::zeros()
+            } else {
+                Vector3::new(uniform(), uniform(), uniform()) * 0.05
+            }
+        });
         let cal = calibrate(&s.nominal, &known, plan, &readings, 0.5e-3).expect("solves");
         // The truth in the report's gauge.
         let mut truth = p;
@@ -756,18 +726,9 @@ fn the_designed_prediction_matches_the_identifications_uncertainty() {
     let s = centre();
     for (procedure, n) in [(Procedure::JigFree, 15), (Procedure::BallPlate, 7)] {
         let d = designed(&s, procedure, n);
-        let r: Vec<CircleReadings> = d
-            .plan
-            .circles
-            .iter()
-            .map(|c| {
-                let m = measure(&s.nominal, &s.actual, c, &quiet()).expect("measurable");
-                CircleReadings {
-                    lengths_mm: m.lengths_mm(c.radius_mm),
-                    commands: m.commands,
-                }
-            })
-            .collect();
+        let r = dbb_readings(&s.nominal, &s.actual, &d.plan.circles, 0.0, 1, |_| {
+            Vector3::zeros()
+        });
         // Noise-free readings: the residual σ is rounding, so scale the reported σ to the
         // design's σ through the ratio the identification used.
         let cal =

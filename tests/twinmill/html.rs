@@ -440,6 +440,35 @@ fn page_holds(page: &Path, json: &str, names: &[&str]) -> String {
     html
 }
 
+/// Runs `args`, a command that prints its JSON and writes the page `page` (in the
+/// sandbox): it succeeds, and the page holds every number of the JSON and the names at
+/// `names` ([`page_holds`]). The page and the JSON.
+fn command_page(sb: &Sandbox, args: &[&str], page: &str, names: &[&str]) -> (String, String) {
+    let (code, stdout, stderr) = sb.run(args);
+    assert_eq!(code, 0, "{args:?}: {stderr}");
+    (page_holds(&sb.dir.join(page), &stdout, names), stdout)
+}
+
+/// `measure SCENE --instrument laser` along X over ±20 mm at 0.3 µm noise, and `extra`.
+fn measure_laser(sb: &Sandbox, scene: &str, extra: &[&str]) -> (i32, String, String) {
+    let mut args = vec![
+        "measure",
+        scene,
+        "--instrument",
+        "laser",
+        "--axis",
+        "X",
+        "--from",
+        "-20",
+        "--to",
+        "20",
+        "--noise",
+        "0.3",
+    ];
+    args.extend(extra);
+    sb.run(&args)
+}
+
 fn scene_file(name: &str) -> String {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("scenes")
@@ -555,21 +584,7 @@ fn measure_writes_a_page_with_every_number_of_its_figures() {
     let mdx = scene_file("mdx50-step.toml");
     let trunnion = scene_file("trunnion-ac.toml");
     // Laser: the page beside the readings, named after them; the ISO 230-2 plot.
-    let (code, stdout, stderr) = sb.run(&[
-        "measure",
-        &mdx,
-        "--instrument",
-        "laser",
-        "--axis",
-        "X",
-        "--from",
-        "-20",
-        "--to",
-        "20",
-        "--noise",
-        "0.3",
-        "--json",
-    ]);
+    let (code, stdout, stderr) = measure_laser(&sb, &mdx, &["--json"]);
     assert_eq!(code, 0, "{stderr}");
     let html = page_holds(&sb.dir.join("mdx50-step-laser.html"), &stdout, &[]);
     assert!(html.contains("ISO 230-2 figures") && html.contains("<svg"));
@@ -623,22 +638,7 @@ fn measure_writes_a_page_with_every_number_of_its_figures() {
 fn evaluate_writes_a_page_with_every_number_of_its_figures() {
     let sb = Sandbox::new("html-evaluate");
     let mdx = scene_file("mdx50-step.toml");
-    let (code, _, stderr) = sb.run(&[
-        "measure",
-        &mdx,
-        "--instrument",
-        "laser",
-        "--axis",
-        "X",
-        "--from",
-        "-20",
-        "--to",
-        "20",
-        "--noise",
-        "0.3",
-        "--out",
-        "laser.csv",
-    ]);
+    let (code, _, stderr) = measure_laser(&sb, &mdx, &["--out", "laser.csv"]);
     assert_eq!(code, 0, "{stderr}");
     let (code, _, stderr) = sb.run(&[
         "measure",
@@ -651,36 +651,37 @@ fn evaluate_writes_a_page_with_every_number_of_its_figures() {
         "bb.csv",
     ]);
     assert_eq!(code, 0, "{stderr}");
-    let (code, stdout, stderr) = sb.run(&[
+    let evaluate = [
         "evaluate",
         "iso230-2",
         "laser.csv",
         "--json",
         "--html",
         "e2.html",
-    ]);
-    assert_eq!(code, 0, "{stderr}");
-    page_holds(&sb.dir.join("e2.html"), &stdout, &[]);
-    let (code, stdout, stderr) = sb.run(&[
-        "evaluate", "iso230-4", "bb.csv", "--radius", "100", "--json", "--html", "e4.html",
-    ]);
-    assert_eq!(code, 0, "{stderr}");
-    let html = page_holds(&sb.dir.join("e4.html"), &stdout, &[]);
+    ];
+    command_page(&sb, &evaluate, "e2.html", &[]);
+    let (html, _) = command_page(
+        &sb,
+        &[
+            "evaluate", "iso230-4", "bb.csv", "--radius", "100", "--json", "--html", "e4.html",
+        ],
+        "e4.html",
+        &[],
+    );
     assert!(html.contains("polyline"), "the polar plot");
     sb.write(
         "readings.csv",
         b"Lx1,Lx2,Ly1,Ly2\n3.1,3.8,3.1,3.8\n3.0,3.6,3.2,3.6\n",
     );
-    let (code, stdout, stderr) = sb.run(&[
+    let evaluate = [
         "evaluate",
         "ball-sensor",
         "readings.csv",
         "--json",
         "--html",
         "ebs.html",
-    ]);
-    assert_eq!(code, 0, "{stderr}");
-    let html = page_holds(&sb.dir.join("ebs.html"), &stdout, &[]);
+    ];
+    let (html, _) = command_page(&sb, &evaluate, "ebs.html", &[]);
     assert!(html.contains("Ball centres"));
     // Without --html, evaluate writes no page.
     let before = files_in(&sb.dir).len();
@@ -693,7 +694,7 @@ fn evaluate_writes_a_page_with_every_number_of_its_figures() {
 fn the_hexapod_commands_write_a_page_with_every_number_of_their_output() {
     let sb = Sandbox::new("html-hexapod");
     let hex = scene_file("hexapod-machining-centre.toml");
-    let (code, stdout, stderr) = sb.run(&[
+    let ballbar = [
         "measure",
         &hex,
         "--instrument",
@@ -701,13 +702,12 @@ fn the_hexapod_commands_write_a_page_with_every_number_of_their_output() {
         "--json",
         "--html",
         "bb.html",
-    ]);
-    assert_eq!(code, 0, "{stderr}");
-    let html = page_holds(&sb.dir.join("bb.html"), &stdout, &[]);
+    ];
+    let (html, _) = command_page(&sb, &ballbar, "bb.html", &[]);
     assert!(html.contains("polyline"), "the polar plot");
     // Calibration without a jig: the base frame's six rigid motions are not determined,
     // and the page says so and why, beside the parameters with σ and the spectrum.
-    let (code, stdout, stderr) = sb.run(&[
+    let calibrate = [
         "identify",
         &hex,
         "--procedure",
@@ -715,13 +715,9 @@ fn the_hexapod_commands_write_a_page_with_every_number_of_their_output() {
         "--json",
         "--html",
         "cal.html",
-    ]);
-    assert_eq!(code, 0, "{stderr}");
-    let html = page_holds(
-        &sb.dir.join("cal.html"),
-        &stdout,
-        &["/run/calibration/identifiability/gauge"],
-    );
+    ];
+    let gauge = ["/run/calibration/identifiability/gauge"];
+    let (html, stdout) = command_page(&sb, &calibrate, "cal.html", &gauge);
     let v: Value = serde_json::from_str(&stdout).expect("outcome");
     assert_eq!(
         v["run"]["calibration"]["identifiability"]["gauge"]
@@ -735,7 +731,7 @@ fn the_hexapod_commands_write_a_page_with_every_number_of_their_output() {
     for p in v["run"]["parameters"].as_array().expect("parameters") {
         assert!(html.contains(p["name"].as_str().expect("name")));
     }
-    let (code, stdout, stderr) = sb.run(&[
+    let amplification = [
         "hexapod",
         "amplification",
         &hex,
@@ -746,9 +742,8 @@ fn the_hexapod_commands_write_a_page_with_every_number_of_their_output() {
         "--json",
         "--html",
         "amp.html",
-    ]);
-    assert_eq!(code, 0, "{stderr}");
-    let html = page_holds(&sb.dir.join("amp.html"), &stdout, &[]);
+    ];
+    let (html, _) = command_page(&sb, &amplification, "amp.html", &[]);
     assert!(html.contains("K_p") && html.contains("<rect"), "the maps");
 }
 

@@ -17,12 +17,12 @@ fn designed_scene(tag: &str) -> Scene {
     let base = scene();
     let ids: Vec<_> = NINE
         .iter()
-        .map(|n| base.model.deviation_id(n).expect("known"))
+        .map(|n| base.model().deviation_id(n).expect("known"))
         .collect();
     let mut opts = DesignOptions::standard();
     opts.noise_sigma_mm = 0.007;
     opts.pitch_mm = 0.3;
-    let d = design(&base.model, &base.tool, &ids, &opts).expect("a design");
+    let d = design(base.model(), &base.tool, &ids, &opts).expect("a design");
     let params: Vec<String> = NINE.iter().map(|s| s.to_string()).collect();
     let mut s = base.clone();
     s.pitch_mm = 0.2;
@@ -275,23 +275,51 @@ fn cli_identify_rejects_inconsistent_input_cleanly() {
     );
     one_line_error(&["identify", "unknown.toml", "--out", "c"], &["dy_AQ"], "c");
     // A machine the solved set cannot explain (the 1 mm step of dy_AY; only the spindle
-    // tilt alpha_ZS solved for): the loop does not converge; the report says so, exit code
-    // 2, the reason on stderr.
+    // tilt alpha_ZS solved for): the faces' offsets cannot come from the model at their σ,
+    // so the identification is refused as a misfit (one line, exit 1, nothing written)
+    // before any convergence is judged: no value of alpha_ZS closes a 1 mm step.
     sb.write(
         "short.toml",
         identify_scene_text(&["alpha_ZS"], "").as_bytes(),
     );
-    let (code, stdout, stderr) = sb.run(&["identify", "short.toml", "--out", "d", "--json"]);
-    assert_eq!(code, 2, "{stdout}{stderr}");
-    assert!(stderr.contains("did not converge"), "{stderr}");
-    let r: serde_json::Value = serde_json::from_str(&stdout).expect("json");
-    assert_eq!(r["converged"], serde_json::Value::Bool(false));
-    let worst = r["rounds"]
-        .as_array()
-        .and_then(|x| x.last())
-        .and_then(|x| x["worst_face_mm"].as_f64())
-        .expect("rounds");
-    assert!(worst > 0.05, "the unexplained step stays: {worst}");
+    one_line_error(
+        &["identify", "short.toml", "--out", "d", "--json"],
+        &[
+            "short.toml: identify: the data cannot come from the model at the stated noise, \
+             refused: χ² ",
+            // Two faces' offset and slope, less the one unknown.
+            " for 3 dof (p 0.0e0; at the stated noise χ² stays below ",
+            "of the faces' offsets and slopes at their fits' σ; out of line, worst first: A",
+            "(--accept-misfit takes it anyway)",
+        ],
+        "d",
+    );
+    let (_, _, stderr) = sb.run(&["identify", "short.toml", "--out", "d"]);
+    let number_after = |key: &str| -> f64 {
+        let at = stderr.find(key).expect(key) + key.len();
+        let s = &stderr[at..];
+        let end = s.find([' ', ')', ';']).unwrap_or(s.len());
+        s[..end].parse().expect("a number")
+    };
+    // The limit is the χ² quantile at p = 1e-6 for 3 dof: its upper tail, in closed form
+    // for 3 dof, erfc(√(x/2)) + √(2x/π)·e^(−x/2), is 1e-6 there.
+    let limit = number_after("stays below ");
+    let tail3 = |x: f64| {
+        let t = (x / 2.0).sqrt();
+        // erfc by its continued-fraction-free asymptotic series (x ≫ 1 here).
+        let erfc = (-t * t).exp() / (t * std::f64::consts::PI.sqrt())
+            * (1.0 - 1.0 / (2.0 * t * t) + 3.0 / (4.0 * t.powi(4)) - 15.0 / (8.0 * t.powi(6)));
+        erfc + (2.0 * x / std::f64::consts::PI).sqrt() * (-x / 2.0).exp()
+    };
+    assert!(
+        (tail3(limit) / 1e-6 - 1.0).abs() < 1e-2, // the limit is printed to 4 digits
+        "limit {limit}: tail {}",
+        tail3(limit)
+    );
+    // The step shared by two faces whose offsets are each known far better than one point's
+    // 0.025 mm noise: at least 2·(0.5 / 0.025)² = 800 — far beyond the limit.
+    let chi2 = number_after("refused: χ² ");
+    assert!(chi2 > 800.0 && chi2 > 10.0 * limit, "{stderr}");
 }
 
 #[test]
@@ -427,7 +455,7 @@ fn designs_promise_what_identify_finds_for_random_requests() {
         }
         let ids: Vec<_> = params
             .iter()
-            .map(|n| s.model.deviation_id(n).expect("known"))
+            .map(|n| s.model().deviation_id(n).expect("known"))
             .collect();
         let name = format!("random-{case}");
         let out = design_scene(&s, &params, &ids, &name, &NoProgress).expect("a design");

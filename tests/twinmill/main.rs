@@ -22,14 +22,25 @@ mod html;
 mod hexapod_calibration;
 mod hexapod_cut;
 mod verbs;
+mod fuzz;
+mod robustness;
+mod misfit;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use twinmill::math::{Aabb, Point3, Real, Vector3};
+use twinmill::calibration::calibrate::IsoTerm;
+use twinmill::calibration::hexapod_calibrate::CircleReadings;
+use twinmill::machine::chain::Chain;
+use twinmill::machine::hexapod::Hexapod;
+use twinmill::math::{Aabb, CounterRng, Point3, Real, Vector3};
+use twinmill::metrology::hexapod_dbb::{DbbCircle, DbbInstrument, measure};
+use twinmill::metrology::rotary_test::{Setup, Sweep};
 use twinmill::metrology::scan::ScannerConfig;
+use twinmill::nc::{AxisLetter, AxisValues};
 use twinmill::pipeline::{Outcome, run};
 use twinmill::progress::NoProgress;
+use twinmill::scene::HexapodScene;
 use twinmill::scene::Scene;
 // `crate::math` and `crate::nc` for the shared P1 benchmark support (`html`).
 use twinmill::{math, nc};
@@ -282,4 +293,154 @@ fn the_spread_bounds_are_the_chi_square_quantiles() {
             "{n}: {a} {b}"
         );
     }
+}
+
+// ---------------------------------------------------------------------------------------
+// The trunnion's rotary location test (ISO 10791-6), shared by the identification and the
+// misfit tests.
+
+fn letter(c: char) -> AxisLetter {
+    AxisLetter::from_char(c).expect("letter")
+}
+
+/// The trunnion A/C machine of the built-in scene, nominal.
+fn trunnion_chain() -> Chain {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/trunnion-ac.toml");
+    Scene::parse(&builtin("trunnion-ac.toml"), &path)
+        .expect("scene")
+        .chain()
+        .nominal()
+}
+
+/// C turned a full circle at A = 0 and at A = −30°, A swept −60…60° at C = 0, and A and C
+/// together (two rotary and three linear axes).
+fn rotary_sweeps() -> Vec<Sweep> {
+    let at = |a: Real| AxisValues::default().with(letter('A'), a);
+    vec![
+        Sweep {
+            axis: letter('C'),
+            from: 0.0,
+            to: 330.0,
+            positions: 12,
+            at: at(0.0),
+            also: vec![],
+        },
+        Sweep {
+            axis: letter('C'),
+            from: 0.0,
+            to: 330.0,
+            positions: 12,
+            at: at(-30.0),
+            also: vec![],
+        },
+        Sweep {
+            axis: letter('A'),
+            from: -60.0,
+            to: 60.0,
+            positions: 9,
+            at: at(0.0),
+            also: vec![],
+        },
+        Sweep {
+            axis: letter('A'),
+            from: -45.0,
+            to: 45.0,
+            positions: 13,
+            at: at(0.0),
+            also: vec![(letter('C'), 0.0, 180.0)],
+        },
+    ]
+}
+
+fn setup(seed: u64, mounting: Vector3) -> Setup {
+    Setup {
+        point_w: Point3::new(60.0, 0.0, 30.0),
+        mounting_mm: mounting,
+        tool_offset: Vector3::zeros(),
+        seed,
+    }
+}
+
+/// The location terms of the trunnion (the C table's offset along itself and angle zero
+/// included, which no table-side test can see).
+fn terms(chain: &Chain) -> (Vec<String>, Vec<IsoTerm>) {
+    let names = chain.rotary_location_terms();
+    let terms = names
+        .iter()
+        .map(|n| IsoTerm::parse(chain, n).expect("term"))
+        .collect();
+    (names, terms)
+}
+
+/// Random location errors of a trial: offsets uniform in ±50 µm, tilts in ±100 µrad, the
+/// two terms no test sees left zero.
+fn draw(rng: &CounterRng, trial: u64, names: &[String]) -> Vec<Real> {
+    names
+        .iter()
+        .enumerate()
+        .map(|(k, n)| {
+            let u = 2.0 * rng.uniform(trial, k as u64) - 1.0;
+            match n.as_str() {
+                "EZ0C" | "EC0C" => 0.0,
+                _ if matches!(n.as_bytes()[1], b'A' | b'B' | b'C') => 100e-6 * u,
+                _ => 0.05 * u,
+            }
+        })
+        .collect()
+}
+
+fn inject(nominal: &Chain, names: &[String], values: &[Real]) -> Chain {
+    let mut actual = nominal.clone();
+    // The two terms no test sees are not location errors: never injected (drawn zero).
+    for (n, v) in names.iter().zip(values).filter(|(_, v)| **v != 0.0) {
+        actual.apply_iso_term(n, *v).expect("known term");
+    }
+    actual
+}
+
+fn mounting(rng: &CounterRng, trial: u64) -> Vector3 {
+    Vector3::from_fn(|k, _| 0.2 * (2.0 * rng.uniform(trial, 100 + k as u64) - 1.0))
+}
+
+// ---------------------------------------------------------------------------------------
+// The hexapod machining centre and its double ball bar, shared by the calibration and the
+// misfit tests.
+
+const HEXAPOD_CENTRE: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/scenes/hexapod-machining-centre.toml"
+);
+
+fn hexapod_centre() -> HexapodScene {
+    HexapodScene::load(Path::new(HEXAPOD_CENTRE)).expect("machining-centre scene loads")
+}
+
+/// The bar lengths of `circles` run on `actual` (`nominal` the controller's model), as
+/// `calibrate` takes them: circle `j` read with noise σ `noise_sigma_mm` from the seed
+/// `seed` on its own stream (`j << 32`), the bar mounted `mount(j)` off its ball.
+fn dbb_readings(
+    nominal: &Hexapod,
+    actual: &Hexapod,
+    circles: &[DbbCircle],
+    noise_sigma_mm: Real,
+    seed: u64,
+    mut mount: impl FnMut(usize) -> Vector3,
+) -> Vec<CircleReadings> {
+    circles
+        .iter()
+        .enumerate()
+        .map(|(j, c)| {
+            let inst = DbbInstrument {
+                mount_mm: mount(j),
+                noise_sigma_mm,
+                seed,
+                stream: (j as u64) << 32,
+            };
+            let m = measure(nominal, actual, c, &inst).expect("measurable");
+            CircleReadings {
+                lengths_mm: m.lengths_mm(c.radius_mm),
+                commands: m.commands,
+            }
+        })
+        .collect()
 }

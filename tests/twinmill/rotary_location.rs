@@ -2,118 +2,17 @@
 //! sensor and from probed sphere positions: injected errors come back within their reported
 //! uncertainties, and the report names what a test cannot determine.
 
-use crate::builtin;
-use twinmill::calibration::calibrate::{IsoTerm, Model, Registration, ball_features, identify};
+use crate::{
+    builtin, draw, inject, mounting, rotary_sweeps as sweeps, setup, terms,
+    trunnion_chain as trunnion,
+};
+use twinmill::calibration::calibrate::{Model, Registration, ball_features, identify};
 use twinmill::cutting::tool::{Tool, ToolKind};
 use twinmill::machine::chain::Chain;
-use twinmill::math::{CounterRng, Point3, Real, Vector3};
+use twinmill::math::{CounterRng, Real, Vector3};
 use twinmill::metrology::ball_sensor::BallSensor;
-use twinmill::metrology::rotary_test::{Setup, Sweep, probe_test, sensor_test};
-use twinmill::nc::{AxisLetter, AxisValues};
+use twinmill::metrology::rotary_test::{probe_test, sensor_test};
 use twinmill::scene::Scene;
-
-fn letter(c: char) -> AxisLetter {
-    AxisLetter::from_char(c).expect("letter")
-}
-
-/// The trunnion A/C machine of the built-in scene, nominal.
-fn trunnion() -> Chain {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/trunnion-ac.toml");
-    Scene::parse(&builtin("trunnion-ac.toml"), &path)
-        .expect("scene")
-        .chain
-        .nominal()
-}
-
-/// C turned a full circle at A = 0 and at A = −30°, A swept −60…60° at C = 0, and A and C
-/// together (two rotary and three linear axes).
-fn sweeps() -> Vec<Sweep> {
-    let at = |a: Real| AxisValues::default().with(letter('A'), a);
-    vec![
-        Sweep {
-            axis: letter('C'),
-            from: 0.0,
-            to: 330.0,
-            positions: 12,
-            at: at(0.0),
-            also: vec![],
-        },
-        Sweep {
-            axis: letter('C'),
-            from: 0.0,
-            to: 330.0,
-            positions: 12,
-            at: at(-30.0),
-            also: vec![],
-        },
-        Sweep {
-            axis: letter('A'),
-            from: -60.0,
-            to: 60.0,
-            positions: 9,
-            at: at(0.0),
-            also: vec![],
-        },
-        Sweep {
-            axis: letter('A'),
-            from: -45.0,
-            to: 45.0,
-            positions: 13,
-            at: at(0.0),
-            also: vec![(letter('C'), 0.0, 180.0)],
-        },
-    ]
-}
-
-fn setup(seed: u64, mounting: Vector3) -> Setup {
-    Setup {
-        point_w: Point3::new(60.0, 0.0, 30.0),
-        mounting_mm: mounting,
-        tool_offset: Vector3::zeros(),
-        seed,
-    }
-}
-
-/// The location terms of the trunnion (the C table's offset along itself and angle zero
-/// included, which no table-side test can see).
-fn terms(chain: &Chain) -> (Vec<String>, Vec<IsoTerm>) {
-    let names = chain.rotary_location_terms();
-    let terms = names
-        .iter()
-        .map(|n| IsoTerm::parse(chain, n).expect("term"))
-        .collect();
-    (names, terms)
-}
-
-/// Random location errors of a trial: offsets uniform in ±50 µm, tilts in ±100 µrad, the
-/// two terms no test sees left zero.
-fn draw(rng: &CounterRng, trial: u64, names: &[String]) -> Vec<Real> {
-    names
-        .iter()
-        .enumerate()
-        .map(|(k, n)| {
-            let u = 2.0 * rng.uniform(trial, k as u64) - 1.0;
-            match n.as_str() {
-                "EZ0C" | "EC0C" => 0.0,
-                _ if matches!(n.as_bytes()[1], b'A' | b'B' | b'C') => 100e-6 * u,
-                _ => 0.05 * u,
-            }
-        })
-        .collect()
-}
-
-fn inject(nominal: &Chain, names: &[String], values: &[Real]) -> Chain {
-    let mut actual = nominal.clone();
-    // The two terms no test sees are not location errors: never injected (drawn zero).
-    for (n, v) in names.iter().zip(values).filter(|(_, v)| **v != 0.0) {
-        actual.apply_iso_term(n, *v).expect("known term");
-    }
-    actual
-}
-
-fn mounting(rng: &CounterRng, trial: u64) -> Vector3 {
-    Vector3::from_fn(|k, _| 0.2 * (2.0 * rng.uniform(trial, 100 + k as u64) - 1.0))
-}
 
 /// Runs `trials` identifications with `measure` giving the samples of a trial, and checks
 /// that every identified term is within 3 of its standard uncertainties of the truth (the

@@ -29,6 +29,19 @@ pub enum CloudError {
         /// What is wrong.
         message: String,
     },
+    /// A PLY header line or ASCII value that is not what it should be, at its 1-based line
+    /// and column: `file:line:col: what is wrong, what is expected`.
+    #[error("{}:{line}:{column}: {message}", path.display())]
+    At {
+        /// The file concerned.
+        path: PathBuf,
+        /// 1-based line.
+        line: usize,
+        /// 1-based column.
+        column: usize,
+        /// What is wrong, and what is expected.
+        message: String,
+    },
     /// A point has a NaN or infinite coordinate or normal.
     #[error("{}: {}point {index} has a non-finite {what}", path.display(), at_line(*line))]
     NonFinite {

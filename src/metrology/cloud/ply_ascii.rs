@@ -126,18 +126,29 @@ pub(super) fn read_ascii(data: &[u8], h: &Header, l: &VertexLayout) -> Result<Bo
         let mut c = [0.0; 3];
         let mut n = [0.0; 3];
         let mut toks = line.split_ascii_whitespace();
-        for col in &l.columns {
+        for (k, col) in l.columns.iter().enumerate() {
             let Some(tok) = toks.next() else {
-                return Err(ReadError::Malformed(format!(
-                    "line {lineno}: vertex {i}: expected {nprops} values, found {}",
-                    line.split_ascii_whitespace().count()
-                )));
+                return Err(ReadError::At {
+                    line: lineno,
+                    column: line.chars().count() + 1,
+                    message: format!(
+                        "vertex {i}: got {} values, expected {nprops}",
+                        line.split_ascii_whitespace().count()
+                    ),
+                });
             };
             let v = parse_ascii(tok, col.ty).ok_or_else(|| {
-                ReadError::Malformed(format!(
-                    "line {lineno}: vertex {i}: '{tok}' is not a valid {}",
-                    col.ty.name()
-                ))
+                // the token is a slice of the line: its column is the characters before it
+                let at = tok.as_ptr() as usize - line.as_ptr() as usize;
+                ReadError::At {
+                    line: lineno,
+                    column: line[..at].chars().count() + 1,
+                    message: format!(
+                        "vertex {i}, property {}: got '{tok}', expected a {}",
+                        l.names.get(k).map_or("?", String::as_str),
+                        col.ty.name()
+                    ),
+                }
             })?;
             let slot = match col.role {
                 Role::Coord(a) => c.get_mut(a),
@@ -153,11 +164,16 @@ pub(super) fn read_ascii(data: &[u8], h: &Header, l: &VertexLayout) -> Result<Bo
                 *slot = v;
             }
         }
-        if toks.next().is_some() {
-            return Err(ReadError::Malformed(format!(
-                "line {lineno}: vertex {i}: expected {nprops} values, found {}",
-                line.split_ascii_whitespace().count()
-            )));
+        if let Some(extra) = toks.next() {
+            let at = extra.as_ptr() as usize - line.as_ptr() as usize;
+            return Err(ReadError::At {
+                line: lineno,
+                column: line[..at].chars().count() + 1,
+                message: format!(
+                    "vertex {i}: got {} values, expected {nprops}",
+                    line.split_ascii_whitespace().count()
+                ),
+            });
         }
         if !c.iter().all(|v| v.is_finite()) {
             return Err(non_finite(i, "coordinate", Some(lineno)));
@@ -247,16 +263,30 @@ mod tests {
     fn ascii_errors_name_file_and_line() {
         let head = "ply\nformat ascii 1.0\nelement vertex 2\nproperty double x\n\
                     property double y\nproperty double z\nproperty uchar red\nend_header\n";
+        // file:line:column of the offending value, its property, what was expected
         let m = malformed_message(read(format!("{head}1 2 3 4\n4 5 x 6\n").as_bytes()));
         assert!(
-            m.contains("test.ply") && m.contains("line 10") && m.contains("'x'"),
+            m.starts_with("test.ply:10:5: ")
+                && m.contains("property z: got 'x', expected a double"),
             "{m}"
         );
         let m = malformed_message(read(format!("{head}1 2 3 4\n\n4 5 6 7 8\n").as_bytes()));
-        assert!(m.contains("line 11") && m.contains("found 5"), "{m}");
+        assert!(
+            m.starts_with("test.ply:11:9: ") && m.contains("got 5 values, expected 4"),
+            "{m}"
+        );
+        let m = malformed_message(read(format!("{head}1 2 3 4\n44444 55555\n").as_bytes()));
+        assert!(
+            m.starts_with("test.ply:10:12: ") && m.contains("got 2 values, expected 4"),
+            "{m}"
+        );
         // Integers must be whole and in range for their type.
         let m = malformed_message(read(format!("{head}1 2 3 256\n4 5 6 7\n").as_bytes()));
-        assert!(m.contains("line 9") && m.contains("uchar"), "{m}");
+        assert!(
+            m.starts_with("test.ply:9:7: ")
+                && m.contains("property red: got '256', expected a uchar"),
+            "{m}"
+        );
         assert!(is_malformed(read(
             format!("{head}1 2 3 2.5\n4 5 6 7\n").as_bytes()
         )));
@@ -270,7 +300,7 @@ mod tests {
         let m = malformed_message(read(
             b"ply\nformat ascii 1.0\nelement vertex 1\nproperty quad x\nend_header\n",
         ));
-        assert!(m.contains("line 4") && m.contains("quad"), "{m}");
+        assert!(m.starts_with("test.ply:4:1: ") && m.contains("quad"), "{m}");
     }
 
     #[test]

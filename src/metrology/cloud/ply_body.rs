@@ -6,6 +6,12 @@ use crate::math::{Point3, Real, Vector3};
 /// Reader-internal error, given a path by `ply_read::read_ply`.
 pub(super) enum ReadError {
     Malformed(String),
+    /// A value of an ASCII data line, at its 1-based line and column.
+    At {
+        line: usize,
+        column: usize,
+        message: String,
+    },
     NonFinite {
         index: usize,
         what: &'static str,

@@ -318,6 +318,8 @@ pub(super) struct VertexLayout {
     pub(super) count: usize,
     /// Every vertex property, in file order.
     pub(super) columns: Vec<Column>,
+    /// Their names.
+    pub(super) names: Vec<String>,
     /// Columns of x, y, z.
     pub(super) xyz: [Column; 3],
     /// Columns of nx, ny, nz.
@@ -344,6 +346,7 @@ impl VertexLayout {
         let count =
             usize::try_from(v.count).map_err(|_| format!("vertex count {} too large", v.count))?;
         let mut columns = Vec::with_capacity(v.props.len());
+        let mut names = Vec::with_capacity(v.props.len());
         let mut coord: [Option<Column>; 3] = [None; 3];
         let mut normal: [Option<Column>; 3] = [None; 3];
         let mut scalar_names = Vec::new();
@@ -391,6 +394,7 @@ impl VertexLayout {
                 }
             }
             columns.push(col);
+            names.push(p.name.clone());
             offset = offset
                 .checked_add(ty.size())
                 .ok_or_else(|| "vertex record too large".to_string())?;
@@ -407,6 +411,7 @@ impl VertexLayout {
             element,
             count,
             columns,
+            names,
             xyz: [x, y, z],
             normal,
             scalar_names,

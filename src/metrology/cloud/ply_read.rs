@@ -36,16 +36,41 @@ pub fn read_ply(bytes: &[u8], path: &Path) -> Result<PointCloud, CloudError> {
     Ok(assemble(&header, layout, body))
 }
 
+/// A PLY reader's message as the user's error: one that starts `line N: ` (the header's
+/// and the ASCII data's) is located at that line, column 1 (the line's keyword or first
+/// value); others name the file only.
 pub(super) fn malformed_ply(path: &Path, message: String) -> CloudError {
-    CloudError::Malformed {
-        path: path.to_path_buf(),
-        message: format!("malformed PLY: {message}"),
+    let located = message.strip_prefix("line ").and_then(|rest| {
+        let (n, what) = rest.split_once(": ")?;
+        Some((n.parse::<usize>().ok()?, what))
+    });
+    match located {
+        Some((line, what)) => CloudError::At {
+            path: path.to_path_buf(),
+            line,
+            column: 1,
+            message: format!("malformed PLY: {what}"),
+        },
+        None => CloudError::Malformed {
+            path: path.to_path_buf(),
+            message: format!("malformed PLY: {message}"),
+        },
     }
 }
 
 pub(super) fn read_error(path: &Path, e: ReadError) -> CloudError {
     match e {
         ReadError::Malformed(message) => malformed_ply(path, message),
+        ReadError::At {
+            line,
+            column,
+            message,
+        } => CloudError::At {
+            path: path.to_path_buf(),
+            line,
+            column,
+            message: format!("malformed PLY: {message}"),
+        },
         ReadError::NonFinite { index, what, line } => CloudError::NonFinite {
             path: path.to_path_buf(),
             index,

@@ -78,13 +78,13 @@ pub(super) fn read(bytes: &[u8]) -> Result<PointCloud, CloudError> {
 }
 
 pub(super) fn is_malformed(r: Result<PointCloud, CloudError>) -> bool {
-    matches!(r, Err(CloudError::Malformed { .. }))
+    matches!(r, Err(CloudError::Malformed { .. } | CloudError::At { .. }))
 }
 
 /// The Malformed message, or a description of what came instead.
 pub(super) fn malformed_message(r: Result<PointCloud, CloudError>) -> String {
     match r {
-        Err(e @ CloudError::Malformed { .. }) => e.to_string(),
+        Err(e @ (CloudError::Malformed { .. } | CloudError::At { .. })) => e.to_string(),
         other => panic!("expected Malformed, got {other:?}"),
     }
 }

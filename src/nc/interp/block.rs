@@ -217,19 +217,30 @@ impl Interpreter {
         self.check_spline_thread_words(b, g.motion, motion_to_be, g.nonmodal, g.path, axis_given)?;
 
         // 2. feed mode, 3. feed, 4. speed
+        // Every G93/G94/G95 block is a new mode, even the one in effect: G94 and G95 set
+        // the feed rate to zero (an F in the same block counts, read after the mode)
         if let Some(fm) = g.feed_mode {
             self.feed_mode = match fm {
                 930 => FeedMode::InverseTime,
                 950 => FeedMode::PerRev,
                 _ => FeedMode::PerMinute,
             };
+            let per_rev = Real::from(u8::from(fm == 950));
+            self.event(
+                "SET_FEED_MODE",
+                vec![EventArg::Num(0.0), EventArg::Num(per_rev)],
+            );
+            if fm != 930 {
+                self.feed = 0.0;
+                self.event("SET_FEED_RATE", vec![EventArg::Num(0.0)]);
+            }
         }
         if let Some(f) = b.word(b'f') {
             if f < 0.0 {
                 return Err(self.err_word(b, b'f', "Negative F word used"));
             }
             self.feed = f * self.u;
-            if self.feed_mode == FeedMode::PerMinute {
+            if self.feed_mode != FeedMode::InverseTime {
                 self.event("SET_FEED_RATE", vec![EventArg::Num(f)]);
             }
         }

@@ -154,6 +154,8 @@ pub struct Interpreter {
     first_line: bool,
     main_title: bool,
     blocks: u64,
+    /// Lines executed since the last move that went somewhere.
+    idle_blocks: u64,
     // splines and threading
     /// The motion mode before this block's motion step (LinuxCNC's `motion_mode` there).
     motion_before: Option<i32>,
@@ -281,6 +283,7 @@ impl Interpreter {
             first_line: true,
             main_title: false,
             blocks: 0,
+            idle_blocks: 0,
             motion_before: None,
             nurbs_points: Vec::new(),
             nurbs_order: 3,
@@ -370,6 +373,9 @@ impl Interpreter {
         if let Some(p) = self.out_pos.take() {
             m.start = AxisValues::from_array(p);
         }
+        if m.start != m.end {
+            self.idle_blocks = 0;
+        }
         // a move sets the canon position (rs274's rigid tap leaves it, coming back)
         if self.offs_set && m.kind != MotionKind::RigidTap {
             self.canon_off = [0.0; 6];
@@ -428,10 +434,28 @@ impl Interpreter {
             self.fail(e);
             return;
         }
+        self.idle_blocks += 1;
+        if self.idle_blocks > self.opts.max_idle_blocks {
+            let e = lerr(
+                1,
+                "",
+                format!(
+                    "more than {} blocks in a row without motion (endless loop?); expected \
+                     a move within that many blocks (the limit is [nc] max_idle_blocks, \
+                     nc motion --max-idle-blocks)",
+                    self.opts.max_idle_blocks
+                ),
+            );
+            self.fail(e);
+            return;
+        }
         if self.resync_pending {
             // LinuxCNC re-reads the position from the canon after a tool change
             self.resync_pending = false;
             self.cur_off = self.canon_off;
+            // also after G40: the programmed point is forgotten for the canon's, which is
+            // where the compensated tool went (the exit move must still be straight)
+            self.prog_override = None;
         }
         self.line_start = self.tell();
         let mut buf = std::mem::take(&mut self.buf);

@@ -218,6 +218,13 @@ impl Interpreter {
                 canon_off[i] += self.tool_off[i] - old[i];
             }
             self.set_canon_offsets(canon_off, self.cur_off);
+            // after G40 the current point is the programmed one (not where the machine
+            // is): it too keeps its machine position
+            if let Some(p) = self.prog_override.as_mut() {
+                for i in 0..6 {
+                    p[i] -= self.tool_off[i] - old[i];
+                }
+            }
         }
         Ok(())
     }
