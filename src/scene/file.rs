@@ -184,6 +184,20 @@ pub fn machine_kind(text: &str) -> Option<String> {
     toml::from_str::<Peek>(text).ok()?.machine?.kind
 }
 
+/// `[machine] kind`'s value and where it stands, if the text has one (read leniently, as
+/// [`machine_kind`]).
+pub(super) fn machine_kind_at(text: &str) -> Option<Spanned<String>> {
+    #[derive(Deserialize)]
+    struct Peek {
+        machine: Option<KindPeek>,
+    }
+    #[derive(Deserialize)]
+    struct KindPeek {
+        kind: Option<Spanned<String>>,
+    }
+    toml::from_str::<Peek>(text).ok()?.machine?.kind
+}
+
 fn default_spindle() -> String {
     "S".into()
 }

@@ -10,6 +10,7 @@ use super::SceneError;
 use super::cut::read_cut;
 use super::file::{
     HexapodMachineFile, Required, SceneFile, SerialMachineFile, StockFile, ToolFile, machine_kind,
+    machine_kind_at,
 };
 use super::hexapod::{HexapodScene, read_hexapod};
 use super::identify::{IdentifySetup, identify_setup};
@@ -29,6 +30,21 @@ use toml::Spanned;
 /// names its line and column.
 fn parse_file<M: DeserializeOwned>(ctx: &Ctx) -> Result<SceneFile<M>, SceneError> {
     toml::from_str(ctx.text).map_err(|e| toml_error(ctx.text, ctx.path, &e))
+}
+
+/// Refuses a `[machine] kind` that is neither machine, at its line and column, before the
+/// sections are read by a kind's rules.
+fn known_kind(ctx: &Ctx) -> Result<(), SceneError> {
+    match machine_kind_at(ctx.text) {
+        Some(k) if !["serial", "hexapod"].contains(&k.get_ref().as_str()) => Err(ctx.err(
+            k.span(),
+            format!(
+                "machine.kind: got \"{}\", expected \"serial\" or \"hexapod\"",
+                k.get_ref()
+            ),
+        )),
+        _ => Ok(()),
+    }
 }
 
 /// A serial scene's program, `[tool]` and `[stock]`: the first one missing is reported as
@@ -156,6 +172,7 @@ impl Scene {
     /// Parses and validates scene text; the stock must fit in `memory`.
     pub fn parse_with(text: &str, path: &Path, memory: &MemoryBudget) -> Result<Scene, SceneError> {
         let ctx = Ctx { path, text };
+        known_kind(&ctx)?;
         if machine_kind(text).as_deref() == Some("hexapod") {
             return Err(SceneError::Hexapod {
                 path: path.to_path_buf(),
@@ -207,6 +224,7 @@ impl Scene {
         memory: &MemoryBudget,
     ) -> Result<Scene, SceneError> {
         let ctx = Ctx { path, text };
+        known_kind(&ctx)?;
         let file: SceneFile<HexapodMachineFile> = parse_file(&ctx)?;
         let hex = read_hexapod(&ctx, &file)?;
         let (Some(program), Some(tool), Some(stock)) = (&file.program, &file.tool, &file.stock)
@@ -287,6 +305,7 @@ impl HexapodScene {
     /// Parses and validates hexapod scene text; `path` locates messages.
     pub fn parse(text: &str, path: &Path) -> Result<HexapodScene, SceneError> {
         let ctx = Ctx { path, text };
+        known_kind(&ctx)?;
         let file: SceneFile<HexapodMachineFile> = parse_file(&ctx)?;
         read_hexapod(&ctx, &file)
     }
