@@ -17,7 +17,7 @@ const SCENE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/mdx50-step.toml
 /// 10,000 moves from a fixed seed.
 fn program(scene: &Scene, n: usize) -> Program {
     let rng = CounterRng::new(7);
-    let mut at = scene.home;
+    let mut at = scene.home();
     let mut moves = Vec::with_capacity(n);
     for i in 0..n {
         let u = |k| rng.uniform(i as u64, k);
@@ -60,8 +60,9 @@ fn benches(c: &mut Criterion) {
         ("alpha_ZS", -5e-4),
         ("beta_ZS", 5e-4),
     ] {
-        let id = scene.chain.deviation_id(name).expect("known");
-        scene.chain.set_deviation(id, v as Real);
+        let m = scene.serial_mut().expect("a serial machine");
+        let id = m.chain.deviation_id(name).expect("known");
+        m.chain.set_deviation(id, v as Real);
     }
     let prog = program(&scene, 10_000);
     let opts = CorrectOptions::for_accuracy(1e-3);
@@ -71,10 +72,10 @@ fn benches(c: &mut Criterion) {
     g.bench_function("10,000 moves, nine deviations (moves)", |b| {
         b.iter(|| {
             correct_program(
-                black_box(&scene.chain),
+                black_box(scene.chain()),
                 &scene.tool,
                 black_box(&prog),
-                &scene.home,
+                &scene.home(),
                 &opts,
             )
             .expect("corrects")

@@ -117,8 +117,8 @@ fn bench_instruments(c: &mut Criterion) {
     use twinmill::nc::AxisLetter;
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/xyz-error-motions.toml");
     let scene = twinmill::scene::Scene::load(&path).expect("the built-in scene loads");
-    let chain = &scene.chain;
-    let mut circle = BallBarSetup::new(Plane::Xy, scene.home, 100.0);
+    let chain = scene.chain();
+    let mut circle = BallBarSetup::new(Plane::Xy, scene.home(), 100.0);
     circle.turns = Turns::Ccw;
     circle.noise_um = 0.1;
     let opts = CircularOptions {
@@ -155,7 +155,7 @@ fn bench_instruments(c: &mut Criterion) {
             end_mm: 60.0,
             count: 11,
         },
-        scene.home,
+        scene.home(),
     );
     laser.noise_um = 0.5;
     let mut g = c.benchmark_group("laser");

@@ -25,10 +25,9 @@ use twinmill::cutting::shape::Cylinder;
 use twinmill::cutting::stock::TriDexel;
 use twinmill::cutting::sweep::{Kinematics, sweep_program};
 use twinmill::cutting::tool::{Tool, ToolKind};
-use twinmill::hexapod_scene::HexapodScene;
 use twinmill::math::{Aabb, Point3, Real, Vector3};
 use twinmill::progress::NoProgress;
-use twinmill::scene::{MemoryBudget, Scene};
+use twinmill::scene::{Machine, MemoryBudget, Scene};
 use twinmill::{cutting, machine, math, nc};
 
 #[path = "support/five_axis.rs"]
@@ -75,7 +74,7 @@ fn benches(c: &mut Criterion) {
                     |mut stock| {
                         sweep_program(
                             &mut stock,
-                            &scene.chain,
+                            scene.chain(),
                             &tool,
                             &moves,
                             &scene.sweep,
@@ -89,7 +88,7 @@ fn benches(c: &mut Criterion) {
         );
     }
 
-    let moves = polyline(&blade(&scene.chain.nominal(), ball.radius(), 720), FEED);
+    let moves = polyline(&blade(&scene.chain().nominal(), ball.radius(), 720), FEED);
     g.throughput(Throughput::Elements(moves.len() as u64));
     g.bench_function(
         format!("blade-like finishing, ball, {PITCH} mm, 720 moves (moves)"),
@@ -99,7 +98,7 @@ fn benches(c: &mut Criterion) {
                 |mut stock| {
                     sweep_program(
                         &mut stock,
-                        &scene.chain,
+                        scene.chain(),
                         &ball,
                         &moves,
                         &scene.sweep,
@@ -112,9 +111,12 @@ fn benches(c: &mut Criterion) {
         },
     );
 
-    let hexapod = HexapodScene::load_cut(Path::new(HEXAPOD), &MemoryBudget::installed())
+    let hexapod = Scene::load_hexapod_cut(Path::new(HEXAPOD), &MemoryBudget::installed())
         .expect("hexapod scene");
-    let twin = hexapod.hexapod.clone().expect("a hexapod scene");
+    let Machine::Hexapod(h) = &hexapod.machine else {
+        panic!("a hexapod scene")
+    };
+    let twin = h.twin.clone();
     let moves = polyline(&hexapod_side(180), FEED);
     g.throughput(Throughput::Elements(moves.len() as u64));
     g.bench_function(

@@ -18,9 +18,9 @@ mod group {
     use criterion::{Criterion, Throughput, criterion_group};
     use std::hint::black_box;
     use std::path::Path;
-    use twinmill::hexapod_scene::HexapodScene;
     use twinmill::machine::hexapod::{Hexapod, Pose, Struts};
     use twinmill::math::{CounterRng, Real};
+    use twinmill::scene::HexapodScene;
 
     const SCENE: &str = concat!(
         env!("CARGO_MANIFEST_DIR"),

@@ -36,17 +36,18 @@ const NINE: [(&str, f64); 9] = [
 fn benches(c: &mut Criterion) {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/mdx50-step.toml");
     let mut base = Scene::load(&path).expect("scene");
+    let m = base.serial_mut().expect("a serial machine");
     for (n, v) in NINE {
-        let id = base.chain.deviation_id(n).expect("known");
-        base.chain.set_deviation(id, v);
-        base.injected.insert(n.into(), v);
+        let id = m.chain.deviation_id(n).expect("known");
+        m.chain.set_deviation(id, v);
+        m.injected.insert(n.into(), v);
     }
     let ids: Vec<_> = NINE
         .iter()
-        .map(|(n, _)| base.model.deviation_id(n).expect("known"))
+        .map(|(n, _)| base.model().deviation_id(n).expect("known"))
         .collect();
     let opts = DesignOptions::standard();
-    let d = design(&base.model, &base.tool, &ids, &opts).expect("design");
+    let d = design(base.model(), &base.tool, &ids, &opts).expect("design");
     let params: Vec<String> = NINE.iter().map(|(n, _)| n.to_string()).collect();
     let toml = design_scene_toml(&base, &d, &opts, &params, "bench-design", "bench.ngc")
         .expect("the scene has a [scanner]");
@@ -71,7 +72,7 @@ fn benches(c: &mut Criterion) {
     let features = extract_features(&scene, &program, &cloud.points, None).expect("features");
     let solve = || {
         correction_loop(
-            &scene.model,
+            scene.model(),
             &ids,
             &scene.tool,
             black_box(&features),
@@ -99,7 +100,7 @@ fn benches(c: &mut Criterion) {
                 let f = extract_features(&scene, &program, black_box(&cloud.points), None)
                     .expect("features");
                 correction_loop(
-                    &scene.model,
+                    scene.model(),
                     &ids,
                     &scene.tool,
                     &f,
@@ -127,11 +128,11 @@ fn rotary_location(c: &mut Criterion) {
     use twinmill::pipeline::default_setup;
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/trunnion-ac.toml");
     let scene = Scene::load(&path).expect("scene");
-    let sweeps = default_sweeps(&scene.chain);
+    let sweeps = default_sweeps(scene.chain());
     let setup = default_setup(1);
     let samples = sensor_test(
-        &scene.chain,
-        &scene.model,
+        scene.chain(),
+        scene.model(),
         &BallSensor::seed003(8.0),
         1.0,
         &setup,
@@ -140,14 +141,14 @@ fn rotary_location(c: &mut Criterion) {
     .expect("trace");
     let features = ball_features(&samples, setup.tool_offset, 0);
     let terms: Vec<IsoTerm> = scene
-        .model
+        .model()
         .rotary_location_terms()
         .iter()
-        .map(|n| IsoTerm::parse(&scene.model, n).expect("term"))
+        .map(|n| IsoTerm::parse(scene.model(), n).expect("term"))
         .collect();
     let tool = Tool::try_new(ToolKind::Ball, 1.0, 1.0).expect("tool");
     let model = Model {
-        chain: &scene.model,
+        chain: scene.model(),
         ids: &[],
         iso_terms: &terms,
         tool: &tool,

@@ -27,7 +27,7 @@ fn benches(c: &mut Criterion) {
     // The sweep as it runs in the pipeline: a fresh stock cut by the whole program.
     let swept = || {
         let mut stock = TriDexel::new_box(scene.stock_box, scene.pitch_mm, 8e9).expect("fits");
-        let (chain, tool) = (&scene.chain, &scene.tool);
+        let (chain, tool) = (scene.chain(), &scene.tool);
         sweep_program(
             &mut stock,
             chain,

@@ -43,7 +43,7 @@ mod group {
                 let mut stock = bar(10.0, -20.0, 40.0, 0.1);
                 sweep_program(
                     &mut stock,
-                    &scene.chain,
+                    scene.chain(),
                     &scene.tool,
                     &moves,
                     &opts,
@@ -62,7 +62,7 @@ mod group {
                 b.iter_batched(
                     || bar(8.0, -10.0, 20.0, pitch),
                     |mut stock| {
-                        sweep_program(&mut stock, &scene.chain, &ball, &moves, &opts, &NoProgress)
+                        sweep_program(&mut stock, scene.chain(), &ball, &moves, &opts, &NoProgress)
                             .expect("sweeps")
                     },
                     BatchSize::LargeInput,
@@ -80,11 +80,11 @@ mod group {
             .with(AxisLetter::Y, -20.0)
             .with(AxisLetter::Z, 3.0)
             .with(AxisLetter::A, 30.0);
-        let plain = scene.chain.clone();
+        let plain = scene.chain().clone();
         g.bench_function("w_from_t without error motions", |b| {
             b.iter(|| plain.w_from_t(std::hint::black_box(&q)))
         });
-        let mut with = scene.chain.clone();
+        let mut with = scene.chain().clone();
         for l in [AxisLetter::X, AxisLetter::Y, AxisLetter::Z] {
             let mut e = AxisErrorMotions::for_axis(l);
             e.functions[0].terms = vec![

@@ -115,7 +115,7 @@ fn main() {
         ));
     }
     for pitch in [0.2, 0.1] {
-        let chain = mdx.chain.clone();
+        let chain = mdx.chain().clone();
         cases.push((
             format!("P4 helical groove {pitch} mm"),
             Box::new(move || {
@@ -128,7 +128,7 @@ fn main() {
         ));
     }
     {
-        let (chain, tool) = (mdx.chain.clone(), mdx.tool.clone());
+        let (chain, tool) = (mdx.chain().clone(), mdx.tool.clone());
         cases.push((
             "P3 hexagon 0.1 mm".into(),
             Box::new(move || {
@@ -142,7 +142,7 @@ fn main() {
     }
     {
         // tests/twinmill/rotary.rs: rotary_move_surface_agrees_with_brute_force.
-        let chain = mdx.chain.nominal();
+        let chain = mdx.chain().nominal();
         cases.push((
             "rotary move A 0-90 0.4 mm".into(),
             Box::new(move || {

@@ -36,7 +36,7 @@ fn main() -> std::process::ExitCode {
         (
             "trunnion-blade.ngc",
             five_axis::nc_text(
-                &five_axis::blade(&trunnion.chain.nominal(), 3.0, 1440),
+                &five_axis::blade(&trunnion.chain().nominal(), 3.0, 1440),
                 &[X, Y, Z, A, C],
                 120.0,
                 "blade-like finishing, ball D6: C 0.25 deg a move, A +-5 deg twice a turn, 0.2 mm deep",

@@ -11,7 +11,6 @@
 use std::path::Path;
 use std::time::Instant;
 use twinmill::cutting::sweep::sweep_program;
-use twinmill::hexapod_scene::HexapodScene;
 use twinmill::progress::NoProgress;
 use twinmill::scene::{MemoryBudget, Scene, SceneError};
 
@@ -27,7 +26,7 @@ fn main() {
     };
     let mut scene = match Scene::load(Path::new(path)) {
         Err(SceneError::Hexapod { .. }) => {
-            HexapodScene::load_cut(Path::new(path), &MemoryBudget::installed())
+            Scene::load_hexapod_cut(Path::new(path), &MemoryBudget::installed())
         }
         other => other,
     }

@@ -8,11 +8,11 @@
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use twinmill::hexapod_scene::HexapodScene;
 use twinmill::metrology::cloud::{read_ply, read_pts, read_xyz};
 use twinmill::metrology::{ball_sensor, circular, positioning};
 use twinmill::nc::{InterpOptions, Interpreter, ToolTable};
 use twinmill::pipeline::dbb::parse_plan;
+use twinmill::scene::HexapodScene;
 use twinmill::scene::{MemoryBudget, Scene, machine_kind};
 use twinmill::study::{self, Manifest};
 

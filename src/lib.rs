@@ -20,7 +20,6 @@ pub mod calibration;
 pub mod report;
 
 pub mod scene;
-pub mod hexapod_scene;
 pub mod pipeline;
 pub mod output;
 pub mod study;

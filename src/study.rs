@@ -305,7 +305,7 @@ pub fn plan(study_file: &Path, shards: usize) -> Result<Manifest, StudyError> {
     for (name, d) in &f.vary.deviations {
         let key = format!("vary.deviations.{}", name.get_ref());
         scene
-            .chain
+            .chain()
             .deviation_id(name.get_ref())
             .map_err(|e| at(name.span(), format!("{key}: {e}")))?;
         d.get_ref()
@@ -461,13 +461,16 @@ pub fn run_shard(m: &Manifest, shard: usize) -> Result<Vec<Row>, StudyError> {
     for t in m.trials.iter().filter(|t| t.shard == shard) {
         let clock = Instant::now();
         let mut s = base.clone();
+        let machine = s
+            .serial_mut()
+            .ok_or_else(|| input(&m.scene, "a study varies a serial machine's deviations"))?;
         for (name, v) in &t.deviations {
-            let id = s
+            let id = machine
                 .chain
                 .deviation_id(name)
                 .map_err(|e| input(&m.scene, e.to_string()))?;
-            s.chain.set_deviation(id, *v);
-            s.injected.insert(name.clone(), *v);
+            machine.chain.set_deviation(id, *v);
+            machine.injected.insert(name.clone(), *v);
         }
         if let Some(sc) = s.scanner.as_mut() {
             sc.seed = t.scanner_seed;
@@ -477,9 +480,9 @@ pub fn run_shard(m: &Manifest, shard: usize) -> Result<Vec<Row>, StudyError> {
             .parameters
             .iter()
             .map(|p| {
-                s.chain
+                s.chain()
                     .deviation_id(p)
-                    .map_or(Real::NAN, |id| s.chain.deviation(id))
+                    .map_or(Real::NAN, |id| s.chain().deviation(id))
             })
             .collect();
         let row = match identify_scene(&s, &program, None, Some(0), &NoProgress) {

@@ -62,7 +62,7 @@ pub fn exec(a: CorrectArgs) -> ExitCode {
     };
     let bars = bars(a.args.json);
     let (chain, warning) = match a.model {
-        ModelSource::Injected => (scene.chain.clone(), None),
+        ModelSource::Injected => (scene.chain().clone(), None),
         ModelSource::Identified => {
             match run(&scene, &program, &bars)
                 .and_then(|o| identified_model(&scene, &o.report).map(|c| (c, o.report.warning)))

@@ -7,11 +7,11 @@ use super::{Loaded, SceneArgs, bars, fail, load, print_out, procedure_arg, write
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use twinmill::calibration::hexapod_calibrate::Procedure;
-use twinmill::hexapod_scene::HexapodScene;
 use twinmill::output::{json_bytes, write_files};
 use twinmill::pipeline::dbb::{CalibrationDesignOutcome, calibration_design};
 use twinmill::pipeline::design_scene;
 use twinmill::pipeline::pages::design_page;
+use twinmill::scene::HexapodScene;
 use twinmill::scene::Need;
 
 /// Design test cuts or a hexapod's DBB circles that show the deviations.
@@ -147,7 +147,7 @@ pub fn exec(a: DesignArgs) -> ExitCode {
     };
     let mut ids = Vec::new();
     for p in &params {
-        match scene.model.deviation_id(p) {
+        match scene.model().deviation_id(p) {
             Ok(id) => ids.push(id),
             Err(e) => return fail(format!("--params: {e}")),
         }

@@ -155,11 +155,11 @@ pub fn exec(a: HexapodArgs) -> ExitCode {
 
 /// The hexapod command, or why it failed.
 fn hexapod_run(command: HexapodCommand) -> Result<ExitCode, String> {
-    use twinmill::hexapod_scene::HexapodScene;
     use twinmill::machine::hexapod_accuracy::Workspace;
     use twinmill::pipeline::hexapod::{
         AmplificationRequest, hexapod_amplification, hexapod_homing, hexapod_pivot,
     };
+    use twinmill::scene::HexapodScene;
     let load = |p: &Path| HexapodScene::load(p).map_err(|e| e.to_string());
     let json_text = |v: serde_json::Value| serde_json::to_string(&v);
     Ok(match command {

@@ -9,12 +9,12 @@ use super::{
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use twinmill::hexapod_scene::HexapodScene;
 use twinmill::metrology::cloud::read_cloud_file;
 use twinmill::pipeline::dbb::{calibrate_measured, calibrate_scene, load_plan};
 use twinmill::pipeline::identify_scene;
 use twinmill::pipeline::instrument_pages::calibrate_page;
 use twinmill::pipeline::pages::identify_page;
+use twinmill::scene::HexapodScene;
 use twinmill::scene::Need;
 
 /// Identify the deviations: from cut faces, or a hexapod's DBB traces.

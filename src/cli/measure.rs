@@ -5,7 +5,6 @@
 use super::{fail, numbers, print_out, write};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use twinmill::hexapod_scene::HexapodScene;
 use twinmill::math::Vector3;
 use twinmill::metrology::ballbar::Turns;
 use twinmill::metrology::hexapod_dbb::DbbPlane;
@@ -14,6 +13,7 @@ use twinmill::pipeline::measure::{
     BallbarOptions, DbbRequest, LaserOptions, MeasureInstrument, MeasureRequest, RotaryOptions,
     hexapod_ballbar, measure,
 };
+use twinmill::scene::HexapodScene;
 
 /// The virtual instruments of `measure`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

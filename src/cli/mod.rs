@@ -101,7 +101,7 @@ pub fn load(a: &SceneArgs, command: &str, needs: &[Need]) -> Result<Loaded, Exit
     };
     let scene = match Scene::load_with(&a.scene, &budget) {
         Err(SceneError::Hexapod { .. }) if command == "simulate" => {
-            twinmill::hexapod_scene::HexapodScene::load_cut(&a.scene, &budget).map_err(fail)?
+            Scene::load_hexapod_cut(&a.scene, &budget).map_err(fail)?
         }
         Err(SceneError::Hexapod { path }) => return Ok(Loaded::Hexapod(path)),
         r => r.map_err(fail)?,

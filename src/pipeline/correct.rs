@@ -51,7 +51,7 @@ fn nonzero_deviations(chain: &Chain) -> BTreeMap<String, Real> {
 
 /// The correction loop of seed 002 Fig. 1 on a scene: correct `program` for the deviated
 /// chain `model` (the scene's injected deviations, or identified ones), simulate the
-/// corrected program on the scene's machine (`scene.chain`), measure the milled faces and the
+/// corrected program on the scene's machine (`scene.chain()`), measure the milled faces and the
 /// tool path against the nominal ones, and refine the subdivision until both are within
 /// `accuracy_mm` — or report what stays out and why. Pass 0 is the program as given.
 pub fn correct(
@@ -72,8 +72,8 @@ pub fn correct(
     if !(accuracy_mm.is_finite() && accuracy_mm > 0.0) {
         return Err(cerr(CorrectError::BadAccuracy(accuracy_mm)));
     }
-    let start = program.moves.first().map_or(scene.home, |m| m.start);
-    let nominal = scene.chain.nominal();
+    let start = program.moves.first().map_or(scene.home(), |m| m.start);
+    let nominal = scene.chain().nominal();
     let mut timings: Vec<(String, Real)> = Vec::new();
     let mut sweep_scene = scene.clone();
     sweep_scene.sweep = SweepOptions {
@@ -85,7 +85,9 @@ pub fn correct(
     // The nominal part: the program as given on the nominal machine.
     let nominal_part = {
         let mut nominal_scene = sweep_scene.clone();
-        nominal_scene.chain = nominal.clone();
+        if let Some(m) = nominal_scene.serial_mut() {
+            m.chain = nominal.clone();
+        }
         machine_part(&nominal_scene, program, progress)?
     };
     timings.extend(
@@ -123,7 +125,7 @@ pub fn correct(
             &scene.face_options,
         )
         .map_err(cerr)?;
-        let path = path_error(&scene.chain, &scene.tool, program, cp);
+        let path = path_error(scene.chain(), &scene.tool, program, cp);
         let whole = part_error(&part.stock, &nominal_part.stock);
         timings.push((
             format!("measure {iteration}"),
@@ -146,7 +148,7 @@ pub fn correct(
     let mut next = Some(correct_program(model, &scene.tool, program, &start, &opts).map_err(cerr)?);
     timings.push(("correct 1".into(), clock.elapsed().as_secs_f64()));
     // Pass 0, the program as given. Its faces may be too far off to find: then no figure.
-    let given = uncorrected(&scene.chain, program, &start).map_err(cerr)?;
+    let given = uncorrected(scene.chain(), program, &start).map_err(cerr)?;
     let mut iterations = vec![match measure(0, None, &given, &mut timings) {
         Ok(it) => it,
         Err(PipelineError::Correct {
@@ -156,7 +158,7 @@ pub fn correct(
             iteration: 0,
             path_tolerance_mm: None,
             blocks: given.blocks.len(),
-            path: path_error(&scene.chain, &scene.tool, program, &given),
+            path: path_error(scene.chain(), &scene.tool, program, &given),
             part: crate::calibration::correct::PartError::default(),
             faces: crate::calibration::correct::FaceCheck {
                 faces: Vec::new(),
@@ -304,7 +306,7 @@ pub fn correct(
         program: program.path.display().to_string(),
         corrected_program: file,
         corrected_for,
-        simulated: scene.injected.clone(),
+        simulated: scene.injected().clone(),
         accuracy_mm,
         met,
         status,
@@ -336,7 +338,7 @@ pub fn identified_model(scene: &Scene, report: &Report) -> Result<Chain, Pipelin
             report.not_identified.join(", ")
         )));
     }
-    let mut model = scene.model.clone();
+    let mut model = scene.model().clone();
     for (name, value) in &report.identified {
         let mut parts = name.split('+');
         let first = parts.next().unwrap_or_default();

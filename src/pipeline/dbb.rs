@@ -10,7 +10,6 @@ use crate::calibration::hexapod_calibrate::{
     pose_errors, true_deviations, work_time,
 };
 use crate::calibration::hexapod_design::{CircleDesign, design};
-use crate::hexapod_scene::HexapodScene;
 use crate::machine::hexapod::{Hexapod, ParameterId};
 use crate::machine::hexapod_accuracy::Workspace;
 use crate::math::{CounterRng, Real, Vector3};
@@ -19,6 +18,7 @@ use crate::metrology::circular::{CircularFigures, CircularOptions, evaluate};
 use crate::metrology::hexapod_dbb::DbbPlane;
 use crate::metrology::hexapod_dbb::{DbbCircle, DbbInstrument, RecordedCircle, measure};
 use crate::report::plots::polar_plot;
+use crate::scene::HexapodScene;
 use crate::scene::{SceneError, line_col, read_text};
 use serde::Serialize;
 use std::path::Path;

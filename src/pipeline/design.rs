@@ -62,7 +62,7 @@ pub fn design_scene(
     let mut tried = 0;
     for _ in 0..MAX_DESIGN_ROUNDS {
         let d =
-            design_with(&scene.model, &scene.tool, ids, &opts, &measured).map_err(design_err)?;
+            design_with(scene.model(), &scene.tool, ids, &opts, &measured).map_err(design_err)?;
         let learns = d.faces.iter().any(|f| !measured.contains_key(&f.name));
         if tried > 0 && !learns {
             // Every face of this design was measured in an earlier one.
@@ -102,7 +102,7 @@ pub fn design_scene(
         .parameters
         .iter()
         .filter_map(|e| {
-            let id = scene.model.deviation_id(&e.name).ok()?;
+            let id = scene.model().deviation_id(&e.name).ok()?;
             Some((e.name.clone(), e.sigma / magnitude(id)))
         })
         .collect();
@@ -152,7 +152,7 @@ pub fn design_scene(
         notes: lever_notes(
             &design.cuts,
             &verified.features,
-            &scene.model,
+            scene.model(),
             &scene.tool,
             ids,
         ),

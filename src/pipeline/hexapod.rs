@@ -6,7 +6,6 @@
 //! **Invariant:** the same scene and request give the same outcome (sequential, no random
 //! numbers).
 
-use crate::hexapod_scene::HexapodScene;
 use crate::machine::hexapod::{Amplification, Pose};
 use crate::machine::hexapod_accuracy::{
     AmplificationMap, HomingSetup, LevelPositioning, PivotReport, ResolutionBudget, StrutHoming,
@@ -18,6 +17,7 @@ use crate::report::hexapod::{
     amplification_csv, amplification_png, amplification_summary, homing_summary, pivot_summary,
 };
 use crate::report::render::encode_png;
+use crate::scene::HexapodScene;
 use serde::Serialize;
 
 /// The most grid points along one axis of a map or pivot test.

@@ -63,7 +63,7 @@ pub fn extract_features(
                 points,
                 spec,
                 &program.moves,
-                &scene.model,
+                scene.model(),
                 &scene.tool,
                 &scene.stock_box,
                 &scene.face_options,
@@ -79,7 +79,7 @@ pub fn extract_features(
     selected
         .iter()
         .map(|sel| {
-            plane_feature(points, sel, &scene.model, &scene.tool, &scene.face_options)
+            plane_feature(points, sel, scene.model(), &scene.tool, &scene.face_options)
                 .map(Feature::Plane)
                 .map_err(err)
         })
@@ -97,7 +97,7 @@ fn scene_ids(scene: &Scene) -> Result<Vec<DeviationId>, PipelineError> {
     Ok(scene
         .parameters
         .iter()
-        .filter_map(|n| scene.model.deviation_id(n).ok())
+        .filter_map(|n| scene.model().deviation_id(n).ok())
         .collect())
 }
 
@@ -297,7 +297,7 @@ pub fn identify_scene(
         .as_ref()
         .map(|s| scan_noise(s, &scene.stock_box));
     let (mut ident, twin, rounds, converged) = correction_loop(
-        &scene.model,
+        scene.model(),
         &ids,
         &scene.tool,
         &features,
@@ -333,7 +333,7 @@ pub fn identify_scene(
                 })?;
             let f = extract_features(scene, program, &scanned.cloud.points, None)?;
             let m = Model {
-                chain: &scene.model,
+                chain: scene.model(),
                 ids: &ids,
                 iso_terms: &[],
                 tool: &scene.tool,
@@ -355,7 +355,7 @@ pub fn identify_scene(
         }
         lap("monte carlo", &mut timings);
     }
-    let truth: Vec<Real> = ids.iter().map(|id| scene.chain.deviation(*id)).collect();
+    let truth: Vec<Real> = ids.iter().map(|id| scene.chain().deviation(*id)).collect();
     let simulated = surface.is_some();
     let estimate = |e: &crate::calibration::calibrate::Estimate| EstimateReport {
         name: e.name.clone(),
@@ -373,7 +373,7 @@ pub fn identify_scene(
     let report = IdentifyReport {
         warning: ident.fit.accepted_line(),
         scene: scene.name.clone(),
-        chain: scene.chain.to_string(),
+        chain: scene.chain().to_string(),
         cloud: source,
         registration: match scene.registration {
             Registration::Estimate => "estimate",

@@ -7,7 +7,6 @@
 
 use super::dbb::{BallbarOutcome, ballbar as dbb_ballbar};
 use super::evaluate::{circular_summary, plot_bytes, positioning_summary};
-use crate::hexapod_scene::HexapodScene;
 use crate::math::{Real, Vector3};
 use crate::metrology::ballbar::Turns;
 use crate::metrology::circular::{CircularOptions, TraceError, evaluate as evaluate_circular};
@@ -16,6 +15,7 @@ use crate::metrology::positioning::evaluate as evaluate_positioning;
 use crate::nc::AxisLetter;
 use crate::report::html::render_page;
 use crate::report::pages;
+use crate::scene::HexapodScene;
 use crate::scene::{MemoryBudget, Scene, SceneError};
 use std::path::{Path, PathBuf};
 
@@ -610,7 +610,7 @@ fn measure_rotary(scene: &Scene, r: &MeasureRequest) -> Result<Reading, String> 
 fn measure_laser(scene: &Scene, r: &MeasureRequest, file: &Path) -> Result<Reading, String> {
     use crate::metrology::interferometer::{self, LaserError, LaserSetup, Targets};
     let l = &r.laser;
-    let chain = &scene.chain;
+    let chain = scene.chain();
     let linear: Vec<String> = chain
         .axes()
         .iter()
@@ -658,7 +658,7 @@ fn measure_laser(scene: &Scene, r: &MeasureRequest, file: &Path) -> Result<Readi
             );
         }
     };
-    let mut held = scene.home;
+    let mut held = scene.home();
     if let Some(at) = &l.at {
         for (letter, v) in axis_values("--at", at, chain)? {
             if letter == axis {
@@ -690,7 +690,7 @@ fn measure_laser(scene: &Scene, r: &MeasureRequest, file: &Path) -> Result<Readi
         format!(
             "twinmill measure {} --instrument laser ({})",
             scene.path.display(),
-            scene.machine_name
+            scene.machine_name()
         ),
         described.clone(),
         format!(
@@ -732,14 +732,14 @@ fn measure_laser(scene: &Scene, r: &MeasureRequest, file: &Path) -> Result<Readi
 fn measure_ballbar(scene: &Scene, r: &MeasureRequest, file: &Path) -> Result<Reading, String> {
     use crate::metrology::ballbar::{self, BallBarError, BallBarSetup, Plane};
     let b = &r.ballbar;
-    let chain = &scene.chain;
+    let chain = scene.chain();
     let plane = match &b.plane {
         None => Plane::Xy,
         Some(p) => {
             Plane::from_name(p).ok_or_else(|| format!("--plane: '{p}': expected XY, YZ or ZX"))?
         }
     };
-    let mut centre = scene.home;
+    let mut centre = scene.home();
     if let Some(c) = &b.centre {
         for (letter, v) in axis_values("--centre", c, chain)? {
             centre.set(letter, v);
@@ -785,7 +785,7 @@ fn measure_ballbar(scene: &Scene, r: &MeasureRequest, file: &Path) -> Result<Rea
         format!(
             "twinmill measure {} --instrument ballbar ({})",
             scene.path.display(),
-            scene.machine_name
+            scene.machine_name()
         ),
         described.clone(),
         format!(

@@ -188,13 +188,13 @@ pub fn identify_measurements(
         .iter()
         .map(|(k, p)| read_measurement(*k, p))
         .collect::<Result<Vec<_>, _>>()?;
-    let chain = &scene.chain;
+    let chain = scene.chain();
     let params: Vec<MachineParameter> = match &request.parameters {
         Some(names) => names
             .iter()
-            .map(|n| MachineParameter::parse(chain, &scene.injected, n))
+            .map(|n| MachineParameter::parse(chain, scene.injected(), n))
             .collect::<Result<_, _>>(),
-        None => instruments::scene_parameters(chain, &scene.injected),
+        None => instruments::scene_parameters(chain, scene.injected()),
     }
     .map_err(|message| MeasurementsError::Parameter {
         path: scene.path.clone(),
@@ -212,7 +212,7 @@ pub fn identify_measurements(
         .iter()
         .map(|(_, p)| p.display().to_string())
         .collect();
-    let fragment = instruments::fragment(&model, &scene.injected, &outcome, &sources)
+    let fragment = instruments::fragment(&model, scene.injected(), &outcome, &sources)
         .map_err(MeasurementsError::Identify)?;
     Ok(MeasurementsOutcome {
         outcome,
@@ -301,7 +301,7 @@ mod tests {
         let dir =
             std::env::temp_dir().join(format!("twinmill-measurements-{}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("temp dir");
-        let measured = files(&truth.chain, &dir);
+        let measured = files(truth.chain(), &dir);
         // The twin before: the scene's terms at zero, the squareness forgotten, the pitch
         // (which no set-up here sees) known.
         let start_text = with_sections(
@@ -345,7 +345,7 @@ mod tests {
                         noise_um: 0.0,
                         ..setup
                     };
-                    let r = interferometer::measure(&refit.chain, &s).expect("measures");
+                    let r = interferometer::measure(refit.chain(), &s).expect("measures");
                     (
                         r.readings.iter().map(|x| x.deviation_mm).collect(),
                         readings.iter().map(|x| x.deviation_mm).collect(),
@@ -357,7 +357,7 @@ mod tests {
                         mount_offset_mm: crate::math::Vector3::new(0.005, -0.004, 0.0),
                         ..setup
                     };
-                    let r = ballbar::measure(&refit.chain, &s).expect("measures");
+                    let r = ballbar::measure(refit.chain(), &s).expect("measures");
                     (
                         r.samples.iter().map(|x| x.deviation_mm).collect(),
                         samples.iter().map(|x| x.deviation_mm).collect(),
@@ -384,7 +384,7 @@ mod tests {
         let dir =
             std::env::temp_dir().join(format!("twinmill-measurements-bad-{}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("temp dir");
-        let measured = files(&scene.chain, &dir);
+        let measured = files(scene.chain(), &dir);
         let laser = measured[0].1.clone();
         let e = read_measurement(MeasurementKind::Ballbar(None), &laser).expect_err("refused");
         assert!(e.to_string().contains("laser-X.csv"), "{e}");

@@ -24,7 +24,7 @@ use crate::report::pages::{self as page, FittedPlane, PartGeometry, View3dParts}
 use crate::report::part_view::{PartViewOptions, render_part_view};
 use crate::report::render::encode_png;
 use crate::report::{CorrectReport, DesignReport, IdentifyReport, ScanFileReport};
-use crate::scene::Scene;
+use crate::scene::{Machine, Scene};
 
 /// What a part's deviation is measured from.
 pub struct Reference {
@@ -52,19 +52,23 @@ pub fn reference_part(scene: &Scene, moves: &[Move]) -> Result<Reference, Pipeli
             what: format!("the design {name}"),
         });
     }
-    let nominal = scene.chain.nominal();
+    let nominal = scene.chain().nominal();
     // A hexapod's nominal machine: the actual one with the nominal parameters.
-    let nominal_twin = scene.hexapod.as_ref().map(|t| HexapodTwin {
-        actual: t.nominal.clone(),
-        table: t.table.as_ref().map(|a| TableAxes {
-            nominal: a.nominal.clone(),
-            actual: a.nominal.clone(),
-        }),
-        ..t.clone()
-    });
-    let perfect = match (&scene.hexapod, &nominal_twin) {
-        (Some(t), Some(n)) => t == n,
-        _ => scene.chain == nominal,
+    let (nominal_twin, perfect) = match &scene.machine {
+        Machine::Hexapod(h) => {
+            let t = &h.twin;
+            let n = HexapodTwin {
+                actual: t.nominal.clone(),
+                table: t.table.as_ref().map(|a| TableAxes {
+                    nominal: a.nominal.clone(),
+                    actual: a.nominal.clone(),
+                }),
+                ..t.clone()
+            };
+            let perfect = *t == n;
+            (Some(n), perfect)
+        }
+        Machine::Serial(m) => (None, m.chain == nominal),
     };
     if perfect {
         return Ok(Reference {
@@ -347,7 +351,7 @@ pub fn correct_page(
     let mut stock = make_stock(scene)?;
     sweep_program(
         &mut stock,
-        &scene.chain,
+        scene.chain(),
         &scene.tool,
         corrected,
         &scene.sweep,

@@ -147,7 +147,7 @@ pub fn rotary_test(scene: &Scene, req: &RotaryRequest) -> Result<RotaryOutcome, 
         message,
     };
     let sweeps = if req.sweeps.is_empty() {
-        default_sweeps(&scene.chain)
+        default_sweeps(scene.chain())
     } else {
         req.sweeps.clone()
     };
@@ -159,8 +159,8 @@ pub fn rotary_test(scene: &Scene, req: &RotaryRequest) -> Result<RotaryOutcome, 
     let (samples, instrument) = match req.instrument {
         RotaryInstrument::BallSensor { sensor, height_mm } => (
             sensor_test(
-                &scene.chain,
-                &scene.model,
+                scene.chain(),
+                scene.model(),
                 &sensor,
                 height_mm,
                 &req.setup,
@@ -169,7 +169,7 @@ pub fn rotary_test(scene: &Scene, req: &RotaryRequest) -> Result<RotaryOutcome, 
             "ball-sensor",
         ),
         RotaryInstrument::Probe { sigma_mm } => (
-            probe_test(&scene.chain, sigma_mm, &req.setup, &sweeps),
+            probe_test(scene.chain(), sigma_mm, &req.setup, &sweeps),
             "probe",
         ),
     };
@@ -187,7 +187,7 @@ pub fn rotary_test(scene: &Scene, req: &RotaryRequest) -> Result<RotaryOutcome, 
         identification,
     };
     Ok(RotaryOutcome {
-        trace_csv: trace_csv(&scene.chain, &samples),
+        trace_csv: trace_csv(scene.chain(), &samples),
         report,
         samples,
     })
@@ -200,13 +200,13 @@ fn identify_location(
     setup: &Setup,
 ) -> Result<LocationReport, String> {
     let names = if names.is_empty() {
-        scene.model.rotary_location_terms()
+        scene.model().rotary_location_terms()
     } else {
         names.to_vec()
     };
     let terms = names
         .iter()
-        .map(|n| IsoTerm::parse(&scene.model, n).map_err(|e| e.to_string()))
+        .map(|n| IsoTerm::parse(scene.model(), n).map_err(|e| e.to_string()))
         .collect::<Result<Vec<_>, _>>()?;
     let features = ball_features(samples, setup.tool_offset, 0);
     // Ball features do not use the tool; the model takes one for plane features.
@@ -224,7 +224,7 @@ fn identify_location(
     r.fit
         .enforce("measure", scene.accept_misfit)
         .map_err(|e| e.to_string())?;
-    let injected = |n: &str| scene.injected.get(n).copied();
+    let injected = |n: &str| scene.injected().get(n).copied();
     let term = |e: &crate::calibration::calibrate::Estimate| TermReport {
         name: e.name.clone(),
         value: e.value,
@@ -270,7 +270,7 @@ fn test_model(
     let identified = |name: &str| {
         !name.contains('_')
             && scene
-                .model
+                .model()
                 .iso_term_id(name)
                 .is_ok_and(|(axis, component)| {
                     terms
@@ -279,15 +279,15 @@ fn test_model(
                 })
     };
     let mut deviations: BTreeMap<&str, Real> = scene
-        .injected
+        .injected()
         .iter()
         .filter(|(n, _)| !identified(n))
         .map(|(n, v)| (n.as_str(), *v))
         .collect();
-    for (n, v) in scene.known.iter().filter(|(n, _)| identified(n)) {
+    for (n, v) in scene.known().iter().filter(|(n, _)| identified(n)) {
         deviations.insert(n, *v);
     }
-    let mut chain = scene.model.nominal().with_error_motions_of(&scene.model);
+    let mut chain = scene.model().nominal().with_error_motions_of(scene.model());
     for iso in [false, true] {
         for (name, v) in deviations.iter().filter(|(n, _)| n.contains('_') != iso) {
             if iso {

@@ -89,7 +89,7 @@ pub fn extract_faces(
             points,
             &scene.faces[k],
             &program.moves,
-            &scene.model,
+            scene.model(),
             &scene.tool,
             &scene.stock_box,
             &scene.face_options,
@@ -103,7 +103,7 @@ pub fn extract_faces(
         }
     }
     let fit =
-        |sel| identify::fit_face(points, sel, &scene.model, &scene.face_options).map_err(id_err);
+        |sel| identify::fit_face(points, sel, scene.model(), &scene.face_options).map_err(id_err);
     Ok([fit(&selected[0])?, fit(&selected[1])?])
 }
 
@@ -150,9 +150,9 @@ pub fn run(
         source,
     };
     let cuts = [&faces[0].cut, &faces[1].cut];
-    let ident = identify::identify_step(&faces, &scene.model, &scene.tool).map_err(id_err)?;
+    let ident = identify::identify_step(&faces, scene.model(), &scene.tool).map_err(id_err)?;
     let (predicted_step, predicted_tilt) = identify::predicted_step(
-        &scene.chain,
+        scene.chain(),
         &scene.tool,
         faces.each_ref().map(|f| (&f.cut, &f.flank.plane.normal)),
         &ident.frame,
@@ -162,7 +162,7 @@ pub fn run(
 
     // Heat map of both faces against the first face's nominal plane.
     let nominal = identify::flank(
-        &scene.chain.nominal(),
+        &scene.chain().nominal(),
         &scene.tool,
         cuts[0],
         &scene.stock_box,
@@ -253,8 +253,8 @@ pub fn run(
     let report = Report {
         warning: fit.accepted_line(),
         scene: scene.name.clone(),
-        machine: scene.machine_name.clone(),
-        chain: scene.chain.to_string(),
+        machine: scene.machine_name().to_string(),
+        chain: scene.chain().to_string(),
         program: program.path.display().to_string(),
         moves: program.moves.len(),
         step_mm: ident.step_mm,
@@ -262,8 +262,8 @@ pub fn run(
         predicted_step_mm: predicted_step,
         tilt_rad: ident.tilt_rad,
         predicted_tilt_rad: predicted_tilt,
-        injected: scene.injected.clone(),
-        known: scene.known.clone(),
+        injected: scene.injected().clone(),
+        known: scene.known().clone(),
         identified,
         uncertainty,
         not_identified,
@@ -391,7 +391,7 @@ pub fn scanner_study(
                 first.then_some(stock),
             )?;
             let ident =
-                identify::identify_step(&faces, &scene.model, &scene.tool).map_err(id_err)?;
+                identify::identify_step(&faces, scene.model(), &scene.tool).map_err(id_err)?;
             if let Some((n, v, s)) = &ident.offset {
                 name.clone_from(n);
                 values.push(*v);
@@ -400,9 +400,9 @@ pub fn scanner_study(
             steps.push(ident.step_mm);
         }
         let truth = scene
-            .chain
+            .chain()
             .deviation_id(&name)
-            .map(|id| scene.chain.deviation(id))
+            .map(|id| scene.chain().deviation(id))
             .unwrap_or(Real::NAN);
         let n = values.len().max(1) as Real;
         let mean = values.iter().sum::<Real>() / n;

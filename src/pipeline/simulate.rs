@@ -22,7 +22,7 @@ use crate::report::render::encode_png;
 use crate::report::svg::{MapLabels, deviation_map_svg};
 use crate::report::{CollisionEvent, DeviationSummary};
 use crate::report::{MeshSummary, SimulationReport, StockReport};
-use crate::scene::Scene;
+use crate::scene::{Machine, Scene};
 use std::collections::BTreeMap;
 use std::time::Instant;
 
@@ -241,11 +241,11 @@ fn cut_part(
     let clock = Instant::now();
     // A hexapod scene has no holder or fixtures (refused on loading): its sweep runs
     // without the collision checks, which drive a chain.
-    let checked = match &scene.hexapod {
-        Some(twin) => {
+    let checked = match &scene.machine {
+        Machine::Hexapod(h) => {
             let sweep = sweep_program(
                 stock,
-                Kinematics::Poses(twin),
+                Kinematics::Poses(&h.twin),
                 &scene.tool,
                 &program.moves,
                 &scene.sweep,
@@ -259,9 +259,9 @@ fn cut_part(
                 check_error_bound_mm: 0.0,
             }
         }
-        None => sweep_with_checks(
+        Machine::Serial(m) => sweep_with_checks(
             stock,
-            &scene.chain,
+            &m.chain,
             &scene.tool,
             scene.holder.as_ref(),
             &scene.fixtures,

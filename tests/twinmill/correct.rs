@@ -20,7 +20,7 @@ fn face_distances(s: &Scene, moves: &[Move]) -> [Vec<Real>; 2] {
     let opts = SweepOptions {
         rotary_step_bound_mm: 1e-5,
     };
-    sweep_program(&mut stock, &s.chain, &s.tool, moves, &opts, &NoProgress).expect("sweeps");
+    sweep_program(&mut stock, s.chain(), &s.tool, moves, &opts, &NoProgress).expect("sweeps");
     let zero = [[0.0; 6]; 4];
     let (n, d) = exact_face(&zero, -25.0, 0.0, s.tool.radius());
     let mut out = [Vec::new(), Vec::new()];
@@ -60,7 +60,7 @@ fn corrected_program_leaves_no_step_on_the_paper_scene() {
     assert!((step.abs() - 1.0).abs() < 1e-6, "uncorrected step {step}");
 
     let out =
-        twinmill::pipeline::correct(&s, &program, &s.chain, 1e-3, &NoProgress).expect("corrects");
+        twinmill::pipeline::correct(&s, &program, s.chain(), 1e-3, &NoProgress).expect("corrects");
     assert!(out.report.met, "{}", out.report.status);
     let [a0, a180] = face_distances(&s, &out.corrected.moves);
     assert!(a0.len() > 5000 && a180.len() > 5000);
@@ -81,7 +81,7 @@ fn corrected_program_leaves_no_step_on_the_paper_scene() {
     let parsed = twinmill::nc::parse_program(
         &text.replace(" G94", ""),
         Path::new("corrected.ngc"),
-        s.home,
+        s.home(),
     )
     .expect("the corrected program parses");
     assert_eq!(parsed.moves.len(), out.corrected.moves.len());
@@ -129,7 +129,7 @@ fn mixed_deviation_sets_are_corrected_to_within_1_um_on_the_faces() {
             }
         }
         assert!(any);
-        let out = twinmill::pipeline::correct(&s, &program, &s.chain, 1e-3, &NoProgress)
+        let out = twinmill::pipeline::correct(&s, &program, s.chain(), 1e-3, &NoProgress)
             .expect("corrects");
         let [a0, a180] = face_distances(&s, &out.corrected.moves);
         assert!(a0.len() > 5000 && a180.len() > 5000, "set {set}");
@@ -137,7 +137,7 @@ fn mixed_deviation_sets_are_corrected_to_within_1_um_on_the_faces() {
         assert!(
             m0 < 1e-3 && m1 < 1e-3,
             "set {set} {:?}: faces off by {m0} and {m1} mm",
-            s.injected
+            s.injected()
         );
         // And every cut surface of the part, against the program as given on the nominal
         // machine, ray by ray: no floor or other surface shows the uncorrectable tilt.
@@ -201,11 +201,11 @@ fn correct_rejects_bad_accuracy_and_unreachable_poses() {
     let s = scene();
     let program = s.load_program().expect("parses");
     for acc in [0.0, -1.0, Real::NAN, Real::INFINITY] {
-        let e = twinmill::pipeline::correct(&s, &program, &s.chain, acc, &NoProgress)
+        let e = twinmill::pipeline::correct(&s, &program, s.chain(), acc, &NoProgress)
             .expect_err("bad accuracy");
         assert!(e.to_string().contains("accuracy"), "{e}");
     }
-    let mut far = s.chain.clone();
+    let mut far = s.chain().clone();
     far.set_deviation(far.deviation_id("dz_AY").expect("known"), 50.0);
     let e = twinmill::pipeline::correct(&s, &program, &far, 1e-3, &NoProgress)
         .expect_err("unreachable");
@@ -323,7 +323,7 @@ fn whole_part_error_is_the_distance_between_surfaces_not_the_height_of_a_moved_e
     let s = Scene::load(&sb.dir.join("s.toml")).expect("scene");
     let program = s.load_program().expect("program");
     let out =
-        twinmill::pipeline::correct(&s, &program, &s.chain, 1e-3, &NoProgress).expect("corrects");
+        twinmill::pipeline::correct(&s, &program, s.chain(), 1e-3, &NoProgress).expect("corrects");
     let given = &out.report.iterations[0];
     assert_eq!(given.iteration, 0);
     // The path is off by |t| everywhere.
@@ -379,14 +379,19 @@ fn head_table_programs_at_b_zero_are_corrected_not_refused() {
     let s = Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/head-table.toml"))
         .expect("loads");
     let program = s.load_program().expect("parses");
-    let start = program.moves.first().map_or(s.home, |m| m.start);
+    let start = program.moves.first().map_or(s.home(), |m| m.start);
     let opts = twinmill::calibration::correct::CorrectOptions::for_accuracy(1e-3);
     // Every move, 3+2 at B = 0 (C parallel to the tool), at B = 30, and C and B turning
     // while cutting, corrects; before, every pose failed with a C correction of −86°.
-    let cp =
-        twinmill::calibration::correct::correct_program(&s.chain, &s.tool, &program, &start, &opts)
-            .expect("corrects");
-    let nominal = s.chain.nominal();
+    let cp = twinmill::calibration::correct::correct_program(
+        s.chain(),
+        &s.tool,
+        &program,
+        &start,
+        &opts,
+    )
+    .expect("corrects");
+    let nominal = s.chain().nominal();
     let axes = |a: &twinmill::nc::AxisValues| [L::C, L::X, L::Y, L::Z, L::B].map(|l| a.get(l));
     let l = s.tool.length();
     let (mut worst, mut given): (Real, Real) = (0.0, 0.0);
@@ -405,9 +410,9 @@ fn head_table_programs_at_b_zero_are_corrected_not_refused() {
             }));
             let cmd = twinmill::calibration::correct::path_point(src, b.s.0 + (b.s.1 - b.s.0) * t);
             for h in [0.0, l / 2.0, l] {
-                let d = head_table_oracle(&s.chain, &axes(&q), h);
+                let d = head_table_oracle(s.chain(), &axes(&q), h);
                 let n = head_table_oracle(&nominal, &axes(&cmd), h);
-                let g = head_table_oracle(&s.chain, &axes(&cmd), h);
+                let g = head_table_oracle(s.chain(), &axes(&cmd), h);
                 let dist = |a: [Real; 3], b: [Real; 3]| {
                     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
                 };

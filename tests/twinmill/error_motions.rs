@@ -181,8 +181,8 @@ fn reversal_shifts_faces_approached_from_opposite_sides() {
     }
     // The chain's static poses say the same.
     let q = AxisValues::default().with(AxisLetter::X, 10.0);
-    let up = scene.chain.tool_point(&q, &Directions::default());
-    let down = scene.chain.tool_point(
+    let up = scene.chain().tool_point(&q, &Directions::default());
+    let down = scene.chain().tool_point(
         &q,
         &Directions::default().with(AxisLetter::X, Direction::Negative),
     );
@@ -209,7 +209,7 @@ fn rotary_location_moves_the_line() {
     sb.write("s.toml", text.as_bytes());
     sb.write("p.ngc", b"G0 X0\nM30\n");
     let scene = Scene::load(&sb.dir.join("s.toml")).expect("scene");
-    let nominal = scene.chain.nominal();
+    let nominal = scene.chain().nominal();
     let d = Directions::default();
     let at = |c: Real| {
         let q = AxisValues::default()
@@ -217,7 +217,7 @@ fn rotary_location_moves_the_line() {
             .with(AxisLetter::Y, -7.0)
             .with(AxisLetter::Z, 3.0)
             .with(AxisLetter::C, c);
-        scene.chain.tool_point(&q, &d) - nominal.tool_point(&q, &d)
+        scene.chain().tool_point(&q, &d) - nominal.tool_point(&q, &d)
     };
     let moved = at(180.0) - at(0.0);
     assert!((moved.y - 0.1).abs() < 1e-12, "{moved}");
@@ -247,7 +247,7 @@ fn squareness_turns_one_axis_against_its_reference() {
             .with(AxisLetter::X, x)
             .with(AxisLetter::Y, y)
             .with(AxisLetter::Z, z);
-        scene.chain.tool_point(&q, &d)
+        scene.chain().tool_point(&q, &d)
     };
     let l = 100.0;
     let along_x = p(l, 0.0, 0.0) - p(0.0, 0.0, 0.0);
@@ -260,7 +260,7 @@ fn squareness_turns_one_axis_against_its_reference() {
     let want_z = twinmill::math::Vector3::new(l * eps.sin(), 0.0, l * eps.cos());
     assert!((along_z - want_z).norm() < 1e-12, "{along_z}");
     let q = AxisValues::default().with(AxisLetter::Y, 30.0);
-    let rot = scene.chain.w_from_t(&q).rotation;
+    let rot = scene.chain().w_from_t(&q).rotation;
     assert!(rot.angle() < 1e-15);
 }
 

@@ -6,7 +6,6 @@
 use super::{Sandbox, builtin};
 use nalgebra::Matrix3;
 use std::path::Path;
-use twinmill::hexapod_scene::HexapodScene;
 use twinmill::machine::hexapod::{
     Hexapod, HexapodError, Limits, PARAMETERS, ParameterId, Pose, STRUTS, twin_pose,
 };
@@ -14,6 +13,7 @@ use twinmill::machine::hexapod_accuracy::{
     HomingSetup, homing_check, index_latched, pivot_test, wrong_index_effects,
 };
 use twinmill::math::{CounterRng, Real, Vector3};
+use twinmill::scene::HexapodScene;
 use twinmill::scene::{Scene, SceneError};
 
 fn scene_path(name: &str) -> std::path::PathBuf {

@@ -12,7 +12,6 @@ use twinmill::calibration::hexapod_calibrate::{
     default_plan, gauge_names, pose_errors, tool_table_calibration,
 };
 use twinmill::calibration::hexapod_design::{CircleDesign, design, reachable};
-use twinmill::hexapod_scene::HexapodScene;
 use twinmill::machine::hexapod::{Hexapod, ParameterId, Pose};
 use twinmill::machine::hexapod_accuracy::Workspace;
 use twinmill::math::{Real, Vector3};
@@ -20,6 +19,7 @@ use twinmill::metrology::ballbar::Turns;
 use twinmill::metrology::circular::{CircularOptions, evaluate, parse_trace};
 use twinmill::metrology::hexapod_dbb::{DbbCircle, DbbInstrument, DbbPlane, measure};
 use twinmill::pipeline::dbb::{CALIBRATION_NOISE_MM, parse_plan, plan_toml, trial_machine};
+use twinmill::scene::HexapodScene;
 
 fn workspace(s: &HexapodScene) -> Workspace {
     s.workspace.expect("the scene has a [workspace]")

@@ -7,11 +7,10 @@ use super::Sandbox;
 use nalgebra::{Matrix3, Matrix6, Vector6};
 use std::path::{Path, PathBuf};
 use twinmill::cutting::stock::TriDexel;
-use twinmill::hexapod_scene::HexapodScene;
 use twinmill::math::{Real, Vector3};
 use twinmill::pipeline::machine_part;
 use twinmill::progress::NoProgress;
-use twinmill::scene::{MemoryBudget, Scene};
+use twinmill::scene::{HexapodScene, Machine, MemoryBudget, Scene, SceneError};
 
 fn scene_path(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -145,7 +144,7 @@ fn z_top(stock: &TriDexel, x: Real, y: Real) -> (Real, Real, Real) {
 }
 
 fn load(path: &Path) -> (Scene, HexapodScene) {
-    let scene = HexapodScene::load_cut(path, &MemoryBudget::installed()).expect("scene loads");
+    let scene = Scene::load_hexapod_cut(path, &MemoryBudget::installed()).expect("scene loads");
     let hex = HexapodScene::load(path).expect("hexapod loads");
     (scene, hex)
 }
@@ -247,8 +246,10 @@ fn a_table_axis_turns_the_part_and_its_tilt_shows_between_the_faces() {
         b"G21 G90\nG0 X-70 Y20 Z200 A0 B0 C0\nG0 Z159\nG1 X70 F600\nG0 Z200\nG0 C180\nG0 X-70\nG0 Z159\nG1 X70\nG0 Z200\nM2\n",
     );
     let (scene, hex) = load(&path);
-    let twin = scene.hexapod.as_ref().expect("a hexapod");
-    assert!(twin.table.is_some());
+    let Machine::Hexapod(h) = &scene.machine else {
+        panic!("a hexapod")
+    };
+    assert!(h.twin.table.is_some());
     let program = scene.load_program().expect("program parses");
     let part = machine_part(&scene, &program, &NoProgress).expect("cuts");
     let nominal = Oracle::new(&hex.nominal.parameters(), hex.nominal.tool_offset());
@@ -376,4 +377,171 @@ fn cli_simulates_a_hexapod_and_refuses_bad_input_with_the_nc_line() {
         assert!(err.contains(what), "{err}");
         assert!(!sb.dir.join("out").exists());
     }
+}
+
+/// One reader for both machine kinds: a hexapod scene that cuts takes `[report] view` as a
+/// serial scene does (the hexapod verbs read the same file), its machine is the hexapod
+/// variant with the twin the hexapod verbs get, and a bad view is refused at its line and
+/// column with the serial scene's message.
+#[test]
+fn a_hexapod_scene_takes_report_view_like_a_serial_one() {
+    let path = scene_path("hexapod-step.toml");
+    let text = std::fs::read_to_string(&path).expect("scene");
+    let budget = MemoryBudget::installed();
+    let with_view = format!("{text}\n[report]\nview = \"+x\"\n");
+    let scene = Scene::parse_hexapod_cut(&with_view, &path, &budget).expect("[report] accepted");
+    // "+x": the eye on the +x axis, looking back at the part.
+    let v = scene.view.expect("a view").into_inner();
+    assert!((v - Vector3::x()).norm() < 1e-15, "{v:?}");
+    assert!(
+        Scene::parse_hexapod_cut(&text, &path, &budget)
+            .expect("loads")
+            .view
+            .is_none(),
+        "no [report]: the default view"
+    );
+    // The hexapod verbs read the same file, and see the same machine.
+    let hex = HexapodScene::parse(&with_view, &path).expect("the hexapod verbs accept [report]");
+    let Machine::Hexapod(h) = &scene.machine else {
+        panic!("a hexapod scene's machine is the hexapod variant")
+    };
+    assert_eq!(h.twin, hex.twin());
+    assert_eq!(h.injected, hex.injected);
+    // A bad view: three lines below the end of the text (a blank line, `[report]`, the
+    // key), at column 8 (after `view = `), with the message a serial scene gives.
+    let bad_view = "\n[report]\nview = \"+w\"\n";
+    let (line, column, message) =
+        match Scene::parse_hexapod_cut(&format!("{text}{bad_view}"), &path, &budget) {
+            Err(SceneError::Invalid {
+                line,
+                column,
+                message,
+                ..
+            }) => (line, column, message),
+            other => panic!("expected a located error, got {:?}", other.map(|s| s.name)),
+        };
+    assert_eq!((line, column), (text.lines().count() + 3, 8), "{message}");
+    let serial_path = scene_path("xyz-pocket.toml");
+    let serial = std::fs::read_to_string(&serial_path).expect("serial scene");
+    match Scene::parse_with(&format!("{serial}{bad_view}"), &serial_path, &budget) {
+        Err(SceneError::Invalid { message: m, .. }) => assert_eq!(m, message),
+        other => panic!("expected a located error, got {:?}", other.map(|s| s.name)),
+    }
+}
+
+/// `simulate` on a hexapod scene with `[report] view`: it runs, cuts the same part as
+/// without the section (the view changes the pictures, not the physics), and the picture
+/// looks from the asked direction — a different image from the default view, which looks
+/// along the machined faces' normals.
+#[test]
+fn a_hexapod_scene_with_report_view_simulates() {
+    let sb = Sandbox::new("hexapod-report-view");
+    let scene = std::fs::read_to_string(scene_path("hexapod-step.toml")).expect("scene");
+    let program = std::fs::read_to_string(scene_path("hexapod-step.ngc")).expect("program");
+    sb.write("hexapod-step.ngc", program.as_bytes());
+    sb.write(
+        "plain.toml",
+        scene
+            .replace("name = \"hexapod-step\"", "name = \"plain\"")
+            .as_bytes(),
+    );
+    sb.write(
+        "viewed.toml",
+        format!(
+            "{}\n[report]\nview = \"-y\"\n",
+            scene.replace("name = \"hexapod-step\"", "name = \"viewed\"")
+        )
+        .as_bytes(),
+    );
+    let mut made = Vec::new();
+    for name in ["plain", "viewed"] {
+        let (code, _, err) = sb.run(&["simulate", &format!("{name}.toml"), "--out", "out"]);
+        assert_eq!(code, 0, "{name}: {err}");
+        let dir = sb.dir.join(format!("out/{name}-simulate"));
+        let report: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(dir.join("report.json")).expect("report"),
+        )
+        .expect("json");
+        let png = std::fs::read(dir.join("part.png")).expect("part.png");
+        made.push((report, png));
+    }
+    let (plain, viewed) = (&made[0], &made[1]);
+    for key in ["stock", "mesh", "deviation"] {
+        assert_eq!(
+            plain.0[key], viewed.0[key],
+            "{key}: the view changed the part"
+        );
+    }
+    assert_eq!(
+        plain.0["sweep"]["tip_error_mm"],
+        viewed.0["sweep"]["tip_error_mm"]
+    );
+    assert_ne!(
+        plain.1, viewed.1,
+        "[report] view did not change the picture"
+    );
+}
+
+/// The one reader refuses a `[machine] kind` it does not know before reading the machine
+/// by either kind's rules, and a serial machine's key in a hexapod scene, each at the
+/// value's (or key's) line and column, naming the key.
+#[test]
+fn an_unknown_machine_kind_and_a_serial_key_in_a_hexapod_scene_are_refused_at_their_place() {
+    let path = scene_path("hexapod-step.toml");
+    let hexapod = std::fs::read_to_string(&path).expect("scene");
+    let serial_path = scene_path("xyz-pocket.toml");
+    let serial = std::fs::read_to_string(&serial_path).expect("scene");
+    let budget = MemoryBudget::installed();
+    // Line and column (1-based) of the first occurrence of `needle` in `text`, plus `skip`
+    // characters.
+    let at = |text: &str, needle: &str, skip: usize| {
+        let i = text.find(needle).expect("needle") + skip;
+        let line = text[..i].matches('\n').count() + 1;
+        let column = text[..i].rsplit('\n').next().expect("line").chars().count() + 1;
+        (line, column)
+    };
+    let located = |r: Result<(), SceneError>| match r {
+        Err(SceneError::Invalid {
+            line,
+            column,
+            message,
+            ..
+        }) => (line, column, message),
+        other => panic!("expected a located error, got {other:?}"),
+    };
+    let kind = "kind = \"hexapod\"";
+    let nonsense_hex = hexapod.replacen(kind, "kind = \"nonsense\"", 1);
+    let want = (
+        at(&nonsense_hex, "kind = \"nonsense\"", 7),
+        "machine.kind: got \"nonsense\", expected \"serial\" or \"hexapod\"",
+    );
+    for r in [
+        Scene::parse_with(&nonsense_hex, &path, &budget).map(|_| ()),
+        Scene::parse_hexapod_cut(&nonsense_hex, &path, &budget).map(|_| ()),
+        HexapodScene::parse(&nonsense_hex, &path).map(|_| ()),
+    ] {
+        let (l, c, m) = located(r);
+        assert_eq!(((l, c), m.as_str()), want);
+    }
+    // A serial scene given the kind: the same refusal, not the serial reader's.
+    let nonsense_serial = serial.replacen("[machine]\n", "[machine]\nkind = \"nonsense\"\n", 1);
+    let (l, c, m) = located(Scene::parse_with(&nonsense_serial, &serial_path, &budget).map(|_| ()));
+    assert_eq!((l, c), at(&nonsense_serial, "kind = \"nonsense\"", 7));
+    assert_eq!(m, want.1);
+
+    // A serial machine's key in a hexapod's [machine] (`spindle`), and a serial section
+    // ([reversal]) in a hexapod scene that cuts: refused at the key, which the message names.
+    let spindle = hexapod.replacen(kind, "kind = \"hexapod\"\nspindle = \"S\"", 1);
+    for r in [
+        Scene::parse_hexapod_cut(&spindle, &path, &budget).map(|_| ()),
+        HexapodScene::parse(&spindle, &path).map(|_| ()),
+    ] {
+        let (l, c, m) = located(r);
+        assert_eq!((l, c), at(&spindle, "spindle = ", 0), "{m}");
+        assert!(m.starts_with("machine.spindle: unknown key"), "{m}");
+    }
+    let reversal = hexapod.replacen("[tool]", "[reversal]\nX = 0.002\n\n[tool]", 1);
+    let (l, c, m) = located(Scene::parse_hexapod_cut(&reversal, &path, &budget).map(|_| ()));
+    assert_eq!((l, c), at(&reversal, "X = 0.002", 4), "{m}");
+    assert_eq!(m, "[reversal] does not apply to a hexapod scene");
 }

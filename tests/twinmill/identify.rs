@@ -17,12 +17,12 @@ fn designed_scene(tag: &str) -> Scene {
     let base = scene();
     let ids: Vec<_> = NINE
         .iter()
-        .map(|n| base.model.deviation_id(n).expect("known"))
+        .map(|n| base.model().deviation_id(n).expect("known"))
         .collect();
     let mut opts = DesignOptions::standard();
     opts.noise_sigma_mm = 0.007;
     opts.pitch_mm = 0.3;
-    let d = design(&base.model, &base.tool, &ids, &opts).expect("a design");
+    let d = design(base.model(), &base.tool, &ids, &opts).expect("a design");
     let params: Vec<String> = NINE.iter().map(|s| s.to_string()).collect();
     let mut s = base.clone();
     s.pitch_mm = 0.2;
@@ -455,7 +455,7 @@ fn designs_promise_what_identify_finds_for_random_requests() {
         }
         let ids: Vec<_> = params
             .iter()
-            .map(|n| s.model.deviation_id(n).expect("known"))
+            .map(|n| s.model().deviation_id(n).expect("known"))
             .collect();
         let name = format!("random-{case}");
         let out = design_scene(&s, &params, &ids, &name, &NoProgress).expect("a design");

@@ -42,7 +42,7 @@ fn values(x: Real, y: Real, z: Real) -> AxisValues {
 }
 
 fn laser(scene: &Scene, setup: &LaserSetup) -> Vec<Reading> {
-    interferometer::measure(&scene.chain, setup)
+    interferometer::measure(scene.chain(), setup)
         .expect("the laser measures")
         .readings
 }
@@ -251,7 +251,7 @@ fn value(d: &Diagnosis) -> (Real, Real) {
 }
 
 fn bar(scene: &Scene, setup: &BallBarSetup) -> Vec<Sample> {
-    ballbar::measure(&scene.chain, setup)
+    ballbar::measure(scene.chain(), setup)
         .expect("the ball bar measures")
         .samples
 }

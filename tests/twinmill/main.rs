@@ -31,7 +31,6 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use twinmill::calibration::calibrate::IsoTerm;
 use twinmill::calibration::hexapod_calibrate::CircleReadings;
-use twinmill::hexapod_scene::HexapodScene;
 use twinmill::machine::chain::Chain;
 use twinmill::machine::hexapod::Hexapod;
 use twinmill::math::{Aabb, CounterRng, Point3, Real, Vector3};
@@ -41,6 +40,7 @@ use twinmill::metrology::scan::ScannerConfig;
 use twinmill::nc::{AxisLetter, AxisValues};
 use twinmill::pipeline::{Outcome, run};
 use twinmill::progress::NoProgress;
+use twinmill::scene::HexapodScene;
 use twinmill::scene::Scene;
 // `crate::math` and `crate::nc` for the shared P1 benchmark support (`html`).
 use twinmill::{math, nc};
@@ -65,9 +65,10 @@ fn scanner(scene: &mut Scene) -> &mut ScannerConfig {
 }
 
 fn set_deviation(scene: &mut Scene, name: &str, value: Real) {
-    let id = scene.chain.deviation_id(name).expect("known name");
-    scene.chain.set_deviation(id, value);
-    scene.injected.insert(name.to_string(), value);
+    let m = scene.serial_mut().expect("a serial machine");
+    let id = m.chain.deviation_id(name).expect("known name");
+    m.chain.set_deviation(id, value);
+    m.injected.insert(name.to_string(), value);
 }
 
 // ---------------------------------------------------------------------------------------
@@ -126,7 +127,7 @@ fn exact_face(dev: &[[Real; 6]; 4], y: Real, a_deg: Real, r: Real) -> (Vector3, 
 }
 
 fn mdx50_deviations(scene: &Scene) -> [[Real; 6]; 4] {
-    std::array::from_fn(|j| scene.chain.deviations()[j].values)
+    std::array::from_fn(|j| scene.chain().deviations()[j].values)
 }
 
 // ---------------------------------------------------------------------------------------
@@ -307,7 +308,7 @@ fn trunnion_chain() -> Chain {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/trunnion-ac.toml");
     Scene::parse(&builtin("trunnion-ac.toml"), &path)
         .expect("scene")
-        .chain
+        .chain()
         .nominal()
 }
 

@@ -21,7 +21,6 @@ use twinmill::calibration::hexapod_calibrate::{
 };
 use twinmill::calibration::hexapod_design::design;
 use twinmill::cutting::tool::{Tool, ToolKind};
-use twinmill::hexapod_scene::HexapodScene;
 use twinmill::machine::hexapod::Hexapod;
 use twinmill::math::{CounterRng, Point3, Real, UnitVector3, Vector3};
 use twinmill::metrology::ball_sensor::BallSensor;
@@ -30,6 +29,7 @@ use twinmill::metrology::hexapod_dbb::{DbbInstrument, measure};
 use twinmill::metrology::rotary_test::{probe_test, sensor_test};
 use twinmill::pipeline::dbb::{CALIBRATION_NOISE_MM, trial_machine};
 use twinmill::pipeline::{RotaryInstrument, RotaryRequest, default_setup, rotary_test};
+use twinmill::scene::HexapodScene;
 use twinmill::scene::Scene;
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
@@ -490,6 +490,8 @@ fn sensor() -> RotaryInstrument {
 fn a_rotary_test_the_model_cannot_explain_is_refused_naming_the_samples() {
     let mut scene = trunnion();
     scene
+        .serial_mut()
+        .expect("a serial machine")
         .chain
         .apply_iso_term("EC0XY", 40e-6)
         .expect("a squareness of the trunnion");
@@ -584,7 +586,7 @@ fn nine() -> (Scene, twinmill::nc::Program) {
 #[test]
 fn good_faces_are_accepted_in_999_of_1000_trials() {
     let (scene, program) = nine();
-    let model = scene.chain.nominal();
+    let model = scene.chain().nominal();
     let ids: Vec<_> = scene
         .parameters
         .iter()

@@ -449,7 +449,7 @@ fn absurd_machines_are_refused_naming_the_key() {
 /// 1e308, a joint beyond 100 m.
 #[test]
 fn absurd_hexapods_are_refused_naming_the_key() {
-    use twinmill::hexapod_scene::HexapodScene;
+    use twinmill::scene::HexapodScene;
     let base = builtin("hexapod-genhexkins.toml");
     let home = base
         .lines()

@@ -14,7 +14,7 @@ use twinmill::progress::NoProgress;
 // A rotary move: the dexel surface agrees with a brute-force point-in-sweep test.
 
 fn nominal_mdx50() -> Chain {
-    scene().chain.nominal()
+    scene().chain().nominal()
 }
 
 #[test]
@@ -181,7 +181,15 @@ fn indexed_face_errors(angles: &[Real], devs: &[(&str, Real)]) -> (Real, Real, R
         max: Point3::new(20.0, BAR_R + 0.5, BAR_R + 0.5),
     };
     let mut stock = TriDexel::from_solid(bounds, 0.2, 4e9, &bar).expect("fits");
-    sweep_program(&mut stock, &s.chain, &s.tool, &moves, &s.sweep, &NoProgress).expect("sweeps");
+    sweep_program(
+        &mut stock,
+        s.chain(),
+        &s.tool,
+        &moves,
+        &s.sweep,
+        &NoProgress,
+    )
+    .expect("sweeps");
     let (mut off, mut ang, mut worst) = (0.0 as Real, 0.0 as Real, 0.0 as Real);
     for (&a, &line) in angles.iter().zip(&cuts) {
         let (n, d) = exact_index_face(&dev, a, r);
@@ -448,7 +456,7 @@ fn helical_groove_crossings_lie_on_the_true_swept_surface() {
     let mut stock = helix_stock(0.2);
     sweep_program(
         &mut stock,
-        &s.chain,
+        s.chain(),
         &helix_tool(),
         &moves,
         &s.sweep,

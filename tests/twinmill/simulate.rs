@@ -453,7 +453,7 @@ fn simulate_maps_the_deviation_from_a_design_mesh() {
         let mut stock = twinmill::pipeline::make_stock(&s).expect("stock");
         sweep_program(
             &mut stock,
-            &s.chain,
+            s.chain(),
             &s.tool,
             &prog.moves,
             &s.sweep,

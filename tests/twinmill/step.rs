@@ -175,7 +175,7 @@ fn another_chain_needs_only_a_scene_file() {
     // dy_AX. Same program, same experiment.
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/vmc-4th-axis-step.toml");
     let mut s = Scene::load(&path).expect("loads");
-    assert_eq!(s.chain.joint_name(0), "AX");
+    assert_eq!(s.chain().joint_name(0), "AX");
     scanner(&mut s).noise_sigma_mm = 0.0;
     let r = run_scene(&s).report;
     assert!(
@@ -199,7 +199,7 @@ fn ball_end_mill_cuts_the_same_step() {
     scanner(&mut s).noise_sigma_mm = 0.0;
     let text = builtin("mdx50-step.ngc").replace("G0 Z0", "G0 Z-3");
     let program =
-        twinmill::nc::parse_program(&text, Path::new("ball.ngc"), s.home).expect("parses");
+        twinmill::nc::parse_program(&text, Path::new("ball.ngc"), s.home()).expect("parses");
     let r = run(&s, &program, &NoProgress).expect("runs").report;
     assert!((r.step_mm - 1.0).abs() < 0.5e-3, "step {}", r.step_mm);
     assert!((r.identified["dy_AY"] + 0.5).abs() < 0.5e-3);
@@ -282,7 +282,7 @@ fn check_faces_exact(s: &Scene) -> Result<(), TestCaseError> {
     let mut stock = TriDexel::new_box(s.stock_box, s.pitch_mm, 4e9).expect("fits");
     sweep_program(
         &mut stock,
-        &s.chain,
+        s.chain(),
         &s.tool,
         &program.moves,
         &s.sweep,
@@ -382,7 +382,7 @@ fn the_library_chain_matches_the_independent_derivation() {
             .with(AxisLetter::Y, y)
             .with(AxisLetter::Z, z)
             .with(AxisLetter::A, a);
-        let lib = s.chain.w_from_t(&q).to_homogeneous();
+        let lib = s.chain().w_from_t(&q).to_homogeneous();
         let ind = mdx50_w_from_t(&dev, x, y, z, a);
         assert!(
             (lib - ind).abs().max() < 1e-12,
@@ -446,7 +446,7 @@ fn a_cut_that_misses_its_face_fails_and_the_twin_predicts_the_material_side() {
     };
     let (c0, c1) = (cut(9), cut(14));
     let side = |mv| {
-        flank(&s.model, &s.tool, mv, &s.stock_box)
+        flank(s.model(), &s.tool, mv, &s.stock_box)
             .expect("a flank")
             .plane
             .normal
@@ -459,7 +459,7 @@ fn a_cut_that_misses_its_face_fails_and_the_twin_predicts_the_material_side() {
         u: UnitVector3::new_normalize(Vector3::x()),
     };
     let (step, tilt) =
-        predicted_step(&s.chain, &s.tool, [(c0, &n0), (c1, &n1)], &frame).expect("predicts");
+        predicted_step(s.chain(), &s.tool, [(c0, &n0), (c1, &n1)], &frame).expect("predicts");
     let (exact_step, exact_tilt) = exact_step_and_tilt(&mdx50_deviations(&s), s.tool.radius(), at);
     assert!((exact_step + 100.0).abs() < 1e-9, "exact {exact_step}");
     assert!(

@@ -96,8 +96,9 @@ fn a_trial_is_what_identify_gives_on_its_inputs() {
     let mut s = twinmill::scene::Scene::load(&sb.dir.join("s.toml")).expect("scene");
     let t = &m.trials[1];
     for (name, v) in &t.deviations {
-        let id = s.chain.deviation_id(name).expect("name");
-        s.chain.set_deviation(id, *v);
+        let chain = &mut s.serial_mut().expect("a serial machine").chain;
+        let id = chain.deviation_id(name).expect("name");
+        chain.set_deviation(id, *v);
     }
     let sc = s.scanner.as_mut().expect("scanner");
     sc.seed = t.scanner_seed;

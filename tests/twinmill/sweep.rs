@@ -83,7 +83,7 @@ fn checked_sweep_removes_exactly_what_the_sweep_removes() {
         let v0 = plain.volume();
         let rep = sweep_program(
             &mut plain,
-            &s.chain,
+            s.chain(),
             &s.tool,
             &prog.moves,
             &s.sweep,
@@ -101,7 +101,7 @@ fn checked_sweep_removes_exactly_what_the_sweep_removes() {
                 let mut stock = twinmill::pipeline::make_stock(&s).expect("stock");
                 let r = sweep_with_checks(
                     &mut stock,
-                    &s.chain,
+                    s.chain(),
                     &s.tool,
                     Some(&holder),
                     &[],
@@ -151,7 +151,7 @@ fn sweep_report_states_the_chord_sagitta_of_arcs() {
     let mut stock = twinmill::pipeline::make_stock(&s).expect("stock");
     let rep = sweep_program(
         &mut stock,
-        &s.chain,
+        s.chain(),
         &s.tool,
         &prog.moves,
         &s.sweep,
