@@ -88,8 +88,8 @@ const LAYOUT: &[(&str, &[&str])] = &[
     (
         "scene",
         &[
-            "file", "memory", "machine", "hexapod", "cut", "scanner", "identify", "report",
-            "program", "read", "write",
+            "file", "check", "memory", "machine", "hexapod", "cut", "scanner", "identify",
+            "report", "program", "read", "write",
         ],
     ),
     (
