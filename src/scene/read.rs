@@ -57,7 +57,10 @@ fn required<'f, M>(
         (Some(p), Some(t), Some(s)) => Ok((p, t, s)),
         _ => Err(match parse_file_required(ctx) {
             Err(e) => e,
-            Ok(()) => ctx.err(0..0, "missing field `program`, `tool` or `stock`"),
+            Ok(()) => ctx.err(
+                0..0,
+                "program, tool or stock: missing, expected a value for each of these keys",
+            ),
         }),
     }
 }
@@ -377,8 +380,8 @@ mod tests {
     use serde::Deserialize;
 
     /// A serial scene needs a program, `[tool]` and `[stock]`: one that lacks any of them is
-    /// refused where and as toml refuses a struct whose field is missing (the reader keeps
-    /// them optional for hexapod scenes).
+    /// refused where toml refuses a struct whose field is missing, naming the key in our
+    /// words (the reader keeps them optional for hexapod scenes).
     #[test]
     fn a_serial_scene_without_program_tool_or_stock_is_refused_as_a_missing_field() {
         #[derive(Deserialize)]
@@ -423,8 +426,9 @@ mod tests {
                 .err()
                 .expect("a missing field");
             let (line, column) = line_col(&cut, e.span().unwrap_or(0..0).start);
-            let want = e.message().trim().to_string();
-            assert!(want.contains(key), "{want}");
+            assert!(e.message().contains(key), "{}", e.message());
+            // in our words, as every TOML file's missing key is reported
+            let want = format!("{key}: missing, expected a value for this key");
             match Scene::parse_with(&cut, &path, &memory) {
                 Err(SceneError::Invalid {
                     line: l,
