@@ -14,11 +14,11 @@ use std::process::ExitCode;
 struct Cli {
     #[command(subcommand)]
     command: Command,
-    /// Keep an identification the stated noise cannot explain
-    ///
-    /// Keep an identification (run, identify, design, correct --model identified, measure)
-    /// whose residuals the stated noise cannot explain, instead of refusing it; its report
-    /// then says so on its first line.
+    // One line (a longer help here would turn `--help` into the long form): an
+    // identification by run, identify, design, correct --model identified or measure whose
+    // residuals the stated noise cannot explain is kept instead of refused, and its report
+    // says so on its first line (docs/identification-and-correction.md).
+    /// Keep an identification that misfits the stated noise
     #[arg(long, global = true)]
     accept_misfit: bool,
 }

@@ -474,7 +474,10 @@ fn serial_commands_refuse_a_hexapod_scene_and_serial_scenes_still_load() {
     Scene::parse(&text, &dir.join("x.toml")).expect("serial kind accepted");
     let bad = text.replace("kind = \"serial\"", "kind = \"delta\"");
     match Scene::parse(&bad, &dir.join("x.toml")) {
-        Err(SceneError::Invalid { message, .. }) => assert!(message.contains("'delta'")),
+        Err(SceneError::Invalid { message, .. }) => assert_eq!(
+            message,
+            "machine.kind: got \"delta\", expected \"serial\" or \"hexapod\""
+        ),
         other => panic!("{:?}", other.map(|s| s.name)),
     }
     // A singular pose is an error from the kinematics, not a number.
