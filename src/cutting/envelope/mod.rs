@@ -77,7 +77,7 @@ mod path;
 mod probe;
 mod solve;
 
-pub use path::{MovePath, error_motion_speed};
+pub use path::{MovePath, error_motion_speed, rotation_and_travel};
 use path::{Sample, speed_bound};
 use probe::{
     Face, Hit, Probe, Ray, Shape, ball_sphere, frame_box, line_segment_distance, tool_interval,
@@ -157,13 +157,7 @@ impl Cutter for RotaryEnvelope {
     fn ray_cut(&self, origin: &Point3, axis: usize) -> Option<RayCut> {
         let mut out = Vec::new();
         self.ray_cuts(origin, axis, &mut out);
-        let (first, last) = (out.first()?, out.last()?);
-        Some(RayCut {
-            t_in: first.t_in,
-            t_out: last.t_out,
-            n_in: first.n_in,
-            n_out: last.n_out,
-        })
+        RayCut::hull(&out)
     }
 
     fn ray_cuts(&self, origin: &Point3, axis: usize, out: &mut Vec<RayCut>) {

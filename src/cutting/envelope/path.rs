@@ -220,6 +220,20 @@ impl MovePath {
     }
 }
 
+/// Total rotation (rad) and linear travel (mm) of the move `a → b` on `chain`: the sums of
+/// its rotary and of its linear axes' moves.
+pub fn rotation_and_travel(chain: &Chain, a: &AxisValues, b: &AxisValues) -> (Real, Real) {
+    let (mut omega, mut travel) = (0.0, 0.0);
+    for axis in chain.axes() {
+        let dq = (b.get(axis.letter) - a.get(axis.letter)).abs();
+        match axis.kind {
+            AxisKind::Rotary => omega += dq.to_radians(),
+            AxisKind::Linear => travel += dq,
+        }
+    }
+    (omega, travel)
+}
+
 /// A bound on the speed (mm per unit λ) of any point within `reach` of the tool-axis point at
 /// height `mid` on the move: the rotation `ω` (rad) times the largest distance `ρ` of such a
 /// point from a rotary axis, plus the linear travel. `ρ` is taken at both ends (distance of
@@ -235,18 +249,12 @@ pub(super) fn speed_bound(
     end: &AxisValues,
     state: &[Real; 6],
 ) -> Real {
-    let (mut omega, mut travel) = (0.0, 0.0);
-    let mut rotaries = 0;
-    for axis in chain.axes() {
-        let dq = (end.get(axis.letter) - start.get(axis.letter)).abs();
-        match axis.kind {
-            AxisKind::Rotary => {
-                omega += dq.to_radians();
-                rotaries += 1;
-            }
-            AxisKind::Linear => travel += dq,
-        }
-    }
+    let (omega, travel) = rotation_and_travel(chain, start, end);
+    let rotaries = chain
+        .axes()
+        .iter()
+        .filter(|a| a.kind == AxisKind::Rotary)
+        .count();
     let mid = Point3::new(0.0, 0.0, mid);
     let mut rho: Real = 0.0;
     for q in [start, end] {
@@ -285,14 +293,7 @@ pub fn error_motion_speed(
     end: &AxisValues,
     state: &[Real; 6],
 ) -> (Real, Real) {
-    let (mut omega, mut travel) = (0.0, 0.0);
-    for axis in chain.axes() {
-        let dq = (end.get(axis.letter) - start.get(axis.letter)).abs();
-        match axis.kind {
-            AxisKind::Rotary => omega += dq.to_radians(),
-            AxisKind::Linear => travel += dq,
-        }
-    }
+    let (omega, travel) = rotation_and_travel(chain, start, end);
     let (mut speed, mut turn) = (0.0, 0.0);
     for (i, axis) in chain.axes().iter().enumerate() {
         let Some(e) = &chain.error_motions_all()[i] else {

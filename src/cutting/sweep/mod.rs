@@ -42,7 +42,9 @@
 //! the unit tests.
 
 use crate::cutting::cutter::{Line, Quadric, SweptTool, t_extremes};
-use crate::cutting::envelope::{ENVELOPE_TOL, MovePath, RotaryEnvelope, error_motion_speed};
+use crate::cutting::envelope::{
+    ENVELOPE_TOL, MovePath, RotaryEnvelope, error_motion_speed, rotation_and_travel,
+};
 use crate::cutting::stock::{Cutter, RayCut, TriDexel};
 use crate::cutting::tool::{Tool, ToolKind};
 use crate::machine::PoseSource;
@@ -61,7 +63,7 @@ pub use driver::{
 };
 #[cfg(test)]
 use substeps::pose_at;
-use substeps::{COARSE, Poses, rotation_and_travel, substeps};
+use substeps::{COARSE, Poses, substeps};
 pub use substeps::{RotaryBound, SAMPLED_BOUND_FACTOR, SampledBound, rotary_substeps};
 pub use translated::TranslatedTool;
 

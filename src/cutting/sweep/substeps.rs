@@ -48,19 +48,6 @@ const MAX_SUBSTEPS: Real = 5e7;
 /// Sub-steps per coarse interval used to skip parts of a rotary move far from the stock.
 pub(super) const COARSE: usize = 64;
 
-/// Total rotation (rad) and linear travel (mm) of a move on this chain.
-pub(super) fn rotation_and_travel(chain: &Chain, a: &AxisValues, b: &AxisValues) -> (Real, Real) {
-    let (mut omega, mut travel) = (0.0, 0.0);
-    for axis in chain.axes() {
-        let dq = (b.get(axis.letter) - a.get(axis.letter)).abs();
-        match axis.kind {
-            AxisKind::Rotary => omega += dq.to_radians(),
-            AxisKind::Linear => travel += dq,
-        }
-    }
-    (omega, travel)
-}
-
 /// The error bound of a rotary move's sub-steps: `ε(N) = a/N + b/N²` (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RotaryBound {
