@@ -599,13 +599,7 @@ impl Cutter for SweptTool {
         e[axis] = 1.0;
         let mut out = Vec::new();
         self.intervals(origin, &e, &mut out);
-        let (first, last) = (out.first()?, out.last()?);
-        Some(RayCut {
-            t_in: first.t_in,
-            t_out: last.t_out,
-            n_in: first.n_in,
-            n_out: last.n_out,
-        })
+        RayCut::hull(&out)
     }
 
     fn ray_cuts(&self, origin: &Point3, axis: usize, out: &mut Vec<RayCut>) {

@@ -129,6 +129,20 @@ pub struct RayCut {
     pub n_out: Vector3,
 }
 
+impl RayCut {
+    /// The hull of a ray's sorted, disjoint intervals: from the first one's entry to the
+    /// last one's exit, with their normals; `None` when there is no interval.
+    pub fn hull(cuts: &[RayCut]) -> Option<RayCut> {
+        let (first, last) = (cuts.first()?, cuts.last()?);
+        Some(RayCut {
+            t_in: first.t_in,
+            t_out: last.t_out,
+            n_in: first.n_in,
+            n_out: last.n_out,
+        })
+    }
+}
+
 /// A solid that removes material: anything that can say what it occupies along an
 /// axis-parallel ray.
 pub trait Cutter: Sync {

@@ -1,0 +1,381 @@
+//! The forest of root blocks with its leaf lookup, and the polylines of the minimal faces
+//! between leaves (tangent-line corners added, simplified by Douglas–Peucker).
+//!
+//! **Invariant:** a face's polyline is built from that face's lattice data only, in one
+//! canonical direction, so both leaves beside it get the same polyline.
+
+use super::*;
+
+// ---------------------------------------------------------------------------------------
+// The forest of root blocks and leaf lookup.
+
+pub(super) struct Forest<'a> {
+    pub(super) lat: Lat<'a>,
+    /// Root blocks per axis.
+    pub(super) rn: [usize; 3],
+    /// Tree index of each root block (row-major x, y, z), or None if it is empty.
+    pub(super) roots: Vec<Option<u32>>,
+    pub(super) trees: Vec<Tree>,
+}
+
+#[derive(Clone, Copy)]
+pub(super) struct LeafRef {
+    pub(super) tree: usize,
+    pub(super) node: usize,
+    pub(super) o: [isize; 3],
+    pub(super) s: usize,
+    pub(super) kind: Kind,
+}
+
+impl Forest<'_> {
+    /// The leaf holding cell `c`; None outside the roots or in an empty root.
+    fn leaf_at(&self, c: [isize; 3]) -> Option<LeafRef> {
+        let mut r = [0usize; 3];
+        for a in 0..3 {
+            if c[a] < -1 {
+                return None;
+            }
+            r[a] = (c[a] + 1) as usize / ROOT;
+            if r[a] >= self.rn[a] {
+                return None;
+            }
+        }
+        let tree = self.roots[(r[2] * self.rn[1] + r[1]) * self.rn[0] + r[0]]? as usize;
+        let t = &self.trees[tree];
+        let (mut node, mut o, mut s) = (0usize, t.origin, ROOT);
+        loop {
+            match t.nodes[node] {
+                Node::Leaf(kind) => {
+                    return Some(LeafRef {
+                        tree,
+                        node,
+                        o,
+                        s,
+                        kind,
+                    });
+                }
+                Node::Split(first) => {
+                    let h = (s / 2) as isize;
+                    let ch = usize::from(c[0] - o[0] >= h)
+                        | usize::from(c[1] - o[1] >= h) << 1
+                        | usize::from(c[2] - o[2] >= h) << 2;
+                    o = child_origin(o, s, ch);
+                    s /= 2;
+                    node = first as usize + ch;
+                }
+            }
+        }
+    }
+
+    /// The minimal faces on one side of a leaf: (lower lattice point of the square, size).
+    pub(super) fn minimal_faces(
+        &self,
+        leaf: &LeafRef,
+        n: usize,
+        upper: bool,
+        out: &mut Vec<([isize; 3], usize)>,
+    ) {
+        let (u, v) = ((n + 1) % 3, (n + 2) % 3);
+        let c = leaf.o[n] + if upper { leaf.s as isize } else { 0 };
+        let beyond = if upper { c } else { c - 1 };
+        let mut stack = vec![(leaf.o[u], leaf.o[v], leaf.s)];
+        while let Some((a, b, q)) = stack.pop() {
+            let nb = self.leaf_at(point(n, beyond, a, b));
+            if q == 1 || nb.is_none_or(|l| l.s >= q) {
+                out.push((point(n, c, a, b), q));
+            } else {
+                let h = (q / 2) as isize;
+                for (da, db) in [(0, 0), (h, 0), (0, h), (h, h)] {
+                    stack.push((a + da, b + db, q / 2));
+                }
+            }
+        }
+        // Fixed order whatever the stack did.
+        out.sort_unstable();
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// Face polylines.
+
+/// A polyline of a minimal face in canonical direction (as the leaf below the face's plane
+/// sees it); `closed`: a loop lying inside the face.
+pub(super) struct Chain {
+    pub(super) v: Vec<Vtx>,
+    pub(super) closed: bool,
+}
+
+/// The corner where the tangent lines of `a` and `b` meet in the face plane (axis `n`,
+/// coordinate from the points), if the normals turn by more than [`CORNER_DEGREES`] there
+/// and the corner lies inside the cell face `[lo, hi]` (in-face coordinates).
+fn tangent_corner(n: usize, a: &Vtx, b: &Vtx, lo: [Real; 2], hi: [Real; 2]) -> Option<Point3> {
+    let (u, v) = ((n + 1) % 3, (n + 2) % 3);
+    let ta = [a.n[u], a.n[v]];
+    let tb = [b.n[u], b.n[v]];
+    let la = (ta[0] * ta[0] + ta[1] * ta[1]).sqrt();
+    let lb = (tb[0] * tb[0] + tb[1] * tb[1]).sqrt();
+    if la < 0.3 || lb < 0.3 {
+        return None;
+    }
+    let (ta, tb) = ([ta[0] / la, ta[1] / la], [tb[0] / lb, tb[1] / lb]);
+    if ta[0] * tb[0] + ta[1] * tb[1] > CORNER_DEGREES.to_radians().cos() {
+        return None;
+    }
+    let det = ta[0] * tb[1] - ta[1] * tb[0];
+    if det.abs() < 1e-6 {
+        return None;
+    }
+    let ra = ta[0] * a.p[u] + ta[1] * a.p[v];
+    let rb = tb[0] * b.p[u] + tb[1] * b.p[v];
+    let x = [
+        (ra * tb[1] - rb * ta[1]) / det,
+        (ta[0] * rb - tb[0] * ra) / det,
+    ];
+    let margin = [(hi[0] - lo[0]) * 1e-6, (hi[1] - lo[1]) * 1e-6];
+    for k in 0..2 {
+        if !(x[k] > lo[k] + margin[k] && x[k] < hi[k] - margin[k]) {
+            return None;
+        }
+    }
+    let mut p = a.p;
+    p[u] = x[0];
+    p[v] = x[1];
+    Some(p)
+}
+
+/// The oriented segments of one cell face (corners in cyclic order `cs`, signs `inside`):
+/// (from edge, to edge, slot), canonical direction (seen from the cell below the plane).
+fn cell_face_segments(inside: [bool; 4]) -> ([(usize, usize, usize); 2], usize) {
+    // Edge k joins corners k and k + 1; midpoints and corners in face units.
+    const MID: [[Real; 2]; 4] = [[0.5, 0.0], [1.0, 0.5], [0.5, 1.0], [0.0, 0.5]];
+    const CORNER: [[Real; 2]; 4] = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]];
+    let mut active = [0usize; 4];
+    let mut n_active = 0;
+    for k in 0..4 {
+        if inside[k] != inside[(k + 1) % 4] {
+            active[n_active] = k;
+            n_active += 1;
+        }
+    }
+    let mut segs = [(0, 0, 0); 2];
+    let mut count = 0;
+    let mut add = |a: usize, b: usize, c: usize, slot: usize| {
+        let d = [MID[b][0] - MID[a][0], MID[b][1] - MID[a][1]];
+        let w = [CORNER[c][0] - MID[a][0], CORNER[c][1] - MID[a][1]];
+        let cross = d[0] * w[1] - d[1] * w[0];
+        segs[count] = if cross < 0.0 {
+            (a, b, slot)
+        } else {
+            (b, a, slot)
+        };
+        count += 1;
+    };
+    match n_active {
+        2 => {
+            let c = (0..4).find(|&c| inside[c]).unwrap_or(0);
+            add(active[0], active[1], c, 0);
+        }
+        4 => {
+            for (k, _) in inside.iter().enumerate().filter(|(_, i)| **i) {
+                add((k + 3) % 4, k, k, k / 2);
+            }
+        }
+        _ => {}
+    }
+    (segs, count)
+}
+
+impl Forest<'_> {
+    /// The polylines of the minimal face with lower lattice point `f0` (axis `n`) and size
+    /// `q`, from the signs `inside` gives for its lattice points (which must be the
+    /// lattice's own). Simplified within `tol` when `q > 1`.
+    pub(super) fn face_chains(
+        &self,
+        n: usize,
+        f0: [isize; 3],
+        q: usize,
+        signs: &Signs,
+        tol: Real,
+    ) -> (Vec<Chain>, usize) {
+        let lat = &self.lat;
+        if signs.uniform(lat, n, f0, q) {
+            return (Vec::new(), 0);
+        }
+        let (u, v) = ((n + 1) % 3, (n + 2) % 3);
+        let (c, u0, v0) = (f0[n], f0[u], f0[v]);
+        let w = q + 1;
+        let signs = signs.face(lat, n, f0, q);
+        if signs.iter().all(|&x| x == signs[0]) {
+            return (Vec::new(), 0);
+        }
+        // Segments: (from, corner, to).
+        let mut segs: Vec<(Vtx, Option<Vtx>, Vtx)> = Vec::new();
+        let mut corners = 0;
+        for b in 0..q {
+            for a in 0..q {
+                let cs = [(a, b), (a + 1, b), (a + 1, b + 1), (a, b + 1)];
+                let ins = cs.map(|(x, y)| signs[x + y * w]);
+                if ins.iter().all(|&x| x == ins[0]) {
+                    continue;
+                }
+                let (list, count) = cell_face_segments(ins);
+                if count == 0 {
+                    continue;
+                }
+                // Edge k: lower point and axis.
+                let edge = |k: usize| -> (usize, [isize; 3], bool) {
+                    let (x, y, axis) = match k {
+                        0 => (a, b, u),
+                        1 => (a + 1, b, v),
+                        2 => (a, b + 1, u),
+                        _ => (a, b, v),
+                    };
+                    let p = point(n, c, u0 + x as isize, v0 + y as isize);
+                    (axis, p, signs[x + y * w])
+                };
+                let p00 = point(n, c, u0 + a as isize, v0 + b as isize);
+                let lo = lat.pos(p00);
+                let hi = lat.pos(point(n, c, u0 + a as isize + 1, v0 + b as isize + 1));
+                for &(ea, eb, slot) in &list[..count] {
+                    let (axa, pa, ia) = edge(ea);
+                    let (axb, pb, ib) = edge(eb);
+                    let (va, _) = lat.crossing(axa, pa, ia);
+                    let (vb, _) = lat.crossing(axb, pb, ib);
+                    let corner =
+                        tangent_corner(n, &va, &vb, [lo[u], lo[v]], [hi[u], hi[v]]).map(|p| Vtx {
+                            key: corner_key(n, slot, p00),
+                            p,
+                            n: Vector3::zeros(),
+                            corner: true,
+                        });
+                    corners += usize::from(corner.is_some());
+                    segs.push((va, corner, vb));
+                }
+            }
+        }
+        // Link into polylines.
+        let mut by_from: Vec<(Key, usize)> =
+            segs.iter().enumerate().map(|(i, s)| (s.0.key, i)).collect();
+        by_from.sort_unstable();
+        let mut tos: Vec<Key> = segs.iter().map(|s| s.2.key).collect();
+        tos.sort_unstable();
+        let next_of = |key: Key| -> Option<usize> {
+            let i = by_from.partition_point(|x| x.0 < key);
+            (i < by_from.len() && by_from[i].0 == key).then(|| by_from[i].1)
+        };
+        let mut used = vec![false; segs.len()];
+        let mut chains = Vec::new();
+        let follow = |start: usize, used: &mut Vec<bool>| -> Vec<Vtx> {
+            let mut out = Vec::new();
+            let mut i = start;
+            loop {
+                used[i] = true;
+                let (a, corner, _) = &segs[i];
+                out.push(*a);
+                if let Some(cv) = corner {
+                    out.push(*cv);
+                }
+                match next_of(segs[i].2.key) {
+                    Some(j) if !used[j] => i = j,
+                    _ => {
+                        out.push(segs[i].2);
+                        return out;
+                    }
+                }
+            }
+        };
+        // Open polylines start where no segment ends.
+        for (i, seg) in segs.iter().enumerate() {
+            if tos.binary_search(&seg.0.key).is_err() {
+                let v = follow(i, &mut used);
+                chains.push(Chain { v, closed: false });
+            }
+        }
+        for i in 0..segs.len() {
+            if !used[i] {
+                let mut v = follow(i, &mut used);
+                // The walk ends back at its first vertex: drop the repeat.
+                if v.len() > 1 && v[v.len() - 1].key == v[0].key {
+                    v.pop();
+                }
+                chains.push(Chain { v, closed: true });
+            }
+        }
+        if q > 1 {
+            for ch in &mut chains {
+                simplify(ch, tol);
+            }
+        }
+        (chains, corners)
+    }
+}
+
+fn dist_to_segment(p: &Point3, a: &Point3, b: &Point3) -> Real {
+    let d = b - a;
+    let l2 = d.norm_squared();
+    let t = if l2 > 0.0 {
+        ((p - a).dot(&d) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p - (a + d * t)).norm()
+}
+
+/// Douglas–Peucker within `tol`, keeping the ends (of an open polyline), corners, and for a
+/// closed one its smallest key and the vertex farthest from it. Depends on the polyline
+/// only, so both leaves of a face simplify it alike.
+fn simplify(ch: &mut Chain, tol: Real) {
+    let mut v = std::mem::take(&mut ch.v);
+    if ch.closed {
+        let first = (0..v.len()).min_by_key(|&i| v[i].key).unwrap_or(0);
+        v.rotate_left(first);
+        let v0 = v[0];
+        v.push(v0);
+    }
+    let m = v.len();
+    let mut keep = vec![false; m];
+    keep[0] = true;
+    keep[m - 1] = true;
+    for (k, x) in v.iter().enumerate() {
+        keep[k] |= x.corner;
+    }
+    if ch.closed && m > 2 {
+        let far = (1..m - 1)
+            .max_by(|&a, &b| {
+                let da = (v[a].p - v[0].p).norm_squared();
+                let db = (v[b].p - v[0].p).norm_squared();
+                da.total_cmp(&db).then(b.cmp(&a))
+            })
+            .unwrap_or(1);
+        keep[far] = true;
+    }
+    let anchors: Vec<usize> = (0..m).filter(|&k| keep[k]).collect();
+    let mut stack: Vec<(usize, usize)> = anchors.windows(2).map(|w| (w[0], w[1])).collect();
+    while let Some((a, b)) = stack.pop() {
+        if b <= a + 1 {
+            continue;
+        }
+        let (mut best, mut at) = (0.0, a);
+        for k in a + 1..b {
+            let d = dist_to_segment(&v[k].p, &v[a].p, &v[b].p);
+            if d > best {
+                best = d;
+                at = k;
+            }
+        }
+        if best > tol {
+            keep[at] = true;
+            stack.push((a, at));
+            stack.push((at, b));
+        }
+    }
+    if ch.closed {
+        v.pop();
+        keep.pop();
+    }
+    ch.v = v
+        .into_iter()
+        .zip(keep)
+        .filter_map(|(x, k)| k.then_some(x))
+        .collect();
+}

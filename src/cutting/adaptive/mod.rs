@@ -1,0 +1,322 @@
+//! Adaptive surface mesh of the cut stock: few, large triangles where the part is flat, a
+//! sharp edge where two flat faces meet, and the dexel-resolution contour of [`super::mesh`]
+//! only where neither describes the surface within a stated distance.
+//!
+//! **Why not simplify the fine mesh.** A 100 × 100 × 20 mm part at 0.05 mm has 23 million
+//! dexel-resolution triangles, nearly all of them on flat faces; building them and
+//! simplifying afterwards costs tens of CPU-seconds and gigabytes. Here flat regions are
+//! recognised on the lattice itself, before any triangle exists.
+//!
+//! **Octree of lattice blocks.** The lattice of [`super::mesh`] (ray centres, grown by one
+//! layer) is covered by root blocks of [`ROOT`]³ cells. A block is a leaf when
+//! - no lattice point in its closed box differs in sign from another (*empty*);
+//! - *planar*: the crossings on its sign-changing lattice edges all lie within
+//!   `plane_tol_mm` of one plane (normal the mean of their normals, which agree within
+//!   [`GROUP_DEGREES`]), and every lattice point's inside/outside (read on its z ray, as
+//!   the fine mesher does) is what that plane's half-space predicts;
+//! - *edge*: the same with two planes (two groups of normals), the points predicted by the
+//!   intersection (a convex edge) or the union (a concave edge) of the two half-spaces;
+//! - *fine*: a single cell, meshed as [`super::mesh`] does (marching-cubes polygons,
+//!   fanned around the quadratic-error point where the crossings' normals disagree).
+//!
+//! Otherwise it splits into eight. The sign test is exact (every lattice point of the
+//! closed box is compared, one column word at a time), so a leaf's surface crosses its
+//! box as its plane(s) do.
+//!
+//! **Closed and oriented by construction.** The surface meets a block's faces in the
+//! marching-cubes segments of the lattice points on them, which depend on those points
+//! alone. Each face shared by two leaves is taken at the size of the smaller one (the
+//! *minimal face*); both leaves build its polyline from the lattice data of that face only,
+//! in one canonical direction (each takes it in its own sense), and simplify it the same way
+//! (Douglas–Peucker within `chain_tol_mm`, ends and sharp corners kept). A leaf links the
+//! polylines of its minimal faces into closed loops and triangulates each loop with edges
+//! inside the block only. So every mesh edge on a block face is used once in each
+//! direction, whatever the leaves decide inside. [`TriMesh::check_watertight`] verifies it.
+//!
+//! **Sharp edges are exact.** On a face segment whose two crossings' normals differ by more
+//! than [`CORNER_DEGREES`] in the face, the point where their tangent lines meet is added
+//! (when it lies in that cell face) — computed from the face's data, so both neighbours add
+//! the same point. An edge leaf's loop then passes through the two points where the edge
+//! line leaves the block; it is split there and each half fanned in its plane.
+//!
+//! **Bound.** Every crossing of a planar or edge leaf lies within `plane_tol_mm` of its
+//! plane; the leaf's triangles lie within `plane_tol_mm` of it too and span the same
+//! outline up to the `chain_tol_mm` of the simplified face polylines. So every crossing of
+//! the tri-dexel lies within [`AdaptiveOptions::bound_mm`] = 2·plane_tol + chain_tol of the
+//! mesh (tested against the exact crossings), and every mesh vertex is an exact crossing, a
+//! tangent-line corner, or a fan centre within `plane_tol_mm` of its plane. A triangulation
+//! that would fold (a triangle facing against its plane's normal) or a loop that is not as
+//! expected makes the leaf split, in rounds, until none does; single cells never fail.
+//!
+//! **Determinism.** Vertices are named by lattice keys (the lattice edge of a crossing, the
+//! cell face of a corner, the leaf of a fan centre) and numbered in key order at the end;
+//! triangles are joined in root-block order: the mesh is identical for any thread count.
+//!
+//! **Invariant:** reads the stock only, as [`super::mesh`] does.
+//!
+//! **Files.** This one holds the options, the report and the mesher; `lattice` the vertex
+//! keys and the lattice read from the z rays, `classify` the leaves and the octree,
+//! `forest` the leaf lookup and the face polylines, `triangles` the leaves' triangles,
+//! `tests` the unit tests.
+
+use super::mesh::{Frame, MeshError, Qef, TriMesh};
+use crate::cutting::stock::TriDexel;
+use crate::math::{Point3, Real, Vector3};
+use rayon::prelude::*;
+
+mod classify;
+mod forest;
+mod lattice;
+mod triangles;
+
+#[cfg(test)]
+use classify::plane_mask;
+use classify::{Grower, Kind, Node, Plane, Signs, Tree, child_origin, occupied_roots};
+use forest::{Forest, LeafRef};
+use lattice::{Key, Lat, Vtx, bit_range, corner_key, local_key, point};
+use triangles::Out;
+
+/// Root block edge in cells (a power of two; masks of `ROOT + 1` bits fit a word).
+pub const ROOT: usize = 32;
+/// Crossings whose normals agree within this angle (degrees) may share a plane.
+pub const GROUP_DEGREES: Real = 20.0;
+/// A face segment whose crossings' in-face normals differ by more than this (degrees) gets
+/// the corner where their tangent lines meet.
+pub const CORNER_DEGREES: Real = 30.0;
+
+/// Tolerances of the adaptive mesh.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct AdaptiveOptions {
+    /// How far a crossing may lie from its leaf's plane (mm).
+    pub plane_tol_mm: Real,
+    /// How far a dropped vertex of a face polyline may lie from the kept chord (mm).
+    pub chain_tol_mm: Real,
+}
+
+impl Default for AdaptiveOptions {
+    fn default() -> Self {
+        Self {
+            plane_tol_mm: 1.5e-3,
+            chain_tol_mm: 1.5e-3,
+        }
+    }
+}
+
+impl AdaptiveOptions {
+    /// The stated bound on the distance from any crossing of the tri-dexel to the mesh (mm).
+    pub fn bound_mm(&self) -> Real {
+        2.0 * self.plane_tol_mm + self.chain_tol_mm
+    }
+}
+
+/// What the adaptive mesher made.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct AdaptiveReport {
+    /// Distance bound from every crossing to the mesh (mm), see [`AdaptiveOptions::bound_mm`].
+    pub bound_mm: Real,
+    /// Leaves meshed as one plane.
+    pub planar_leaves: usize,
+    /// Leaves meshed as two planes meeting at a sharp edge.
+    pub edge_leaves: usize,
+    /// Single cells meshed at dexel resolution.
+    pub fine_cells: usize,
+    /// Tangent-line corners added on face segments.
+    pub corner_points: usize,
+    /// Fine cells' polygons fanned around their quadratic-error point.
+    pub feature_vertices: usize,
+    /// Rounds of splitting leaves whose triangulation failed its checks.
+    pub split_rounds: usize,
+    /// Largest distance of a crossing from its leaf's plane (mm).
+    pub max_plane_residual_mm: Real,
+}
+
+// ---------------------------------------------------------------------------------------
+// The mesher.
+
+/// Meshes the boundary of the stock's material adaptively. See the module documentation
+/// for the guarantees. Fails only if the mesh would need 2³² vertices or more, or (a
+/// defect, never seen) if a single lattice cell's face segments did not close.
+pub fn mesh_stock_adaptive(
+    stock: &TriDexel,
+    opts: &AdaptiveOptions,
+) -> Result<(TriMesh, AdaptiveReport), MeshError> {
+    let lat = Lat {
+        f: Frame::of(stock),
+    };
+    let n = lat.f.n;
+    // Cells run from −1 to n − 1 on each axis.
+    let rn: [usize; 3] = std::array::from_fn(|a| (n[a] + 1).div_ceil(ROOT));
+    let tol = opts.plane_tol_mm;
+    let origin = |r: usize| -> [isize; 3] {
+        let rx = r % rn[0];
+        let ry = r / rn[0] % rn[1];
+        let rz = r / (rn[0] * rn[1]);
+        [rx, ry, rz].map(|x| (x * ROOT) as isize - 1)
+    };
+    let occupied = occupied_roots(&lat, rn);
+    let grown: Vec<(Option<Tree>, Real)> = (0..rn[0] * rn[1] * rn[2])
+        .into_par_iter()
+        .map(|r| {
+            if !occupied[r] {
+                return (None, 0.0);
+            }
+            let o = origin(r);
+            let mut nodes = vec![Node::Leaf(Kind::Empty)];
+            let mut g = Grower {
+                lat: &lat,
+                tol,
+                resid: 0.0,
+            };
+            g.grow(&mut nodes, 0, o, ROOT);
+            let resid = g.resid;
+            let empty = matches!(nodes[0], Node::Leaf(Kind::Empty));
+            (
+                (!empty).then_some(Tree {
+                    root: r,
+                    origin: o,
+                    nodes,
+                }),
+                resid,
+            )
+        })
+        .collect();
+    let mut report = AdaptiveReport {
+        bound_mm: opts.bound_mm(),
+        ..AdaptiveReport::default()
+    };
+    let mut roots = Vec::with_capacity(grown.len());
+    let mut trees = Vec::new();
+    for (t, r) in grown {
+        report.max_plane_residual_mm = report.max_plane_residual_mm.max(r);
+        roots.push(t.map(|t| {
+            trees.push(t);
+            (trees.len() - 1) as u32
+        }));
+    }
+    let mut forest = Forest {
+        lat,
+        rn,
+        roots,
+        trees,
+    };
+    // Mesh every tree; after a round that split leaves, mesh again the trees that split and
+    // those sharing a root face with them (whose minimal faces may have changed).
+    let mut outs: Vec<Option<Out>> = forest.trees.iter().map(|_| None).collect();
+    loop {
+        let f = &forest;
+        let fresh: Vec<Option<Out>> = f
+            .trees
+            .par_iter()
+            .enumerate()
+            .zip(outs.par_iter())
+            .map(|((ti, t), old)| {
+                old.is_none()
+                    .then(|| f.mesh_tree(ti, t, opts.chain_tol_mm, tol))
+            })
+            .collect();
+        for (o, n) in outs.iter_mut().zip(fresh) {
+            if n.is_some() {
+                *o = n;
+            }
+        }
+        let failed: Vec<Vec<(usize, [isize; 3], usize)>> = outs
+            .iter()
+            .map(|o| o.as_ref().map_or_else(Vec::new, |o| o.failed.clone()))
+            .collect();
+        if failed.iter().all(Vec::is_empty) {
+            break;
+        }
+        // Every round splits at least one leaf larger than a cell, so this ends; a single
+        // cell cannot fail (its face segments always close), but if one did it would fail
+        // forever: stop instead.
+        report.split_rounds += 1;
+        let cell_failed = failed.iter().flatten().any(|&(_, _, s)| s == 1);
+        if cell_failed {
+            return Err(MeshError::Unresolved {
+                what: "a single lattice cell whose face segments do not close",
+            });
+        }
+        let lat = &forest.lat;
+        let resid: Real = forest
+            .trees
+            .par_iter_mut()
+            .zip(&failed)
+            .map(|(t, nodes)| {
+                let mut g = Grower {
+                    lat,
+                    tol,
+                    resid: 0.0,
+                };
+                for &(node, o, s) in nodes {
+                    g.split(&mut t.nodes, node, o, s);
+                }
+                g.resid
+            })
+            .reduce(|| 0.0, Real::max);
+        report.max_plane_residual_mm = report.max_plane_residual_mm.max(resid);
+        for (ti, nodes) in failed.iter().enumerate() {
+            if nodes.is_empty() {
+                continue;
+            }
+            outs[ti] = None;
+            let r = forest.trees[ti].root;
+            let rc = [r % rn[0], r / rn[0] % rn[1], r / (rn[0] * rn[1])];
+            for axis in 0..3 {
+                for step in [-1isize, 1] {
+                    let c = rc[axis] as isize + step;
+                    if c < 0 || c >= rn[axis] as isize {
+                        continue;
+                    }
+                    let mut nc = rc;
+                    nc[axis] = c as usize;
+                    let nr = (nc[2] * rn[1] + nc[1]) * rn[0] + nc[0];
+                    if let Some(nt) = forest.roots[nr] {
+                        outs[nt as usize] = None;
+                    }
+                }
+            }
+        }
+    }
+    let outs: Vec<Out> = outs.into_iter().flatten().collect();
+    // Number the vertices in key order and join the triangles in tree order.
+    let mut verts: Vec<(Key, Point3)> = Vec::new();
+    let mut tris: Vec<[Key; 3]> = Vec::new();
+    for o in outs {
+        verts.extend(o.verts);
+        tris.extend(o.tris);
+        report.planar_leaves += o.planar;
+        report.edge_leaves += o.edge;
+        report.fine_cells += o.fine;
+        report.corner_points += o.corners;
+        report.feature_vertices += o.features;
+    }
+    verts.par_sort_unstable_by_key(|v| v.0);
+    verts.dedup_by_key(|v| v.0);
+    if verts.len() >= u32::MAX as usize {
+        return Err(MeshError::TooLarge {
+            what: "vertices",
+            count: verts.len(),
+            format: "32-bit vertex indices",
+        });
+    }
+    let index = |k: &Key| verts.partition_point(|v| v.0 < *k) as u32;
+    let triangles: Vec<[u32; 3]> = tris.par_iter().map(|t| t.each_ref().map(index)).collect();
+    Ok((
+        TriMesh {
+            vertices: verts.into_iter().map(|v| v.1).collect(),
+            triangles,
+        },
+        report,
+    ))
+}
+
+#[cfg(test)]
+#[path = "../../../benches/support/p1.rs"]
+#[allow(
+    clippy::duplicate_mod,
+    reason = "benchmark P1's program is shared by the unit tests of sweep, zmap and adaptive"
+)]
+mod p1;
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,325 @@
+//! Leaves to triangles: each leaf's face polylines linked into closed loops, fanned in its
+//! plane(s) (an edge leaf's loop split where the edge leaves the block), fine cells as
+//! the dexel-resolution mesher meshes them; every leaf of a tree in node order.
+//!
+//! **Invariant:** triangles only join vertices of the leaf's own loops and fan centres
+//! inside its block, so every edge on a block face is used once in each direction.
+
+use super::*;
+
+// ---------------------------------------------------------------------------------------
+// Leaves to triangles.
+
+#[derive(Default)]
+pub(super) struct Out {
+    pub(super) tris: Vec<[Key; 3]>,
+    pub(super) verts: Vec<(Key, Point3)>,
+    /// Leaves whose triangulation failed: node, origin, size.
+    pub(super) failed: Vec<(usize, [isize; 3], usize)>,
+    pub(super) planar: usize,
+    pub(super) edge: usize,
+    pub(super) fine: usize,
+    pub(super) corners: usize,
+    pub(super) features: usize,
+}
+
+/// Fans a polygon in a plane with normal `nrm`: from its first vertex if that gives no
+/// degenerate or folded triangle, else around its centroid (key `centre`). None if
+/// neither works.
+fn fan_polygon(
+    poly: &[Vtx],
+    nrm: &Vector3,
+    centre: Key,
+) -> Option<(Vec<[Key; 3]>, Option<Point3>)> {
+    let m = poly.len();
+    if m < 3 {
+        return None;
+    }
+    let good = |a: &Point3, b: &Point3, c: &Point3| {
+        let x = (b - a).cross(&(c - a));
+        let l = x.norm();
+        l > 1e-12 && x.dot(nrm) > 0.5 * l
+    };
+    if (1..m - 1).all(|k| good(&poly[0].p, &poly[k].p, &poly[k + 1].p)) {
+        let t = (1..m - 1)
+            .map(|k| [poly[0].key, poly[k].key, poly[k + 1].key])
+            .collect();
+        return Some((t, None));
+    }
+    let c = Point3::from(poly.iter().fold(Vector3::zeros(), |s, x| s + x.p.coords) / m as Real);
+    if (0..m).all(|k| good(&c, &poly[k].p, &poly[(k + 1) % m].p)) {
+        let t = (0..m)
+            .map(|k| [centre, poly[k].key, poly[(k + 1) % m].key])
+            .collect();
+        return Some((t, Some(c)));
+    }
+    None
+}
+
+impl Forest<'_> {
+    /// The closed loops of a leaf's surface from the polylines of its minimal faces, each
+    /// counter-clockwise about the outward normal. None if they do not close.
+    fn loops(
+        &self,
+        leaf: &LeafRef,
+        signs: &Signs,
+        tol: Real,
+        corners: &mut usize,
+    ) -> Option<Vec<Vec<Vtx>>> {
+        let mut open: Vec<Vec<Vtx>> = Vec::new();
+        let mut loops = Vec::new();
+        let mut faces = Vec::new();
+        for n in 0..3 {
+            for upper in [false, true] {
+                faces.clear();
+                self.minimal_faces(leaf, n, upper, &mut faces);
+                for &(f0, q) in &faces {
+                    let (chains, c) = self.face_chains(n, f0, q, signs, tol);
+                    // A corner belongs to the face: count it once, from the leaf below.
+                    if upper {
+                        *corners += c;
+                    }
+                    for mut ch in chains {
+                        if !upper {
+                            ch.v.reverse();
+                        }
+                        if ch.closed {
+                            loops.push(ch.v);
+                        } else {
+                            open.push(ch.v);
+                        }
+                    }
+                }
+            }
+        }
+        open.sort_unstable_by_key(|c| c[0].key);
+        let mut used = vec![false; open.len()];
+        for s in 0..open.len() {
+            if used[s] {
+                continue;
+            }
+            let start = open[s][0].key;
+            let mut lp: Vec<Vtx> = Vec::new();
+            let mut i = s;
+            loop {
+                used[i] = true;
+                let c = &open[i];
+                lp.extend_from_slice(&c[..c.len() - 1]);
+                let end = c[c.len() - 1].key;
+                if end == start {
+                    break;
+                }
+                let j = open.partition_point(|c| c[0].key < end);
+                if j >= open.len() || open[j][0].key != end || used[j] {
+                    return None;
+                }
+                i = j;
+            }
+            loops.push(lp);
+        }
+        Some(loops)
+    }
+
+    fn mesh_leaf(&self, leaf: &LeafRef, tol: Real, plane_tol: Real, out: &mut Out) {
+        match leaf.kind {
+            Kind::Empty => {}
+            Kind::Fine => self.mesh_cell(leaf, tol, out),
+            Kind::Planar(_) | Kind::Edge(..) => {
+                let signs = Signs::Predict(&leaf.kind, leaf.o[2], leaf.s);
+                let mut corners = 0;
+                let ok = self
+                    .loops(leaf, &signs, tol, &mut corners)
+                    .and_then(|loops| self.mesh_planes(leaf, &loops, plane_tol));
+                match ok {
+                    Some((tris, verts)) => {
+                        out.tris.extend(tris);
+                        out.verts.extend(verts);
+                        out.corners += corners;
+                        match leaf.kind {
+                            Kind::Planar(_) => out.planar += 1,
+                            _ => out.edge += 1,
+                        }
+                    }
+                    None => out.failed.push((leaf.node, leaf.o, leaf.s)),
+                }
+            }
+        }
+    }
+
+    #[allow(clippy::type_complexity)]
+    fn mesh_planes(
+        &self,
+        leaf: &LeafRef,
+        loops: &[Vec<Vtx>],
+        plane_tol: Real,
+    ) -> Option<(Vec<[Key; 3]>, Vec<(Key, Point3)>)> {
+        let mut tris = Vec::new();
+        let mut verts = Vec::new();
+        let mut piece = 0;
+        let mut emit = |poly: &[Vtx], nrm: &Vector3, tris: &mut Vec<[Key; 3]>| -> Option<()> {
+            let centre = local_key(leaf.tree, leaf.node, piece);
+            piece += 1;
+            let (t, c) = fan_polygon(poly, nrm, centre)?;
+            tris.extend(t);
+            verts.extend(poly.iter().map(|x| (x.key, x.p)));
+            if let Some(c) = c {
+                verts.push((centre, c));
+            }
+            Some(())
+        };
+        match leaf.kind {
+            Kind::Planar(p) => {
+                for lp in loops {
+                    if lp.iter().any(|x| x.corner) {
+                        return None;
+                    }
+                    emit(lp, &p.n, &mut tris)?;
+                }
+            }
+            Kind::Edge(p, q, _) => {
+                if loops.len() != 1 {
+                    return None;
+                }
+                let lp = &loops[0];
+                let cs: Vec<usize> = (0..lp.len()).filter(|&k| lp[k].corner).collect();
+                if cs.len() != 2 {
+                    return None;
+                }
+                let (c1, c2) = (cs[0], cs[1]);
+                let off = |pl: &Plane, x: &Vtx| (pl.n.dot(&x.p.coords) - pl.d).abs();
+                // The corners (from the crossings' own tangents) must lie on both planes,
+                // so the split line is the planes' edge and each half lies in its plane.
+                if [c1, c2]
+                    .iter()
+                    .any(|&c| off(&p, &lp[c]) > plane_tol || off(&q, &lp[c]) > plane_tol)
+                {
+                    return None;
+                }
+                let a: Vec<Vtx> = lp[c1..=c2].to_vec();
+                let b: Vec<Vtx> = lp[c2..].iter().chain(&lp[..=c1]).copied().collect();
+                for half in [a, b] {
+                    let probe = half.iter().find(|x| !x.corner)?;
+                    let pl = if off(&p, probe) <= off(&q, probe) {
+                        p
+                    } else {
+                        q
+                    };
+                    if half.iter().any(|x| off(&pl, x) > plane_tol) {
+                        return None;
+                    }
+                    emit(&half, &pl.n, &mut tris)?;
+                }
+            }
+            Kind::Empty | Kind::Fine => return None,
+        }
+        Some((tris, verts))
+    }
+
+    /// A single cell at dexel resolution, as [`crate::cutting::mesh`] meshes it.
+    fn mesh_cell(&self, leaf: &LeafRef, tol: Real, out: &mut Out) {
+        let lat = &self.lat;
+        let o = leaf.o;
+        let mut m = [0u64; 4];
+        for (q, mq) in m.iter_mut().enumerate() {
+            *mq = lat.column(o[0] + (q & 1) as isize, o[1] + (q >> 1) as isize, o[2], 1);
+        }
+        let signs = Signs::Cell(o, m);
+        let mut corners = 0;
+        let Some(loops) = self.loops(leaf, &signs, tol, &mut corners) else {
+            // Cannot happen for a single cell (its face segments always close); keep the
+            // mesh closed by failing loudly in the report instead of guessing.
+            out.failed.push((leaf.node, leaf.o, leaf.s));
+            return;
+        };
+        out.fine += 1;
+        out.corners += corners;
+        let lo = lat.pos(o);
+        let hi = lat.pos([o[0] + 1, o[1] + 1, o[2] + 1]);
+        for (li, lp) in loops.iter().enumerate() {
+            let mut qef = Qef::default();
+            let mut any_corner = false;
+            for x in lp {
+                if x.corner {
+                    any_corner = true;
+                } else {
+                    qef.add(&x.p, &x.n);
+                }
+            }
+            out.verts.extend(lp.iter().map(|x| (x.key, x.p)));
+            let feature = any_corner || qef.rank() >= 2;
+            if !feature && lp.len() == 3 {
+                out.tris.push([lp[0].key, lp[1].key, lp[2].key]);
+                continue;
+            }
+            if !feature && lp.len() == 4 {
+                let shares = |a: &Vtx, b: &Vtx| share_cell_face(a.key, b.key);
+                let d02 = !shares(&lp[0], &lp[2]);
+                let d13 = !shares(&lp[1], &lp[3]);
+                if d02 || d13 {
+                    let l02 = (lp[0].p - lp[2].p).norm_squared();
+                    let l13 = (lp[1].p - lp[3].p).norm_squared();
+                    let k = lp.iter().map(|x| x.key).collect::<Vec<_>>();
+                    if d02 && (!d13 || l02 <= l13) {
+                        out.tris.push([k[0], k[1], k[2]]);
+                        out.tris.push([k[0], k[2], k[3]]);
+                    } else {
+                        out.tris.push([k[0], k[1], k[3]]);
+                        out.tris.push([k[1], k[2], k[3]]);
+                    }
+                    continue;
+                }
+            }
+            let centre = local_key(leaf.tree, leaf.node, li);
+            out.features += 1;
+            out.verts.push((centre, qef.solve(&lo, &hi)));
+            for k in 0..lp.len() {
+                out.tris
+                    .push([centre, lp[k].key, lp[(k + 1) % lp.len()].key]);
+            }
+        }
+    }
+}
+
+fn key_point(key: Key) -> [isize; 3] {
+    let f = |s: u32| ((key >> s) as u32) as isize - 1;
+    [f(64), f(32), f(0)]
+}
+
+/// Whether two crossing vertices of one cell lie on a common face of it.
+fn share_cell_face(a: Key, b: Key) -> bool {
+    let (aa, ab) = ((a >> 96 & 3) as usize, (b >> 96 & 3) as usize);
+    let (pa, pb) = (key_point(a), key_point(b));
+    (0..3).any(|m| m != aa && m != ab && pa[m] == pb[m])
+}
+
+impl Forest<'_> {
+    /// Meshes every leaf of tree `ti`, in node order.
+    pub(super) fn mesh_tree(&self, ti: usize, t: &Tree, tol: Real, plane_tol: Real) -> Out {
+        let mut out = Out::default();
+        let mut stack = vec![(0usize, t.origin, ROOT)];
+        while let Some((node, o, s)) = stack.pop() {
+            match t.nodes[node] {
+                Node::Leaf(kind) => {
+                    let leaf = LeafRef {
+                        tree: ti,
+                        node,
+                        o,
+                        s,
+                        kind,
+                    };
+                    self.mesh_leaf(&leaf, tol, plane_tol, &mut out);
+                }
+                Node::Split(first) => {
+                    for c in (0..8).rev() {
+                        stack.push((first as usize + c, child_origin(o, s, c), s / 2));
+                    }
+                }
+            }
+        }
+        // Each vertex is named by every leaf that uses it: keep one per tree (equal keys
+        // carry equal positions), so the trees' outputs stay near the mesh's size.
+        out.verts.sort_unstable_by_key(|v| v.0);
+        out.verts.dedup_by_key(|v| v.0);
+        out
+    }
+}

@@ -1,0 +1,191 @@
+//! The exact swept volume of a flat or ball end mill on a move that turns a rotary axis,
+//! ray by ray: the per-ray envelope.
+//!
+//! On a move from `q0` to `q1` every axis value is linear in `λ ∈ [0, 1]` and the tool's pose
+//! is `T(λ) = chain.w_from_t(q(λ))`, a rotation and a translation that both vary. Along a ray
+//! `o + t·e` the tool at one `λ` is convex, so it occupies one interval `[t_in(λ), t_out(λ)]`
+//! (or none), found in closed form in the tool frame: the ray `T(λ)⁻¹(o + t·e)` against the
+//! cylinder `r ≤ R` between the end planes, and for a ball end mill the sphere of radius `R`
+//! about the axis point at height `R`. The swept volume along the ray is the union over `λ`:
+//! one interval `[min t_in, max t_out]` for every connected set of `λ` where the ray meets
+//! the tool (the intervals move continuously), possibly several disjoint intervals.
+//!
+//! **Where the extremes are.** The least `t_in` (greatest `t_out`) over a connected set of
+//! poses is at one of: a move end; a smooth extreme, where the active face's rate
+//! `dt/dλ = (n·V)/(n·e)` (outward normal `n`, the tool's velocity `V` at the point) changes
+//! sign; or a pose where the ray passes through an edge circle of the tool (bottom and top
+//! edges of a flat end mill, the top edge of a ball end mill), which is where the active face
+//! changes (a kink) or where the ray leaves the tool with finite slope. Where the ray merely
+//! touches a smooth face (`t_in = t_out`), `t_in` rises and `t_out` falls with infinite slope
+//! into the touch, so no extreme sits there. Each pose is evaluated in closed form with the
+//! rate of both ends and, for every edge, `φ = ρ − R`, the radius at which the ray crosses
+//! the edge's plane; an edge crossing is a sign change of `φ`.
+//!
+//! **Cells.** No tool point moves faster than `M = ω·ρ + v` per unit `λ` (`ω` the total
+//! rotation in rad, `ρ` a bound on the distance of any tool point from the rotary axes during
+//! the move, `v` the linear travel; with several rotary axes `ρ` is widened like the sub-step
+//! bound of [`crate::cutting::sweep`]). The move is split into `N` cells of width `h` with
+//! `δ = M·h/2 ≤ R/8`: the tool anywhere in a cell lies inside the tool at the cell's middle
+//! grown by `δ`. A ray that misses the grown tool misses the cell. The ray is evaluated
+//! exactly at the ends and middle of every cell it may meet; in each half-cell (the tool
+//! moves by at most `R/8`) a sign change of a rate or of `φ` is solved for by the Illinois
+//! variant of regula falsi, and the pose found is offered. A half-cell whose ends both miss
+//! may hide a touch: the tool lies in capsules of radius `R` about four pieces of its axis,
+//! each with its own speed bound `M_k`, and a touch deeper than [`ENVELOPE_TOL`] needs some
+//! piece to travel from both ends to the ray (`d_k(a) + d_k(b) + 2·tol ≤ M_k·w`, `d_k` the
+//! ray's distance from the capsule); while one can, the half-cell is bisected, the middle
+//! checked against the tool grown by `M·w/2 − tol`. A half-cell with one end inside and a
+//! rate that points to an extreme before the ray leaves is bisected until the extreme is
+//! bracketed.
+//!
+//! **Span.** The stock asks only about the material's extent along a ray
+//! ([`Cutter::ray_cuts_in_span`]): cells whose grown tool meets the ray only outside it are
+//! skipped, and an interval end already beyond it is not refined (it stays beyond it).
+//!
+//! **Accuracy.** Every interval end is the exact interval of some pose, so nothing is cut
+//! that the tool does not reach. A smooth extreme is solved until
+//! `min(|dt/dλ|) · w ≤` [`SOLVE_TOL`] over the final bracket `w`, which bounds the distance to
+//! the true extreme on a convex stretch; an edge crossing until `w` times the larger rate at
+//! the bracket ends is below it. A touch between two missing poses is ignored only when it
+//! reaches less than [`ENVELOPE_TOL`] into the ray (measured normal to the tool's surface).
+//! The documented bound is [`ENVELOPE_TOL`] = 0.1 µm.
+//!
+//! **Known limit.** Within one half-cell each rate and each `φ` is taken to change sign at
+//! most once, and a ray inside the tool at both ends of a half-cell to be inside in between.
+//! A ray that leaves the tool and meets it again while the tool moves by less than `R/8`, or
+//! crosses an edge circle twice in that motion, can only be grazing it.
+//!
+//! Normals at the interval ends are the tool's outward normal of the face that bounds the
+//! interval (side, end plane, or sphere) at that point and pose.
+//!
+//! **Invariant:** the envelope knows only the tool's shape, the chain's poses and one move;
+//! it never reads programs, stock or files.
+//!
+//! **Files.** This one holds the tolerances, the error and [`RotaryEnvelope`] as a
+//! [`Cutter`]; `path` the move's poses and speed bounds, `probe` the tool at one pose against
+//! a ray, `solve` the envelope's construction and the per-ray solve, `tests` the unit tests.
+
+use crate::cutting::stock::{Cutter, RayCut};
+use crate::cutting::tool::{Tool, ToolKind};
+use crate::machine::chain::{AxisKind, Chain};
+use crate::machine::error_motion::{self, AxisErrorMotions, Directions};
+use crate::math::{Aabb, Isometry3, Matrix3, Point3, Real, Vector3, tol};
+use crate::nc::AxisValues;
+use std::cell::Cell;
+
+mod path;
+mod probe;
+mod solve;
+
+pub use path::{MovePath, error_motion_speed, rotation_and_travel};
+use path::{Sample, speed_bound};
+use probe::{
+    Face, Hit, Probe, Ray, Shape, ball_sphere, frame_box, line_segment_distance, tool_interval,
+    tool_normal,
+};
+
+/// Bound (mm) on the distance of the envelope's interval ends from the true swept surface
+/// along a ray: 0.1 µm, the µm-metrology budget with a factor ten to spare; the solver
+/// reaches [`SOLVE_TOL`] (see the module docs).
+pub const ENVELOPE_TOL: Real = 1e-7;
+
+/// Distance (mm) to which the solver brings an interval end to the true extreme: a tenth
+/// of [`ENVELOPE_TOL`].
+pub const SOLVE_TOL: Real = 1e-8;
+
+/// Largest grown distance `δ` as a fraction of the tool radius: cells move the tool by at
+/// most twice that, a quarter of its radius, half-cells by an eighth.
+const CELL_GROWTH: Real = 0.125;
+
+/// Pieces of the tool's axis for the separation test between poses that miss the ray.
+const PARTS: usize = 4;
+
+/// Most cells for one move; beyond this the move is refused (the caller falls back).
+const MAX_CELLS: usize = 1 << 16;
+
+/// Regula falsi steps before a solve gives up (each step at least halves the bracket every
+/// third step, so 200 steps reach far below any `λ` resolution).
+const MAX_SOLVE_STEPS: usize = 200;
+
+/// Recursion depth of the half-cell refinement; each level halves the width, so 60 levels
+/// reach below `f64` resolution of `λ`.
+const MAX_DEPTH: u32 = 60;
+/// Errors of building an envelope (the caller sweeps such a move another way).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum EnvelopeError {
+    /// The tool has no closed form here (not flat, or a ball shorter than its diameter).
+    #[error("the envelope solves flat end mills and ball end mills at least a diameter long")]
+    UnsupportedTool,
+    /// The move would need more cells than allowed (an absurd rotation or travel).
+    #[error("the move needs {0:.3e} envelope cells")]
+    TooManyCells(Real),
+}
+
+/// A flat or ball end mill on one move of a chain, as a [`Cutter`]: exact per-ray envelope.
+#[derive(Clone, Debug)]
+pub struct RotaryEnvelope {
+    shape: Shape,
+    r: Real,
+    l: Real,
+    path: MovePath,
+    cells: usize,
+    /// Grown distance δ of a cell (mm).
+    delta: Real,
+    /// Bound on a tool point's speed per unit λ (mm).
+    speed: Real,
+    /// Heights bounding the pieces of the axis segment whose capsules (radius R) hold the tool.
+    part_z: [Real; PARTS + 1],
+    /// Speed bound of each capsule piece's points per unit λ (mm).
+    part_speed: [Real; PARTS],
+    /// Poses at λ = k/(2N), k = 0..=2N: cell ends at even k, middles at odd k.
+    samples: Vec<Sample>,
+    /// Poses halfway between consecutive samples, with their λ: where every ray's first
+    /// bisection and touch test look (computed once per move instead of once per ray; the
+    /// same pose bit for bit, see [`RotaryEnvelope::sample_at`]).
+    quarters: Vec<(Real, Sample)>,
+    /// Box of each cell's grown tool.
+    cell_boxes: Vec<Aabb>,
+    bounds: Aabb,
+}
+
+impl Cutter for RotaryEnvelope {
+    fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    /// The hull of the ray's intervals; the stock uses [`Cutter::ray_cuts`].
+    fn ray_cut(&self, origin: &Point3, axis: usize) -> Option<RayCut> {
+        let mut out = Vec::new();
+        self.ray_cuts(origin, axis, &mut out);
+        RayCut::hull(&out)
+    }
+
+    fn ray_cuts(&self, origin: &Point3, axis: usize, out: &mut Vec<RayCut>) {
+        let mut e = Vector3::zeros();
+        e[axis] = 1.0;
+        self.intervals(origin, &e, out);
+    }
+
+    fn costly_rays(&self) -> bool {
+        true
+    }
+
+    fn ray_cuts_in_span(
+        &self,
+        origin: &Point3,
+        axis: usize,
+        span: (Real, Real),
+        line: u32,
+        out: &mut Vec<RayCut>,
+        lines: &mut Vec<[u32; 2]>,
+    ) {
+        let mut e = Vector3::zeros();
+        e[axis] = 1.0;
+        let before = out.len();
+        self.intervals_in(origin, &e, span, out);
+        lines.resize(lines.len() + out.len() - before, [line, line]);
+    }
+}
+
+#[cfg(test)]
+mod tests;

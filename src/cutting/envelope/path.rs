@@ -1,0 +1,337 @@
+//! The tool's pose along one move and its rate of change ([`MovePath`], without rebuilding
+//! the chain), and the bounds on how fast any tool point moves on it, error motions included
+//! ([`error_motion_speed`]).
+//!
+//! **Invariant:** poses are the chain's exact poses (error motions and reversal take-up
+//! included); a speed bound is never below the true speed.
+
+use super::*;
+
+/// The pose of the tool along one move and its rate of change, evaluated without rebuilding
+/// the chain: fixed transforms and linear axes between rotary axes are folded into one
+/// factor whose translation is linear in `λ`.
+#[derive(Clone, Debug)]
+pub struct MovePath {
+    factors: Vec<Factor>,
+}
+
+#[derive(Clone, Debug)]
+enum Factor {
+    /// `x ↦ rot·x + t0 + λ·t1`.
+    Affine {
+        rot: Matrix3,
+        t0: Vector3,
+        t1: Vector3,
+    },
+    /// Rotation by `th0 + λ·dth` (rad) about the unit `dir` through `origin`; `cross` and
+    /// `outer` are `[dir]×` and `dir·dirᵀ` for Rodrigues' formula.
+    Rotary {
+        dir: Vector3,
+        origin: Vector3,
+        th0: Real,
+        dth: Real,
+        cross: Matrix3,
+        outer: Matrix3,
+    },
+    /// The error motions of an axis that moves from `q0` by `dq`, turning about `centre`,
+    /// with its reversal share moving from `off0` toward `target` at the commanded rate.
+    Error {
+        motions: Box<AxisErrorMotions>,
+        centre: Point3,
+        q0: Real,
+        dq: Real,
+        off0: Real,
+        target: Real,
+    },
+}
+
+/// A pose and its rate of change per unit `λ`.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Sample {
+    /// `w_from_t` rotation (columns: the tool axes in W).
+    pub(super) rot: Matrix3,
+    /// The tool tip in W.
+    pub(super) tip: Point3,
+    /// Angular velocity, in tool coordinates.
+    pub(super) w_t: Vector3,
+    /// Velocity of the tool point at the tip, in tool coordinates: the point `q` (tool
+    /// coordinates) moves at `w_t × q + v_t`.
+    pub(super) v_t: Vector3,
+}
+
+impl MovePath {
+    /// The path of the move from `start` to `end` on `chain`, every axis that moves settled
+    /// in the direction of its motion (no lost motion taken up during the move).
+    pub fn new(chain: &Chain, start: &AxisValues, end: &AxisValues) -> Self {
+        let state = chain.reversal_state(&Directions::default().after_move(start, end));
+        Self::with_state(chain, start, end, &state)
+    }
+
+    /// The path of the move from `start` to `end` on `chain` starting from the reversal
+    /// shares `state` ([`Chain::reversal_state`]): an axis that reverses takes up its lost
+    /// motion over the first `|B|` of its travel.
+    pub fn with_state(
+        chain: &Chain,
+        start: &AxisValues,
+        end: &AxisValues,
+        state: &[Real; 6],
+    ) -> Self {
+        let mut factors = Vec::new();
+        let (mut rot, mut t0, mut t1) = (Matrix3::identity(), Vector3::zeros(), Vector3::zeros());
+        for (i, (axis, dev)) in chain.axes().iter().zip(chain.deviations()).enumerate() {
+            let (q0, q1) = (start.get(axis.letter), end.get(axis.letter));
+            match axis.kind {
+                AxisKind::Linear => {
+                    t0 += rot * (axis.direction.into_inner() * q0);
+                    t1 += rot * (axis.direction.into_inner() * (q1 - q0));
+                }
+                AxisKind::Rotary if q0 == q1 => {
+                    let m = axis.motion(q0);
+                    t0 += rot * m.translation.vector;
+                    rot *= m.rotation.to_rotation_matrix().into_inner();
+                }
+                AxisKind::Rotary => {
+                    if !(rot == Matrix3::identity() && t0 == Vector3::zeros() && t1 == t0) {
+                        factors.push(Factor::Affine { rot, t0, t1 });
+                    }
+                    let dir = axis.direction.into_inner();
+                    factors.push(Factor::Rotary {
+                        dir,
+                        origin: axis.origin.coords,
+                        th0: q0.to_radians(),
+                        dth: (q1 - q0).to_radians(),
+                        cross: dir.cross_matrix(),
+                        outer: dir * dir.transpose(),
+                    });
+                    (rot, t0, t1) = (Matrix3::identity(), Vector3::zeros(), Vector3::zeros());
+                }
+            }
+            if let Some(e) = &chain.error_motions_all()[i] {
+                let (q0, q1) = (start.get(axis.letter), end.get(axis.letter));
+                let off0 = state[axis.letter.index()];
+                let centre = chain.error_centre(i);
+                if q0 == q1 {
+                    let g = error_motion::transform(&e.values_with_offset(q0, off0), &centre);
+                    t0 += rot * g.translation.vector;
+                    rot *= g.rotation.to_rotation_matrix().into_inner();
+                } else {
+                    if !(rot == Matrix3::identity() && t0 == Vector3::zeros() && t1 == t0) {
+                        factors.push(Factor::Affine { rot, t0, t1 });
+                    }
+                    factors.push(Factor::Error {
+                        motions: Box::new(e.clone()),
+                        centre,
+                        q0,
+                        dq: q1 - q0,
+                        off0,
+                        target: e.reversal * (q1 - q0).signum() / 2.0,
+                    });
+                    (rot, t0, t1) = (Matrix3::identity(), Vector3::zeros(), Vector3::zeros());
+                }
+            }
+            let d = dev.transform();
+            t0 += rot * d.translation.vector;
+            rot *= d.rotation.to_rotation_matrix().into_inner();
+        }
+        factors.push(Factor::Affine { rot, t0, t1 });
+        Self { factors }
+    }
+
+    /// The tool's pose in the workpiece frame at fraction `lambda` of the move.
+    pub fn w_from_t(&self, lambda: Real) -> Isometry3 {
+        let s = self.sample(lambda);
+        let rot = nalgebra::Rotation3::from_matrix_unchecked(s.rot);
+        Isometry3::from_parts(
+            s.tip.coords.into(),
+            nalgebra::UnitQuaternion::from_rotation_matrix(&rot),
+        )
+    }
+
+    /// The pose at `lambda` and its spatial rate (angular velocity `w` and the velocity `v`
+    /// of the W point at the origin, so a point `x` of the tool moves at `w × x + v`).
+    pub(super) fn sample(&self, lambda: Real) -> Sample {
+        let (mut r, mut t) = (Matrix3::identity(), Vector3::zeros());
+        let (mut w, mut v) = (Vector3::zeros(), Vector3::zeros());
+        for f in &self.factors {
+            match f {
+                Factor::Affine { rot, t0, t1 } => {
+                    v += r * t1;
+                    t += r * (t0 + t1 * lambda);
+                    r *= rot;
+                }
+                Factor::Rotary {
+                    dir,
+                    origin,
+                    th0,
+                    dth,
+                    cross,
+                    outer,
+                } => {
+                    let omega = (r * dir) * *dth;
+                    let centre = r * origin + t;
+                    w += omega;
+                    v -= omega.cross(&centre);
+                    let (sin, cos) = (th0 + dth * lambda).sin_cos();
+                    let mut rt = cross * sin + outer * (1.0 - cos);
+                    for k in 0..3 {
+                        rt[(k, k)] += cos;
+                    }
+                    t += r * (origin - rt * origin);
+                    r *= rt;
+                }
+                Factor::Error {
+                    motions,
+                    centre,
+                    q0,
+                    dq,
+                    off0,
+                    target,
+                } => {
+                    let q = q0 + dq * lambda;
+                    let (mut vals, mut slopes) = motions.values_and_slopes(q);
+                    for s in &mut slopes {
+                        *s *= dq;
+                    }
+                    if let Some(p) = motions.positioning {
+                        let (gap, done) = (target - off0, (dq * lambda).abs());
+                        if done < gap.abs() {
+                            vals[p as usize] += off0 + gap.signum() * done;
+                            slopes[p as usize] += gap.signum() * dq.abs();
+                        } else {
+                            vals[p as usize] += target;
+                        }
+                    }
+                    let g = error_motion::transform(&vals, centre);
+                    let (wl, ul) = error_motion::twist(&vals, &slopes, centre);
+                    let ww = r * wl;
+                    w += ww;
+                    v += r * ul - ww.cross(&t);
+                    t += r * g.translation.vector;
+                    r *= g.rotation.to_rotation_matrix().into_inner();
+                }
+            }
+        }
+        Sample {
+            rot: r,
+            tip: Point3::from(t),
+            w_t: r.tr_mul(&w),
+            v_t: r.tr_mul(&(w.cross(&t) + v)),
+        }
+    }
+}
+
+/// Total rotation (rad) and linear travel (mm) of the move `a → b` on `chain`: the sums of
+/// its rotary and of its linear axes' moves.
+pub fn rotation_and_travel(chain: &Chain, a: &AxisValues, b: &AxisValues) -> (Real, Real) {
+    let (mut omega, mut travel) = (0.0, 0.0);
+    for axis in chain.axes() {
+        let dq = (b.get(axis.letter) - a.get(axis.letter)).abs();
+        match axis.kind {
+            AxisKind::Rotary => omega += dq.to_radians(),
+            AxisKind::Linear => travel += dq,
+        }
+    }
+    (omega, travel)
+}
+
+/// A bound on the speed (mm per unit λ) of any point within `reach` of the tool-axis point at
+/// height `mid` on the move: the rotation `ω` (rad) times the largest distance `ρ` of such a
+/// point from a rotary axis, plus the linear travel. `ρ` is taken at both ends (distance of
+/// the axis point from each rotary axis line, plus `reach`) and grown by the travel, which is
+/// the most it can change while the rotation turns points about the axis; several rotary
+/// axes widen it by `(1 + ω)` as the sub-step bound does. Error motions add their own
+/// speed ([`error_motion_speed`]).
+pub(super) fn speed_bound(
+    chain: &Chain,
+    mid: Real,
+    reach: Real,
+    start: &AxisValues,
+    end: &AxisValues,
+    state: &[Real; 6],
+) -> Real {
+    let (omega, travel) = rotation_and_travel(chain, start, end);
+    let rotaries = chain
+        .axes()
+        .iter()
+        .filter(|a| a.kind == AxisKind::Rotary)
+        .count();
+    let mid = Point3::new(0.0, 0.0, mid);
+    let mut rho: Real = 0.0;
+    for q in [start, end] {
+        let c = chain.w_from_t(q) * mid;
+        for (p, d) in chain.rotary_lines_in_w(q) {
+            let r = c - p;
+            rho = rho.max((r - d * r.dot(&d)).norm());
+        }
+    }
+    rho += reach + travel;
+    if rotaries > 1 {
+        rho *= 1.0 + omega;
+    }
+    let base = omega * rho + travel;
+    if chain.has_error_motions() {
+        base + error_motion_speed(chain, &mid, reach, start, end, state).0
+    } else {
+        base
+    }
+}
+
+/// What error motions add to the speed of points within `reach` of the tool point `mid`
+/// (tool frame) on the move `start → end` from the reversal shares `state`, per unit λ, and
+/// the rate of the orientation they turn (rad per unit λ): for each axis `i` that moves by
+/// `Δq_i`, `|Δq_i|·(s_δ + r + s_θ·ρ_i)` with `s_δ`, `s_θ` bounds on its offset and angular
+/// slopes over the move, `r` 1 when its lost motion is taken up during the move, and `ρ_i`
+/// a bound on the distance of the points from the axis's error centre (its distance at
+/// both ends plus `reach`, the travel and 1 mm for the error offsets themselves, widened by
+/// `(1 + ω)` when a rotary axis turns). A point of the frame after the axis moves at
+/// `w × (x − c) + δ'` relative to the frame before it, `|w| ≤ s_θ·|Δq|`, `|δ'| ≤ (s_δ + r)·|Δq|`.
+pub fn error_motion_speed(
+    chain: &Chain,
+    mid: &Point3,
+    reach: Real,
+    start: &AxisValues,
+    end: &AxisValues,
+    state: &[Real; 6],
+) -> (Real, Real) {
+    let (omega, travel) = rotation_and_travel(chain, start, end);
+    let (mut speed, mut turn) = (0.0, 0.0);
+    for (i, axis) in chain.axes().iter().enumerate() {
+        let Some(e) = &chain.error_motions_all()[i] else {
+            continue;
+        };
+        let (q0, q1) = (start.get(axis.letter), end.get(axis.letter));
+        let dq = (q1 - q0).abs();
+        if dq == 0.0 {
+            continue;
+        }
+        let (sd, sa) = e.slope_bounds(q0.min(q1), q0.max(q1));
+        let ramp = if e.reversal != 0.0 { 1.0 } else { 0.0 };
+        let mut rho: Real = 0.0;
+        for q in [start, end] {
+            let c = centre_in_w(chain, i, q, state);
+            rho = rho.max((chain.w_from_t_state(q, state) * mid - c).norm());
+        }
+        rho = (rho + reach + travel + 1.0) * (1.0 + omega);
+        speed += dq * (sd + ramp + sa * rho);
+        turn += dq * sa;
+    }
+    (speed, turn)
+}
+
+/// The error centre of axis `i` in W at `q` (the frame after its motion).
+fn centre_in_w(chain: &Chain, i: usize, q: &AxisValues, state: &[Real; 6]) -> Point3 {
+    let mut pose = Isometry3::identity();
+    for (j, (axis, dev)) in chain.axes().iter().zip(chain.deviations()).enumerate() {
+        let qj = q.get(axis.letter);
+        pose *= axis.motion(qj);
+        if j == i {
+            return pose * chain.error_centre(i);
+        }
+        if let Some(e) = &chain.error_motions_all()[j] {
+            let v = e.values_with_offset(qj, state[axis.letter.index()]);
+            pose *= error_motion::transform(&v, &chain.error_centre(j));
+        }
+        pose *= dev.transform();
+    }
+    pose * Point3::origin()
+}

@@ -1,0 +1,609 @@
+//! Building the envelope of one move (cells, speed bounds, the tool's extent) and solving a
+//! ray: poses probed at the cells' ends and middles, sign changes of rates and `φ` solved by
+//! the Illinois regula falsi, touches between missing poses ruled out by bisection, the
+//! interval ends merged.
+//!
+//! **Invariant:** every interval end is the exact interval of some pose, within
+//! [`ENVELOPE_TOL`] of the true swept surface.
+
+use super::*;
+
+impl RotaryEnvelope {
+    /// The envelope of `tool` on the move `start → end` of `chain` (moving axes settled in
+    /// their direction of motion, see [`MovePath::new`]).
+    pub fn new(
+        chain: &Chain,
+        tool: &Tool,
+        start: &AxisValues,
+        end: &AxisValues,
+    ) -> Result<Self, EnvelopeError> {
+        let state = chain.reversal_state(&Directions::default().after_move(start, end));
+        Self::with_state(chain, tool, start, end, &state)
+    }
+
+    /// The envelope of `tool` on the move `start → end` of `chain` from the reversal
+    /// shares `state` (see [`MovePath::with_state`]).
+    pub fn with_state(
+        chain: &Chain,
+        tool: &Tool,
+        start: &AxisValues,
+        end: &AxisValues,
+        state: &[Real; 6],
+    ) -> Result<Self, EnvelopeError> {
+        let shape = match tool.kind() {
+            ToolKind::Flat => Shape::Flat,
+            ToolKind::Ball if tool.length() >= 2.0 * tool.radius() => Shape::Ball,
+            _ => return Err(EnvelopeError::UnsupportedTool),
+        };
+        let (r, l) = (tool.radius(), tool.length());
+        let path = MovePath::with_state(chain, start, end, state);
+        let speed = speed_bound(chain, l / 2.0, tool.reach_from(l / 2.0), start, end, state);
+        // The capsule of radius R about the axis segment [z0, l] holds the tool; its pieces
+        // and their own speed bounds.
+        let z0 = match shape {
+            Shape::Flat => 0.0,
+            Shape::Ball => r,
+        };
+        let part_z: [Real; PARTS + 1] =
+            std::array::from_fn(|k| z0 + (l - z0) * k as Real / PARTS as Real);
+        let part_speed: [Real; PARTS] = std::array::from_fn(|k| {
+            let half = (part_z[k + 1] - part_z[k]) / 2.0;
+            speed_bound(chain, part_z[k] + half, half + r, start, end, state)
+        });
+        let want = speed / (2.0 * CELL_GROWTH * r);
+        if !(want.is_finite() && want <= MAX_CELLS as Real) {
+            return Err(EnvelopeError::TooManyCells(want));
+        }
+        let cells = (want.ceil() as usize).max(1);
+        let h = 1.0 / cells as Real;
+        let delta = speed * h / 2.0 + tol::FEASIBILITY;
+        let samples: Vec<Sample> = (0..=2 * cells)
+            .map(|k| path.sample(k as Real / (2 * cells) as Real))
+            .collect();
+        // Every λ lies within h/4 of a sample, where the tool has moved by at most M·h/4.
+        let margin = speed * h / 4.0 + tol::FEASIBILITY;
+        let mut bounds = Aabb::empty();
+        for s in &samples {
+            let b = frame_box(s, shape, r, l, margin);
+            bounds.grow(&b.min);
+            bounds.grow(&b.max);
+        }
+        let cell_boxes = (0..cells)
+            .map(|j| frame_box(&samples[2 * j + 1], shape, r, l, delta))
+            .collect();
+        let lambda_of = |k: usize| k as Real / (2 * cells) as Real;
+        let quarters = (0..2 * cells)
+            .map(|k| {
+                let mid = 0.5 * (lambda_of(k) + lambda_of(k + 1));
+                (mid, path.sample(mid))
+            })
+            .collect();
+        Ok(Self {
+            shape,
+            r,
+            l,
+            path,
+            cells,
+            delta,
+            speed,
+            part_z,
+            part_speed,
+            samples,
+            quarters,
+            cell_boxes,
+            bounds,
+        })
+    }
+
+    /// Number of cells the move is split into.
+    pub fn cells(&self) -> usize {
+        self.cells
+    }
+
+    /// The bound on any tool point's speed per unit of the move parameter (mm).
+    pub fn speed_bound(&self) -> Real {
+        self.speed
+    }
+
+    fn lambda_of(&self, k: usize) -> Real {
+        k as Real / (2 * self.cells) as Real
+    }
+
+    /// Whether the ray meets the tool at a pose grown by `grow` (mm) within the ray's span.
+    #[inline(always)]
+    fn meets_grown(&self, s: &Sample, ray: &Ray, grow: Real) -> bool {
+        let p = s.rot.tr_mul(&(ray.o - s.tip));
+        let u = s.rot.tr_mul(ray.e);
+        let meets = |(t0, _, t1, _): (Real, Face, Real, Face)| t1 >= ray.span.0 && t0 <= ray.span.1;
+        // A ball's interval holds its sphere's: when that meets the span so does the tool's
+        // (the shank's cylinder, with its divisions, is then not needed for the answer)
+        if self.shape == Shape::Ball && ball_sphere(self.r, &p, &u, grow).is_some_and(meets) {
+            return true;
+        }
+        tool_interval(self.shape, self.r, self.l, &p, &u, grow).is_some_and(meets)
+    }
+
+    /// The ray evaluated exactly at a pose.
+    #[inline(always)]
+    fn probe(&self, s: &Sample, lambda: Real, ray: &Ray) -> Probe {
+        let p = s.rot.tr_mul(&(ray.o - s.tip));
+        let u = s.rot.tr_mul(ray.e);
+        let hit =
+            tool_interval(self.shape, self.r, self.l, &p, &u, 0.0).map(|(t0, f0, t1, f1)| Hit {
+                t_in: t0,
+                face_in: f0,
+                t_out: t1,
+                face_out: f1,
+            });
+        let phi = |h: Real| {
+            if u.z.abs() <= tol::RELATIVE_EPS {
+                return Real::INFINITY;
+            }
+            let q = p + u * ((h - p.z) / u.z);
+            (q.x * q.x + q.y * q.y).sqrt() - self.r
+        };
+        let bottom = match self.shape {
+            Shape::Flat => phi(0.0),
+            Shape::Ball => Real::INFINITY,
+        };
+        Probe {
+            lambda,
+            hit,
+            phi: [bottom, phi(self.l)],
+            p,
+            u,
+            rot: s.rot,
+            w_t: s.w_t,
+            v_t: s.v_t,
+            rates: Cell::new([Real::NAN; 2]),
+            known: Cell::new(0),
+        }
+    }
+
+    #[inline(always)]
+    fn probe_at(&self, lambda: Real, ray: &Ray) -> Probe {
+        self.probe(&self.sample_at(lambda), lambda, ray)
+    }
+
+    /// The pose at `lambda`: the stored one when `lambda` is exactly a quarter point (the
+    /// midpoint of two consecutive samples as [`Self::refine`] computes it), else computed.
+    #[inline(always)]
+    pub(super) fn sample_at(&self, lambda: Real) -> Sample {
+        let k = ((lambda * (4 * self.cells) as Real - 1.0) / 2.0).round();
+        if k >= 0.0
+            && let Some((at, s)) = self.quarters.get(k as usize)
+            && *at == lambda
+        {
+            return *s;
+        }
+        self.path.sample(lambda)
+    }
+
+    /// The sorted, disjoint intervals of the ray `o + t·e` (`e` unit) inside the swept volume,
+    /// with material normals, appended to `out`.
+    pub fn intervals(&self, o: &Point3, e: &Vector3, out: &mut Vec<RayCut>) {
+        self.intervals_in(o, e, (Real::NEG_INFINITY, Real::INFINITY), out);
+    }
+
+    /// Like [`RotaryEnvelope::intervals`] where only `span` along the ray matters (the
+    /// material's extent): interval ends outside it are left unrefined (they stay outside
+    /// it) and parts of the move whose grown tool meets the ray only outside it are skipped.
+    pub fn intervals_in(&self, o: &Point3, e: &Vector3, span: (Real, Real), out: &mut Vec<RayCut>) {
+        // a dexel ray's box tests need no divisions (the same results)
+        let axis = Aabb::unit_axis(e);
+        let box_meets = |b: &Aabb| match axis {
+            Some(a) => b.axis_ray_interval(o, a),
+            None => b.ray_interval(o, e),
+        };
+        if box_meets(&self.bounds).is_none() {
+            return;
+        }
+        let ray = Ray { o, e, span };
+        let n = self.cells;
+        SCRATCH.with_borrow_mut(|scratch| {
+            let Scratch {
+                grown,
+                slot,
+                probes,
+                comp_of,
+                comps,
+                cuts,
+            } = scratch;
+            grown.clear();
+            grown.extend((0..n).map(|j| {
+                box_meets(&self.cell_boxes[j]).is_some_and(|(t0, t1)| t1 >= span.0 && t0 <= span.1)
+                    && self.meets_grown(&self.samples[2 * j + 1], &ray, self.delta)
+            }));
+            if !grown.iter().any(|&g| g) {
+                return;
+            }
+            // The probes at the samples of the cells that may meet the ray, each once:
+            // `slot[k]` indexes sample k's probe in `probes` (NO_PROBE: not evaluated).
+            slot.clear();
+            slot.resize(2 * n + 1, NO_PROBE);
+            probes.clear();
+            for j in (0..n).filter(|&j| grown[j]) {
+                for (k, at) in slot.iter_mut().enumerate().skip(2 * j).take(3) {
+                    if *at == NO_PROBE {
+                        *at = probes.len() as u32;
+                        probes.push(self.probe(&self.samples[k], self.lambda_of(k), &ray));
+                    }
+                }
+            }
+            let at = |k: usize| probes.get(slot[k] as usize);
+            // Connected sets of poses: runs of samples inside the tool joined by half-cells
+            // of cells that may meet the ray; each starts from its samples' extremes.
+            comp_of.clear();
+            comp_of.resize(2 * n + 1, None);
+            comps.clear();
+            for k in 0..=2 * n {
+                let Some(p) = at(k).filter(|p| p.hit.is_some()) else {
+                    continue;
+                };
+                let id = match (k > 0 && grown[(k - 1) / 2])
+                    .then(|| comp_of[k - 1])
+                    .flatten()
+                {
+                    Some(id) => id,
+                    None => {
+                        comps.push(None);
+                        comps.len() - 1
+                    }
+                };
+                comp_of[k] = Some(id);
+                offer(&mut comps[id], p);
+            }
+            // Extremes between the samples, half-cell by half-cell.
+            for k in (0..2 * n).filter(|k| grown[k / 2]) {
+                let (Some(a), Some(b)) = (at(k), at(k + 1)) else {
+                    continue;
+                };
+                match comp_of[k].or(comp_of[k + 1]) {
+                    Some(id) => self.refine(&ray, a, b, &mut comps[id], 0),
+                    None => {
+                        let mut touch = None;
+                        self.refine(&ray, a, b, &mut touch, 0);
+                        comps.push(touch);
+                    }
+                }
+            }
+            cuts.clear();
+            cuts.extend(comps.drain(..).flatten());
+            self.merge_and_emit(cuts, out);
+        });
+    }
+
+    /// Sorts the intervals, merges those that overlap and emits them with their normals.
+    fn merge_and_emit(&self, cuts: &mut [RawEnd], out: &mut Vec<RayCut>) {
+        cuts.sort_by(|a, b| a.lo.t.total_cmp(&b.lo.t));
+        let mut merged: Option<RawEnd> = None;
+        for &c in cuts.iter() {
+            merged = Some(match merged {
+                Some(mut m) if c.lo.t <= m.hi.t + tol::SLIVER => {
+                    if c.hi.t > m.hi.t {
+                        m.hi = c.hi;
+                    }
+                    m
+                }
+                Some(m) => {
+                    emit(&m, self.r, out);
+                    c
+                }
+                None => c,
+            });
+        }
+        if let Some(m) = merged {
+            emit(&m, self.r, out);
+        }
+    }
+
+    /// Offers to `acc` every extreme of the ray's interval strictly between the probes `a`
+    /// and `b` (see the module docs).
+    fn refine(&self, ray: &Ray, a: &Probe, b: &Probe, acc: &mut Option<RawEnd>, depth: u32) {
+        let w = b.lambda - a.lambda;
+        if depth > MAX_DEPTH || self.speed * w <= SOLVE_TOL {
+            return;
+        }
+        let bisect = |acc: &mut Option<RawEnd>| {
+            let m = self.probe_at(0.5 * (a.lambda + b.lambda), ray);
+            offer(acc, &m);
+            self.refine(ray, a, &m, acc, depth + 1);
+            self.refine(ray, &m, b, acc, depth + 1);
+        };
+        let (ha, hb) = (a.hit, b.hit);
+        if ha.is_none() && hb.is_none() {
+            // A touch between two missing poses needs the tool to travel to the ray from both.
+            let z = &self.part_z;
+            let sep =
+                |p: &Probe, k: usize| line_segment_distance(&p.p, &p.u, z[k], z[k + 1]) - self.r;
+            let apart = (0..PARTS)
+                .all(|k| sep(a, k) + sep(b, k) + 2.0 * ENVELOPE_TOL > self.part_speed[k] * w);
+            if apart {
+                return;
+            }
+            // Between two misses the ray can only come to meet the tool where it passes
+            // through an edge circle or touches the tool's smooth part (the capsule of radius
+            // R about the axis from `z[0]` to the top, which holds the tool). An edge crossing
+            // is solved for like one between hits: the ray meets the tool there, if at all.
+            let mut crossing = false;
+            for edge in 0..2 {
+                let (fa, fb) = (a.phi[edge], b.phi[edge]);
+                if !fa.is_nan() && !fb.is_nan() && (fa < 0.0) != (fb < 0.0) {
+                    let phi = move |p: &Probe| Some(p.phi[edge]);
+                    if let Some((lo, hi)) = self.solve(ray, a, b, phi, Stop::Crossing, acc) {
+                        self.refine(ray, a, &lo, acc, depth + 1);
+                        self.refine(ray, &hi, b, acc, depth + 1);
+                        return;
+                    }
+                    crossing = true;
+                }
+            }
+            // Without one, a ray that stays inside the capsule (its distance from the axis
+            // segment below R at both ends, by more than the segment can move) touches no
+            // smooth face in between: it misses throughout.
+            let inside = |p: &Probe| self.r - line_segment_distance(&p.p, &p.u, z[0], self.l);
+            if !crossing && inside(a) + inside(b) > self.speed * w {
+                return;
+            }
+            // And the grown tool about the middle to meet it.
+            let mid = 0.5 * (a.lambda + b.lambda);
+            let s = self.sample_at(mid);
+            let grow = self.speed * w / 2.0 - ENVELOPE_TOL;
+            if grow > 0.0 && self.meets_grown(&s, ray, grow) {
+                let m = self.probe(&s, mid, ray);
+                offer(acc, &m);
+                self.refine(ray, a, &m, acc, depth + 1);
+                self.refine(ray, &m, b, acc, depth + 1);
+            }
+            return;
+        }
+        // Ends already beyond the span need no refinement.
+        let (in_done, out_done) = acc.map_or((false, false), |c| {
+            (c.lo.t < ray.span.0, c.hi.t > ray.span.1)
+        });
+        if in_done && out_done {
+            return;
+        }
+        // The ray crosses an edge circle: a kink or the ray leaving through the edge.
+        for edge in 0..2 {
+            let (fa, fb) = (a.phi[edge], b.phi[edge]);
+            if !fa.is_nan() && !fb.is_nan() && (fa < 0.0) != (fb < 0.0) {
+                let phi = move |p: &Probe| Some(p.phi[edge]);
+                match self.solve(ray, a, b, phi, Stop::Crossing, acc) {
+                    Some((lo, hi)) => {
+                        self.refine(ray, a, &lo, acc, depth + 1);
+                        self.refine(ray, &hi, b, acc, depth + 1);
+                    }
+                    None => bisect(acc),
+                }
+                return;
+            }
+        }
+        let r = self.r;
+        match (ha, hb) {
+            (Some(x), Some(y)) => {
+                if x.face_in.family() != y.face_in.family()
+                    || x.face_out.family() != y.face_out.family()
+                {
+                    return bisect(acc);
+                }
+                if !in_done && a.g_in(r) < 0.0 && b.g_in(r) > 0.0 {
+                    let g = |p: &Probe| p.hit.map(|_| p.g_in(r));
+                    if self.solve(ray, a, b, g, Stop::Extreme, acc).is_none() {
+                        return bisect(acc);
+                    }
+                }
+                if !out_done && a.g_out(r) > 0.0 && b.g_out(r) < 0.0 {
+                    let g = |p: &Probe| p.hit.map(|_| p.g_out(r));
+                    if self.solve(ray, a, b, g, Stop::Extreme, acc).is_none() {
+                        bisect(acc);
+                    }
+                }
+            }
+            // Into a touch t_in rises and t_out falls: an end moving the other way on the
+            // inside has an extreme before the ray leaves.
+            (Some(_), None) if (!in_done && a.g_in(r) < 0.0) || (!out_done && a.g_out(r) > 0.0) => {
+                bisect(acc)
+            }
+            (None, Some(_)) if (!in_done && b.g_in(r) > 0.0) || (!out_done && b.g_out(r) < 0.0) => {
+                bisect(acc)
+            }
+            _ => {}
+        }
+    }
+
+    /// Brackets the sign change of `f` between `a` and `b` by the Illinois variant of regula
+    /// falsi (a bisection every third step that did not halve the bracket), offering every
+    /// pose it evaluates. `None` where `f` is undefined (the ray missed a pose).
+    fn solve(
+        &self,
+        ray: &Ray,
+        a: &Probe,
+        b: &Probe,
+        f: impl Fn(&Probe) -> Option<Real>,
+        stop: Stop,
+        acc: &mut Option<RawEnd>,
+    ) -> Option<(Probe, Probe)> {
+        let (mut lo, mut hi) = (a.clone(), b.clone());
+        let (Some(f_lo), Some(f_hi)) = (f(&lo), f(&hi)) else {
+            return None;
+        };
+        let neg_lo = f_lo < 0.0;
+        // Secant weights (halved by Illinois) and the true values.
+        let (mut wlo, mut whi) = (f_lo, f_hi);
+        let (mut flo, mut fhi) = (f_lo, f_hi);
+        let mut last_side = 0i8;
+        let mut width = hi.lambda - lo.lambda;
+        for step in 0..MAX_SOLVE_STEPS {
+            let w = hi.lambda - lo.lambda;
+            if stop.reached(self, &lo, &hi, flo, fhi, w) {
+                break;
+            }
+            let mut m = (lo.lambda * whi - hi.lambda * wlo) / (whi - wlo);
+            if step % 3 == 2 {
+                if w > 0.5 * width {
+                    m = 0.5 * (lo.lambda + hi.lambda);
+                }
+                width = w;
+            }
+            if !(m > lo.lambda && m < hi.lambda) {
+                m = 0.5 * (lo.lambda + hi.lambda);
+                if !(m > lo.lambda && m < hi.lambda) {
+                    break;
+                }
+            }
+            let p = self.probe_at(m, ray);
+            offer(acc, &p);
+            let fm = f(&p)?;
+            if fm.is_nan() {
+                return None;
+            }
+            if (fm < 0.0) == neg_lo {
+                (lo, flo, wlo) = (p, fm, fm);
+                if last_side < 0 {
+                    whi *= 0.5;
+                }
+                last_side = -1;
+            } else {
+                (hi, fhi, whi) = (p, fm, fm);
+                if last_side > 0 {
+                    wlo *= 0.5;
+                }
+                last_side = 1;
+            }
+        }
+        Some((lo, hi))
+    }
+}
+
+/// When a solve's bracket is fine enough.
+#[derive(Clone, Copy, Debug)]
+enum Stop {
+    /// A smooth extreme of an interval end: `f` is its rate; the end is within
+    /// `min |rate| · w` of the extreme on a convex stretch.
+    Extreme,
+    /// An edge crossing: `t` moves by at most the larger rate at the bracket ends times `w`.
+    Crossing,
+}
+
+impl Stop {
+    /// Whether the bracket `lo`–`hi` (width `w` in λ, `f` there `flo`, `fhi`) of `env`'s
+    /// solve is fine enough.
+    fn reached(
+        self,
+        env: &RotaryEnvelope,
+        lo: &Probe,
+        hi: &Probe,
+        flo: Real,
+        fhi: Real,
+        w: Real,
+    ) -> bool {
+        let slope = match self {
+            Stop::Extreme => flo.abs().min(fhi.abs()),
+            Stop::Crossing => {
+                let rates = [lo, hi]
+                    .into_iter()
+                    .filter(|p| p.hit.is_some())
+                    .flat_map(|p| [p.g_in(env.r).abs(), p.g_out(env.r).abs()])
+                    .filter(|g| g.is_finite())
+                    .fold(Real::NEG_INFINITY, Real::max);
+                if rates.is_finite() { rates } else { env.speed }
+            }
+        };
+        slope * w <= SOLVE_TOL || w <= 4.0 * Real::EPSILON
+    }
+}
+
+fn emit(c: &RawEnd, r: Real, out: &mut Vec<RayCut>) {
+    if c.hi.t - c.lo.t > tol::LENGTH_EPS {
+        out.push(RayCut {
+            t_in: c.lo.t,
+            t_out: c.hi.t,
+            n_in: c.lo.normal(r),
+            n_out: c.hi.normal(r),
+        });
+    }
+}
+
+/// `Scratch::slot` of a sample not evaluated.
+const NO_PROBE: u32 = u32::MAX;
+
+/// Per-thread buffers of [`RotaryEnvelope::intervals_in`], reused from ray to ray.
+#[derive(Default)]
+struct Scratch {
+    grown: Vec<bool>,
+    /// Per sample, its probe's index in `probes` or [`NO_PROBE`].
+    slot: Vec<u32>,
+    probes: Vec<Probe>,
+    comp_of: Vec<Option<usize>>,
+    comps: Vec<Option<RawEnd>>,
+    cuts: Vec<RawEnd>,
+}
+
+thread_local! {
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
+}
+
+/// One end of an interval and where it was found: its normal is worked out only for the
+/// ends that are kept (the same arithmetic as at the probe, so the same bits).
+#[derive(Clone, Copy, Debug)]
+struct End {
+    t: Real,
+    face: Face,
+    /// The end's point and the ray's direction in the tool frame, and the pose's rotation.
+    q: Vector3,
+    u: Vector3,
+    rot: Matrix3,
+}
+
+impl End {
+    fn at(p: &Probe, t: Real, face: Face) -> Self {
+        Self {
+            t,
+            face,
+            q: p.p + p.u * t,
+            u: p.u,
+            rot: p.rot,
+        }
+    }
+
+    /// The material normal (W): the tool's inward normal at the end, the ray where no face
+    /// (`r` the tool radius).
+    fn normal(&self, r: Real) -> Vector3 {
+        match tool_normal(&self.q, self.face, r) {
+            Some(n) => -(self.rot * n),
+            None => self.rot * self.u,
+        }
+    }
+}
+
+/// An interval: its lower and upper ends.
+#[derive(Clone, Copy, Debug)]
+struct RawEnd {
+    lo: End,
+    hi: End,
+}
+
+/// Widens `best` by the interval of the probe, if the ray meets the tool there.
+#[inline(always)]
+fn offer(best: &mut Option<RawEnd>, p: &Probe) {
+    let Some(h) = p.hit else {
+        return;
+    };
+    match best {
+        None => {
+            *best = Some(RawEnd {
+                lo: End::at(p, h.t_in, h.face_in),
+                hi: End::at(p, h.t_out, h.face_out),
+            })
+        }
+        Some(c) => {
+            if h.t_in < c.lo.t {
+                c.lo = End::at(p, h.t_in, h.face_in);
+            }
+            if h.t_out > c.hi.t {
+                c.hi = End::at(p, h.t_out, h.face_out);
+            }
+        }
+    }
+}

@@ -1,0 +1,263 @@
+//! Unit tests of the envelope: the move path against the chain's poses, the intervals
+//! against a brute-force union over densely sampled poses, grazing and twice-crossed rays.
+//!
+//! **Invariant:** expected values come from independent derivations, never from the
+//! program's output.
+
+use super::*;
+use crate::cutting::cutter::SweptTool;
+use crate::nc::AxisLetter;
+use proptest::prelude::*;
+
+fn deviated() -> Chain {
+    let mut c = crate::machine::chain::mdx50_for_tests();
+    for (name, v) in [
+        ("dy_AY", -0.3),
+        ("dz_AY", 0.2),
+        ("beta_AY", 2e-4),
+        ("gamma_AY", -3e-4),
+        ("alpha_YX", 4e-4),
+        ("beta_XZ", -2e-4),
+        ("alpha_ZS", 1e-4),
+        ("beta_ZS", -5e-4),
+    ] {
+        let id = c.deviation_id(name).expect("known");
+        c.set_deviation(id, v);
+    }
+    c
+}
+
+fn q(x: Real, y: Real, z: Real, a: Real) -> AxisValues {
+    AxisValues::default()
+        .with(AxisLetter::X, x)
+        .with(AxisLetter::Y, y)
+        .with(AxisLetter::Z, z)
+        .with(AxisLetter::A, a)
+}
+
+#[test]
+fn move_path_is_the_chain_pose() {
+    let c = deviated();
+    let (a, b) = (q(1.0, -2.0, 8.0, 10.0), q(4.0, -2.0, 7.0, 47.0));
+    let path = MovePath::new(&c, &a, &b);
+    for k in 0..=10 {
+        let l = k as Real / 10.0;
+        let mut qq = a;
+        for axis in c.axes() {
+            let (u, w) = (a.get(axis.letter), b.get(axis.letter));
+            qq.set(axis.letter, u + (w - u) * l);
+        }
+        let d = path.w_from_t(l).to_homogeneous() - c.w_from_t(&qq).to_homogeneous();
+        assert!(d.abs().max() < 1e-12, "λ = {l}: {d}");
+    }
+}
+
+/// The tool's interval along the ray at λ from the cutter's sweep of the standing tool
+/// (an independent closed form), on the library chain's pose.
+fn exact_at(
+    c: &Chain,
+    tool: &Tool,
+    a: &AxisValues,
+    b: &AxisValues,
+    l: Real,
+    o: &Point3,
+    e: &Vector3,
+) -> Option<(Real, Real)> {
+    let mut qq = *a;
+    for axis in c.axes() {
+        let (u, w) = (a.get(axis.letter), b.get(axis.letter));
+        qq.set(axis.letter, u + (w - u) * l);
+    }
+    let pose = c.w_from_t(&qq);
+    let v = nalgebra::Unit::new_normalize(pose.rotation * Vector3::z());
+    let st = SweptTool::new(tool, pose * Point3::origin(), Vector3::zeros(), v);
+    let mut out = Vec::new();
+    st.intervals(o, e, &mut out);
+    Some((out.first()?.t_in, out.last()?.t_out))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 64, failure_persistence: None, rng_seed: proptest::test_runner::RngSeed::Fixed(0x5eed), ..ProptestConfig::default() })]
+
+    /// On random rotary moves (A turning with X, Z), every interval end agrees with a
+    /// brute-force search over 4,000 poses: no pose reaches further than the envelope
+    /// (to 0.1 µm), and the sampled poses come within the sampling error of each end;
+    /// between intervals no pose touches the ray.
+    #[test]
+    fn envelope_agrees_with_brute_force(
+        ball in any::<bool>(), a0 in -40.0..40.0f64, da in -30.0..30.0f64,
+        x0 in -3.0..3.0f64, dx in -4.0..4.0f64, z0 in 4.0..9.0f64, dz in -2.0..2.0f64,
+        y in -2.0..2.0f64, axis in 0usize..3, ou in -1.0..1.0f64, ov in -1.0..1.0f64,
+        f0 in -0.2..0.6f64, f1 in 0.4..1.2f64,
+    ) {
+        let c = deviated();
+        let kind = if ball { ToolKind::Ball } else { ToolKind::Flat };
+        let tool = Tool::try_new(kind, 6.0, 12.0).expect("valid");
+        let (a, b) = (q(x0, y, z0, a0), q(x0 + dx, y, z0 + dz, a0 + da));
+        let env = RotaryEnvelope::new(&c, &tool, &a, &b).expect("supported");
+        // A ray through the region the tool sweeps: aimed near the tool's middle at λ = ½.
+        let mid = MovePath::new(&c, &a, &b).w_from_t(0.5) * Point3::new(0.0, 0.0, 3.0);
+        let mut o = mid;
+        o[(axis + 1) % 3] += 4.0 * ou;
+        o[(axis + 2) % 3] += 4.0 * ov;
+        let mut e = Vector3::zeros();
+        e[axis] = 1.0;
+        let mut cuts = Vec::new();
+        env.intervals(&o, &e, &mut cuts);
+        for w in cuts.windows(2) {
+            prop_assert!(w[0].t_out < w[1].t_in, "not sorted/disjoint: {cuts:?}");
+        }
+        let n = 4000;
+        let mut lo = Real::INFINITY;
+        let mut hi = Real::NEG_INFINITY;
+        let mut hits = Vec::new();
+        for k in 0..=n {
+            let l = k as Real / n as Real;
+            if let Some((t0, t1)) = exact_at(&c, &tool, &a, &b, l, &o, &e) {
+                lo = lo.min(t0);
+                hi = hi.max(t1);
+                hits.push((t0, t1));
+            }
+        }
+        // Around the poses reaching furthest either way, 4,000 poses more within ±1/n.
+        let mut far = [(Real::INFINITY, 0.0), (Real::NEG_INFINITY, 0.0)];
+        for k in 0..=n {
+            let l = k as Real / n as Real;
+            if let Some((t0, t1)) = exact_at(&c, &tool, &a, &b, l, &o, &e) {
+                if t0 < far[0].0 { far[0] = (t0, l); }
+                if t1 > far[1].0 { far[1] = (t1, l); }
+            }
+        }
+        for &(_, l0) in &far {
+            for k in 0..=n {
+                let l = (l0 + (2.0 * k as Real / n as Real - 1.0) / n as Real).clamp(0.0, 1.0);
+                if let Some(h) = exact_at(&c, &tool, &a, &b, l, &o, &e) {
+                    hits.push(h);
+                }
+            }
+        }
+        // Sampling error, worked out here and not from the envelope's own speed bound:
+        // between consecutive sampled poses no tool point moves further than
+        // M = max_k |Δc_k| + 2·sin(θ_k/2)·ρ (c the tool's mid point on its axis, θ_k
+        // the rotation between the poses, ρ = √(R² + (L/2)²) the farthest a tool point
+        // lies from c); an interval end moves along the ray by up to a few times that
+        // where the ray meets the surface at a slant: 4·M, and 1 nm for rounding.
+        let mid = Point3::new(0.0, 0.0, tool.length() / 2.0);
+        let rho = tool.radius().hypot(tool.length() / 2.0);
+        let pose = |l: Real| {
+            let mut qq = a;
+            for axis in c.axes() {
+                let (u, w) = (a.get(axis.letter), b.get(axis.letter));
+                qq.set(axis.letter, u + (w - u) * l);
+            }
+            c.w_from_t(&qq)
+        };
+        let mut step_max: Real = 0.0;
+        let mut prev = pose(0.0);
+        for k in 1..=n {
+            let next = pose(k as Real / n as Real);
+            let moved = ((next * mid) - (prev * mid)).norm()
+                + 2.0 * (next.rotation.angle_to(&prev.rotation) / 2.0).sin() * rho;
+            step_max = step_max.max(moved);
+            prev = next;
+        }
+        let samp = 4.0 * step_max + 1e-6;
+        for &(t0, t1) in &hits {
+            // Every pose's interval lies inside one of the envelope's intervals.
+            let inside = cuts.iter().any(|c| c.t_in <= t0 + ENVELOPE_TOL && t1 <= c.t_out + ENVELOPE_TOL);
+            prop_assert!(inside || t1 - t0 < 1e-6, "pose interval [{t0}, {t1}] not inside {cuts:?}");
+        }
+        for cut in &cuts {
+            // Each end is reached by some pose, within the sampling error.
+            let near_in = hits.iter().any(|h| (h.0 - cut.t_in).abs() <= samp);
+            let near_out = hits.iter().any(|h| (h.1 - cut.t_out).abs() <= samp);
+            prop_assert!(near_in && near_out, "{cut:?} not reached; sampled [{lo}, {hi}]");
+        }
+        if hits.is_empty() {
+            prop_assert!(cuts.iter().all(|c| c.t_out - c.t_in < samp), "{cuts:?} but no pose hits");
+        }
+        // Within a span (the material's extent) the answer is the same.
+        let span = (lo + f0 * (hi - lo), lo + f1 * (hi - lo));
+        if span.0 < span.1 {
+            let clip = |cs: &[RayCut]| -> Vec<(Real, Real)> {
+                cs.iter()
+                    .map(|c| (c.t_in.max(span.0), c.t_out.min(span.1)))
+                    .filter(|(a, b)| b - a > 1e-6)
+                    .collect()
+            };
+            let mut part = Vec::new();
+            env.intervals_in(&o, &e, span, &mut part);
+            let (full, part) = (clip(&cuts), clip(&part));
+            prop_assert_eq!(full.len(), part.len(), "{:?} vs {:?}", full, part);
+            for (x, y) in full.iter().zip(&part) {
+                prop_assert!((x.0 - y.0).abs() <= 2.0 * ENVELOPE_TOL && (x.1 - y.1).abs() <= 2.0 * ENVELOPE_TOL, "{:?} vs {:?}", full, part);
+            }
+        }
+    }
+}
+
+/// A case a random search found in an earlier, Brent-based envelope: a z ray the flat
+/// tool leaves through the edge of its top face while A turns. The farthest exit is where
+/// the ray passes through the top edge circle (λ ≈ 0.924), at the end of the poses that
+/// meet the ray; 20,001 independent poses must not reach beyond the envelope.
+#[test]
+fn envelope_reaches_the_farthest_pose_on_a_grazing_top_face_ray() {
+    let c = deviated();
+    let tool = Tool::try_new(ToolKind::Flat, 6.0, 12.0).expect("valid");
+    let (a, b) = (
+        q(
+            0.0,
+            0.094_409_715_186_335,
+            7.462_192_328_664_928,
+            -33.606_531_410_104_42,
+        ),
+        q(
+            0.0,
+            0.094_409_715_186_335,
+            7.462_192_328_664_928 + 0.545_658_555_771_143_7,
+            -33.606_531_410_104_42 + 23.179_489_768_036_89,
+        ),
+    );
+    let env = RotaryEnvelope::new(&c, &tool, &a, &b).expect("supported");
+    let mut o = MovePath::new(&c, &a, &b).w_from_t(0.5) * Point3::new(0.0, 0.0, 3.0);
+    o.y += 4.0 * 0.768_904_124_454_249_4;
+    let e = Vector3::z();
+    let mut cuts = Vec::new();
+    env.intervals(&o, &e, &mut cuts);
+    let far = cuts.last().expect("the ray is cut").t_out;
+    let n = 20_000;
+    for k in 0..=n {
+        let l = k as Real / n as Real;
+        if let Some((_, t1)) = exact_at(&c, &tool, &a, &b, l, &o, &e) {
+            assert!(
+                t1 <= far + ENVELOPE_TOL,
+                "pose λ = {l} exits at {t1}, envelope at {far}"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_half_turn_leaves_two_intervals_on_a_ray_the_tool_crosses_twice() {
+    // Nominal chain, tool tip 5 mm from the A axis pointing away from it, A turning
+    // 0 → 180°: a z ray at y = 0, x = 0 meets the tool at A = 0 (z ∈ [5, 15]) and at
+    // A = 180° (z ∈ [−15, −5]); in between the tool swings through the y side.
+    let c = crate::machine::chain::mdx50_for_tests();
+    let tool = Tool::try_new(ToolKind::Flat, 2.0, 10.0).expect("valid");
+    let (a, b) = (q(0.0, 0.0, 5.0, 0.0), q(0.0, 0.0, 5.0, 180.0));
+    let env = RotaryEnvelope::new(&c, &tool, &a, &b).expect("supported");
+    let mut cuts = Vec::new();
+    env.intervals(&Point3::new(0.0, 0.0, 0.0), &Vector3::z(), &mut cuts);
+    assert_eq!(cuts.len(), 2, "{cuts:?}");
+    // The ray (y = 0) at angle a: the tool covers |y_t| ≤ 1 about its axis, so the
+    // z extent at a = ±asin(1/z)… the extremes are ±(sqrt(15² + 1²))·cos… take the
+    // exact: points (0, 0, z) inside the tool at some a ∈ [0, π]: |z|·|sin a| ≤ 1 and
+    // 5 ≤ |z|·cos a (or −cos a) ≤ 15 → |z| ∈ [5, sqrt(15² + 1)].
+    let far = (15.0f64 * 15.0 + 1.0).sqrt();
+    assert!((cuts[0].t_in + far).abs() < ENVELOPE_TOL, "{cuts:?}");
+    assert!((cuts[0].t_out + 5.0).abs() < ENVELOPE_TOL, "{cuts:?}");
+    assert!((cuts[1].t_in - 5.0).abs() < ENVELOPE_TOL, "{cuts:?}");
+    assert!((cuts[1].t_out - far).abs() < ENVELOPE_TOL, "{cuts:?}");
+    // Material normals face into the cut: +z at the lower ends of each interval.
+    assert!(cuts[1].n_in.z > 0.99 && cuts[0].n_in.z > 0.0, "{cuts:?}");
+}
