@@ -11,6 +11,9 @@
 //!   the fitted faces;
 //! * `identify (fit + solve)`: the same, starting from the scanned cloud (face selection
 //!   and robust plane fits of the faces included).
+//!
+//! Also the rotary axes' location errors from a ball-sensor test (`rotary location`) and a
+//! serial machine from three laser runs and three ball-bar circles (`instruments`).
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
@@ -167,9 +170,89 @@ fn rotary_location(c: &mut Criterion) {
     g.finish();
 }
 
+/// A serial machine from its instruments (`identify --measurement`): the error motions,
+/// squareness and lost motions of `scenes/xyz-error-motions.toml` (every term the scene
+/// models, 12 parameters, and 6 ball-bar centre unknowns) from three laser runs (X, Y, Z:
+/// 36 targets, 5 bidirectional runs, 360 readings each) and three ball-bar circles (XY, YZ,
+/// ZX: radius 20 mm, one counter-clockwise turn of 360 samples each), σ 0.5 µm.
+/// Timed: the model set-up, identifiability, Levenberg–Marquardt, uncertainties and the
+/// fit check ([`twinmill::calibration::instruments::identify`]); the readings (not timed)
+/// are simulated on the scene's machine.
+fn instruments(c: &mut Criterion) {
+    use twinmill::calibration::instruments::{Measurement, identify, scene_parameters};
+    use twinmill::metrology::ballbar::{self, BallBarSetup, Plane, Turns};
+    use twinmill::metrology::interferometer::{self, LaserSetup, Targets};
+    use twinmill::nc::{AxisLetter, AxisValues};
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/xyz-error-motions.toml");
+    let scene = Scene::load(&path).expect("scene");
+    let chain = scene.chain();
+    let at = AxisValues::default()
+        .with(AxisLetter::X, 30.0)
+        .with(AxisLetter::Y, 20.0)
+        .with(AxisLetter::Z, 30.0);
+    let mut set = Vec::new();
+    for (k, (axis, to)) in [
+        (AxisLetter::X, 60.0),
+        (AxisLetter::Y, 40.0),
+        (AxisLetter::Z, 50.0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let mut s = LaserSetup::new(
+            axis,
+            Targets::Even {
+                start_mm: 0.0,
+                end_mm: to,
+                count: 36,
+            },
+            at,
+        );
+        s.abbe_offset_mm = twinmill::math::Vector3::new(0.0, 0.0, 30.0);
+        s.noise_um = 0.5;
+        s.seed = 1 + k as u64;
+        let readings = interferometer::measure(chain, &s).expect("laser").readings;
+        assert_eq!(readings.len(), 360);
+        set.push(Measurement::Laser {
+            name: format!("laser-{}", axis.as_char()),
+            setup: s,
+            readings,
+        });
+    }
+    for (k, plane) in [Plane::Xy, Plane::Yz, Plane::Zx].into_iter().enumerate() {
+        let mut s = BallBarSetup::new(plane, at, 20.0);
+        s.turns = Turns::Ccw;
+        s.points = 360;
+        s.noise_um = 0.5;
+        s.seed = 10 + k as u64;
+        let samples = ballbar::measure(chain, &s).expect("ball bar").samples;
+        assert_eq!(samples.len(), 360);
+        set.push(Measurement::BallBar {
+            name: format!("ballbar-{}", plane.name()),
+            setup: s,
+            samples,
+        });
+    }
+    let params = scene_parameters(chain, scene.injected()).expect("parameters");
+    let mut g = c.benchmark_group("identify");
+    g.bench_function(
+        format!(
+            "identify (instruments: {} parameters, 3 laser runs + 3 ball-bar circles × 360)",
+            params.len()
+        ),
+        |b| {
+            b.iter(|| {
+                identify(black_box(chain), params.clone(), black_box(set.clone()))
+                    .expect("identifies")
+            })
+        },
+    );
+    g.finish();
+}
+
 // criterion_group! generates an undocumented public function: keep it in a private module.
 mod group {
     use super::*;
-    criterion_group!(identify, benches, rotary_location);
+    criterion_group!(identify, benches, rotary_location, instruments);
 }
 criterion_main!(group::identify);

@@ -4,7 +4,8 @@
 //! measured on the machine). `calibrate` is the hidden old name of the hexapod's.
 
 use super::{
-    Loaded, SceneArgs, bars, fail, load, print_out, procedure_arg, write, write_report_and_cloud,
+    Loaded, SceneArgs, accept_misfit, bars, fail, load, load_machine, print_out, procedure_arg,
+    write, write_report_and_cloud,
 };
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -13,6 +14,7 @@ use twinmill::metrology::cloud::read_cloud_file;
 use twinmill::pipeline::dbb::{calibrate_measured, calibrate_scene, load_plan};
 use twinmill::pipeline::identify_scene;
 use twinmill::pipeline::instrument_pages::calibrate_page;
+use twinmill::pipeline::measurements::{IdentifyRequest, MeasurementKind, identify_measurements};
 use twinmill::pipeline::pages::identify_page;
 use twinmill::scene::HexapodScene;
 use twinmill::scene::Need;
@@ -23,6 +25,11 @@ use twinmill::scene::Need;
 /// flanks and floors) in its simulated scan or in a given cloud: identifiability (singular
 /// values, what is and is not determined), values with uncertainties, the model-correction
 /// loop; write identify.json and cloud.ply.
+///
+/// Serial machine, with --measurement: identify its deviations, error motions and
+/// reversals from laser readings and ball-bar traces (values with σ, what is not
+/// determined), refusing data the stated noise cannot explain; --deviations-out writes the
+/// identified machine for --deviations.
 ///
 /// Hexapod: seed 000's double-ball-bar calibration — measure the procedure's (or the plan's)
 /// circles on the twin, identify with what is not determined, pose errors before and after;
@@ -41,6 +48,99 @@ pub struct IdentifyArgs {
     monte_carlo: Option<usize>,
     #[command(flatten)]
     hexapod: CalibrateOptions,
+    #[command(flatten)]
+    instruments: InstrumentOptions,
+}
+
+// A serial machine from its instruments' files.
+#[derive(clap::Args)]
+#[command(next_help_heading = "Serial machine from laser and ball-bar files")]
+pub struct InstrumentOptions {
+    /// Identify the machine's deviations, error motions and reversals from this laser
+    /// readings or ball-bar trace file (as `measure --instrument laser|ballbar` writes it),
+    /// repeatable: [KIND:]FILE with KIND laser[:AXIS] or ballbar[:PLANE]; without a kind,
+    /// the file's set-up record says what it is.
+    #[arg(long, value_name = "[KIND:]FILE")]
+    measurement: Vec<String>,
+    /// With --measurement: the parameters to identify, by the scene's names
+    /// (EXX.polynomial[1], EYX.periodic[0], EBX.table[1], EC(0X)Y, dy_AY, reversal.X;
+    /// default: every one the scene models).
+    #[arg(long, value_name = "NAME,…", value_delimiter = ',')]
+    parameters: Vec<String>,
+    /// With --measurement: write the identified machine (the scene's [deviations],
+    /// [error_motions] and [reversal] sections, with an [identified] record and
+    /// [identified.sigma]) into this file, which --deviations reads.
+    #[arg(long, value_name = "FILE")]
+    deviations_out: Option<PathBuf>,
+}
+
+/// `identify --measurement`: the scene's serial machine from laser and ball-bar files.
+fn identify_instruments(a: &IdentifyArgs) -> ExitCode {
+    let h = &a.hexapod;
+    let other = [
+        ("--cloud", a.cloud.is_some()),
+        ("--monte-carlo", a.monte_carlo.is_some()),
+        ("--procedure", h.procedure.is_some()),
+        ("--trials", h.trials != 0),
+        ("--plan", h.plan.is_some()),
+        ("--html", h.html.is_some()),
+        ("--readings", !h.readings.is_empty()),
+        ("--corrected", h.corrected.is_some()),
+    ];
+    if let Some((option, _)) = other.iter().find(|(_, given)| *given) {
+        return fail(format!(
+            "{option} cannot go with --measurement (a serial machine identified from laser \
+             and ball-bar files)"
+        ));
+    }
+    let scene = match load_machine(
+        &a.args,
+        "identify --measurement",
+        "a hexapod is identified from its double-ball-bar traces (--readings)",
+    ) {
+        Ok(s) => s,
+        Err(code) => return code,
+    };
+    let mut measurements = Vec::with_capacity(a.instruments.measurement.len());
+    for spec in &a.instruments.measurement {
+        let (kind, path) = match MeasurementKind::parse_spec(spec) {
+            Ok(k) => k,
+            Err(e) => return fail(e),
+        };
+        let kind = match kind {
+            Some(k) => k,
+            None => match MeasurementKind::of_file(&path) {
+                Ok(k) => k,
+                Err(e) => return fail(e),
+            },
+        };
+        measurements.push((kind, path));
+    }
+    let parameters = &a.instruments.parameters;
+    let request = IdentifyRequest {
+        measurements,
+        parameters: (!parameters.is_empty()).then(|| parameters.clone()),
+        accept_misfit: accept_misfit(),
+    };
+    let o = match identify_measurements(&scene, &request) {
+        Ok(o) => o,
+        Err(e) => return fail(e),
+    };
+    if let Some(out) = &a.instruments.deviations_out
+        && let Err(e) = write(out, o.file.as_bytes())
+    {
+        return fail(e);
+    }
+    print_out(
+        || {
+            let mut s = o.report.summary();
+            if let Some(out) = &a.instruments.deviations_out {
+                s.push_str(&format!("  wrote         {}\n", out.display()));
+            }
+            s
+        },
+        a.args.json.then(|| serde_json::to_string_pretty(&o.report)),
+    )
 }
 
 // The hexapod's calibration options.
@@ -162,6 +262,22 @@ fn calibrate(scene: &Path, a: &CalibrateOptions, json: bool) -> Result<ExitCode,
 
 /// `twinmill identify`.
 pub fn exec(a: IdentifyArgs) -> ExitCode {
+    let i = &a.instruments;
+    if !i.measurement.is_empty() {
+        return identify_instruments(&a);
+    }
+    if let Some(option) = [
+        ("--parameters", !i.parameters.is_empty()),
+        ("--deviations-out", i.deviations_out.is_some()),
+    ]
+    .iter()
+    .find_map(|(o, given)| given.then_some(o))
+    {
+        return fail(format!(
+            "{option} goes with --measurement (a serial machine identified from laser and \
+             ball-bar files)"
+        ));
+    }
     let h = &a.hexapod;
     let hexapod = [
         ("--procedure", h.procedure.is_some()),

@@ -75,6 +75,10 @@ pub struct MeasureArgs {
     /// Seed of the noise.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Replace the machine's deviations, error motions and reversals by an identified
+    /// machine's (the file `identify --measurement … --deviations-out` writes).
+    #[arg(long, value_name = "FILE")]
+    deviations: Option<PathBuf>,
     /// Gaussian noise of each reading or sample, σ (µm; default 0: the twin repeats exactly;
     /// a hexapod's double ball bar: 0.5).
     /// Ball sensor: the micrometers' accuracy bound ±a (µm, default 0.5, seed 003's), each
@@ -388,6 +392,7 @@ pub fn exec(a: MeasureArgs) -> ExitCode {
     let (l, b, r) = (a.laser, a.ballbar, a.rotary);
     let request = MeasureRequest {
         accept_misfit: super::accept_misfit(),
+        deviations: a.deviations,
         scene: a.scene,
         instrument: a.instrument.request(),
         out: a.out,

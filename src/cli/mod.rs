@@ -67,6 +67,11 @@ pub struct SceneArgs {
     /// installed memory).
     #[arg(long, value_name = "SIZE")]
     pub memory: Option<String>,
+    /// Replace the machine's deviations, error motions and reversals by an identified
+    /// machine's (the file `identify --measurement … --deviations-out` writes): the twin
+    /// simulates it and correct's model is it.
+    #[arg(long, value_name = "FILE")]
+    pub deviations: Option<PathBuf>,
 }
 
 /// A scene loaded for a verb: a serial machine's scene with its program, or a hexapod's
@@ -103,13 +108,21 @@ pub fn load(a: &SceneArgs, command: &str, needs: &[Need]) -> Result<Loaded, Exit
         Err(SceneError::Hexapod { .. }) if command == "simulate" => {
             Scene::load_hexapod_cut(&a.scene, &budget).map_err(fail)?
         }
-        Err(SceneError::Hexapod { path }) => return Ok(Loaded::Hexapod(path)),
+        Err(SceneError::Hexapod { path }) => {
+            return match &a.deviations {
+                Some(d) => Err(refuse_deviations(&path, d)),
+                None => Ok(Loaded::Hexapod(path)),
+            };
+        }
         r => r.map_err(fail)?,
     };
-    let scene = Scene {
+    let mut scene = Scene {
         accept_misfit: accept_misfit(),
         ..scene
     };
+    if let Some(d) = &a.deviations {
+        scene.apply_deviations_file(d).map_err(fail)?;
+    }
     scene.require(command, needs).map_err(fail)?;
     let program = match scene.load_program() {
         Ok(p) => p,
@@ -120,6 +133,34 @@ pub fn load(a: &SceneArgs, command: &str, needs: &[Need]) -> Result<Loaded, Exit
         Err(e) => return Err(fail(e)),
     };
     Ok(Loaded::Serial(Box::new(scene), program))
+}
+
+/// The one-line refusal of `--deviations` on a hexapod scene.
+pub fn refuse_deviations(scene: &Path, deviations: &Path) -> ExitCode {
+    fail(format!(
+        "{}: --deviations replaces a serial machine's deviations; {} is a hexapod scene",
+        deviations.display(),
+        scene.display()
+    ))
+}
+
+/// The scene's serial machine only (no program, no stock), with `--deviations` applied:
+/// for the verbs that use the machine alone.
+pub fn load_machine(a: &SceneArgs, command: &str, why: &str) -> Result<Scene, ExitCode> {
+    set_threads(a.threads)?;
+    let budget = MemoryBudget {
+        bytes: f64::INFINITY,
+        source: format!("{command} builds no stock"),
+    };
+    let mut scene = match Scene::load_with(&a.scene, &budget) {
+        Err(SceneError::Hexapod { path }) => return Err(refuse_hexapod(&path, command, why)),
+        r => r.map_err(fail)?,
+    };
+    scene.accept_misfit = accept_misfit();
+    if let Some(d) = &a.deviations {
+        scene.apply_deviations_file(d).map_err(fail)?;
+    }
+    Ok(scene)
 }
 
 /// [`load`] for a verb that does not apply to a hexapod: refuses one in one line, `why`.

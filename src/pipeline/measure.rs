@@ -145,6 +145,9 @@ pub struct MeasureRequest {
     /// Keep an identification whose residuals the stated noise cannot explain (its report
     /// then says so first) instead of refusing it.
     pub accept_misfit: bool,
+    /// An identified machine's deviations file replacing the scene's deviation model
+    /// ([`Scene::apply_deviations_file`]); serial machines only.
+    pub deviations: Option<PathBuf>,
 }
 
 /// What an instrument measured, evaluated and ready to write (in this order: the readings,
@@ -193,6 +196,14 @@ pub fn measure(r: &MeasureRequest) -> Result<Measured, String> {
     };
     let (file, m) = match Scene::load_with(&r.scene, &budget) {
         Err(SceneError::Hexapod { path }) => {
+            if let Some(d) = &r.deviations {
+                return Err(format!(
+                    "{}: --deviations replaces a serial machine's deviations; {} is a hexapod \
+                     scene",
+                    d.display(),
+                    path.display()
+                ));
+            }
             if r.instrument != MeasureInstrument::Ballbar {
                 return Err(format!(
                     "{}: --instrument {} does not apply to a hexapod (its struts are not \
@@ -227,10 +238,13 @@ pub fn measure(r: &MeasureRequest) -> Result<Measured, String> {
         }
         Err(e) => return Err(e.to_string()),
         Ok(scene) => {
-            let scene = Scene {
+            let mut scene = Scene {
                 accept_misfit: r.accept_misfit,
                 ..scene
             };
+            if let Some(d) = &r.deviations {
+                scene.apply_deviations_file(d).map_err(|e| e.to_string())?;
+            }
             scene.require("measure", &[]).map_err(|e| e.to_string())?;
             refuse_given(
                 &[

@@ -9,11 +9,13 @@
 //! accepts it.
 
 use crate::calibration::engine::Outcome;
-use crate::calibration::instruments::{self, MachineParameter, Measurement};
+use crate::calibration::instruments::{self, MachineParameter, Measurement, Slot, Target};
+use crate::machine::chain::Chain;
 use crate::metrology::ballbar::{BallBarSetup, Plane};
 use crate::metrology::circular::parse_trace;
 use crate::metrology::interferometer::LaserSetup;
 use crate::metrology::positioning::parse_readings;
+use crate::metrology::table::SETUP_MARKER;
 use crate::nc::AxisLetter;
 use crate::scene::{self, Scene, SceneError};
 use std::path::{Path, PathBuf};
@@ -58,6 +60,72 @@ impl MeasurementKind {
     }
 }
 
+impl MeasurementKind {
+    /// `[KIND:]FILE` of `--measurement`: `laser:X:run.csv`, `ballbar:run.csv`, `run.csv`
+    /// (no kind: [`MeasurementKind::of_file`] decides).
+    pub fn parse_spec(spec: &str) -> Result<(Option<Self>, PathBuf), String> {
+        let lower = spec.to_ascii_lowercase();
+        let Some(kind) = ["laser", "ballbar"]
+            .into_iter()
+            .find(|k| lower.starts_with(&format!("{k}:")))
+        else {
+            return Ok((None, PathBuf::from(spec)));
+        };
+        let rest = &spec[kind.len() + 1..];
+        if let Some((qualifier, file)) = rest.split_once(':')
+            && !file.is_empty()
+            && let Ok(k) = Self::parse(&format!("{kind}:{qualifier}"))
+        {
+            return Ok((Some(k), PathBuf::from(file)));
+        }
+        if rest.is_empty() {
+            return Err(format!(
+                "--measurement '{spec}': expected [KIND:]FILE (KIND laser[:AXIS] or ballbar[:PLANE])"
+            ));
+        }
+        Ok((Some(Self::parse(kind)?), PathBuf::from(rest)))
+    }
+
+    /// What the file at `path` is, from its set-up record (`# set-up: laser …` or
+    /// `# set-up: ballbar …`): an error naming the file when it has none, or both.
+    pub fn of_file(path: &Path) -> Result<Self, MeasurementsError> {
+        let text = scene::read_text(path)?;
+        let mut found: Vec<(usize, &str)> = Vec::new();
+        for (k, l) in text.lines().enumerate() {
+            if let Some(rest) = l.trim().strip_prefix(SETUP_MARKER)
+                && let Some(w) = rest.split_whitespace().next()
+                && !found.iter().any(|(_, f)| *f == w)
+            {
+                found.push((k + 1, w));
+            }
+        }
+        match found[..] {
+            [(_, "laser")] => Ok(Self::Laser(None)),
+            [(_, "ballbar")] => Ok(Self::Ballbar(None)),
+            [] => Err(file_error(
+                path,
+                None,
+                "no set-up record (a '# set-up: laser …' or '# set-up: ballbar …' line, as                  `twinmill measure` writes): give the kind, laser[:AXIS]:FILE or                  ballbar[:PLANE]:FILE"
+                    .into(),
+            )),
+            [(line, w)] => Err(file_error(
+                path,
+                Some(line),
+                format!(
+                    "the set-up record is of the {w}, not of a laser or a ball bar:                      `identify --measurement` takes laser readings and ball-bar traces"
+                ),
+            )),
+            [_, (line, w), ..] => Err(file_error(
+                path,
+                Some(line),
+                format!(
+                    "a second set-up record ({w}): the file's kind is ambiguous; give it,                      laser[:AXIS]:FILE or ballbar[:PLANE]:FILE"
+                ),
+            )),
+        }
+    }
+}
+
 /// An identification from measurement files.
 #[derive(Clone, Debug, PartialEq)]
 pub struct IdentifyRequest {
@@ -80,6 +148,111 @@ pub struct MeasurementsOutcome {
     /// The identified machine as the scene's `[deviations]`, `[error_motions]` and
     /// `[reversal]` sections.
     pub fragment: String,
+    /// The deviations file (`--deviations-out`): the fragment and its `[identified]` and
+    /// `[identified.sigma]` sections, read back by [`Scene::apply_deviations_file`].
+    pub file: String,
+    /// The report: values with σ and the scene's values, what is not determined.
+    pub report: MeasurementsReport,
+}
+
+/// One parameter's value as reported.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct ParameterReport {
+    /// Its name (or a determined combination's).
+    pub name: String,
+    /// The identified value.
+    pub value: f64,
+    /// Its standard uncertainty.
+    pub sigma: f64,
+    /// The units of value and σ (`mm`, `rad`, `mm/mm^2`).
+    pub unit: String,
+    /// The value the scene gives it (injected into the twin that the measurements were
+    /// simulated on, when they were); none for a combination.
+    pub injected: Option<f64>,
+}
+
+/// What `identify --measurement` reports.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct MeasurementsReport {
+    /// The first line when a misfit was accepted (`--accept-misfit`), else none.
+    pub misfit_accepted: Option<String>,
+    /// The scene's name.
+    pub scene: String,
+    /// The machine's name.
+    pub machine: String,
+    /// The machine's axes, from the workpiece.
+    pub axes: Vec<String>,
+    /// The measurement files, in the order given.
+    pub sources: Vec<String>,
+    /// The parameters determined on their own, with σ.
+    pub identified: Vec<ParameterReport>,
+    /// Determined combinations of parameters not determined on their own.
+    pub combinations: Vec<ParameterReport>,
+    /// The parameters the measurements do not determine on their own: no value is reported.
+    pub not_determined: Vec<String>,
+    /// Of those, the ones no measurement sees at all.
+    pub no_data: Vec<String>,
+    /// The goodness of fit, in one line.
+    pub fit: String,
+    /// The whitened, magnitude-scaled Jacobian's singular values.
+    pub singular_values: Vec<f64>,
+    /// Its condition number.
+    pub condition_number: f64,
+}
+
+impl MeasurementsReport {
+    /// The summary printed by `identify --measurement` (the accepted misfit first).
+    pub fn summary(&self) -> String {
+        use std::fmt::Write as _;
+        let mut s = String::new();
+        if let Some(l) = &self.misfit_accepted {
+            let _ = writeln!(s, "{l}");
+        }
+        let _ = writeln!(
+            s,
+            "twinmill identify: {} ({}, axes {}) from {} measurement files",
+            self.scene,
+            self.machine,
+            self.axes.join(" "),
+            self.sources.len()
+        );
+        for f in &self.sources {
+            let _ = writeln!(s, "  measurement   {f}");
+        }
+        let line = |e: &ParameterReport| {
+            let mut t = format!("{:+.6e} ± {:.2e} {}", e.value, e.sigma, e.unit);
+            if let Some(i) = e.injected {
+                let _ = write!(t, " [injected {i:+.6e}]");
+            }
+            t
+        };
+        for e in &self.identified {
+            let _ = writeln!(s, "  identified    {:<28} {}", e.name, line(e));
+        }
+        for e in &self.combinations {
+            let _ = writeln!(s, "  combination   {:<28} {}", e.name, line(e));
+        }
+        for n in &self.not_determined {
+            let why = if self.no_data.contains(n) {
+                "no measurement sees it"
+            } else {
+                "not determined on its own"
+            };
+            let _ = writeln!(s, "  not determined {n} ({why})");
+        }
+        let _ = writeln!(s, "  fit           {}", self.fit);
+        let _ = writeln!(
+            s,
+            "  jacobian      condition {:.3e}; singular values {}",
+            self.condition_number,
+            self.singular_values
+                .iter()
+                .map(|v| format!("{v:.3e}"))
+                .collect::<Vec<_>>()
+                .join(" ")
+        );
+        s
+    }
 }
 
 /// Why an identification from files failed.
@@ -214,11 +387,142 @@ pub fn identify_measurements(
         .collect();
     let fragment = instruments::fragment(&model, scene.injected(), &outcome, &sources)
         .map_err(MeasurementsError::Identify)?;
+    let report = report_of(scene, model.parameters(), &outcome, &sources);
+    let file = deviations_file(&fragment, &report, &outcome);
     Ok(MeasurementsOutcome {
         outcome,
         parameters,
         fragment,
+        file,
+        report,
     })
+}
+
+/// The units of a parameter's value.
+fn unit_of(chain: &Chain, p: &MachineParameter) -> String {
+    let angle = |a: bool| if a { "rad" } else { "mm" };
+    match &p.target {
+        Target::Deviation(id) => angle(id.component.is_angle()).into(),
+        Target::Iso => angle(chain.iso_term_id(&p.name).is_ok_and(|(_, c)| c.is_angle())).into(),
+        Target::Motion {
+            component, slot, ..
+        } => match slot {
+            Slot::Polynomial(0) | Slot::Table(_) | Slot::Periodic(_) => {
+                angle(component.is_angle()).into()
+            }
+            Slot::Polynomial(1) => format!("{}/mm", angle(component.is_angle())),
+            Slot::Polynomial(k) => format!("{}/mm^{k}", angle(component.is_angle())),
+        },
+        Target::Reversal(_) => "mm".into(),
+    }
+}
+
+/// The report of an identification: values only for what is determined.
+fn report_of(
+    scene: &Scene,
+    params: &[MachineParameter],
+    outcome: &Outcome,
+    sources: &[String],
+) -> MeasurementsReport {
+    let chain = scene.chain();
+    let identified: Vec<ParameterReport> = outcome
+        .parameters
+        .iter()
+        .map(|e| {
+            let p = params.iter().find(|p| p.name == e.name);
+            ParameterReport {
+                name: e.name.clone(),
+                value: e.value,
+                sigma: e.sigma,
+                unit: p.map_or_else(String::new, |p| unit_of(chain, p)),
+                injected: p.map(|p| p.start),
+            }
+        })
+        .collect();
+    let combinations = outcome
+        .combinations
+        .iter()
+        .map(|e| ParameterReport {
+            name: e.name.clone(),
+            value: e.value,
+            sigma: e.sigma,
+            unit: String::new(),
+            injected: None,
+        })
+        .collect();
+    let not_determined: Vec<String> = params
+        .iter()
+        .filter(|p| !identified.iter().any(|e| e.name == p.name))
+        .map(|p| p.name.clone())
+        .collect();
+    let no_data = not_determined
+        .iter()
+        .filter(|n| outcome.identifiability.no_data.contains(n))
+        .cloned()
+        .collect();
+    MeasurementsReport {
+        misfit_accepted: outcome.fit.accepted_line(),
+        scene: scene.name.clone(),
+        machine: scene.machine_name().to_string(),
+        axes: chain
+            .axes()
+            .iter()
+            .map(|a| a.letter.as_char().to_string())
+            .collect(),
+        sources: sources.to_vec(),
+        identified,
+        combinations,
+        not_determined,
+        no_data,
+        fit: outcome.fit.describe(),
+        singular_values: outcome.identifiability.singular_values.clone(),
+        condition_number: outcome.identifiability.condition_number,
+    }
+}
+
+/// A TOML string (a JSON string's escapes are TOML's).
+fn toml_string(s: &str) -> String {
+    serde_json::to_string(s).unwrap_or_else(|_| "\"\"".into())
+}
+
+fn toml_strings(v: &[String]) -> String {
+    format!(
+        "[{}]",
+        v.iter()
+            .map(|s| toml_string(s))
+            .collect::<Vec<_>>()
+            .join(", ")
+    )
+}
+
+/// The deviations file: the fragment, then `[identified]` and `[identified.sigma]`.
+fn deviations_file(fragment: &str, report: &MeasurementsReport, outcome: &Outcome) -> String {
+    use std::fmt::Write as _;
+    let mut s = fragment.to_string();
+    let _ = writeln!(
+        s,
+        "\n# What these sections were identified for and from; read back by `--deviations`."
+    );
+    let _ = writeln!(s, "[identified]");
+    let _ = writeln!(s, "machine = {}", toml_string(&report.machine));
+    let _ = writeln!(s, "scene = {}", toml_string(&report.scene));
+    let _ = writeln!(s, "axes = {}", toml_strings(&report.axes));
+    let _ = writeln!(s, "sources = {}", toml_strings(&report.sources));
+    let _ = writeln!(s, "misfit_accepted = {}", outcome.fit.misfit_accepted);
+    let _ = writeln!(
+        s,
+        "not_determined = {}",
+        toml_strings(&report.not_determined)
+    );
+    let _ = writeln!(
+        s,
+        "\n# Each identified parameter's standard uncertainty (its units)."
+    );
+    let _ = writeln!(s, "[identified.sigma]");
+    for e in &report.identified {
+        let _ = writeln!(s, "{} = {:?}", toml_string(&e.name), e.sigma);
+    }
+    s
 }
 
 #[cfg(test)]

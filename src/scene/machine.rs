@@ -263,7 +263,7 @@ pub(super) fn read_serial(
 
 /// Sets the deviations of `map` on `chain`: names `<component>_<joint>` first, then the
 /// ISO location and squareness names (`EY0A`, `EC(0X)Y`, …) composed onto them.
-fn deviation_map(
+pub(super) fn deviation_map(
     ctx: &Ctx,
     chain: &mut Chain,
     map: &BTreeMap<String, Spanned<Real>>,
@@ -289,7 +289,7 @@ fn deviation_map(
 }
 
 /// The `[error_motions]` and `[reversal]` sections set on `chain`.
-fn error_motions(
+pub(super) fn error_motions(
     ctx: &Ctx,
     chain: &mut Chain,
     motions: &BTreeMap<String, Spanned<MotionFile>>,

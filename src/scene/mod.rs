@@ -11,6 +11,8 @@
 //! The folder, in reading order: [`file`] (the serde structs of the format), [`check`] (the
 //! bounds of coordinates, angles and directions), [`memory`]
 //! (the stock's memory budget), [`machine`] (a serial chain, and the [`Machine`] variants),
+//! [`deviations`] (an identified machine's deviations file, `--deviations`, replacing a
+//! serial machine's deviation model),
 //! [`hexapod`] (a hexapod and its sections), [`cut`] (tool, holder, stock, fixtures, design
 //! model, sweep), [`scanner`] (the virtual scanner and the scanner-effects study),
 //! [`identify`] (`[identify]`), [`report`] (`[report]`), [`program`] (the files a scene
@@ -24,6 +26,7 @@ mod file;
 mod check;
 mod memory;
 mod machine;
+mod deviations;
 mod hexapod;
 mod cut;
 mod scanner;

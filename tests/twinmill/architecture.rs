@@ -88,8 +88,19 @@ const LAYOUT: &[(&str, &[&str])] = &[
     (
         "scene",
         &[
-            "file", "check", "memory", "machine", "hexapod", "cut", "scanner", "identify",
-            "report", "program", "read", "write",
+            "file",
+            "check",
+            "memory",
+            "machine",
+            "deviations",
+            "hexapod",
+            "cut",
+            "scanner",
+            "identify",
+            "report",
+            "program",
+            "read",
+            "write",
         ],
     ),
     (
