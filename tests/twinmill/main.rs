@@ -25,6 +25,7 @@ mod verbs;
 mod fuzz;
 mod robustness;
 mod misfit;
+mod axis_comp;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};
