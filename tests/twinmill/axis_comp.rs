@@ -126,11 +126,6 @@ fn a_laser_comp_table_cancels_the_x_positioning_error_at_the_targets() {
     let after = measure("after.csv", Some("x.comp"));
     let a_after = figure(&after, "A");
     assert!(a_after <= 1e-4, "A after {a_after} mm (bound 0.1 µm)");
-    eprintln!(
-        "A before {:.4} µm, after {:.6} µm",
-        a_before * 1e3,
-        a_after * 1e3
-    );
     let readings = std::fs::read_to_string(sb.dir.join("after.csv")).expect("written");
     assert!(readings.contains("compensation: x.comp (7 entries) applied to X"));
     // The set-up record says so, and identification refuses to model it as uncompensated.

@@ -503,13 +503,6 @@ fn corrected_rotary_moves_keep_their_duration_in_inverse_time() {
         (g94_total - nominal_min).abs() > 1e-6 * nominal_min,
         "G94 would keep the duration too: {g94_total}"
     );
-    eprintln!(
-        "nominal {:.9} s, corrected in G93 {:.9} s in {} blocks, in G94 it would be {:.9} s",
-        nominal_min * 60.0,
-        total * 60.0,
-        d.len(),
-        g94_total * 60.0
-    );
 
     // The same through `twinmill nc motion`: its JSON (positions and feeds to 1e-6).
     let sb = crate::Sandbox::new("inverse-time");
