@@ -5,7 +5,9 @@ use super::{fail, print_out, write};
 use clap::Subcommand;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use twinmill::pipeline::evaluate::{BallSensorRequest, Evaluated, ball_sensor, iso230_2, iso230_4};
+use twinmill::pipeline::evaluate::{
+    BallSensorRequest, CompRequest, Evaluated, ball_sensor, comp_table, iso230_2, iso230_4,
+};
 
 /// Evaluate measurement files as a standard says (ISO 230-2, 230-4).
 ///
@@ -41,6 +43,19 @@ pub enum EvaluateCommand {
         /// SVG) into this file.
         #[arg(long, value_name = "FILE")]
         html: Option<PathBuf>,
+        /// Also write the LinuxCNC axis compensation file (`[JOINT_n] COMP_FILE` with
+        /// `COMP_FILE_TYPE = 1`) that cancels the mean deviations at the targets: each line
+        /// `nominal forward_trim reverse_trim` (mm), trims −x̄↑ and −x̄↓; the provenance
+        /// follows the table as `#` lines.
+        #[arg(long, value_name = "OUT")]
+        comp: Option<PathBuf>,
+        /// The axis the compensation is for (default: the one the readings file records).
+        #[arg(long, value_name = "L", requires = "comp")]
+        axis: Option<String>,
+        /// The LinuxCNC joint number named in the file (default: the axis's joint under
+        /// trivial kinematics, X 0, Y 1, Z 2, A 3, B 4, C 5).
+        #[arg(long, value_name = "N", requires = "comp")]
+        joint: Option<u32>,
     },
     /// ISO 230-4 circular test (ball bar) from a radial-deviation trace: CSV
     /// `direction,angle,deviation` (`ccw`/`cw`, degrees, mm; `deviation[um]`, `angle[rad]`
@@ -130,7 +145,32 @@ pub fn exec(a: EvaluateArgs) -> ExitCode {
             json,
             png,
             html,
-        } => written(iso230_2(&file, png.as_deref(), html.is_some()), html, json),
+            comp,
+            axis,
+            joint,
+        } => {
+            // Everything is computed before anything is written.
+            let table = comp
+                .map(|out| comp_table(&file, &CompRequest { out, axis, joint }))
+                .transpose();
+            let (table, e) = match (table, iso230_2(&file, png.as_deref(), html.is_some())) {
+                (Err(m), _) | (_, Err(m)) => return fail(m),
+                (Ok(t), Ok(e)) => (t, e),
+            };
+            let e = match table {
+                Some(t) => {
+                    if let Err(m) = write(&t.out, t.text.as_bytes()) {
+                        return fail(m);
+                    }
+                    Evaluated {
+                        summary: e.summary + &t.summary,
+                        ..e
+                    }
+                }
+                None => e,
+            };
+            written(Ok(e), html, json)
+        }
         EvaluateCommand::Iso230_4 {
             file,
             radius,

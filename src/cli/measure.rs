@@ -197,6 +197,12 @@ pub struct LaserArgs {
     /// The other axes' values during the test, e.g. Y=100,Z=50 (default: the scene's home).
     #[arg(long, value_name = "AXIS=VALUE,...", allow_hyphen_values = true)]
     at: Option<String>,
+    /// A LinuxCNC compensation file (`[JOINT_n] COMP_FILE` with `COMP_FILE_TYPE = 1`, as
+    /// `evaluate iso230-2 --comp` writes it) that the controller applies to the measured
+    /// axis, interpolated by direction of motion as LinuxCNC's motion controller does: the
+    /// readings then show the accuracy after compensation.
+    #[arg(long, value_name = "FILE")]
+    comp: Option<PathBuf>,
 }
 
 // The ball bar's options.
@@ -289,6 +295,7 @@ fn instrument_options(a: &MeasureArgs) -> Vec<(Instrument, &'static str, bool)> 
         (Laser, "--abbe", l.abbe.is_some()),
         (Laser, "--drift", l.drift.is_some()),
         (Laser, "--at", l.at.is_some()),
+        (Laser, "--comp", l.comp.is_some()),
         (Ballbar, "--plane", b.plane.is_some()),
         (Ballbar, "--centre", b.centre.is_some()),
         (Ballbar, "--radius", b.radius.is_some()),
@@ -411,6 +418,7 @@ pub fn exec(a: MeasureArgs) -> ExitCode {
             abbe: l.abbe,
             drift: l.drift,
             at: l.at,
+            comp: l.comp,
         },
         ballbar: BallbarOptions {
             plane: b.plane,

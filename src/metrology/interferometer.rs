@@ -29,6 +29,14 @@
 //! direction sets the reversal share of every reading. The other axes stay at their held
 //! values.
 //!
+//! # Compensation
+//!
+//! With a [`CompTable`] the controller compensates the measured axis as LinuxCNC's motion
+//! controller applies `[JOINT_n] COMP_FILE` (see [`super::comp_table`]): every commanded
+//! value `t` of the axis becomes `t + c(t, d)` on its way to the chain, `d` the direction
+//! the command moved in last (kept over a stop), `c` the table's correction. The readings
+//! stay *position reached − commanded target*: what the user sees after compensation.
+//!
 //! # Noise
 //!
 //! Each reading `k` (0-based, in the order taken) adds `σ·n_k + d·k/(2m)`: a Gaussian
@@ -41,6 +49,7 @@
 //! cannot give one (an axis the machine lacks or that turns, fewer than two runs or targets,
 //! a non-finite value) is an error before any reading is taken.
 
+use super::comp_table::CompTable;
 use super::positioning::{Direction as Approach, Reading, readings_csv};
 use super::table::{
     axis_values_record, number, parse_axis_values_record, parse_vector_record, setup_record,
@@ -171,6 +180,9 @@ pub struct LaserSetup {
     pub drift_um_per_run: Real,
     /// Seed of the noise.
     pub seed: u64,
+    /// The controller's compensation table of the measured axis, if any (see the module
+    /// documentation).
+    pub comp: Option<CompTable>,
 }
 
 impl LaserSetup {
@@ -187,6 +199,7 @@ impl LaserSetup {
             noise_um: 0.0,
             drift_um_per_run: 0.0,
             seed: 1,
+            comp: None,
         }
     }
 
@@ -220,7 +233,13 @@ impl LaserSetup {
             self.noise_um,
             self.drift_um_per_run,
             self.seed
-        )
+        ) + &match &self.comp {
+            Some(c) => format!(
+                "; compensated by a LinuxCNC table of {} entries",
+                c.entries().len()
+            ),
+            None => String::new(),
+        }
     }
 
     /// The set-up as the readings file records it (see [`super::table::SETUP_MARKER`]):
@@ -229,8 +248,12 @@ impl LaserSetup {
     /// readings' own.
     pub fn record(&self) -> String {
         let h = self.abbe_offset_mm;
+        let comp = match &self.comp {
+            Some(c) => format!(" comp_entries={}", c.entries().len()),
+            None => String::new(),
+        };
         format!(
-            "laser axis={} runs={} overshoot_mm={:?} held={} abbe_mm={:?},{:?},{:?} noise_um={:?} drift_um_per_run={:?}",
+            "laser axis={} runs={} overshoot_mm={:?} held={} abbe_mm={:?},{:?},{:?} noise_um={:?} drift_um_per_run={:?}{comp}",
             self.axis.as_char(),
             self.runs,
             self.overshoot_mm,
@@ -277,6 +300,13 @@ impl LaserSetup {
                     "abbe_mm" => s.abbe_offset_mm = parse_vector_record(v, "abbe_mm")?,
                     "noise_um" => s.noise_um = number(v, "noise_um")?,
                     "drift_um_per_run" => s.drift_um_per_run = number(v, "drift_um_per_run")?,
+                    "comp_entries" => {
+                        return Err(format!(
+                            "the readings were taken through a compensation table ({v} \
+                             entries), which the record does not hold: measure again without \
+                             --comp to model the machine"
+                        ));
+                    }
                     other => return Err(format!("unknown set-up key '{other}'")),
                 }
             }
@@ -414,6 +444,13 @@ pub fn measure(chain: &Chain, setup: &LaserSetup) -> Result<LaserMeasurement, La
     let mut state = chain.reversal_state(&Directions::default().with(axis, Direction::Negative));
     let mut zero: Option<Point3> = None;
     let mut readings = Vec::with_capacity(2 * m * setup.runs);
+    // The commanded value of the axis and the direction it last moved in, for the
+    // compensation (the cycle starts moving − to below the first target).
+    let mut commanded = first - setup.overshoot_mm;
+    let mut moving = Approach::Backward;
+    if let Some(c) = &setup.comp {
+        q = at(commanded + c.correction(commanded, moving));
+    }
     for run in 1..=setup.runs {
         let up = targets.iter().map(|&t| (t, Some(Approach::Forward)));
         let down = targets.iter().rev().map(|&t| (t, Some(Approach::Backward)));
@@ -422,7 +459,18 @@ pub fn measure(chain: &Chain, setup: &LaserSetup) -> Result<LaserMeasurement, La
             .chain(down)
             .chain([(first - setup.overshoot_mm, None)]);
         for (t, approach) in stops {
-            let next = at(t);
+            if t != commanded {
+                moving = if t > commanded {
+                    Approach::Forward
+                } else {
+                    Approach::Backward
+                };
+            }
+            commanded = t;
+            let next = match &setup.comp {
+                Some(c) => at(t + c.correction(t, moving)),
+                None => at(t),
+            };
             state = chain.reversal_after_move(&state, &q, &next);
             q = next;
             let Some(direction) = approach else { continue };

@@ -80,6 +80,123 @@ pub fn iso230_2(file: &Path, png: Option<&Path>, html: bool) -> Result<Evaluated
     })
 }
 
+/// What `evaluate iso230-2 --comp` writes: a LinuxCNC compensation table.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CompRequest {
+    /// The compensation file to write.
+    pub out: PathBuf,
+    /// The axis letter the table is for; `None`: the one the readings file records.
+    pub axis: Option<String>,
+    /// The LinuxCNC joint number; `None`: the axis's joint under trivial kinematics (X 0,
+    /// Y 1, Z 2, A 3, B 4, C 5).
+    pub joint: Option<u32>,
+}
+
+/// A compensation table made from readings: the file's text and the summary's lines.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CompWritten {
+    /// The file to write.
+    pub out: PathBuf,
+    /// Its text.
+    pub text: String,
+    /// What the summary says about it.
+    pub summary: String,
+}
+
+/// `evaluate iso230-2 --comp`: the LinuxCNC compensation table (`COMP_FILE_TYPE = 1`) that
+/// cancels the readings' mean deviations at their targets (see
+/// [`crate::metrology::comp_table`]), with its provenance after the table.
+pub fn comp_table(file: &Path, r: &CompRequest) -> Result<CompWritten, String> {
+    use crate::metrology::comp_table::CompTable;
+    use crate::metrology::table::setup_record;
+    use crate::nc::AxisLetter;
+    let text = read(file)?;
+    let figures = parse_readings(&text, file)
+        .and_then(|readings| evaluate_positioning(&readings, file))
+        .map_err(|e| e.to_string())?;
+    let letter = |s: &str| {
+        let mut c = s.trim().chars();
+        match (c.next(), c.next()) {
+            (Some(c), None) => AxisLetter::from_char(c.to_ascii_uppercase()),
+            _ => None,
+        }
+    };
+    let recorded = setup_record(&text, "laser").and_then(|(line, pairs)| {
+        pairs
+            .iter()
+            .find(|(k, _)| k == "axis")
+            .map(|(_, v)| (line, v.clone()))
+    });
+    let axis = match (&r.axis, &recorded) {
+        (Some(a), _) => {
+            let l = letter(a)
+                .ok_or_else(|| format!("--axis: '{a}' is not an axis letter (X Y Z A B C)"))?;
+            if let Some((line, v)) = &recorded
+                && letter(v) != Some(l)
+            {
+                return Err(format!(
+                    "{}:{line}: the readings were taken on axis {v}, not on --axis {a}",
+                    file.display()
+                ));
+            }
+            l
+        }
+        (None, Some((line, v))) => letter(v).ok_or_else(|| {
+            format!(
+                "{}:{line}: axis '{v}' is not an axis letter",
+                file.display()
+            )
+        })?,
+        (None, None) => {
+            return Err(format!(
+                "{}: the readings record no axis: give --axis with --comp",
+                file.display()
+            ));
+        }
+    };
+    let joint = r.joint.unwrap_or(axis.index() as u32);
+    let table = CompTable::from_figures(&figures, file).map_err(|e| e.to_string())?;
+    let out = r.out.display();
+    let comments = vec![
+        format!(
+            "LinuxCNC axis compensation for axis {} (joint {joint}), units mm: [JOINT_{joint}] \
+             COMP_FILE = {out}, COMP_FILE_TYPE = 1",
+            axis.as_char()
+        ),
+        format!(
+            "from the ISO 230-2 readings {} ({} targets, {} runs each way) by twinmill \
+             evaluate iso230-2 --comp",
+            file.display(),
+            figures.targets.len(),
+            figures.runs
+        ),
+        "each line: nominal (commanded position), forward trim = -(mean deviation approaching \
+         in +), reverse trim = -(mean deviation approaching in -); LinuxCNC adds the trim of \
+         the direction of motion to the command, interpolated between nominals"
+            .to_string(),
+        "these comments follow the table: LinuxCNC stops reading at the first line that is \
+         not three numbers"
+            .to_string(),
+    ];
+    let um = |x: f64| x * 1e3;
+    let worst = table
+        .entries()
+        .iter()
+        .flat_map(|e| [e.forward_trim.abs(), e.reverse_trim.abs()])
+        .fold(0.0, f64::max);
+    Ok(CompWritten {
+        text: table.to_text(&comments),
+        summary: format!(
+            "  compensation  wrote {out}: {} entries for axis {} (joint {joint}), largest trim \
+             {:.4} µm; [JOINT_{joint}] COMP_FILE = {out}, COMP_FILE_TYPE = 1\n",
+            table.entries().len(),
+            axis.as_char(),
+            um(worst)
+        ),
+        out: r.out.clone(),
+    })
+}
+
 /// `evaluate iso230-4`: the circular test's figures of a trace for a circle of `radius_mm`
 /// (and the screw lead `pitch_mm` for the cyclic terms).
 pub fn iso230_4(

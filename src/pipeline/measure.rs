@@ -65,6 +65,9 @@ pub struct LaserOptions {
     pub drift: Option<Real>,
     /// The other axes' values `AXIS=VALUE,…`.
     pub at: Option<String>,
+    /// A LinuxCNC compensation file (`COMP_FILE_TYPE = 1`) the controller applies to the
+    /// measured axis.
+    pub comp: Option<PathBuf>,
 }
 
 /// The ball bar's options (a serial machine's; the hexapod's where said).
@@ -693,6 +696,14 @@ fn measure_laser(scene: &Scene, r: &MeasureRequest, file: &Path) -> Result<Readi
     setup.noise_um = r.noise_um.unwrap_or(0.0);
     setup.drift_um_per_run = l.drift.unwrap_or(0.0);
     setup.seed = r.seed;
+    if let Some(path) = &l.comp {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+        setup.comp = Some(
+            crate::metrology::comp_table::CompTable::parse(&text, path)
+                .map_err(|e| e.to_string())?,
+        );
+    }
     let m = interferometer::measure(chain, &setup).map_err(|e| match e {
         LaserError::Axis(m) => format!("--axis {}: {m}", axis.as_char()),
         LaserError::Setup { name, message } => format!("--{name}: {message}"),
@@ -714,6 +725,15 @@ fn measure_laser(scene: &Scene, r: &MeasureRequest, file: &Path) -> Result<Readi
         "deviation = position reached - target (mm), along the axis's commanded direction"
             .to_string(),
     ];
+    if let (Some(path), Some(c)) = (&l.comp, &setup.comp) {
+        comments.push(format!(
+            "compensation: {} ({} entries) applied to {} as LinuxCNC applies [JOINT_n] \
+             COMP_FILE with COMP_FILE_TYPE = 1",
+            path.display(),
+            c.entries().len(),
+            axis.as_char()
+        ));
+    }
     comments.extend(m.notes.iter().map(|n| format!("note: {n}")));
     let title = format!(
         "twinmill measure: {} laser on {}",
@@ -721,6 +741,9 @@ fn measure_laser(scene: &Scene, r: &MeasureRequest, file: &Path) -> Result<Readi
         axis.as_char()
     );
     let mut extra = vec![("set-up", described)];
+    if let Some(path) = &l.comp {
+        extra.push(("compensation", path.display().to_string()));
+    }
     extra.extend(m.notes.iter().map(|n| ("note", n.clone())));
     extra.push(("wrote", file.display().to_string()));
     let plot_title = format!("ISO 230-2: {} {}", scene.name, axis.as_char());

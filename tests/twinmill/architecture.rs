@@ -41,6 +41,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "segment",
             "table",
             "positioning",
+            "comp_table",
             "circular",
             "ball_sensor",
             "interferometer",

@@ -433,3 +433,108 @@ fn head_table_programs_at_b_zero_are_corrected_not_refused() {
     );
     assert!(cp.summary.axis_angle_rad > 0.0 && cp.summary.axis_angle_rad < 1e-4);
 }
+
+/// The length LinuxCNC applies F to (its interpreter's `find_straight_length`): the XYZ
+/// length when not zero, else the A B C length (degrees). Written here from LinuxCNC's rule,
+/// independently of the correction's own.
+fn linuxcnc_length(a: &[Real; 6], b: &[Real; 6]) -> Real {
+    let d = |r: std::ops::Range<usize>| r.map(|k| (b[k] - a[k]).powi(2)).sum::<Real>().sqrt();
+    let xyz = d(0..3);
+    if xyz > 0.0 { xyz } else { d(3..6) }
+}
+
+#[test]
+fn corrected_rotary_moves_keep_their_duration_in_inverse_time() {
+    use twinmill::calibration::correct::{CorrectOptions, correct_program, write_gcode};
+    let s = Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/trunnion-ac.toml"))
+        .expect("loads");
+    let home = s.home();
+    let src = "G21 G90 G94\nG1 X10 A10 C30 F600\nM30\n";
+    let program = twinmill::nc::parse_program(src, Path::new("move.ngc"), home).expect("parses");
+    // By hand: LinuxCNC feeds the XYZ length, 10 mm at 600 mm/min: 1/60 min (1 s).
+    let nominal_min = 10.0 / 600.0;
+    let cp = correct_program(
+        s.chain(),
+        &s.tool,
+        &program,
+        &home,
+        &CorrectOptions::for_accuracy(0.002),
+    )
+    .expect("corrects");
+    let mut text = Vec::new();
+    write_gcode(&cp, &[], &mut text).expect("writes");
+    let text = String::from_utf8(text).expect("utf-8");
+    // Inverse time around the corrected move, units per minute again after it.
+    let g93 = text.find("\nG93\n").expect("G93");
+    let g94 = text.rfind("\nG94\n").expect("G94 restored");
+    assert!(g93 < g94 && text[g94..].contains("M30"), "{text}");
+    assert!(cp.summary.inverse_time_blocks >= 1, "{:?}", cp.summary);
+
+    // Durations of the feed moves as a controller runs them: G93 blocks take 1/F.
+    let durations = |moves: &[Move]| -> Vec<Real> {
+        moves
+            .iter()
+            .filter_map(|m| {
+                let f = m.feed_mm_per_min?;
+                Some(linuxcnc_length(&m.start.to_array(), &m.end.to_array()) / f)
+            })
+            .collect()
+    };
+    let read = twinmill::nc::parse_program(&text, Path::new("corrected.ngc"), home)
+        .expect("the corrected program parses");
+    let d = durations(&read.moves);
+    let total: Real = d.iter().sum();
+    assert!(
+        (total - nominal_min).abs() < 1e-12,
+        "corrected move takes {total} min, nominal {nominal_min} min"
+    );
+    // Every part takes its share: the source move is split into equal parameter parts.
+    for x in &d {
+        assert!((x * d.len() as Real - nominal_min).abs() < 1e-12, "{d:?}");
+    }
+    // At the programmed 600 mm/min instead, the corrected chords would take another time.
+    let g94_total: Real = read
+        .moves
+        .iter()
+        .filter(|m| m.feed_mm_per_min.is_some())
+        .map(|m| linuxcnc_length(&m.start.to_array(), &m.end.to_array()) / 600.0)
+        .sum();
+    assert!(
+        (g94_total - nominal_min).abs() > 1e-6 * nominal_min,
+        "G94 would keep the duration too: {g94_total}"
+    );
+
+    // The same through `twinmill nc motion`: its JSON (positions and feeds to 1e-6).
+    let sb = crate::Sandbox::new("inverse-time");
+    sb.write("corrected.ngc", text.as_bytes());
+    let (code, stdout, stderr) = sb.run(&["nc", "motion", "corrected.ngc", "--jsonl"]);
+    assert_eq!(code, 0, "{stderr}");
+    let point = |v: &serde_json::Value| -> [Real; 6] {
+        std::array::from_fn(|k| {
+            let key = ["x", "y", "z", "a", "b", "c"][k];
+            v.get(key)
+                .or_else(|| v.get(k))
+                .and_then(serde_json::Value::as_f64)
+                .unwrap_or(0.0)
+        })
+    };
+    let mut nc_total = 0.0;
+    let mut parts = 0;
+    for line in stdout.lines() {
+        let v: serde_json::Value = serde_json::from_str(line).expect("JSON line");
+        if let Some(f) = v["feed"].as_f64() {
+            let dur = linuxcnc_length(&point(&v["start"]), &point(&v["end"])) / f;
+            assert!(
+                (dur * d.len() as Real - nominal_min).abs() < 1e-6 * nominal_min,
+                "{line}"
+            );
+            nc_total += dur;
+            parts += 1;
+        }
+    }
+    assert_eq!(parts, d.len());
+    assert!(
+        (nc_total - nominal_min).abs() < 1e-6 * nominal_min,
+        "{nc_total}"
+    );
+}

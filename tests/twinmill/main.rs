@@ -26,6 +26,7 @@ mod fuzz;
 mod robustness;
 mod misfit;
 mod identify_instruments;
+mod axis_comp;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};

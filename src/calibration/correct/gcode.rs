@@ -27,6 +27,12 @@ fn format_feed(f: Real) -> String {
 /// lines as comments, `G21 G90 G94`, one `G0`/`G1` per block with every axis of the machine
 /// (linear axes to 1 nm, rotary to 1e-7°) and the feed on every `G1`, a comment naming the
 /// source line (and the part, for subdivided moves), `M30` if the source ended so, `%`.
+///
+/// Blocks with an inverse-time feed ([`Block::inverse_time_per_min`]) are written in `G93`
+/// with their `F` (1/min, the shortest decimal that reads back exactly) on every block, as
+/// LinuxCNC asks of each `G93` motion block: a `G93` line before the first of a run, a `G94`
+/// line after its last (before the next block, or before `M30`), so the program continues
+/// and ends in units per minute.
 pub fn write_gcode(
     program: &CorrectedProgram,
     header: &[String],
@@ -38,8 +44,13 @@ pub fn write_gcode(
     }
     writeln!(out, "G21 G90 G94")?;
     let mut line = String::new();
+    let mut inverse_time = false;
     for b in &program.blocks {
         line.clear();
+        if b.inverse_time_per_min.is_some() != inverse_time {
+            inverse_time = !inverse_time;
+            writeln!(out, "{}", if inverse_time { "G93" } else { "G94" })?;
+        }
         // Blocks are straight (see `emitted_kind`): G0 or G1.
         let rapid = matches!(b.kind, MoveKind::Rapid);
         line.push_str(if rapid { "G0" } else { "G1" });
@@ -48,9 +59,17 @@ pub fn write_gcode(
             line.push(l.as_char());
             line.push_str(&format_axis(l, b.end.get(l)));
         }
-        if let (false, Some(f)) = (rapid, b.feed_mm_per_min) {
-            line.push_str(" F");
-            line.push_str(&format_feed(f));
+        match (rapid, b.inverse_time_per_min, b.feed_mm_per_min) {
+            (true, _, _) => {}
+            (false, Some(inverse), _) => {
+                line.push_str(" F");
+                line.push_str(&format!("{inverse}"));
+            }
+            (false, None, Some(f)) => {
+                line.push_str(" F");
+                line.push_str(&format_feed(f));
+            }
+            (false, None, None) => {}
         }
         match (b.source, b.part) {
             (None, _) => line.push_str(" (corrected start position)"),
@@ -58,6 +77,9 @@ pub fn write_gcode(
             (Some(_), (k, n)) => line.push_str(&format!(" (src line {}, {k}/{n})", b.line)),
         }
         writeln!(out, "{line}")?;
+    }
+    if inverse_time {
+        writeln!(out, "G94")?;
     }
     if program.ended {
         writeln!(out, "M30")?;

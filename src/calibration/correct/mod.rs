@@ -100,8 +100,8 @@ use pose::axis_point;
 pub use pose::{FlutePoints, PoseFit, PoseSolver};
 use program::format_axis;
 pub use program::{
-    Block, CorrectedProgram, CorrectionSummary, MoveCorrection, as_printed, correct_program,
-    uncorrected,
+    Block, CorrectedProgram, CorrectionSummary, MoveCorrection, as_printed, controller_length,
+    correct_program, uncorrected,
 };
 pub use verify::{
     FaceCheck, FaceError, PartError, PathError, axis_angle_error, face_errors, nominal_face,
@@ -276,6 +276,12 @@ const CHECK_AT: [Real; 3] = [0.25, 0.5, 0.75];
 pub const LINEAR_DECIMALS: usize = 6;
 /// Decimals printed for rotary axes (degrees): 1e-7° is 0.17 nm at 100 mm from the axis.
 pub const ROTARY_DECIMALS: usize = 7;
+/// A rotary block whose duration at the programmed feed is within this fraction of its share
+/// of the source move's keeps `G94`: 1e-9 is far above f64 rounding of lengths (1e-15), so a
+/// move nothing changed stays as programmed; any real change, even the printed values'
+/// rounding to 1 nm (up to 5e-8 of a 10 mm move), is above it and gets `G93`, which keeps the
+/// duration exactly.
+const DURATION_TOLERANCE: Real = 1e-9;
 /// Samples per sub-move (besides its ends) in [`path_error`]: the chord's distance from a
 /// smooth path peaks inside; 8 samples see it to within a few percent.
 pub const PATH_SAMPLES: usize = 8;

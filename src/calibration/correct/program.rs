@@ -26,6 +26,10 @@ pub struct Block {
     pub part: (usize, usize),
     /// The source move's parameter interval this block covers.
     pub s: (Real, Real),
+    /// Inverse-time feed `F` (1/min) when the block is written in `G93`: a corrected move
+    /// that turns a rotary axis and would take another time than its part of the source
+    /// move at the programmed feed (see [`inverse_time_feeds`]); `None`: `G94`.
+    pub inverse_time_per_min: Option<Real>,
 }
 
 /// The correction of one source move.
@@ -74,6 +78,8 @@ pub struct CorrectionSummary {
     pub max_linear_correction_mm: Real,
     /// Largest correction of a rotary axis (degrees).
     pub max_rotary_correction_deg: Real,
+    /// Blocks written with inverse-time feed (`G93`) to keep their source move's duration.
+    pub inverse_time_blocks: usize,
 }
 
 /// A corrected program: blocks to emit and the same as moves to simulate.
@@ -202,6 +208,7 @@ pub fn correct_program(
             line: first_line,
             part: (1, 1),
             s: (0.0, 0.0),
+            inverse_time_per_min: None,
         });
     }
 
@@ -232,6 +239,7 @@ pub fn correct_program(
                 line: mv.line,
                 part: (1, 1),
                 s: (0.0, 1.0),
+                inverse_time_per_min: None,
             });
             per_move.push(MoveCorrection {
                 line: mv.line,
@@ -314,6 +322,7 @@ pub fn correct_program(
                 line: mv.line,
                 part: (j, n),
                 s: ((j - 1) as Real / n as Real, j as Real / n as Real),
+                inverse_time_per_min: None,
             });
         }
         if n > 1 {
@@ -331,15 +340,22 @@ pub fn correct_program(
         prev = *points.last().unwrap_or(&prev);
     }
     summary.blocks = blocks.len();
+    summary.inverse_time_blocks = inverse_time_feeds(&mut blocks, &program.moves, start);
     let mut moves = Vec::with_capacity(blocks.len());
     let mut at = *start;
     for b in &blocks {
         if b.end != at {
+            // A G93 block runs at the feed that makes its length take 1/F minutes, as the
+            // controller converts it.
+            let feed = match b.inverse_time_per_min {
+                Some(f) => Some(f * controller_length(&at, &b.end)),
+                None => b.feed_mm_per_min,
+            };
             moves.push(Move {
                 kind: b.kind,
                 start: at,
                 end: b.end,
-                feed_mm_per_min: b.feed_mm_per_min,
+                feed_mm_per_min: feed,
                 line: b.line,
             });
         }
@@ -354,6 +370,63 @@ pub fn correct_program(
         summary,
         ended: program.ended_by.is_some(),
     })
+}
+
+/// The length a feed-per-minute controller applies F to (LinuxCNC's, its interpreter's
+/// `find_straight_length`): the XYZ length of a straight move (mm) when it is not zero,
+/// else its A B C length (degrees).
+pub fn controller_length(from: &AxisValues, to: &AxisValues) -> Real {
+    let d = |ls: [AxisLetter; 3]| {
+        ls.iter()
+            .map(|&l| (to.get(l) - from.get(l)).powi(2))
+            .sum::<Real>()
+            .sqrt()
+    };
+    let xyz = d([AxisLetter::X, AxisLetter::Y, AxisLetter::Z]);
+    if xyz > 0.0 {
+        xyz
+    } else {
+        d([AxisLetter::A, AxisLetter::B, AxisLetter::C])
+    }
+}
+
+/// Puts the feed blocks of straight source moves that turn a rotary axis (in the source or
+/// in the block) into inverse time where the programmed feed would give them another
+/// duration than their part of the source move: the source move takes `T =
+/// controller_length / F` minutes, each of its `n` parts (equal shares of its parameter)
+/// must take `T/n`, and gets `F = n/T` in `G93` unless `controller_length / F` of the block
+/// is within [`DURATION_TOLERANCE`] of `T/n`. Arcs keep their feed (their source length
+/// is the helix's, not a chord's). Returns the number of blocks put in inverse time.
+fn inverse_time_feeds(blocks: &mut [Block], source: &[Move], start: &AxisValues) -> usize {
+    let turns = |a: &AxisValues, b: &AxisValues| {
+        [AxisLetter::A, AxisLetter::B, AxisLetter::C]
+            .iter()
+            .any(|&l| a.get(l) != b.get(l))
+    };
+    let mut count = 0;
+    let mut at = *start;
+    for b in blocks.iter_mut() {
+        let from = at;
+        at = b.end;
+        let (Some(i), Some(f), MoveKind::Linear) = (b.source, b.feed_mm_per_min, b.kind) else {
+            continue;
+        };
+        let mv = &source[i];
+        if !matches!(mv.kind, MoveKind::Linear)
+            || !(turns(&mv.start, &mv.end) || turns(&from, &b.end))
+        {
+            continue;
+        }
+        // The parts are equal shares of the source parameter: each takes T/n, F = n·f/L.
+        let (length, parts) = (controller_length(&mv.start, &mv.end), b.part.1 as Real);
+        let nominal = length / f / parts;
+        let as_programmed = controller_length(&from, &b.end) / f;
+        if nominal > 0.0 && (as_programmed - nominal).abs() > DURATION_TOLERANCE * nominal {
+            b.inverse_time_per_min = Some(f * parts / length);
+            count += 1;
+        }
+    }
+    count
 }
 
 /// The program as given, in the form of a corrected one (every move one block, values
@@ -378,6 +451,7 @@ pub fn uncorrected(
             line: mv.line,
             part: (1, 1),
             s: (0.0, 1.0),
+            inverse_time_per_min: None,
         })
         .collect();
     Ok(CorrectedProgram {

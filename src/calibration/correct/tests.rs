@@ -257,13 +257,26 @@ fn rotary_moves_are_subdivided_until_the_path_is_within_tolerance() {
     let before = cp.blocks[cp.blocks.len() - 2];
     assert_eq!(last.part, (1, 1));
     assert_eq!(last.end.get(AxisLetter::B), before.end.get(AxisLetter::B));
-    // Emitted: parts named, feed kept on every sub-move.
+    // Emitted: parts named; the turn's sub-moves in inverse time, each taking its share of
+    // the source move's 40 mm at 500 mm/min (LinuxCNC feeds the XYZ length), then G94 again
+    // for the straight move at its programmed feed.
     let mut text = Vec::new();
     write_gcode(&cp, &["head test".into()], &mut text).expect("writes");
     let text = String::from_utf8(text).expect("utf-8");
     let n = turn_fix.sub_moves;
     assert!(text.contains(&format!("(src line 1, {n}/{n})")), "{text}");
-    assert_eq!(text.matches("F500").count(), n + 1);
+    assert_eq!(text.matches("F500").count(), 1, "{text}");
+    assert_eq!(cp.summary.inverse_time_blocks, n);
+    let share = 40.0 / 500.0 / n as Real;
+    for b in cp.blocks.iter().filter(|b| b.source == Some(0)) {
+        let f = b.inverse_time_per_min.expect("inverse time");
+        assert!((f * share - 1.0).abs() < 1e-12, "{f}");
+    }
+    let g93 = text.find("\nG93\n").expect("G93");
+    let g94 = text
+        .find("\nG94\nG1")
+        .expect("G94 before the straight move");
+    assert!(g93 < g94 && text[g94..].contains("F500"), "{text}");
     assert!(text.contains("G21 G90 G94") && text.trim_end().ends_with("M30\n%"));
 }
 
