@@ -55,8 +55,8 @@
 //! **Invariant:** plans and writes text; runs no sweep or scan and touches no files.
 
 use crate::calibration::calibrate::{
-    ANGLE_MAGNITUDE_RAD, CalibrateError, Feature, Identifiability, Model, PlaneFeature,
-    Registration, identifiability, magnitude, synthetic_plane_feature,
+    ANGLE_MAGNITUDE_RAD, CalibrateError, Feature, Identifiability, IsoTerm, Model, PlaneFeature,
+    Registration, identifiability, synthetic_plane_feature,
 };
 use crate::calibration::identify::{FaceKind, FaceRegion, FaceSpec};
 use crate::cutting::tool::{Tool, ToolKind};
@@ -436,14 +436,14 @@ fn evaluate(
     o: &DesignOptions,
     model: &Chain,
     tool: &Tool,
-    ids: &[DeviationId],
+    (ids, iso): (&[DeviationId], &[IsoTerm]),
     measured: &MeasuredFaces,
 ) -> Option<(Identifiability, Vec<(String, Real)>)> {
     let feats = features_of(cuts, o, model, tool, measured)?;
     let m = Model {
         chain: model,
         ids,
-        iso_terms: &[],
+        iso_terms: iso,
         tool,
         features: &feats,
         registration: Registration::Estimate,
@@ -453,10 +453,10 @@ fn evaluate(
     // Relative uncertainty of each parameter from the scaled information in the
     // determined subspace.
     let j = m.jacobian(&x)?;
-    let np = ids.len();
+    let np = m.params();
     let mut js = j.clone();
-    for (k, id) in ids.iter().enumerate() {
-        js.column_mut(k).scale_mut(magnitude(*id));
+    for (k, scale) in m.param_scales().into_iter().enumerate() {
+        js.column_mut(k).scale_mut(scale);
     }
     // (JᵀJ)⁺ = J⁺·J⁺ᵀ, the rank from J's own singular values (a whitened direction below
     // 1e-6 is not seen: the 1e-12 of JᵀJ's eigenvalues it stands for).
@@ -477,15 +477,17 @@ pub fn design(
     params: &[DeviationId],
     o: &DesignOptions,
 ) -> Result<Design, DesignError> {
-    design_with(model, tool, params, o, &MeasuredFaces::new())
+    design_with(model, tool, params, &[], o, &MeasuredFaces::new())
 }
 
-/// [`design`], with the faces already measured on simulated scans of earlier designs used
-/// instead of their expected uncertainties.
+/// [`design`] for the joint deviations `params` and the ISO location and squareness terms
+/// `iso` (each one parameter), with the faces already measured on simulated scans of
+/// earlier designs used instead of their expected uncertainties.
 pub fn design_with(
     model: &Chain,
     tool: &Tool,
     params: &[DeviationId],
+    iso: &[IsoTerm],
     o: &DesignOptions,
     measured: &MeasuredFaces,
 ) -> Result<Design, DesignError> {
@@ -506,7 +508,7 @@ pub fn design_with(
             2.0 * o.margin_mm + CLEARANCE_MM
         )));
     }
-    if params.is_empty() {
+    if params.is_empty() && iso.is_empty() {
         return Err(DesignError::Calibrate(CalibrateError::NoParameters));
     }
     let pool = candidates(o, tool);
@@ -547,8 +549,8 @@ pub fn design_with(
             .par_iter()
             .map(|set| {
                 let cuts: Vec<Cut> = set.iter().map(|&k| pool[k]).collect();
-                let (ident, rel) = evaluate(&cuts, o, model, tool, params, measured)?;
-                Some((key_of(&ident, params.len()), ident, rel))
+                let (ident, rel) = evaluate(&cuts, o, model, tool, (params, iso), measured)?;
+                Some((key_of(&ident, params.len() + iso.len()), ident, rel))
             })
             .collect();
         let mut round: Vec<(Vec<usize>, Evaluated)> = children
@@ -582,7 +584,9 @@ pub fn design_with(
     chosen.sort_by(|a, b| a.index().total_cmp(&b.index()));
     let feats = features_of(&chosen, o, model, tool, measured);
     let mut d = finish(chosen, ident, rel, o, tool, evaluated);
-    d.notes = feats.map_or_else(Vec::new, |f| lever_notes(&d.cuts, &f, model, tool, params));
+    d.notes = feats.map_or_else(Vec::new, |f| {
+        lever_notes(&d.cuts, &f, model, tool, params, iso)
+    });
     Ok(d)
 }
 
@@ -665,13 +669,14 @@ pub fn lever_notes(
     model: &Chain,
     tool: &Tool,
     params: &[DeviationId],
+    iso: &[IsoTerm],
 ) -> Vec<String> {
     let names: Vec<String> = params.iter().map(|id| model.deviation_name(*id)).collect();
     let cov = {
         let m = Model {
             chain: model,
             ids: params,
-            iso_terms: &[],
+            iso_terms: iso,
             tool,
             features,
             registration: Registration::Estimate,

@@ -6,6 +6,7 @@
 use super::{Loaded, SceneArgs, bars, fail, load, print_out, procedure_arg, write};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use twinmill::calibration::calibrate::IsoTerm;
 use twinmill::calibration::hexapod_calibrate::Procedure;
 use twinmill::output::{json_bytes, write_files};
 use twinmill::pipeline::dbb::{CalibrationDesignOutcome, calibration_design};
@@ -145,15 +146,22 @@ pub fn exec(a: DesignArgs) -> ExitCode {
             ));
         }
     };
+    // Joint deviations (`dy_AY`) and ISO location and squareness terms (`EX0C`, `EC(0X)Y`),
+    // each one parameter, as the scene's `[identify] parameters` take them.
     let mut ids = Vec::new();
+    let mut iso: Vec<IsoTerm> = Vec::new();
     for p in &params {
-        match scene.model().deviation_id(p) {
-            Ok(id) => ids.push(id),
-            Err(e) => return fail(format!("--params: {e}")),
+        let parsed = if p.contains('_') {
+            scene.model().deviation_id(p).map(|id| ids.push(id))
+        } else {
+            IsoTerm::parse(scene.model(), p).map(|t| iso.push(t))
+        };
+        if let Err(e) = parsed {
+            return fail(format!("--params: {e}"));
         }
     }
     let name = format!("{}-design", scene.name);
-    let outcome = match design_scene(&scene, &params, &ids, &name, &bars(a.args.json)) {
+    let outcome = match design_scene(&scene, &params, &ids, &iso, &name, &bars(a.args.json)) {
         Ok(o) => o,
         Err(e) => return fail(e),
     };

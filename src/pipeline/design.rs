@@ -9,7 +9,7 @@
 //! nothing new is learned); the best measured design is kept.
 
 use super::{IdentifyOutcome, PipelineError, identify_scene};
-use crate::calibration::calibrate::{Feature, magnitude};
+use crate::calibration::calibrate::{Feature, IsoTerm, component_magnitude, magnitude};
 use crate::calibration::design::{
     Design, DesignOptions, Key, MeasuredFaces, design_with, key_of, kind_name, lever_notes, order,
 };
@@ -43,6 +43,7 @@ pub fn design_scene(
     scene: &Scene,
     params: &[String],
     ids: &[DeviationId],
+    iso: &[IsoTerm],
     name: &str,
     progress: &dyn Progress,
 ) -> Result<DesignOutcome, PipelineError> {
@@ -56,13 +57,13 @@ pub fn design_scene(
     opts.noise_sigma_mm = scanner.noise_sigma_mm;
     opts.pitch_mm = scanner.pitch_mm;
     let path = PathBuf::from(name).join("design.toml");
-    let np = ids.len();
+    let np = ids.len() + iso.len();
     let mut measured = MeasuredFaces::new();
     let mut best: Option<(Key, Design, String, IdentifyOutcome)> = None;
     let mut tried = 0;
     for _ in 0..MAX_DESIGN_ROUNDS {
-        let d =
-            design_with(scene.model(), &scene.tool, ids, &opts, &measured).map_err(design_err)?;
+        let d = design_with(scene.model(), &scene.tool, ids, iso, &opts, &measured)
+            .map_err(design_err)?;
         let learns = d.faces.iter().any(|f| !measured.contains_key(&f.name));
         if tried > 0 && !learns {
             // Every face of this design was measured in an earlier one.
@@ -102,8 +103,11 @@ pub fn design_scene(
         .parameters
         .iter()
         .filter_map(|e| {
-            let id = scene.model().deviation_id(&e.name).ok()?;
-            Some((e.name.clone(), e.sigma / magnitude(id)))
+            let scale = match scene.model().deviation_id(&e.name) {
+                Ok(id) => magnitude(id),
+                Err(_) => component_magnitude(iso.iter().find(|t| t.name == e.name)?.component),
+            };
+            Some((e.name.clone(), e.sigma / scale))
         })
         .collect();
     let seed = scanner.seed;
@@ -155,6 +159,7 @@ pub fn design_scene(
             scene.model(),
             &scene.tool,
             ids,
+            iso,
         ),
     };
     Ok(DesignOutcome {

@@ -4,8 +4,8 @@
 
 use super::{PipelineError, machine_part, scan_noise};
 use crate::calibration::calibrate::{
-    CalibrateError, Feature, Identification, Model, PlaneFeature, Registration, face_rms_parts,
-    plane_feature, predicted_plane, select_plane_face,
+    CalibrateError, Feature, Identification, IsoTerm, Model, PlaneFeature, Registration,
+    face_rms_parts, plane_feature, predicted_plane, select_plane_face,
 };
 use crate::calibration::design::kind_name;
 use crate::calibration::goodness::ScanNoise;
@@ -86,7 +86,9 @@ pub fn extract_features(
         .collect()
 }
 
-fn scene_ids(scene: &Scene) -> Result<Vec<DeviationId>, PipelineError> {
+/// The scene's `[identify] parameters` on its model: the joint deviations (`dy_AY`), then
+/// the ISO location and squareness terms (`EX0C`, `EC(0X)Y`), each one parameter.
+fn scene_params(scene: &Scene) -> Result<(Vec<DeviationId>, Vec<IsoTerm>), PipelineError> {
     let err = |source| PipelineError::Calibrate {
         path: scene.path.display().to_string(),
         source,
@@ -94,11 +96,32 @@ fn scene_ids(scene: &Scene) -> Result<Vec<DeviationId>, PipelineError> {
     if scene.parameters.is_empty() {
         return Err(err(CalibrateError::NoParameters));
     }
-    Ok(scene
-        .parameters
+    let (joints, iso): (Vec<&String>, Vec<&String>) =
+        scene.parameters.iter().partition(|n| n.contains('_'));
+    let ids = joints
         .iter()
         .filter_map(|n| scene.model().deviation_id(n).ok())
-        .collect())
+        .collect();
+    let terms = iso
+        .iter()
+        .filter_map(|n| IsoTerm::parse(scene.model(), n).ok())
+        .collect();
+    Ok((ids, terms))
+}
+
+/// The value of the ISO term `term` in `values` (deviations by name, as a scene writes
+/// them), under any of its names; zero when absent.
+fn iso_value(chain: &Chain, values: &BTreeMap<String, Real>, term: &IsoTerm) -> Real {
+    values
+        .iter()
+        .filter(|(n, _)| !n.contains('_'))
+        .filter(|(n, _)| {
+            chain
+                .iso_term_id(n)
+                .is_ok_and(|(a, c)| a == term.axis && c == term.component)
+        })
+        .map(|(_, v)| *v)
+        .sum()
 }
 
 /// How far the twin's faces are from the measured ones: for each plane feature, the largest
@@ -172,22 +195,79 @@ pub fn correction_loop(
     tolerance_mm: Real,
     scan: Option<&ScanNoise>,
 ) -> Result<(Identification, Chain, Vec<LoopRound>, bool), CalibrateError> {
+    correction_loop_terms(
+        model,
+        ids,
+        &[],
+        tool,
+        features,
+        registration,
+        tolerance_mm,
+        scan,
+    )
+}
+
+/// [`correction_loop`] identifying the ISO location and squareness terms `iso` too, each
+/// one parameter (not the joint values it composes onto), given with its value in `model`
+/// (the prior: `[identify] known`, else zero). The solve takes an ISO term on top of the
+/// chain's values, so each round's increment is composed onto the twin
+/// ([`Chain::apply_iso_term`]) and the reported values and solution are the prior plus the
+/// increments so far.
+#[expect(
+    clippy::too_many_arguments,
+    reason = "correction_loop's arguments and the ISO terms with their priors"
+)]
+pub fn correction_loop_terms(
+    model: &Chain,
+    ids: &[DeviationId],
+    iso: &[(IsoTerm, Real)],
+    tool: &crate::cutting::tool::Tool,
+    features: &[Feature],
+    registration: Registration,
+    tolerance_mm: Real,
+    scan: Option<&ScanNoise>,
+) -> Result<(Identification, Chain, Vec<LoopRound>, bool), CalibrateError> {
     let mut twin = model.clone();
     let mut rounds = Vec::new();
     let mut last = None;
     let mut converged = false;
+    let terms: Vec<IsoTerm> = iso.iter().map(|(t, _)| t.clone()).collect();
+    let mut total: Vec<Real> = iso.iter().map(|(_, v)| *v).collect();
     for round in 1..=MAX_ROUNDS {
         let m = Model {
             chain: &twin,
             ids,
-            iso_terms: &[],
+            iso_terms: &terms,
             tool,
             features,
             registration,
         };
-        let ident = crate::calibration::calibrate::identify_with(&m, scan)?;
+        let mut ident = crate::calibration::calibrate::identify_with(&m, scan)?;
         for (id, v) in ids.iter().zip(&ident.solution) {
             twin.set_deviation(*id, *v);
+        }
+        // The ISO terms' values so far: before this round (`total`) plus its increments.
+        let before: Vec<Real> = ids
+            .iter()
+            .map(|_| 0.0)
+            .chain(total.iter().copied())
+            .collect();
+        for (k, t) in terms.iter().enumerate() {
+            let step = ident.solution[ids.len() + k];
+            twin.apply_iso_term(&t.name, step)
+                .map_err(|e| CalibrateError::Parameter(e.to_string()))?;
+            total[k] += step;
+        }
+        for e in ident.parameters.iter_mut().chain(&mut ident.combinations) {
+            e.value += e
+                .coefficients
+                .iter()
+                .zip(&before)
+                .map(|(c, b)| c * b)
+                .sum::<Real>();
+        }
+        for (x, b) in ident.solution.iter_mut().zip(&before) {
+            *x += b;
         }
         let (worst, matched) = face_match(&twin, tool, features, &ident.registration, tolerance_mm);
         rounds.push(LoopRound {
@@ -258,7 +338,11 @@ pub fn identify_scene(
         Some(_) => scene.require("identify", &[Need::Parameters])?,
         None => scene.require("identify", &[Need::Parameters, Need::Scanner])?,
     }
-    let ids = scene_ids(scene)?;
+    let (ids, terms) = scene_params(scene)?;
+    let iso: Vec<(IsoTerm, Real)> = terms
+        .iter()
+        .map(|t| (t.clone(), iso_value(scene.model(), scene.known(), t)))
+        .collect();
     let mut timings = Vec::new();
     let mut clock = Instant::now();
     let mut lap = |name: &str, timings: &mut Vec<(String, Real)>| {
@@ -296,9 +380,10 @@ pub fn identify_scene(
         .scanner
         .as_ref()
         .map(|s| scan_noise(s, &scene.stock_box));
-    let (mut ident, twin, rounds, converged) = correction_loop(
+    let (mut ident, twin, rounds, converged) = correction_loop_terms(
         scene.model(),
         &ids,
+        &iso,
         &scene.tool,
         &features,
         scene.registration,
@@ -335,27 +420,47 @@ pub fn identify_scene(
             let m = Model {
                 chain: scene.model(),
                 ids: &ids,
-                iso_terms: &[],
+                iso_terms: &terms,
                 tool: &scene.tool,
                 features: &f,
                 registration: scene.registration,
             };
             let r = crate::calibration::calibrate::identify(&m).map_err(cal)?;
             // Values of the main run's quantities (same coefficients) in this trial.
+            // ISO terms solve on top of the model's prior values.
+            let prior = ids.iter().map(|_| 0.0).chain(iso.iter().map(|(_, v)| *v));
+            let x: Vec<Real> = r.solution.iter().zip(prior).map(|(x, p)| x + p).collect();
             for e in ident.parameters.iter().chain(&ident.combinations) {
-                let v: Real = e
-                    .coefficients
-                    .iter()
-                    .zip(&r.solution)
-                    .map(|(c, x)| c * x)
-                    .sum();
+                let v: Real = e.coefficients.iter().zip(&x).map(|(c, x)| c * x).sum();
                 samples.entry(e.name.clone()).or_default().push(v);
             }
             mc_trials += 1;
         }
         lap("monte carlo", &mut timings);
     }
-    let truth: Vec<Real> = ids.iter().map(|id| scene.chain().deviation(*id)).collect();
+    // The truth of an ISO term is what the scene injects under its names (0 if none); a
+    // scene that injects joint values on the joints the term composes onto gives none.
+    let truth: Vec<Option<Real>> = ids
+        .iter()
+        .map(|id| Some(scene.chain().deviation(*id)))
+        .chain(terms.iter().map(|t| {
+            let named = scene.injected().keys().any(|n| {
+                !n.contains('_')
+                    && scene
+                        .chain()
+                        .iso_term_id(n)
+                        .is_ok_and(|(a, c)| a == t.axis && c == t.component)
+            });
+            let on_joints = scene.injected().keys().any(|n| {
+                n.contains('_')
+                    && scene
+                        .chain()
+                        .deviation_id(n)
+                        .is_ok_and(|id| id.joint == t.axis || id.joint + 1 == t.axis)
+            });
+            (named || !on_joints).then(|| iso_value(scene.chain(), scene.injected(), t))
+        }))
+        .collect();
     let simulated = surface.is_some();
     let estimate = |e: &crate::calibration::calibrate::Estimate| EstimateReport {
         name: e.name.clone(),
@@ -366,7 +471,16 @@ pub fn identify_scene(
             let mean = v.iter().sum::<Real>() / n;
             (v.iter().map(|x| (x - mean).powi(2)).sum::<Real>() / (n - 1.0)).sqrt()
         }),
-        injected: simulated.then(|| e.coefficients.iter().zip(&truth).map(|(c, t)| c * t).sum()),
+        injected: simulated
+            .then(|| {
+                e.coefficients
+                    .iter()
+                    .zip(&truth)
+                    .filter(|(c, _)| **c != 0.0)
+                    .map(|(c, t)| t.map(|t| c * t))
+                    .sum::<Option<Real>>()
+            })
+            .flatten(),
         coefficients: e.coefficients.clone(),
     };
     let id = &ident.identifiability;

@@ -92,14 +92,32 @@ pub(super) fn identify_setup(
     }
     let mut parameters = Vec::new();
     if let Some(ps) = &f.parameters {
+        // A joint deviation (`dy_AY`) or an ISO 230-7 location or squareness term (`EX0C`,
+        // `EC(0X)Y`), as `[deviations]` and `known` name them; an ISO term counts once
+        // under any of its names.
+        let mut terms = Vec::new();
         for p in ps.get_ref() {
-            chain
-                .deviation_id(p.get_ref())
-                .map_err(|e| ctx.err(p.span(), e.to_string()))?;
-            if parameters.contains(p.get_ref()) {
-                return Err(ctx.err(p.span(), format!("parameter '{}' given twice", p.get_ref())));
+            let name = p.get_ref();
+            if name.contains('_') {
+                chain
+                    .deviation_id(name)
+                    .map_err(|e| ctx.err(p.span(), e.to_string()))?;
+            } else {
+                let term = chain
+                    .iso_term_id(name)
+                    .map_err(|e| ctx.err(p.span(), e.to_string()))?;
+                if let Some((_, other)) = terms.iter().find(|(t, _)| *t == term) {
+                    return Err(ctx.err(
+                        p.span(),
+                        format!("parameter '{name}' is '{other}' again (one ISO term)"),
+                    ));
+                }
+                terms.push((term, name.clone()));
             }
-            parameters.push(p.get_ref().clone());
+            if parameters.contains(name) {
+                return Err(ctx.err(p.span(), format!("parameter '{name}' given twice")));
+            }
+            parameters.push(name.clone());
         }
         if parameters.is_empty() {
             return Err(ctx.err(ps.span(), "identify.parameters is empty"));

@@ -458,7 +458,7 @@ fn designs_promise_what_identify_finds_for_random_requests() {
             .map(|n| s.model().deviation_id(n).expect("known"))
             .collect();
         let name = format!("random-{case}");
-        let out = design_scene(&s, &params, &ids, &name, &NoProgress).expect("a design");
+        let out = design_scene(&s, &params, &ids, &[], &name, &NoProgress).expect("a design");
         let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(&name);
         std::fs::create_dir_all(&dir).expect("temp dir");
         std::fs::write(dir.join("design.ngc"), &out.design.program).expect("program");

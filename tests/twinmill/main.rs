@@ -27,6 +27,7 @@ mod robustness;
 mod misfit;
 mod identify_instruments;
 mod axis_comp;
+mod iso_names;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};

@@ -121,6 +121,9 @@ pub enum CalibrateError {
     /// No parameter to solve for.
     #[error("no deviation to identify was given")]
     NoParameters,
+    /// A parameter the chain does not have.
+    #[error("{0}")]
+    Parameter(String),
     /// No feature to solve from.
     #[error("no measured feature was given")]
     NoFeatures,
