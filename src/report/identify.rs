@@ -149,7 +149,12 @@ impl IdentifyReport {
             self.cloud
         );
         let fmt = |e: &EstimateReport| {
-            let unit = if e.name.starts_with('d') { "mm" } else { "rad" };
+            // Joint and ISO names alike (`dy_AY`, `EX0C` mm; `gamma_YX`, `EC(0X)Y` rad).
+            let unit = if super::is_angle_name(&e.name) {
+                "rad"
+            } else {
+                "mm"
+            };
             let mut t = format!("{:+.6e} ± {:.2e} {unit}", e.value, e.sigma);
             if let Some(m) = e.monte_carlo_spread {
                 let _ = write!(t, " (MC spread {m:.2e})");

@@ -304,9 +304,9 @@ pub fn part_view3d(parts: &View3dParts<'_>) -> Result<View3d, GlbError> {
     })
 }
 
-/// A value in its natural unit: mm for offsets (`d…`), µrad for angles.
+/// A value in its natural unit: mm for offsets (`d…`, `EX0C`), µrad for angles.
 fn value_text(name: &str, v: Real) -> String {
-    if name.starts_with('d') {
+    if !super::is_angle_name(name) {
         format!("{v:+.6} mm")
     } else {
         format!("{:+.4} µrad", v * 1e6)
@@ -314,7 +314,7 @@ fn value_text(name: &str, v: Real) -> String {
 }
 
 fn sigma_text(name: &str, v: Real) -> String {
-    if name.starts_with('d') {
+    if !super::is_angle_name(name) {
         format!("{v:.6} mm")
     } else {
         format!("{:.4} µrad", v * 1e6)

@@ -55,6 +55,15 @@ fn identify_values_a_table_location_term_as_one_parameter() {
     );
     assert!((v + j).abs() < 1e-9, "EY0C {v} is not −dy_CX {j}");
     assert!((s - sj).abs() < 1e-9 * sj.max(1.0), "σ {s} against {sj}");
+    // An offset term is printed in mm, as its joint is.
+    let line = by_iso
+        .report
+        .summary()
+        .lines()
+        .find(|l| l.contains("EY0C") && l.contains("identified"))
+        .map(str::to_string)
+        .expect("a line for EY0C");
+    assert!(line.trim_end().ends_with(" mm"), "{line}");
     // The report's truth for the term is the scene's, under its ISO name.
     let injected = by_iso
         .report
@@ -205,4 +214,82 @@ fn design_params_refuse_a_name_the_machine_lacks_in_one_line() {
         );
         assert!(!sb.dir.join("d").exists(), "nothing written");
     }
+}
+
+/// The value and σ a command's summary prints for `name` (`  EX0B  +9.964 ± 0.105 …` or
+/// `identified  EC(0X)Y  +2.0e-5 ± 1.0e-8 rad`).
+fn printed(stdout: &str, name: &str) -> (f64, f64) {
+    let line = stdout
+        .lines()
+        .find(|l| l.split_whitespace().any(|w| w == name))
+        .unwrap_or_else(|| panic!("no line for {name}: {stdout}"));
+    let words: Vec<&str> = line.split_whitespace().collect();
+    let pm = words.iter().position(|w| *w == "±").expect("value ± sigma");
+    let num = |w: &str| w.parse::<f64>().unwrap_or_else(|_| panic!("{line}"));
+    (num(words[pm - 1]), num(words[pm + 1]))
+}
+
+#[test]
+fn measure_identifies_a_head_location_term_as_one_parameter() {
+    // The head-table scene offsets B's line by EX0B = 10 µm and EZ0B = −30 µm: two joint
+    // values each (the joints before and after B); the ball-sensor test identifies each
+    // term as one parameter, within 4σ of the scene's value.
+    let sb = Sandbox::new("iso-names-measure");
+    sb.write("head-table.toml", builtin("head-table.toml").as_bytes());
+    sb.write("head-table.ngc", builtin("head-table.ngc").as_bytes());
+    let args = [
+        "measure",
+        "head-table.toml",
+        "--instrument",
+        "ball-sensor",
+        "--identify",
+        "EX0B,EZ0B",
+        "--out",
+        "t.csv",
+    ];
+    let (code, stdout, stderr) = sb.run(&args);
+    assert_eq!(code, 0, "{stderr}");
+    for (name, truth_um) in [("EX0B", 10.0), ("EZ0B", -30.0)] {
+        let (v, s) = printed(&stdout, name);
+        assert!(
+            (v - truth_um).abs() <= 4.0 * s && s > 0.0,
+            "{name} = {v} ± {s} µm, scene {truth_um}"
+        );
+    }
+}
+
+#[test]
+fn identify_parameters_take_a_squareness_name() {
+    // A ball-bar circle in XY sees X-to-Y squareness as the ellipse's axis along ±45°:
+    // EC(0X)Y = 20 µrad in the scene is what `identify --parameters "EC(0X)Y"` recovers.
+    let sb = Sandbox::new("iso-names-parameters");
+    sb.write("xyz.toml", builtin("xyz-error-motions.toml").as_bytes());
+    sb.write("xyz-pocket.ngc", builtin("xyz-pocket.ngc").as_bytes());
+    let (code, _, stderr) = sb.run(&[
+        "measure",
+        "xyz.toml",
+        "--instrument",
+        "ballbar",
+        "--plane",
+        "XY",
+        "--out",
+        "bb-XY.csv",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let (code, stdout, stderr) = sb.run(&[
+        "identify",
+        "xyz.toml",
+        "--measurement",
+        "bb-XY.csv",
+        "--parameters",
+        "EC(0X)Y",
+        "--deviations-out",
+        "d.toml",
+    ]);
+    assert_eq!(code, 0, "{stderr}");
+    let (v, s) = printed(&stdout, "EC(0X)Y");
+    assert!(
+        (v - 20e-6).abs() <= 4.0 * s && s > 0.0,
+        "EC(0X)Y = {v} ± {s}"
+    );
 }
