@@ -76,18 +76,12 @@ pub struct InstrumentOptions {
 
 /// `identify --measurement`: the scene's serial machine from laser and ball-bar files.
 fn identify_instruments(a: &IdentifyArgs) -> ExitCode {
-    let h = &a.hexapod;
-    let other = [
+    let serial = [
         ("--cloud", a.cloud.is_some()),
         ("--monte-carlo", a.monte_carlo.is_some()),
-        ("--procedure", h.procedure.is_some()),
-        ("--trials", h.trials != 0),
-        ("--plan", h.plan.is_some()),
-        ("--html", h.html.is_some()),
-        ("--readings", !h.readings.is_empty()),
-        ("--corrected", h.corrected.is_some()),
     ];
-    if let Some((option, _)) = other.iter().find(|(_, given)| *given) {
+    let given = serial.iter().find_map(|(o, given)| given.then_some(*o));
+    if let Some(option) = given.or_else(|| a.hexapod.first_given()) {
         return fail(format!(
             "{option} cannot go with --measurement (a serial machine identified from laser \
              and ball-bar files)"
@@ -173,6 +167,22 @@ pub struct CalibrateOptions {
     /// scene) into this file.
     #[arg(long, value_name = "FILE")]
     corrected: Option<PathBuf>,
+}
+
+impl CalibrateOptions {
+    /// The first of these options given on the command line (for a refusal naming it).
+    fn first_given(&self) -> Option<&'static str> {
+        [
+            ("--procedure", self.procedure.is_some()),
+            ("--trials", self.trials != 0),
+            ("--plan", self.plan.is_some()),
+            ("--html", self.html.is_some()),
+            ("--readings", !self.readings.is_empty()),
+            ("--corrected", self.corrected.is_some()),
+        ]
+        .into_iter()
+        .find_map(|(o, given)| given.then_some(o))
+    }
 }
 
 /// `calibrate`, the hidden old name of `identify` on a hexapod.
@@ -278,15 +288,6 @@ pub fn exec(a: IdentifyArgs) -> ExitCode {
              ball-bar files)"
         ));
     }
-    let h = &a.hexapod;
-    let hexapod = [
-        ("--procedure", h.procedure.is_some()),
-        ("--trials", h.trials != 0),
-        ("--plan", h.plan.is_some()),
-        ("--html", h.html.is_some()),
-        ("--readings", !h.readings.is_empty()),
-        ("--corrected", h.corrected.is_some()),
-    ];
     // A simulated scan needs the scanner; a given cloud does not.
     let identify_needs: &[Need] = match a.cloud {
         Some(_) => &[Need::Parameters],
@@ -294,7 +295,7 @@ pub fn exec(a: IdentifyArgs) -> ExitCode {
     };
     let (scene, program) = match load(&a.args, "identify", identify_needs) {
         Ok(Loaded::Serial(scene, program)) => {
-            if let Some((option, _)) = hexapod.iter().find(|(_, given)| *given) {
+            if let Some(option) = a.hexapod.first_given() {
                 return fail(format!(
                     "{}: {option} is an option of a hexapod's identification from double-ball-bar \
                  traces; a serial machine is identified from the faces of its cut part",
