@@ -304,10 +304,14 @@ pub fn plan(study_file: &Path, shards: usize) -> Result<Manifest, StudyError> {
     }
     for (name, d) in &f.vary.deviations {
         let key = format!("vary.deviations.{}", name.get_ref());
-        scene
-            .chain()
-            .deviation_id(name.get_ref())
-            .map_err(|e| at(name.span(), format!("{key}: {e}")))?;
+        let chain = scene.chain();
+        let n = name.get_ref();
+        let named = if n.contains('_') {
+            chain.deviation_id(n).map(|_| ())
+        } else {
+            chain.iso_term_id(n).map(|_| ())
+        };
+        named.map_err(|e| at(name.span(), format!("{key}: {e}")))?;
         d.get_ref()
             .check()
             .map_err(|e| at(d.span(), format!("{key}: {e}")))?;
@@ -415,6 +419,25 @@ pub struct Row {
     pub seconds: Real,
 }
 
+/// A parameter's injected value in a trial's scene: a joint deviation (`dy_AY`) as the
+/// chain holds it; an ISO term (`EY0A`, `EC(0X)Y`) as injected by that name, or zero when
+/// the scene injects neither it nor any joint deviation (which would project onto it: the
+/// value is then not one number, and `NaN` says so).
+fn injected_value(s: &Scene, p: &str) -> Real {
+    let chain = s.chain();
+    if p.contains('_') {
+        return chain
+            .deviation_id(p)
+            .map_or(Real::NAN, |id| chain.deviation(id));
+    }
+    let injected = s.injected();
+    match injected.get(p) {
+        Some(v) => *v,
+        None if injected.keys().any(|k| k.contains('_')) => Real::NAN,
+        None => 0.0,
+    }
+}
+
 /// Which shard to run: the given index, else `SLURM_ARRAY_TASK_ID`, else
 /// `JOB_COMPLETION_INDEX` (Kubernetes Indexed Jobs).
 pub fn shard_index(given: Option<usize>) -> Result<usize, String> {
@@ -461,30 +484,23 @@ pub fn run_shard(m: &Manifest, shard: usize) -> Result<Vec<Row>, StudyError> {
     for t in m.trials.iter().filter(|t| t.shard == shard) {
         let clock = Instant::now();
         let mut s = base.clone();
-        let machine = s
+        // The draws replace the scene's values of the same names; joint deviations and ISO
+        // terms are then applied as the scene reader applies `[deviations]`.
+        let mut injected = s
             .serial_mut()
-            .ok_or_else(|| input(&m.scene, "a study varies a serial machine's deviations"))?;
+            .ok_or_else(|| input(&m.scene, "a study varies a serial machine's deviations"))?
+            .injected
+            .clone();
         for (name, v) in &t.deviations {
-            let id = machine
-                .chain
-                .deviation_id(name)
-                .map_err(|e| input(&m.scene, e.to_string()))?;
-            machine.chain.set_deviation(id, *v);
-            machine.injected.insert(name.clone(), *v);
+            injected.insert(name.clone(), *v);
         }
+        s.replace_injected_deviations(injected)
+            .map_err(|e| input(&m.scene, e))?;
         if let Some(sc) = s.scanner.as_mut() {
             sc.seed = t.scanner_seed;
             sc.noise_sigma_mm = t.noise_sigma_mm;
         }
-        let injected: Vec<Real> = m
-            .parameters
-            .iter()
-            .map(|p| {
-                s.chain()
-                    .deviation_id(p)
-                    .map_or(Real::NAN, |id| s.chain().deviation(id))
-            })
-            .collect();
+        let injected: Vec<Real> = m.parameters.iter().map(|p| injected_value(&s, p)).collect();
         let row = match identify_scene(&s, &program, None, Some(0), &NoProgress) {
             Ok(out) => {
                 let r = &out.report;

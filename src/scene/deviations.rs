@@ -147,6 +147,26 @@ fn apply_known(model: &mut Chain, known: &BTreeMap<String, Real>) -> Result<(), 
 }
 
 impl Scene {
+    /// Replaces the serial machine's injected deviations (its `[deviations]` section) by
+    /// `injected`, names as `[deviations]` takes them: the chain becomes the nominal chain
+    /// with its error motions and reversals kept and the map applied as the scene reader
+    /// applies the section (joint deviations first, then the ISO terms composed onto them).
+    /// The identification model is unchanged. The scene is unchanged on an error (an
+    /// unknown name, or a hexapod scene).
+    pub fn replace_injected_deviations(
+        &mut self,
+        injected: BTreeMap<String, Real>,
+    ) -> Result<(), String> {
+        let Machine::Serial(m) = &mut self.machine else {
+            return Err("a hexapod's deviations are not a serial chain's".into());
+        };
+        let mut chain = m.chain.nominal().with_error_motions_of(&m.chain);
+        apply_known(&mut chain, &injected)?;
+        m.chain = chain;
+        m.injected = injected;
+        Ok(())
+    }
+
     /// Replaces the machine's deviation model by the deviations file at `path` (see the
     /// module documentation); the scene is unchanged on an error.
     pub fn apply_deviations_file(&mut self, path: &Path) -> Result<(), SceneError> {

@@ -286,3 +286,52 @@ fn a_study_of_scanner_seeds_gives_the_spread_identify_monte_carlo_gives() {
         p.spread
     );
 }
+
+#[test]
+fn a_study_varies_and_identifies_an_iso_term_by_its_name() {
+    use twinmill::pipeline::identify_scene;
+    use twinmill::progress::NoProgress;
+    let sb = Sandbox::new("study-iso");
+    sb.write("mdx50-step.ngc", builtin("mdx50-step.ngc").as_bytes());
+    let scene = builtin("mdx50-step.toml")
+        .replace("dy_AY = -0.50\n", "")
+        .replace("known = {}", "known = {}\nparameters = [\"EY0A\"]")
+        .replace("pitch_mm = 0.1 ", "pitch_mm = 0.2 ")
+        .replace("pitch_mm = 0.185 ", "pitch_mm = 0.3 ");
+    sb.write("s.toml", scene.as_bytes());
+    sb.write(
+        "study.toml",
+        b"scene = \"s.toml\"\ntrials = 1\nseed = 3\n\
+          [vary.deviations]\nEY0A = { uniform = [-0.6, -0.4] }\n",
+    );
+    let m = study::plan(&sb.dir.join("study.toml"), 1).expect("an ISO name is a deviation");
+    let rows = study::run_shard(&m, 0).expect("runs");
+    let t = &m.trials[0];
+    let (name, v) = &t.deviations[0];
+    assert_eq!(name, "EY0A");
+    assert!((-0.6..=-0.4).contains(v));
+    assert_eq!(rows[0].injected[0], *v, "the truth is the draw");
+    // Independently: the draw written into the scene file's [deviations] by that name, read
+    // by the scene reader, identified with the trial's scanner.
+    sb.write(
+        "s2.toml",
+        scene
+            .replace("[deviations]", &format!("[deviations]\nEY0A = {v:e}\n#"))
+            .as_bytes(),
+    );
+    let mut s = twinmill::scene::Scene::load(&sb.dir.join("s2.toml")).expect("scene");
+    let sc = s.scanner.as_mut().expect("scanner");
+    sc.seed = t.scanner_seed;
+    sc.noise_sigma_mm = t.noise_sigma_mm;
+    let program = s.load_program().expect("program");
+    let out = identify_scene(&s, &program, None, Some(0), &NoProgress).expect("identifies");
+    let e = &out.report.identified[0];
+    assert_eq!(e.name, "EY0A");
+    assert_eq!(rows[0].estimates[0], Some((e.value, e.sigma)));
+    assert!(
+        (e.value - v).abs() < 4.0 * e.sigma.max(1e-4),
+        "EY0A {} ± {} against the injected {v}",
+        e.value,
+        e.sigma
+    );
+}
