@@ -538,3 +538,58 @@ fn corrected_rotary_moves_keep_their_duration_in_inverse_time() {
         "{nc_total}"
     );
 }
+
+/// LinuxCNC's `find_arc_length`, written here from its rule: the start radius times the
+/// angle turned, with the travel along the arc's axis as the other side of a right triangle.
+fn linuxcnc_arc_length(radius: Real, turned_rad: Real, along: Real) -> Real {
+    if along == 0.0 {
+        radius * turned_rad.abs()
+    } else {
+        (radius * turned_rad).hypot(along)
+    }
+}
+
+#[test]
+fn a_corrected_arc_that_turns_a_rotary_axis_keeps_its_helix_duration() {
+    use twinmill::calibration::correct::{CorrectOptions, correct_program, write_gcode};
+    let s = Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/trunnion-ac.toml"))
+        .expect("loads");
+    let home = s.home();
+    // A half turn of radius 5 mm in XY, 2 mm down in Z, while C turns 30°, at 600 mm/min.
+    let src = "G21 G90 G94 G17\nG0 X0 Y0 Z10\nG3 X10 Y0 Z8 I5 J0 C30 F600\nM30\n";
+    let program = twinmill::nc::parse_program(src, Path::new("arc.ngc"), home).expect("parses");
+    // By hand: the helix 5π mm around and 2 mm along, at 600 mm/min.
+    let nominal_min = linuxcnc_arc_length(5.0, std::f64::consts::PI, 2.0) / 600.0;
+    let cp = correct_program(
+        s.chain(),
+        &s.tool,
+        &program,
+        &home,
+        &CorrectOptions::for_accuracy(0.002),
+    )
+    .expect("corrects");
+    let mut text = Vec::new();
+    write_gcode(&cp, &[], &mut text).expect("writes");
+    let text = String::from_utf8(text).expect("utf-8");
+    assert!(text.contains("\nG93\n"), "{text}");
+    let read = twinmill::nc::parse_program(&text, Path::new("corrected.ngc"), home)
+        .expect("the corrected program parses");
+    // The corrected blocks of the arc: every feed move (the move before it is a rapid).
+    let arc: Vec<&Move> = read
+        .moves
+        .iter()
+        .filter(|m| m.feed_mm_per_min.is_some())
+        .collect();
+    assert!(arc.len() > 1, "the arc is written as chords: {text}");
+    let total: Real = arc
+        .iter()
+        .map(|m| {
+            linuxcnc_length(&m.start.to_array(), &m.end.to_array())
+                / m.feed_mm_per_min.expect("feed")
+        })
+        .sum();
+    assert!(
+        (total - nominal_min).abs() < 1e-9 * nominal_min,
+        "the corrected arc takes {total} min, the helix {nominal_min} min"
+    );
+}

@@ -5,7 +5,7 @@ use super::*;
 use crate::cutting::tool::Tool;
 use crate::machine::chain::{AxisKind, Chain};
 use crate::machine::error_motion::Directions;
-use crate::math::Real;
+use crate::math::{Real, Vector3};
 use crate::nc::{AxisLetter, AxisValues, Move, MoveKind, Program};
 
 /// One block of the corrected program: a straight move to `end`.
@@ -390,13 +390,39 @@ pub fn controller_length(from: &AxisValues, to: &AxisValues) -> Real {
     }
 }
 
-/// Puts the feed blocks of straight source moves that turn a rotary axis (in the source or
+/// The length a feed-per-minute controller applies a source move's F to: a straight move's
+/// [`controller_length`]; an arc's helix in X Y Z (LinuxCNC's `find_arc_length`: the start
+/// radius times the angle swept, with the travel along the normal as the other side of the
+/// right triangle when there is any), whatever A B C do meanwhile.
+fn source_length(mv: &Move) -> Real {
+    match mv.kind {
+        MoveKind::Arc(g) => {
+            let xyz = |v: &AxisValues| {
+                Vector3::new(
+                    v.get(AxisLetter::X),
+                    v.get(AxisLetter::Y),
+                    v.get(AxisLetter::Z),
+                )
+            };
+            let along = (xyz(&mv.end) - xyz(&mv.start)).dot(&g.normal);
+            let around = g.radius * g.sweep_deg.to_radians().abs();
+            if along == 0.0 {
+                around
+            } else {
+                around.hypot(along)
+            }
+        }
+        _ => controller_length(&mv.start, &mv.end),
+    }
+}
+
+/// Puts the feed blocks of source moves (straight or arcs) that turn a rotary axis (in the source or
 /// in the block) into inverse time where the programmed feed would give them another
 /// duration than their part of the source move: the source move takes `T =
 /// controller_length / F` minutes, each of its `n` parts (equal shares of its parameter)
 /// must take `T/n`, and gets `F = n/T` in `G93` unless `controller_length / F` of the block
-/// is within [`DURATION_TOLERANCE`] of `T/n`. Arcs keep their feed (their source length
-/// is the helix's, not a chord's). Returns the number of blocks put in inverse time.
+/// is within [`DURATION_TOLERANCE`] of `T/n` (an arc's `T` is its helix's length at F,
+/// [`source_length`]). Returns the number of blocks put in inverse time.
 fn inverse_time_feeds(blocks: &mut [Block], source: &[Move], start: &AxisValues) -> usize {
     let turns = |a: &AxisValues, b: &AxisValues| {
         [AxisLetter::A, AxisLetter::B, AxisLetter::C]
@@ -412,13 +438,14 @@ fn inverse_time_feeds(blocks: &mut [Block], source: &[Move], start: &AxisValues)
             continue;
         };
         let mv = &source[i];
-        if !matches!(mv.kind, MoveKind::Linear)
+        if matches!(mv.kind, MoveKind::Rapid)
             || !(turns(&mv.start, &mv.end) || turns(&from, &b.end))
         {
             continue;
         }
-        // The parts are equal shares of the source parameter: each takes T/n, F = n·f/L.
-        let (length, parts) = (controller_length(&mv.start, &mv.end), b.part.1 as Real);
+        // The parts are equal shares of the source parameter (an arc's angle): each takes
+        // T/n, F = n·f/L.
+        let (length, parts) = (source_length(mv), b.part.1 as Real);
         let nominal = length / f / parts;
         let as_programmed = controller_length(&from, &b.end) / f;
         if nominal > 0.0 && (as_programmed - nominal).abs() > DURATION_TOLERANCE * nominal {
