@@ -423,6 +423,21 @@ pub fn calibrate(
     readings: &[CircleReadings],
     sigma_mm: Real,
 ) -> Result<HexapodCalibration, HexapodCalibrationError> {
+    calibrate_commanded(nominal, nominal, known, plan, readings, sigma_mm)
+}
+
+/// [`calibrate`] of circles run by a `controller` other than the nominal machine (a second
+/// round, on a controller already calibrated): the readings are modelled as
+/// `FK_P(IK_controller(T_k))`; the start, the estimates' deviations and the report's gauge
+/// stay the `nominal` machine's.
+pub fn calibrate_commanded(
+    controller: &Hexapod,
+    nominal: &Hexapod,
+    known: &Hexapod,
+    plan: &Plan,
+    readings: &[CircleReadings],
+    sigma_mm: Real,
+) -> Result<HexapodCalibration, HexapodCalibrationError> {
     let input = |m: String| Err(HexapodCalibrationError::Input(m));
     if readings.len() != plan.circles.len() {
         return input(format!(
@@ -511,7 +526,7 @@ pub fn calibrate(
         let mut i = 0;
         for (j, r) in readings.iter().enumerate() {
             for (k, (cmd, len)) in r.commands.iter().zip(&r.lengths_mm).enumerate() {
-                let reached = twin_pose(nominal, &model, cmd).map_err(kin(j, k))?;
+                let reached = twin_pose(controller, &model, cmd).map_err(kin(j, k))?;
                 let d = reached.position - balls[j];
                 let l = d.norm();
                 res[i] = (l - len) / sigma_mm;

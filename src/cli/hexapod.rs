@@ -22,32 +22,52 @@ pub struct HexapodArgs {
 /// Which hexapod command.
 #[derive(Subcommand)]
 pub enum HexapodCommand {
-    /// Inverse kinematics on the nominal machine (what the controller computes): the six
-    /// strut lengths of a pose.
+    /// Inverse kinematics on the controller's parameters (what the controller computes;
+    /// nominal unless calibrated): the six strut lengths of a pose.
     Ik {
         /// The hexapod scene file (TOML, [machine] kind = "hexapod").
         scene: PathBuf,
         /// The pose X,Y,Z,A,B,C (mm, degrees; R = Rz(C)·Ry(B)·Rx(A)).
         #[arg(long, allow_hyphen_values = true)]
         pose: String,
+        /// Run the controller on these calibrated parameters (the `[controller]` file
+        /// `identify … --corrected` writes) instead of the scene's.
+        #[arg(long, value_name = "FILE")]
+        controller: Option<PathBuf>,
         /// Print {"struts_mm": [...]}.
         #[arg(long)]
         json: bool,
     },
-    /// Forward kinematics: the pose of six strut lengths, by Newton–Raphson from a nearby
-    /// pose (nominal machine; --actual: the machine with the scene's deviations).
+    /// Forward kinematics: the pose of commanded strut lengths (or encoder counts), by
+    /// Newton–Raphson from a nearby pose: where the controller believes the tool is;
+    /// --actual: where the real machine goes.
     Fk {
         /// The hexapod scene file.
         scene: PathBuf,
-        /// The strut lengths L1,…,L6 (mm).
+        /// The commanded strut lengths L1,…,L6 (mm), as the controller computes them (`ik`).
+        #[arg(
+            long,
+            allow_hyphen_values = true,
+            required_unless_present = "counts",
+            conflicts_with = "counts"
+        )]
+        struts: Option<String>,
+        /// The drives' encoder counts N1,…,N6 since homing (needs [drives]): the readings
+        /// N·lead/counts_per_rev (mm) from each strut's reference length.
         #[arg(long, allow_hyphen_values = true)]
-        struts: String,
+        counts: Option<String>,
         /// Start pose X,Y,Z,A,B,C (mm, degrees); default the scene's home pose.
         #[arg(long, allow_hyphen_values = true)]
         near: Option<String>,
-        /// Solve on the actual machine (nominal plus [deviations]).
+        /// Where the actual machine (nominal plus [deviations]) goes: its struts are its own
+        /// reference lengths plus the readings the controller's lengths give.
         #[arg(long)]
         actual: bool,
+        /// Run the controller on these calibrated parameters (the `[controller]` file
+        /// `identify … --corrected` writes) instead of the scene's.
+        #[arg(long, value_name = "FILE")]
+        controller: Option<PathBuf>,
+
         /// Print {"pose": [x, y, z, a, b, c]}.
         #[arg(long)]
         json: bool,
@@ -107,6 +127,10 @@ pub enum HexapodCommand {
         /// Standard deviation of the switch's trip point (mm); default the scene's.
         #[arg(long)]
         sigma: Option<f64>,
+        /// Run the controller on these calibrated parameters (the `[controller]` file
+        /// `identify … --corrected` writes) instead of the scene's.
+        #[arg(long, value_name = "FILE")]
+        controller: Option<PathBuf>,
         /// Print the report as JSON.
         #[arg(long)]
         json: bool,
@@ -125,6 +149,10 @@ pub enum HexapodCommand {
         /// Orientations per angle (steps × steps in all).
         #[arg(long, default_value_t = 5)]
         steps: usize,
+        /// Run the controller on these calibrated parameters (the `[controller]` file
+        /// `identify … --corrected` writes) instead of the scene's.
+        #[arg(long, value_name = "FILE")]
+        controller: Option<PathBuf>,
         /// Print the report as JSON.
         #[arg(long)]
         json: bool,
@@ -160,19 +188,34 @@ fn hexapod_run(command: HexapodCommand) -> Result<ExitCode, String> {
         AmplificationRequest, hexapod_amplification, hexapod_homing, hexapod_pivot,
     };
     use twinmill::scene::HexapodScene;
-    let load = |p: &Path| HexapodScene::load(p).map_err(|e| e.to_string());
+    let load = |p: &Path, controller: &Option<PathBuf>| {
+        let mut s = HexapodScene::load(p).map_err(|e| e.to_string())?;
+        if let Some(c) = controller {
+            s.apply_controller_file(c).map_err(|e| e.to_string())?;
+        }
+        Ok::<_, String>(s)
+    };
     let json_text = |v: serde_json::Value| serde_json::to_string(&v);
     Ok(match command {
-        HexapodCommand::Ik { scene, pose, json } => {
-            let s = load(&scene)?;
+        HexapodCommand::Ik {
+            scene,
+            pose,
+            controller,
+            json,
+        } => {
+            let s = load(&scene, &controller)?;
             let pose = pose_arg(&pose, "pose")?;
             let l = s
-                .nominal
+                .controller
                 .inverse(&pose)
                 .map_err(|e| format!("{}: pose {pose}: {e}", scene.display()))?;
             print_out(
                 || {
-                    let mut t = format!("twinmill: hexapod ik on {} at {pose}\n", s.name);
+                    let mut t = format!(
+                        "twinmill: hexapod ik on {} at {pose} ({})\n",
+                        s.name,
+                        s.controller_label()
+                    );
                     for (i, x) in l.iter().enumerate() {
                         t += &format!("  strut {}   {x:.6} mm\n", i + 1);
                     }
@@ -184,28 +227,58 @@ fn hexapod_run(command: HexapodCommand) -> Result<ExitCode, String> {
         HexapodCommand::Fk {
             scene,
             struts,
+            counts,
             near,
             actual,
+            controller,
             json,
         } => {
-            let s = load(&scene)?;
-            let v = numbers(&struts, 6, "struts")?;
-            let l = [v[0], v[1], v[2], v[3], v[4], v[5]];
+            let s = load(&scene, &controller)?;
+            let l: [f64; 6] = match (&struts, &counts) {
+                (Some(t), _) => {
+                    let v = numbers(t, 6, "struts")?;
+                    [v[0], v[1], v[2], v[3], v[4], v[5]]
+                }
+                (None, Some(c)) => {
+                    let d = s.drives.ok_or_else(|| {
+                        format!(
+                            "{}: --counts needs [drives] lead_mm and counts_per_rev",
+                            scene.display()
+                        )
+                    })?;
+                    let v = numbers(c, 6, "counts")?;
+                    if let Some(x) = v.iter().find(|x| x.fract() != 0.0) {
+                        return Err(format!("--counts are whole encoder counts, got {x}"));
+                    }
+                    let readings: [f64; 6] = std::array::from_fn(|i| v[i] * d.resolution_mm());
+                    s.controller.lengths_of_readings(&readings)
+                }
+                (None, None) => return Err("fk needs --struts or --counts".into()),
+            };
             let near = match near {
                 Some(n) => pose_arg(&n, "near")?,
                 None => s.home,
             };
-            let machine = if actual { &s.actual } else { &s.nominal };
-            let sol = machine
-                .forward(&l, &near)
-                .map_err(|e| format!("{}: {e}", scene.display()))?;
+            let sol = if actual {
+                twinmill::machine::hexapod::reached_by_lengths(&s.controller, &s.actual, &l, &near)
+            } else {
+                s.controller.forward(&l, &near)
+            }
+            .map_err(|e| format!("{}: {e}", scene.display()))?;
             let p = sol.pose.to_mm_deg();
             print_out(
                 || {
                     format!(
-                        "twinmill: hexapod fk on {} ({} machine)\n  pose        {}\n  iterations  {}, strut residual {:.1e} mm\n",
+                        "twinmill: hexapod fk on {} ({})\n  pose        {}\n  iterations  {}, strut residual {:.1e} mm\n",
                         s.name,
-                        if actual { "actual" } else { "nominal" },
+                        if actual {
+                            format!(
+                                "where the actual machine goes, commanded by {}",
+                                s.controller_label()
+                            )
+                        } else {
+                            format!("where {} puts the tool", s.controller_label())
+                        },
                         sol.pose,
                         sol.iterations,
                         sol.residual_mm
@@ -229,7 +302,7 @@ fn hexapod_run(command: HexapodCommand) -> Result<ExitCode, String> {
             resolution_deg,
             json,
         } => {
-            let s = load(&scene)?;
+            let s = load(&scene, &None)?;
             let workspace = match (x, y, z) {
                 (None, None, None) => s.workspace.map(|mut w| {
                     if let Some(t) = tilt {
@@ -280,9 +353,10 @@ fn hexapod_run(command: HexapodCommand) -> Result<ExitCode, String> {
             scene,
             pose,
             sigma,
+            controller,
             json,
         } => {
-            let s = load(&scene)?;
+            let s = load(&scene, &controller)?;
             let pose = pose.map(|p| pose_arg(&p, "pose")).transpose()?;
             let o = hexapod_homing(&s, pose, sigma).map_err(|e| e.to_string())?;
             print_out(
@@ -295,9 +369,10 @@ fn hexapod_run(command: HexapodCommand) -> Result<ExitCode, String> {
             point,
             tilt,
             steps,
+            controller,
             json,
         } => {
-            let s = load(&scene)?;
+            let s = load(&scene, &controller)?;
             let point = match point {
                 Some(p) => {
                     let v = numbers(&p, 3, "point")?;

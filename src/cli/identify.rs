@@ -13,7 +13,7 @@ use std::process::ExitCode;
 use twinmill::metrology::cloud::read_cloud_file;
 use twinmill::pipeline::dbb::{calibrate_measured, calibrate_scene, load_plan};
 use twinmill::pipeline::identify_scene;
-use twinmill::pipeline::instrument_pages::calibrate_page;
+use twinmill::pipeline::instrument_pages::{calibrate_page, measured_calibrate_page};
 use twinmill::pipeline::measurements::{IdentifyRequest, MeasurementKind, identify_measurements};
 use twinmill::pipeline::pages::identify_page;
 use twinmill::scene::HexapodScene;
@@ -163,8 +163,9 @@ pub struct CalibrateOptions {
     /// its order, in the format `measure --instrument ballbar` writes.
     #[arg(long, value_name = "FILE,…", value_delimiter = ',')]
     readings: Vec<PathBuf>,
-    /// With `--readings`: write the corrected parameters (a `[deviations]` fragment of the
-    /// scene) into this file.
+    /// Write the calibrated controller (a `[controller]` file: the identified parameters as
+    /// deviations from nominal, for `--controller FILE` or the scene) into this file, and
+    /// its LinuxCNC genhexkins joint coordinates beside it (`FILE` with `.hal`).
     #[arg(long, value_name = "FILE")]
     corrected: Option<PathBuf>,
 }
@@ -199,7 +200,7 @@ pub struct CalibrateArgs {
 
 /// `twinmill calibrate` (hidden): the hexapod's calibration as before.
 pub fn exec_calibrate(a: CalibrateArgs) -> ExitCode {
-    calibrate(&a.scene, &a.options, a.json).unwrap_or_else(fail)
+    calibrate(&a.scene, &a.options, None, a.json).unwrap_or_else(fail)
 }
 
 /// `identify` on a hexapod scene: refuses the options of a serial machine's, then
@@ -216,16 +217,25 @@ fn calibrate_hexapod(path: &Path, a: &IdentifyArgs) -> ExitCode {
             path.display()
         ));
     }
-    calibrate(path, &a.hexapod, a.args.json).unwrap_or_else(fail)
+    calibrate(path, &a.hexapod, a.args.controller.as_deref(), a.args.json).unwrap_or_else(fail)
 }
 
-/// The hexapod's double-ball-bar calibration: on the twin, or from measured traces.
-fn calibrate(scene: &Path, a: &CalibrateOptions, json: bool) -> Result<ExitCode, String> {
+/// The hexapod's double-ball-bar calibration: on the twin, or from measured traces; the
+/// circles run by the scene's controller or `controller`'s.
+fn calibrate(
+    scene: &Path,
+    a: &CalibrateOptions,
+    controller: Option<&Path>,
+    json: bool,
+) -> Result<ExitCode, String> {
     let procedure = procedure_arg(a.procedure.as_deref())?;
-    let s = HexapodScene {
+    let mut s = HexapodScene {
         accept_misfit: super::accept_misfit(),
         ..HexapodScene::load(scene).map_err(|e| e.to_string())?
     };
+    if let Some(c) = controller {
+        s.apply_controller_file(c).map_err(|e| e.to_string())?;
+    }
     let plan = match &a.plan {
         None => None,
         Some(p) => Some(load_plan(p).map_err(|e| e.to_string())?),
@@ -234,17 +244,9 @@ fn calibrate(scene: &Path, a: &CalibrateOptions, json: bool) -> Result<ExitCode,
         (Some(p), false) => p.procedure,
         _ => procedure,
     };
-    if a.corrected.is_some() && a.readings.is_empty() {
-        return Err(
-            "--corrected needs --readings (the parameters identified from measured circles)".into(),
-        );
-    }
     if !a.readings.is_empty() {
         if a.trials > 0 {
             return Err("--trials runs on the twin; it cannot go with --readings".into());
-        }
-        if a.html.is_some() {
-            return Err("--html is for calibrations on the twin; with --readings the summary, --json and --corrected say it all".into());
         }
         let mut files = Vec::with_capacity(a.readings.len());
         for p in &a.readings {
@@ -252,22 +254,56 @@ fn calibrate(scene: &Path, a: &CalibrateOptions, json: bool) -> Result<ExitCode,
             files.push((p.clone(), text));
         }
         let o = calibrate_measured(&s, procedure, plan, &files).map_err(|e| e.to_string())?;
-        if let Some(out) = &a.corrected {
-            write(out, o.fragment.as_bytes())?;
-        }
+        let page = a
+            .html
+            .as_ref()
+            .map(|h| (h, measured_calibrate_page(&s.name, &o)));
+        let wrote =
+            write_calibration_files(a.corrected.as_deref(), &o.fragment, &o.genhexkins, page)?;
         return Ok(print_out(
-            || o.summary.clone(),
+            || o.summary.clone() + &wrote,
             json.then(|| serde_json::to_string_pretty(&o)),
         ));
     }
     let o = calibrate_scene(&s, procedure, plan, a.trials).map_err(|e| e.to_string())?;
-    if let Some(html) = &a.html {
-        write(html, calibrate_page(&s.name, &o).as_bytes())?;
-    }
+    let page = a.html.as_ref().map(|h| (h, calibrate_page(&s.name, &o)));
+    let wrote = write_calibration_files(a.corrected.as_deref(), &o.fragment, &o.genhexkins, page)?;
     Ok(print_out(
-        || o.summary.clone(),
+        || o.summary.clone() + &wrote,
         json.then(|| serde_json::to_string_pretty(&o)),
     ))
+}
+
+/// Writes the controller file (and the genhexkins file beside it: the same name with
+/// `.hal`) and the page; returns the summary's lines naming them.
+fn write_calibration_files(
+    corrected: Option<&Path>,
+    fragment: &str,
+    genhexkins: &str,
+    page: Option<(&PathBuf, String)>,
+) -> Result<String, String> {
+    let mut wrote = String::new();
+    if let Some(out) = corrected {
+        let hal = out.with_extension("hal");
+        if hal == out {
+            return Err(format!(
+                "--corrected {}: the genhexkins file beside it would take the same name (give the controller file a .toml name)",
+                out.display()
+            ));
+        }
+        write(out, fragment.as_bytes())?;
+        write(&hal, genhexkins.as_bytes())?;
+        wrote += &format!(
+            "  wrote         {} (controller), {} (LinuxCNC genhexkins)\n",
+            out.display(),
+            hal.display()
+        );
+    }
+    if let Some((path, html)) = page {
+        write(path, html.as_bytes())?;
+        wrote += &format!("  wrote         {}\n", path.display());
+    }
+    Ok(wrote)
 }
 
 /// `twinmill identify`.

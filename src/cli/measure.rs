@@ -79,6 +79,10 @@ pub struct MeasureArgs {
     /// machine's (the file `identify --measurement … --deviations-out` writes).
     #[arg(long, value_name = "FILE")]
     deviations: Option<PathBuf>,
+    /// A hexapod: run the circle with the controller on these calibrated parameters (the
+    /// `[controller]` file `identify … --corrected` writes).
+    #[arg(long, value_name = "FILE")]
+    controller: Option<PathBuf>,
     /// Gaussian noise of each reading or sample, σ (µm; default 0: the twin repeats exactly;
     /// a hexapod's double ball bar: 0.5).
     /// Ball sensor: the micrometers' accuracy bound ±a (µm, default 0.5, seed 003's), each
@@ -400,6 +404,7 @@ pub fn exec(a: MeasureArgs) -> ExitCode {
     let request = MeasureRequest {
         accept_misfit: super::accept_misfit(),
         deviations: a.deviations,
+        controller: a.controller,
         scene: a.scene,
         instrument: a.instrument.request(),
         out: a.out,

@@ -29,7 +29,7 @@ use std::sync::Mutex;
 use twinmill::nc::Program;
 use twinmill::output::{json_bytes, ply_bytes, write_files};
 use twinmill::progress::Progress;
-use twinmill::scene::{MemoryBudget, Need, Scene, SceneError};
+use twinmill::scene::{Machine, MemoryBudget, Need, Scene, SceneError};
 
 /// `--accept-misfit`, set once from the command line before any verb runs; every scene a
 /// verb loads takes it.
@@ -72,6 +72,10 @@ pub struct SceneArgs {
     /// simulates it and correct's model is it.
     #[arg(long, value_name = "FILE")]
     pub deviations: Option<PathBuf>,
+    /// A hexapod: run its controller on these calibrated parameters (the `[controller]` file
+    /// `identify … --corrected` writes) instead of the scene's.
+    #[arg(long, value_name = "FILE")]
+    pub controller: Option<PathBuf>,
 }
 
 /// A scene loaded for a verb: a serial machine's scene with its program, or a hexapod's
@@ -106,7 +110,11 @@ pub fn load(a: &SceneArgs, command: &str, needs: &[Need]) -> Result<Loaded, Exit
     };
     let scene = match Scene::load_with(&a.scene, &budget) {
         Err(SceneError::Hexapod { .. }) if command == "simulate" => {
-            Scene::load_hexapod_cut(&a.scene, &budget).map_err(fail)?
+            let mut s = Scene::load_hexapod_cut(&a.scene, &budget).map_err(fail)?;
+            if let Some(c) = &a.controller {
+                s.apply_controller_file(c).map_err(fail)?;
+            }
+            s
         }
         Err(SceneError::Hexapod { path }) => {
             return match &a.deviations {
@@ -120,6 +128,9 @@ pub fn load(a: &SceneArgs, command: &str, needs: &[Need]) -> Result<Loaded, Exit
         accept_misfit: accept_misfit(),
         ..scene
     };
+    if let (Some(c), Machine::Serial(_)) = (&a.controller, &scene.machine) {
+        return Err(refuse_controller(&scene.path, c));
+    }
     if let Some(d) = &a.deviations {
         scene.apply_deviations_file(d).map_err(fail)?;
     }
@@ -133,6 +144,15 @@ pub fn load(a: &SceneArgs, command: &str, needs: &[Need]) -> Result<Loaded, Exit
         Err(e) => return Err(fail(e)),
     };
     Ok(Loaded::Serial(Box::new(scene), program))
+}
+
+/// The one-line refusal of `--controller` on a serial scene.
+pub fn refuse_controller(scene: &Path, controller: &Path) -> ExitCode {
+    fail(format!(
+        "{}: --controller gives a hexapod controller's calibrated parameters; {} is a serial machine (its identified deviations go with --deviations)",
+        controller.display(),
+        scene.display()
+    ))
 }
 
 /// The one-line refusal of `--deviations` on a hexapod scene.
@@ -157,6 +177,9 @@ pub fn load_machine(a: &SceneArgs, command: &str, why: &str) -> Result<Scene, Ex
         r => r.map_err(fail)?,
     };
     scene.accept_misfit = accept_misfit();
+    if let Some(c) = &a.controller {
+        return Err(refuse_controller(&scene.path, c));
+    }
     if let Some(d) = &a.deviations {
         scene.apply_deviations_file(d).map_err(fail)?;
     }

@@ -855,20 +855,40 @@ fn well_conditioned(lu: &nalgebra::LU<Real, nalgebra::U6, nalgebra::U6>) -> bool
     hi.is_finite() && lo > hi * tol::JACOBIAN_CONDITION
 }
 
-/// The twin's pose for a command: the controller computes the readings on the `nominal`
-/// parameters, the `actual` machine moves to the pose they give (Newton from the command
-/// itself): `FK_actual(IK_nominal(command))`. The command must lie in the nominal
-/// workspace; the reached pose is not held to the limits (it is where the machine goes).
+/// The twin's pose for a command: the controller computes the readings on its parameters
+/// (`controller`: the nominal machine, or the calibrated parameters a calibration gave it),
+/// the `actual` machine moves to the pose they give (Newton from the command itself):
+/// `FK_actual(l0_actual + IK_controller(command) − l0_controller)`, which is
+/// `FK_actual(IK_controller(command))` when the reference lengths agree. The command must
+/// lie in the controller's workspace; the reached pose is not held to the limits (it is
+/// where the machine goes).
 pub fn twin_pose(
-    nominal: &Hexapod,
+    controller: &Hexapod,
     actual: &Hexapod,
     command: &Pose,
 ) -> Result<Pose, HexapodError> {
-    nominal.check_pose(command)?;
-    let readings = nominal.readings(command);
+    controller.check_pose(command)?;
+    let readings = controller.readings(command);
     actual
         .forward_unchecked(&actual.lengths_of_readings(&readings), command)
         .map(|s| s.pose)
+}
+
+/// Where the `actual` machine goes when its drives are commanded to the strut `lengths` the
+/// `controller` computed (its IK, [`Hexapod::inverse`]): the drives read
+/// `s_i = L_i − l0_i` on the controller's reference lengths, the real struts are then
+/// `l0_i(actual) + s_i` long, and the pose is their forward kinematics from `near`. The
+/// controller's lengths are checked against its stroke, the pose reached is not held to the
+/// limits (it is where the machine goes).
+pub fn reached_by_lengths(
+    controller: &Hexapod,
+    actual: &Hexapod,
+    lengths: &Struts,
+    near: &Pose,
+) -> Result<FkSolution, HexapodError> {
+    controller.check_lengths(lengths)?;
+    let readings: Struts = std::array::from_fn(|i| lengths[i] - controller.reference[i]);
+    actual.forward_unchecked(&actual.lengths_of_readings(&readings), near)
 }
 
 /// Serial axes on the table side of a hexapod: the chain from the workpiece frame (the
@@ -883,17 +903,26 @@ pub struct TableAxes {
 }
 
 /// The hexapod as an NC program drives it: the controller interpolates the axis values
-/// linearly (Cartesian interpolation) and runs inverse kinematics on the nominal machine;
-/// the actual machine puts the tool at `FK_actual(IK_nominal(command))` ([`twin_pose`]).
-/// X, Y, Z and the angles A, B, C are the platform's pose (the tool point in the base
-/// frame, `R = Rz(c)·Ry(b)·Rx(a)`), except the letters of the table's axes: those turn the
-/// table, and the platform holds the home pose's value of that angle. The tool's tip is the
-/// tool point, its axis the platform's +z. The workpiece frame is the base frame, or with
-/// table axes the frame the table carries.
+/// linearly (Cartesian interpolation) and runs inverse kinematics on its parameters
+/// (`controller`: the nominal machine, or calibrated ones); the actual machine puts the tool
+/// at `FK_actual(IK_controller(command))` ([`twin_pose`]). X, Y, Z and the angles A, B, C
+/// are the platform's pose (the tool point in the base frame, `R = Rz(c)·Ry(b)·Rx(a)`),
+/// except the letters of the table's axes: those turn the table, and the platform holds the
+/// home pose's value of that angle. The tool's tip is the tool point, its axis the
+/// platform's +z. The workpiece frame is the base frame, or with table axes the frame the
+/// table carries.
+///
+/// Three machines: `nominal` (the design, what the commanded path means), `controller`
+/// (what the kinematics compute with) and `actual` (as built). A calibration changes the
+/// controller and nothing else: [`HexapodTwin::with_controller`] re-measures a machine
+/// after its controller took the calibrated parameters.
 #[derive(Clone, Debug, PartialEq)]
 pub struct HexapodTwin {
-    /// The machine as the controller knows it.
+    /// The machine as designed: the parameters the commanded path is meant on.
     pub nominal: Hexapod,
+    /// The parameters the controller's kinematics use (the nominal machine unless
+    /// calibrated).
+    pub controller: Hexapod,
     /// The machine as built.
     pub actual: Hexapod,
     /// The home pose: the platform's angles for the letters the table takes.
@@ -903,6 +932,32 @@ pub struct HexapodTwin {
 }
 
 impl HexapodTwin {
+    /// A machine whose controller runs on the `nominal` parameters: the controller is the
+    /// design.
+    pub fn nominal_controller(
+        nominal: Hexapod,
+        actual: Hexapod,
+        home: Pose,
+        table: Option<TableAxes>,
+    ) -> HexapodTwin {
+        HexapodTwin {
+            controller: nominal.clone(),
+            nominal,
+            actual,
+            home,
+            table,
+        }
+    }
+
+    /// The same machine with its controller running on `controller` (calibrated
+    /// parameters): the actual machine and the table are unchanged.
+    pub fn with_controller(&self, controller: Hexapod) -> HexapodTwin {
+        HexapodTwin {
+            controller,
+            ..self.clone()
+        }
+    }
+
     /// The platform's commanded pose at the axis values `q`.
     pub fn platform_command(&self, q: &AxisValues) -> Pose {
         let mut angles = self.home.angles;
@@ -975,7 +1030,7 @@ impl HexapodTwin {
 
     /// The platform pose reached for the axis values `q` (base frame).
     pub fn reached(&self, q: &AxisValues) -> Result<Pose, HexapodError> {
-        twin_pose(&self.nominal, &self.actual, &self.platform_command(q))
+        twin_pose(&self.controller, &self.actual, &self.platform_command(q))
     }
 }
 
@@ -1013,7 +1068,7 @@ impl PoseSource for HexapodTwin {
         let turns = [AxisLetter::A, AxisLetter::B, AxisLetter::C]
             .into_iter()
             .any(|l| start.get(l) != end.get(l));
-        self.nominal == self.actual
+        self.controller == self.actual
             && !turns
             && self.table.as_ref().is_none_or(|t| t.nominal == t.actual)
     }

@@ -6,8 +6,8 @@
 use super::hexapod::HexapodCommandError;
 use crate::calibration::hexapod_calibrate::{
     CircleReadings, DEFAULT_POINTS, HexapodCalibration, Plan, PoseErrors, Procedure,
-    TableCalibration, WORK, WorkTime, calibrate, calibrated_model, default_plan, measured_model,
-    pose_errors, true_deviations, work_time,
+    TableCalibration, WORK, WorkTime, calibrate_commanded, calibrated_model, default_plan,
+    measured_model, pose_errors, true_deviations, work_time,
 };
 use crate::calibration::hexapod_design::{CircleDesign, design};
 use crate::machine::hexapod::{Hexapod, ParameterId};
@@ -49,14 +49,14 @@ pub struct BallbarOutcome {
     pub summary: String,
 }
 
-/// Runs `circle` with `instrument` on the scene's machine (controller on the nominal
-/// parameters, the machine on the actual ones) and evaluates the trace.
+/// Runs `circle` with `instrument` on the scene's machine (the controller on its parameters,
+/// nominal unless calibrated; the machine on the actual ones) and evaluates the trace.
 pub fn ballbar(
     scene: &HexapodScene,
     circle: &DbbCircle,
     instrument: &DbbInstrument,
 ) -> Result<BallbarOutcome, HexapodCommandError> {
-    let m = measure(&scene.nominal, &scene.actual, circle, instrument)
+    let m = measure(&scene.controller, &scene.actual, circle, instrument)
         .map_err(|e| error(scene, e.to_string()))?;
     let opts = CircularOptions {
         radius_mm: circle.radius_mm,
@@ -124,7 +124,7 @@ pub struct CalibrationRun {
     pub parameters: Vec<ParameterRow>,
     /// The largest |identified − injected| / σ.
     pub worst_normalised_error: Real,
-    /// Pose errors with the nominal controller.
+    /// Pose errors with the scene's controller (nominal unless calibrated).
     pub before: PoseErrors,
     /// Pose errors with the calibrated controller (jig-free: the base frame placed by the
     /// tool table calibration, [`TableCalibration::Tool`]).
@@ -134,6 +134,10 @@ pub struct CalibrationRun {
     pub after_joint_fit: Option<PoseErrors>,
     /// Jig-free: the table calibration's rotation (µrad) and largest joint displacement (mm).
     pub table_alignment: Option<(Real, Real)>,
+    /// The calibrated controller whose pose errors are `after`: the identified parameters,
+    /// jig-free with the base frame the tool table calibration placed.
+    #[serde(skip)]
+    pub controller: Hexapod,
 }
 
 /// Measures the plan's circles on `actual`, identifies, and evaluates before and after.
@@ -159,14 +163,15 @@ pub fn calibration_run(
             seed,
             stream: (j as u64) << 32,
         };
-        let m = measure(&scene.nominal, actual, c, &inst)
+        let m = measure(&scene.controller, actual, c, &inst)
             .map_err(|e| error(scene, format!("circle {}: {e}", j + 1)))?;
         readings.push(CircleReadings {
             lengths_mm: m.lengths_mm(c.radius_mm),
             commands: m.commands,
         });
     }
-    let mut cal = calibrate(
+    let mut cal = calibrate_commanded(
+        &scene.controller,
         &scene.nominal,
         actual,
         plan,
@@ -197,7 +202,7 @@ pub fn calibration_run(
     let (model, table_alignment) =
         calibrated_model(&cal, actual, actual, ws, TableCalibration::Tool)
             .map_err(|e| error(scene, e.to_string()))?;
-    let before = pose_errors(&scene.nominal, actual, ws)
+    let before = pose_errors(&scene.controller, actual, ws)
         .map_err(|e| error(scene, format!("pose errors before: {e}")))?;
     let after = pose_errors(&model, actual, ws)
         .map_err(|e| error(scene, format!("pose errors after: {e}")))?;
@@ -219,6 +224,7 @@ pub fn calibration_run(
         after,
         after_joint_fit,
         table_alignment: table_alignment.map(|(a, t)| (a * 1e6, t)),
+        controller: model,
     })
 }
 
@@ -268,6 +274,98 @@ pub struct TrialSummary {
     pub after_joint_fit_mm: Option<(Real, Real)>,
 }
 
+/// The calibrated `controller` as a controller file (`--controller FILE`, or pasted into the
+/// scene): `#` lines of `header`, then `[controller]` with every parameter the calibration
+/// solved — as its deviation from the scene's nominal machine (mm), its σ as a comment — and
+/// the platform joints where the scene's (the CMM's, which the calibration takes) differ
+/// from nominal. Parameters in index order; fixed decimals, so the same calibration writes
+/// the same bytes.
+pub fn controller_fragment(
+    scene: &HexapodScene,
+    controller: &Hexapod,
+    cal: &HexapodCalibration,
+    header: &[String],
+) -> String {
+    use std::fmt::Write as _;
+    let mut t = String::new();
+    for h in header {
+        let mut line = String::from("#");
+        for w in h.split_whitespace() {
+            if line.len() + 1 + w.len() > 92 && line.len() > 1 {
+                let _ = writeln!(t, "{line}");
+                line = String::from("#");
+            }
+            line.push(' ');
+            line.push_str(w);
+        }
+        let _ = writeln!(t, "{line}");
+    }
+    t.push_str(
+        "# The parameters the controller's kinematics take, as deviations from the scene's nominal\n\
+         # machine (mm; σ: the identification's standard uncertainty). Use it with --controller FILE\n\
+         # (hexapod ik, fk, pivot, homing; measure, simulate, identify) or paste it into the scene.\n\
+         [controller]\n",
+    );
+    let solved: std::collections::BTreeMap<&str, Real> = cal
+        .estimates
+        .iter()
+        .map(|e| (e.name.as_str(), e.sigma_mm))
+        .collect();
+    for id in ParameterId::all() {
+        let name = id.name();
+        let value = controller.parameter(id) - scene.nominal.parameter(id);
+        match solved.get(name.as_str()) {
+            Some(sigma) => {
+                let _ = writeln!(t, "{name} = {value:.7}   # σ {sigma:.7}");
+            }
+            None if value != 0.0 => {
+                let _ = writeln!(t, "{name} = {value:.7}   # the scene's (CMM)");
+            }
+            None => {}
+        }
+    }
+    t
+}
+
+/// The calibrated `controller` as LinuxCNC genhexkins takes it: HAL `setp` lines of its
+/// input pins `genhexkins.base.N.x|y|z` (the base joints `b_i`, N = i − 1) and
+/// `genhexkins.platform.N.x|y|z` (the platform joints less the tool offset, `a_i − o`:
+/// genhexkins' pose is the platform origin's, so the origin is moved to the tool point), and
+/// the reference lengths as the joints' `[JOINT_N] HOME_OFFSET` in comments (the strut
+/// length at the home index, which the INI file holds). The names are those of
+/// `src/emc/kinematics/genhexkins.c` (pins created as `%s.base.%d.x` with the prefix
+/// `genhexkins`, LinuxCNC 2.9 and master). `#` lines of `header` on top.
+pub fn genhexkins_hal(controller: &Hexapod, header: &[String]) -> String {
+    use std::fmt::Write as _;
+    let mut t = String::new();
+    for h in header {
+        let _ = writeln!(t, "# {h}");
+    }
+    t.push_str(
+        "# LinuxCNC genhexkins: base and platform joint coordinates (mm) for the HAL file, with\n\
+         # genhexkins.spindle-offset and genhexkins.tool-offset at 0 (the platform joints are\n\
+         # given relative to the tool point).\n",
+    );
+    let o = controller.tool_offset();
+    for (i, b) in controller.base_joints().iter().enumerate() {
+        for (k, c) in ["x", "y", "z"].iter().enumerate() {
+            let _ = writeln!(t, "setp genhexkins.base.{i}.{c} {:.7}", b[k]);
+        }
+    }
+    for (i, a) in controller.platform_joints().iter().enumerate() {
+        for (k, c) in ["x", "y", "z"].iter().enumerate() {
+            let _ = writeln!(t, "setp genhexkins.platform.{i}.{c} {:.7}", a[k] - o[k]);
+        }
+    }
+    t.push_str(
+        "# The struts' reference lengths: each joint's position at its home index (INI file).\n",
+    );
+    for (i, l) in controller.reference_lengths().iter().enumerate() {
+        let _ = writeln!(t, "# [JOINT_{i}] HOME_OFFSET = {l:.7}");
+    }
+    t
+}
+
 /// `twinmill calibrate`'s outcome.
 #[derive(Clone, Debug, Serialize)]
 pub struct CalibrateOutcome {
@@ -283,6 +381,13 @@ pub struct CalibrateOutcome {
     pub work: [WorkTime; 2],
     /// With trials: their figures.
     pub trials: Option<TrialSummary>,
+    /// The calibrated controller (the one `run.after` is measured with) as a controller
+    /// file ([`controller_fragment`]).
+    #[serde(skip)]
+    pub fragment: String,
+    /// The same controller as LinuxCNC genhexkins' HAL pins ([`genhexkins_hal`]).
+    #[serde(skip)]
+    pub genhexkins: String,
     /// The summary text.
     #[serde(skip)]
     pub summary: String,
@@ -396,6 +501,20 @@ pub fn calibrate_scene(
         None
     };
     let warning = run.calibration.fit.accepted_line();
+    let mut header = vec![format!(
+        "The calibrated controller of {} identified by `twinmill identify` on the twin ({}, {} circles measured on the scene's machine, σ {} µm).",
+        scene.name,
+        plan.procedure.name(),
+        plan.circles.len(),
+        CALIBRATION_NOISE_MM * 1e3
+    )];
+    if let Some((angle, shift)) = run.table_alignment {
+        header.push(format!(
+            "Jig-free: the base frame placed by the table calibration on the tool (taken as exact): turned {angle:.2} µrad, joints moved up to {shift:.4} mm."
+        ));
+    }
+    let fragment = controller_fragment(scene, &run.controller, &run.calibration, &header);
+    let genhexkins = genhexkins_hal(&run.controller, &header[..1]);
     let mut summary = calibration_summary(&scene.name, procedure, &run, &work, trials.as_ref());
     if let Some(w) = &warning {
         summary.insert_str(0, &format!("twinmill: {w}\n"));
@@ -406,6 +525,8 @@ pub fn calibrate_scene(
         run,
         work,
         trials,
+        fragment,
+        genhexkins,
         summary,
     })
 }
@@ -866,8 +987,11 @@ pub struct MeasuredCalibrationOutcome {
     /// average ([`measured_model`]): the readings alone decide it, never the scene's
     /// simulated machine.
     pub predicted_correction: PoseErrors,
-    /// The corrected parameters as a `[deviations]` fragment of the hexapod scene (TOML).
+    /// The calibrated controller as a controller file ([`controller_fragment`]): the
+    /// identified machine's parameters (jig-free, placed as above) for `--controller FILE`.
     pub fragment: String,
+    /// The same controller as LinuxCNC genhexkins' HAL pins ([`genhexkins_hal`]).
+    pub genhexkins: String,
     /// What the CLI prints.
     pub summary: String,
 }
@@ -961,7 +1085,8 @@ pub fn calibrate_measured(
         });
     }
     // The platform joints (the CMM's) are the scene's; nothing else of its machine is used.
-    let mut cal = calibrate(
+    let mut cal = calibrate_commanded(
+        &scene.controller,
         &scene.nominal,
         &scene.actual,
         plan,
@@ -979,38 +1104,32 @@ pub fn calibrate_measured(
         .map_err(|e| error(scene, e.to_string()))?;
     // The identified machine stands in for the real one: its tool against the nominal
     // controller's is the correction the calibration makes.
-    let (identified, _) = measured_model(&cal, &scene.actual, &scene.nominal, &ws)
+    let (identified, placement) = measured_model(&cal, &scene.actual, &scene.controller, &ws)
         .map_err(|e| error(scene, e.to_string()))?;
-    let predicted_correction = pose_errors(&scene.nominal, &identified, &ws)
+    let predicted_correction = pose_errors(&scene.controller, &identified, &ws)
         .map_err(|e| error(scene, format!("pose errors of the identified machine: {e}")))?;
-    let mut fragment = format!(
-        "# Corrected parameters of {} identified by `twinmill calibrate` ({}, {} circles)\n\
-         # from {}.\n\
-         # Deviations from nominal (mm) with their standard uncertainty; the platform joints\n\
-         # are the scene's (CMM). Replace the scene's base-joint and reference-length lines.\n",
-        scene.name,
-        plan.procedure.name(),
-        plan.circles.len(),
-        files
-            .iter()
-            .map(|(p, _)| p.display().to_string())
-            .collect::<Vec<_>>()
-            .join(", ")
-    );
-    if !cal.identifiability.gauge.is_empty() {
-        fragment.push_str(
-            "# Jig-free: the base frame's six rigid motions are not determined by lengths; the\n\
-             # base joints are given with no rigid motion, the table calibration places them.\n",
-        );
+    let sources = files
+        .iter()
+        .map(|(p, _)| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ");
+    let mut header = vec![
+        format!(
+            "The calibrated controller of {} identified by `twinmill identify --readings` ({}, {} circles)",
+            scene.name,
+            plan.procedure.name(),
+            plan.circles.len()
+        ),
+        format!("from {sources}."),
+    ];
+    if let Some((angle, shift)) = placement {
+        header.push(format!(
+            "Jig-free: lengths do not see the base frame; it is placed so that the tool, commanded through the controller that ran the circles to the workspace's eight reference corners, fits the commanded positions (turned {:.2} µrad, joints moved up to {shift:.4} mm): the table frame the machine was aligned in. A table calibration replaces this placement.",
+            angle * 1e6
+        ));
     }
-    fragment.push_str("[deviations]\n");
-    for e in &cal.estimates {
-        let _ = writeln!(
-            fragment,
-            "{} = {:.7}   # σ {:.7}",
-            e.name, e.value_mm, e.sigma_mm
-        );
-    }
+    let fragment = controller_fragment(scene, &identified, &cal, &header);
+    let genhexkins = genhexkins_hal(&identified, &header[..1]);
     let warning = cal.fit.accepted_line();
     let mut summary = warning
         .as_ref()
@@ -1052,8 +1171,10 @@ pub fn calibrate_measured(
     }
     let _ = writeln!(
         summary,
-        "  correction    the nominal controller is off by up to {:.4} mm (position), {:.4} mm (pivot) on the identified machine",
-        predicted_correction.position_mm, predicted_correction.pivot_mm
+        "  correction    {} is off by up to {:.4} mm (position), {:.4} mm (pivot) on the identified machine; the calibrated controller (--corrected) removes it",
+        scene.controller_label(),
+        predicted_correction.position_mm,
+        predicted_correction.pivot_mm
     );
     Ok(MeasuredCalibrationOutcome {
         warning,
@@ -1062,6 +1183,7 @@ pub fn calibrate_measured(
         calibration: cal,
         predicted_correction,
         fragment,
+        genhexkins,
         summary,
     })
 }

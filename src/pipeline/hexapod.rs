@@ -20,6 +20,16 @@ use crate::report::render::encode_png;
 use crate::scene::HexapodScene;
 use serde::Serialize;
 
+/// What the scene's controller runs on, for the JSON: `"nominal"`, `"[controller]"` (the
+/// scene's section) or the controller file's path.
+pub fn controller_name(scene: &HexapodScene) -> String {
+    match (&scene.controller_file, scene.calibrated_controller()) {
+        (Some(p), _) => p.display().to_string(),
+        (None, true) => "[controller]".into(),
+        (None, false) => "nominal".into(),
+    }
+}
+
 /// The most grid points along one axis of a map or pivot test.
 pub const MAX_STEPS: usize = 401;
 
@@ -188,7 +198,7 @@ pub fn hexapod_homing(
     }
     let pose = pose.unwrap_or(scene.home);
     let struts = homing_check(&setup);
-    let wrong_index = wrong_index_effects(&scene.nominal, &scene.actual, &pose, setup.lead_mm)
+    let wrong_index = wrong_index_effects(&scene.controller, &scene.actual, &pose, setup.lead_mm)
         .map_err(|e| error(scene, format!("pose {pose}: {e}")))?;
     let summary = homing_summary(
         &scene.name,
@@ -209,6 +219,9 @@ pub fn hexapod_homing(
 /// The pivot test and the level positioning survey.
 #[derive(Clone, Debug, Serialize)]
 pub struct PivotOutcome {
+    /// What the controller runs on: `"nominal"`, `"[controller]"` (the scene's) or the
+    /// controller file's path.
+    pub controller: String,
     /// The pivot test.
     pub pivot: PivotReport,
     /// The largest positioning error with the tool level over the workspace grid (mm) and
@@ -220,8 +233,9 @@ pub struct PivotOutcome {
 }
 
 /// The pivot test at `point` (default: home's position) over `steps × steps` tilts in
-/// `[−tilt, tilt]` on the actual machine commanded through the nominal one, and the level
-/// positioning over the scene's workspace (`survey_steps` per axis).
+/// `[−tilt, tilt]` on the actual machine commanded through the scene's controller (nominal
+/// unless calibrated: `[controller]` or a controller file), and the level positioning over
+/// the scene's workspace (`survey_steps` per axis).
 pub fn hexapod_pivot(
     scene: &HexapodScene,
     point: Option<Vector3>,
@@ -241,19 +255,25 @@ pub fn hexapod_pivot(
         return Err(error(scene, "--point must be finite"));
     }
     let pivot =
-        pivot_test(&scene.nominal, &scene.actual, &point, tilt_deg, steps).map_err(|e| {
+        pivot_test(&scene.controller, &scene.actual, &point, tilt_deg, steps).map_err(|e| {
             error(
                 scene,
                 format!("pivot at ({}, {}, {}) mm: {e}", point.x, point.y, point.z),
             )
         })?;
     let level_positioning = match &scene.workspace {
-        Some(ws) => level_positioning(&scene.nominal, &scene.actual, ws, [survey_steps; 3])
+        Some(ws) => level_positioning(&scene.controller, &scene.actual, ws, [survey_steps; 3])
             .map_err(|e| error(scene, format!("positioning survey: {e}")))?,
         None => None,
     };
-    let summary = pivot_summary(&scene.name, &pivot, level_positioning.as_ref());
+    let mut summary = pivot_summary(&scene.name, &pivot, level_positioning.as_ref());
+    let at = summary.find('\n').map_or(summary.len(), |k| k + 1);
+    summary.insert_str(
+        at,
+        &format!("  controller    {}\n", scene.controller_label()),
+    );
     Ok(PivotOutcome {
+        controller: controller_name(scene),
         pivot,
         level_positioning,
         summary,

@@ -180,13 +180,13 @@ pub fn hexapod_ballbar_page(scene: &str, o: &super::dbb::BallbarOutcome) -> Stri
     ))
 }
 
-/// `twinmill calibrate`'s page: the identified parameters with σ beside the injected
-/// ones, the singular values, what the readings do not determine and why (the gauge), the
-/// pose errors before and after, the working times and the trials.
-pub fn calibrate_page(scene: &str, o: &super::dbb::CalibrateOutcome) -> String {
+/// The sections every hexapod calibration page opens with: identifiability, fit, what is
+/// not determined, what is weak.
+fn identification_sections(
+    c: &crate::calibration::hexapod_calibrate::HexapodCalibration,
+) -> Vec<crate::report::html::Section> {
     use crate::calibration::hexapod_calibrate::RANK_TOLERANCE;
     use crate::report::html::Section;
-    let c = &o.run.calibration;
     let id = &c.identifiability;
     let mut sections = vec![Section {
         heading: "Identifiability".into(),
@@ -247,6 +247,50 @@ pub fn calibrate_page(scene: &str, o: &super::dbb::CalibrateOutcome) -> String {
         "Directions the readings determine with σ above a tenth of their magnitude: solved, their large σ carried into the parameters'.",
         &id.weak,
     ));
+    sections
+}
+
+/// The singular-value table and the threshold (the rank cut) of a hexapod calibration.
+fn singular_value_section(
+    c: &crate::calibration::hexapod_calibrate::HexapodCalibration,
+) -> (crate::report::html::Section, Real) {
+    use crate::calibration::hexapod_calibrate::RANK_TOLERANCE;
+    use crate::report::html::Section;
+    let id = &c.identifiability;
+    let threshold = id.singular_values.first().copied().unwrap_or(0.0) * RANK_TOLERANCE;
+    let section = Section {
+        heading: "Singular values".into(),
+        intro: "Of the scaled, whitened Jacobian, largest first.".into(),
+        columns: vec!["#".into(), "singular value".into(), "".into()],
+        rows: id
+            .singular_values
+            .iter()
+            .enumerate()
+            .map(|(i, s)| {
+                vec![
+                    (i + 1).to_string(),
+                    format!("{s:.6e}"),
+                    if i < id.rank {
+                        "determined"
+                    } else {
+                        "not determined"
+                    }
+                    .into(),
+                ]
+            })
+            .collect(),
+    };
+    (section, threshold)
+}
+
+/// `twinmill calibrate`'s page: the identified parameters with σ beside the injected
+/// ones, the singular values, what the readings do not determine and why (the gauge), the
+/// pose errors before and after, the working times and the trials.
+pub fn calibrate_page(scene: &str, o: &super::dbb::CalibrateOutcome) -> String {
+    use crate::report::html::Section;
+    let c = &o.run.calibration;
+    let id = &c.identifiability;
+    let mut sections = identification_sections(c);
     sections.push(Section {
         heading: "Identified parameters".into(),
         intro: "Each parameter's deviation from nominal, identified with its standard uncertainty σ, beside the deviation the scene injects (in the same gauge).".into(),
@@ -268,29 +312,8 @@ pub fn calibrate_page(scene: &str, o: &super::dbb::CalibrateOutcome) -> String {
             })
             .collect(),
     });
-    let threshold = id.singular_values.first().copied().unwrap_or(0.0) * RANK_TOLERANCE;
-    sections.push(Section {
-        heading: "Singular values".into(),
-        intro: "Of the scaled, whitened Jacobian, largest first.".into(),
-        columns: vec!["#".into(), "singular value".into(), "".into()],
-        rows: id
-            .singular_values
-            .iter()
-            .enumerate()
-            .map(|(i, s)| {
-                vec![
-                    (i + 1).to_string(),
-                    format!("{s:.6e}"),
-                    if i < id.rank {
-                        "determined"
-                    } else {
-                        "not determined"
-                    }
-                    .into(),
-                ]
-            })
-            .collect(),
-    });
+    let (sv, threshold) = singular_value_section(c);
+    sections.push(sv);
     let mut pose = vec![
         vec![
             "largest level positioning error (mm)".into(),
@@ -380,6 +403,80 @@ pub fn calibrate_page(scene: &str, o: &super::dbb::CalibrateOutcome) -> String {
     .collect();
     render_page(&page::instrument_page(
         format!("twinmill calibrate: {scene} ({})", o.procedure.name()),
+        o.summary.clone(),
+        sections,
+        plots,
+        page::json(o),
+    ))
+}
+
+/// `identify --readings`' page (a calibration from traces measured on the machine): the
+/// identifiability, the fit, the identified parameters with σ (no truth to compare with),
+/// the singular values, the error the calibration removes (the controller that ran the
+/// circles on the identified machine) and the controller file it writes.
+pub fn measured_calibrate_page(scene: &str, o: &super::dbb::MeasuredCalibrationOutcome) -> String {
+    use crate::report::html::Section;
+    let c = &o.calibration;
+    let id = &c.identifiability;
+    let mut sections = identification_sections(c);
+    sections.push(Section {
+        heading: "Identified parameters".into(),
+        intro: "Each parameter's deviation from nominal, identified with its standard uncertainty σ (jig-free: in the report's gauge, the base joints' rigid motion removed).".into(),
+        columns: ["parameter", "identified (mm)", "σ (µm)"]
+            .map(String::from)
+            .to_vec(),
+        rows: c
+            .estimates
+            .iter()
+            .map(|e| {
+                vec![
+                    e.name.clone(),
+                    format!("{:+.6}", e.value_mm),
+                    format!("{:.4}", e.sigma_mm * 1e3),
+                ]
+            })
+            .collect(),
+    });
+    let (sv, threshold) = singular_value_section(c);
+    sections.push(sv);
+    sections.push(Section {
+        heading: "The correction".into(),
+        intro: "How far the controller that ran the circles puts the tool from where it is commanded on the identified machine: the error the calibrated controller removes, if the identified machine is the real one.".into(),
+        columns: vec!["figure".into(), "value (mm)".into()],
+        rows: vec![
+            vec![
+                "largest level positioning error".into(),
+                format!("{:.6}", o.predicted_correction.position_mm),
+            ],
+            vec![
+                "largest pivot error".into(),
+                format!("{:.6}", o.predicted_correction.pivot_mm),
+            ],
+        ],
+    });
+    sections.push(Section {
+        heading: "Files read".into(),
+        intro: "One trace per circle of the plan, in its order.".into(),
+        columns: vec!["circle".into(), "file".into()],
+        rows: o
+            .files
+            .iter()
+            .enumerate()
+            .map(|(k, f)| vec![(k + 1).to_string(), f.clone()])
+            .collect(),
+    });
+    let plots = page::spectrum_plot(
+        &id.singular_values,
+        (threshold > 0.0).then_some(threshold),
+        "Singular values of the calibration's Jacobian: dark bars are determined directions; the gauge's lie below the line.",
+    )
+    .into_iter()
+    .collect();
+    render_page(&page::instrument_page(
+        format!(
+            "twinmill identify --readings: {scene} ({})",
+            o.procedure.name()
+        ),
         o.summary.clone(),
         sections,
         plots,

@@ -151,6 +151,9 @@ pub struct MeasureRequest {
     /// An identified machine's deviations file replacing the scene's deviation model
     /// ([`Scene::apply_deviations_file`]); serial machines only.
     pub deviations: Option<PathBuf>,
+    /// A hexapod controller's calibrated parameters (a `[controller]` file,
+    /// [`HexapodScene::apply_controller_file`]) the circle is run with; hexapods only.
+    pub controller: Option<PathBuf>,
 }
 
 /// What an instrument measured, evaluated and ready to write (in this order: the readings,
@@ -226,7 +229,10 @@ pub fn measure(r: &MeasureRequest) -> Result<Measured, String> {
                 "a serial machine's ball bar, not of a hexapod's double ball bar",
             )?;
             let request = DbbRequest::of_measure(r)?;
-            let scene = HexapodScene::load(&r.scene).map_err(|e| e.to_string())?;
+            let mut scene = HexapodScene::load(&r.scene).map_err(|e| e.to_string())?;
+            if let Some(c) = &r.controller {
+                scene.apply_controller_file(c).map_err(|e| e.to_string())?;
+            }
             let file = default_file(&scene.name);
             let o = hexapod_ballbar(&scene, &request)?;
             let reading = Reading {
@@ -245,6 +251,13 @@ pub fn measure(r: &MeasureRequest) -> Result<Measured, String> {
                 accept_misfit: r.accept_misfit,
                 ..scene
             };
+            if let Some(c) = &r.controller {
+                return Err(format!(
+                    "{}: --controller gives a hexapod controller's calibrated parameters; {} is a serial machine (its identified deviations go with --deviations)",
+                    c.display(),
+                    r.scene.display()
+                ));
+            }
             if let Some(d) = &r.deviations {
                 scene.apply_deviations_file(d).map_err(|e| e.to_string())?;
             }

@@ -59,6 +59,7 @@ pub fn reference_part(scene: &Scene, moves: &[Move]) -> Result<Reference, Pipeli
             let t = &h.twin;
             let n = HexapodTwin {
                 actual: t.nominal.clone(),
+                controller: t.nominal.clone(),
                 table: t.table.as_ref().map(|a| TableAxes {
                     nominal: a.nominal.clone(),
                     actual: a.nominal.clone(),

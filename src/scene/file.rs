@@ -32,6 +32,10 @@ pub(super) struct SceneFile<M> {
     pub table_axes: Option<Spanned<TableAxesFile>>,
     #[serde(default)]
     pub deviations: BTreeMap<String, Spanned<Real>>,
+    /// A hexapod's controller: its parameters as deviations from nominal (refused in a
+    /// serial scene).
+    #[serde(default)]
+    pub controller: BTreeMap<String, Spanned<Real>>,
     #[serde(default)]
     pub error_motions: BTreeMap<String, Spanned<MotionFile>>,
     #[serde(default)]
@@ -56,6 +60,14 @@ pub(super) struct SceneFile<M> {
     pub design: Option<MeshFile>,
     #[serde(default)]
     pub report: Option<ReportFile>,
+}
+
+/// A controller file (`--controller FILE`, what `identify --readings … --corrected` writes):
+/// the `[controller]` section alone.
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(super) struct ControllerFile {
+    pub controller: BTreeMap<String, Spanned<Real>>,
 }
 
 /// The sections a serial scene cannot do without, in the order toml reports the first one

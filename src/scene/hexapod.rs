@@ -1,6 +1,7 @@
 //! A hexapod scene (`[machine] kind = "hexapod"`): the Stewart platform's joints,
 //! reference lengths, tool offset, stroke and joint limits, home pose, the deviations of the
-//! actual machine by parameter name, and the optional data the hexapod verbs use (the
+//! actual machine by parameter name, the controller's parameters (`[controller]`, nominal
+//! by default; a controller file, `--controller FILE`, replaces them), and the optional data the hexapod verbs use (the
 //! workspace to map, the drives' lead and encoder, the homing switches, the table, the
 //! table's rotary axes). A hexapod scene needs no program, tool or stock; with them it cuts
 //! ([`super::Machine::Hexapod`]).
@@ -11,7 +12,7 @@
 use super::Ctx;
 use super::SceneError;
 use super::check::{check_coordinate, check_direction};
-use super::file::{HexapodMachineFile, SceneFile, TableAxesFile};
+use super::file::{ControllerFile, HexapodMachineFile, SceneFile, TableAxesFile};
 use super::machine::HexapodMachine;
 use crate::machine::chain::{Axis, AxisKind, Chain};
 use crate::machine::hexapod::{
@@ -66,8 +67,17 @@ pub struct HexapodScene {
     pub name: String,
     /// Machine description.
     pub machine_name: String,
-    /// The machine as the controller knows it.
+    /// The machine as designed (`[machine]`): what the commanded poses mean.
     pub nominal: Hexapod,
+    /// The parameters the controller's kinematics run on: nominal plus `[controller]` (or a
+    /// controller file's values); the nominal machine when neither gives any.
+    pub controller: Hexapod,
+    /// The controller's values by parameter name, as deviations from nominal (mm); empty:
+    /// the nominal controller.
+    pub controller_values: BTreeMap<String, Real>,
+    /// Where the controller's values come from: `None` for the scene's own (`[controller]`
+    /// or nominal), else the controller file.
+    pub controller_file: Option<PathBuf>,
     /// The machine as built: nominal plus the injected deviations.
     pub actual: Hexapod,
     /// Deviations injected, by parameter name (mm).
@@ -292,6 +302,14 @@ pub(super) fn read_hexapod(
             format!("with the injected deviations the machine does not reach home: {e}"),
         ));
     }
+    let (controller, controller_values) = read_controller(
+        ctx,
+        &file.controller,
+        &nominal,
+        &actual,
+        &home,
+        "[controller]",
+    )?;
     let workspace = match file.workspace.as_ref().map(Spanned::get_ref) {
         Some(w) => {
             let ws = Workspace {
@@ -400,6 +418,9 @@ pub(super) fn read_hexapod(
         name,
         machine_name: m.name.clone(),
         nominal,
+        controller,
+        controller_values,
+        controller_file: None,
         actual,
         injected,
         home,
@@ -414,11 +435,140 @@ pub(super) fn read_hexapod(
     })
 }
 
+/// The controller of `[controller]` (or a controller file's section, `what`): `nominal`
+/// with each named parameter moved by its value (mm; the names of `[deviations]`:
+/// `bx_1`, `l0_3`, …). It must hold the home pose (strokes, joint limits, not singular), and
+/// the `actual` machine it drives must reach it.
+fn read_controller(
+    ctx: &Ctx,
+    entries: &BTreeMap<String, Spanned<Real>>,
+    nominal: &Hexapod,
+    actual: &Hexapod,
+    home: &Pose,
+    what: &str,
+) -> Result<(Hexapod, BTreeMap<String, Real>), SceneError> {
+    let mut controller = nominal.clone();
+    let mut values = BTreeMap::new();
+    for (k, v) in entries {
+        let x = ctx.finite(v, k)?;
+        if ParameterId::from_name(k).is_err() {
+            return Err(ctx.err(
+                v.span(),
+                format!(
+                    "{what} names the platform's kinematic parameters (bx_1 … bz_6, ax_1 … az_6, l0_1 … l0_6); got '{k}'"
+                ),
+            ));
+        }
+        controller
+            .add_deviation(k, x)
+            .map_err(|e| ctx.err(v.span(), e.to_string()))?;
+        values.insert(k.clone(), x);
+    }
+    let span = entries.values().next().map_or(0..0, |v| v.span());
+    controller.check_pose(home).map_err(|e| {
+        ctx.err(
+            span.clone(),
+            format!("with the {what} parameters the controller cannot hold home {home}: {e}"),
+        )
+    })?;
+    twin_pose(&controller, actual, home).map_err(|e| {
+        ctx.err(
+            span,
+            format!("driven by the {what} parameters the machine does not reach home: {e}"),
+        )
+    })?;
+    Ok((controller, values))
+}
+
+/// A controller file's text: its `[controller]` section read against the machine of a
+/// scene (`nominal`, `actual`, `home`). Errors name the file, line and column.
+fn controller_of_text(
+    text: &str,
+    path: &std::path::Path,
+    nominal: &Hexapod,
+    actual: &Hexapod,
+    home: &Pose,
+) -> Result<(Hexapod, BTreeMap<String, Real>), SceneError> {
+    let ctx = Ctx { path, text };
+    let file: ControllerFile =
+        toml::from_str(text).map_err(|e| super::toml_error(text, path, &e))?;
+    read_controller(
+        &ctx,
+        &file.controller,
+        nominal,
+        actual,
+        home,
+        "[controller]",
+    )
+}
+
+impl HexapodScene {
+    /// Replaces the controller's parameters by a controller file's (`--controller FILE`:
+    /// the `[controller]` section `identify --readings … --corrected` writes), as deviations
+    /// from the scene's nominal machine. On an error the scene is unchanged.
+    pub fn apply_controller_file(&mut self, path: &std::path::Path) -> Result<(), SceneError> {
+        let text = super::read_text(path)?;
+        self.apply_controller_text(&text, path)
+    }
+
+    /// [`HexapodScene::apply_controller_file`] on the file's text; `path` locates messages.
+    pub fn apply_controller_text(
+        &mut self,
+        text: &str,
+        path: &std::path::Path,
+    ) -> Result<(), SceneError> {
+        let (controller, values) =
+            controller_of_text(text, path, &self.nominal, &self.actual, &self.home)?;
+        self.controller = controller;
+        self.controller_values = values;
+        self.controller_file = Some(path.to_path_buf());
+        Ok(())
+    }
+
+    /// Whether the controller runs on parameters other than the nominal machine's.
+    pub fn calibrated_controller(&self) -> bool {
+        self.controller != self.nominal
+    }
+
+    /// What the controller runs on, for summaries: `nominal`, `[controller]` or the file.
+    pub fn controller_label(&self) -> String {
+        match (&self.controller_file, self.calibrated_controller()) {
+            (Some(p), _) => format!("the controller of {}", p.display()),
+            (None, true) => "the scene's [controller]".into(),
+            (None, false) => "the nominal controller".into(),
+        }
+    }
+}
+
+impl super::Scene {
+    /// A hexapod scene that cuts: replaces its controller's parameters by a controller
+    /// file's ([`HexapodScene::apply_controller_file`]). A serial scene refuses it.
+    pub fn apply_controller_file(&mut self, path: &std::path::Path) -> Result<(), SceneError> {
+        let text = super::read_text(path)?;
+        let super::Machine::Hexapod(h) = &mut self.machine else {
+            return Err(SceneError::Invalid {
+                path: path.to_path_buf(),
+                line: 1,
+                column: 1,
+                message: format!(
+                    "a controller file holds a hexapod controller's parameters; {} is a serial machine (its identified deviations go with --deviations)",
+                    self.path.display()
+                ),
+            });
+        };
+        let t = &h.twin;
+        let (controller, _) = controller_of_text(&text, path, &t.nominal, &t.actual, &t.home)?;
+        h.twin.controller = controller;
+        Ok(())
+    }
+}
+
 impl HexapodScene {
     /// The machine as an NC program drives it.
     pub fn twin(&self) -> HexapodTwin {
         HexapodTwin {
             nominal: self.nominal.clone(),
+            controller: self.controller.clone(),
             actual: self.actual.clone(),
             home: self.home,
             table: self.table_axes.clone(),

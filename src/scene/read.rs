@@ -189,6 +189,10 @@ impl Scene {
             ("homing", file.homing.as_ref().map(Spanned::span)),
             ("table", file.table.as_ref().map(Spanned::span)),
             ("table_axes", file.table_axes.as_ref().map(Spanned::span)),
+            (
+                "controller",
+                file.controller.values().next().map(Spanned::span),
+            ),
         ] {
             if let Some(span) = span {
                 return Err(ctx.err(

@@ -191,7 +191,7 @@ fn the_ball_plate_determines_all_24_parameters() {
 // calibrated controller's pose errors with its own inverse and forward kinematics.
 
 /// The platform pose's rotation `R = Rz(c)·Ry(b)·Rx(a)` (a, b, c in rad).
-fn rotation(a: Real, b: Real, c: Real) -> nalgebra::Matrix3<Real> {
+pub(crate) fn rotation(a: Real, b: Real, c: Real) -> nalgebra::Matrix3<Real> {
     let (sa, ca) = a.sin_cos();
     let (sb, cb) = b.sin_cos();
     let (sc, cc) = c.sin_cos();
@@ -203,15 +203,15 @@ fn rotation(a: Real, b: Real, c: Real) -> nalgebra::Matrix3<Real> {
 
 /// A machine's geometry as this test reads it: base joints `b_i`, platform joints `a_i`,
 /// tool point `o` (platform frame) and reference lengths `l0_i`.
-struct Geometry {
-    b: [Vector3; 6],
-    a: [Vector3; 6],
-    o: Vector3,
-    l0: [Real; 6],
+pub(crate) struct Geometry {
+    pub(crate) b: [Vector3; 6],
+    pub(crate) a: [Vector3; 6],
+    pub(crate) o: Vector3,
+    pub(crate) l0: [Real; 6],
 }
 
 impl Geometry {
-    fn of(h: &Hexapod) -> Geometry {
+    pub(crate) fn of(h: &Hexapod) -> Geometry {
         let l0 = std::array::from_fn(|i| {
             h.parameter(ParameterId::from_name(&format!("l0_{}", i + 1)).expect("known"))
         });
@@ -224,21 +224,21 @@ impl Geometry {
     }
 
     /// Strut lengths `|t + R·(a_i − o) − b_i|` at the pose `v` = (x, y, z mm; a, b, c rad).
-    fn lengths(&self, v: &[Real; 6]) -> [Real; 6] {
+    pub(crate) fn lengths(&self, v: &[Real; 6]) -> [Real; 6] {
         let r = rotation(v[3], v[4], v[5]);
         let t = Vector3::new(v[0], v[1], v[2]);
         std::array::from_fn(|i| (t + r * (self.a[i] - self.o) - self.b[i]).norm())
     }
 
     /// The drives' readings a controller on this geometry commands for `v`: `L_i − l0_i`.
-    fn readings(&self, v: &[Real; 6]) -> [Real; 6] {
+    pub(crate) fn readings(&self, v: &[Real; 6]) -> [Real; 6] {
         let l = self.lengths(v);
         std::array::from_fn(|i| l[i] - self.l0[i])
     }
 
     /// The pose this machine takes for `readings` (lengths `l0_i + s_i`): Newton from
     /// `near` on central-difference Jacobians, to 1e-12 mm.
-    fn reached(&self, readings: &[Real; 6], near: &[Real; 6]) -> [Real; 6] {
+    pub(crate) fn reached(&self, readings: &[Real; 6], near: &[Real; 6]) -> [Real; 6] {
         let want: [Real; 6] = std::array::from_fn(|i| self.l0[i] + readings[i]);
         let mut v = *near;
         for _ in 0..30 {
@@ -272,7 +272,7 @@ impl Geometry {
 /// (the tool tip's travel from its level position with a and b over ±min(tilt, 15°), five
 /// steps each) at the workspace's centre and four points half way to its corners, mid
 /// height (mm). Grid points the nominal machine cannot reach are left out.
-fn own_pose_errors(
+pub(crate) fn own_pose_errors(
     nominal: &Hexapod,
     controller: &Hexapod,
     actual: &Hexapod,
@@ -929,7 +929,7 @@ fn calibrate_reads_measured_dbb_files_and_writes_the_corrected_parameters() {
         .expect("fragment written")
         .parse()
         .expect("fragment is TOML");
-    let corrected = fragment["deviations"].as_table().expect("[deviations]");
+    let corrected = fragment["controller"].as_table().expect("[controller]");
     let estimates = v["calibration"]["estimates"].as_array().expect("estimates");
     assert_eq!(estimates.len(), 24);
     for e in estimates {

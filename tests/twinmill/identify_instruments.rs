@@ -109,6 +109,7 @@ fn measure_all(dir: &Path, seed: u64) -> Vec<(MeasurementKind, PathBuf)> {
                 rotary: RotaryOptions::default(),
                 accept_misfit: false,
                 deviations: None,
+                controller: None,
             })
             .expect("measures");
             std::fs::write(&file, m.text).expect("writes");
