@@ -203,7 +203,7 @@ fn rotation(a: Real, b: Real, c: Real) -> nalgebra::Matrix3<Real> {
 
 /// A machine's geometry as this test reads it: base joints `b_i`, platform joints `a_i`,
 /// tool point `o` (platform frame) and reference lengths `l0_i`.
-struct Geometry {
+pub(super) struct Geometry {
     b: [Vector3; 6],
     a: [Vector3; 6],
     o: Vector3,
@@ -211,7 +211,7 @@ struct Geometry {
 }
 
 impl Geometry {
-    fn of(h: &Hexapod) -> Geometry {
+    pub(super) fn of(h: &Hexapod) -> Geometry {
         let l0 = std::array::from_fn(|i| {
             h.parameter(ParameterId::from_name(&format!("l0_{}", i + 1)).expect("known"))
         });
@@ -231,14 +231,14 @@ impl Geometry {
     }
 
     /// The drives' readings a controller on this geometry commands for `v`: `L_i − l0_i`.
-    fn readings(&self, v: &[Real; 6]) -> [Real; 6] {
+    pub(super) fn readings(&self, v: &[Real; 6]) -> [Real; 6] {
         let l = self.lengths(v);
         std::array::from_fn(|i| l[i] - self.l0[i])
     }
 
     /// The pose this machine takes for `readings` (lengths `l0_i + s_i`): Newton from
     /// `near` on central-difference Jacobians, to 1e-12 mm.
-    fn reached(&self, readings: &[Real; 6], near: &[Real; 6]) -> [Real; 6] {
+    pub(super) fn reached(&self, readings: &[Real; 6], near: &[Real; 6]) -> [Real; 6] {
         let want: [Real; 6] = std::array::from_fn(|i| self.l0[i] + readings[i]);
         let mut v = *near;
         for _ in 0..30 {
