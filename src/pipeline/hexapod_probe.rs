@@ -22,8 +22,8 @@ pub struct ProbeOutcome {
     pub scene: String,
     /// The calibration, round by round.
     pub calibration: ProbeCalibration,
-    /// Per parameter the rounds identified on its own: the scene's deviation, the final
-    /// controller's deviation from nominal, and the last round's σ (mm).
+    /// Per parameter: the scene's deviation, the final controller's deviation from nominal,
+    /// and the last round's σ along the determined subspace (mm).
     pub parameters: Vec<ProbeParameterRow>,
     /// The final controller as a `[deviations]` fragment (deviations from nominal, σ in
     /// comments).
@@ -77,14 +77,7 @@ pub fn hexapod_probe_calibrate(
     let pn = scene.nominal.parameters();
     let pc = controller.parameters();
     let pa = scene.actual.parameters();
-    let identified: Vec<&str> = last
-        .identification
-        .identified
-        .iter()
-        .map(|e| e.name.as_str())
-        .collect();
     let parameters: Vec<ProbeParameterRow> = ParameterId::all()
-        .filter(|id| identified.contains(&id.name().as_str()))
         .map(|id| ProbeParameterRow {
             name: id.name(),
             injected_mm: pa[id.index()] - pn[id.index()],
@@ -95,8 +88,8 @@ pub fn hexapod_probe_calibrate(
     let mut fragment = format!(
         "# Corrected parameters of {} identified by `twinmill hexapod probe-calibrate`\n\
          # ({} rounds of gauge-block / touch-probe readings, σ {} µm, seed {}).\n\
-         # Deviations from nominal (mm); σ of the last round. Directions the readings do not\n\
-         # determine are left at the controller's values and not listed.\n[deviations]\n",
+         # Deviations from nominal (mm); σ of the last round along what the readings\n\
+         # determine. Directions they do not determine are the controller's values.\n[deviations]\n",
         scene.name,
         options.rounds,
         options.sigma_mm * 1e3,
@@ -138,10 +131,9 @@ fn summary(scene: &HexapodScene, cal: &ProbeCalibration, rows: &[ProbeParameterR
     );
     let _ = writeln!(
         s,
-        "  probe        x, y, z readings a point, noise σ {} µm, seed {}; {np} level grid points, {nv} pivot points × {} orientations (±{tilt}°): {nr} readings a round",
+        "  probe        x, y, z readings a point, noise σ {} µm, seed {}; {np} level grid points, {nv} pivot points swung to {ns} orientations (±{tilt}°): {nr} readings a round",
         o.sigma_mm * 1e3,
-        o.seed,
-        if nv > 0 { ns / nv } else { 0 }
+        o.seed
     );
     let _ = writeln!(
         s,
@@ -193,9 +185,18 @@ fn summary(scene: &HexapodScene, cal: &ProbeCalibration, rows: &[ProbeParameterR
             }
         );
     }
+    if let Some(last) = cal.rounds.last() {
+        let id = &last.identification;
+        let _ = writeln!(
+            s,
+            "\n  identified   {} parameters on their own, {} determined combinations (in the JSON); the\n               controller below is the solution, its σ along what the readings determine",
+            id.identified.len(),
+            id.combinations.len()
+        );
+    }
     let _ = writeln!(
         s,
-        "\n  parameter     as built (mm)   identified (mm)   σ (µm)"
+        "  parameter     as built (mm)   controller (mm)   σ (µm)"
     );
     for r in rows {
         let _ = writeln!(
@@ -208,15 +209,6 @@ fn summary(scene: &HexapodScene, cal: &ProbeCalibration, rows: &[ProbeParameterR
         );
     }
     if let Some(last) = cal.rounds.last() {
-        for c in &last.identification.combinations {
-            let _ = writeln!(
-                s,
-                "  determined combination  {}: {:+.5} mm (σ {:.2} µm, last round)",
-                c.name,
-                c.value_mm,
-                c.sigma_mm * 1e3
-            );
-        }
         for n in &last.identification.not_determined {
             let _ = writeln!(s, "  not determined  {n} (held at the controller's value)");
         }
