@@ -208,12 +208,15 @@ impl ProbeReadings {
     }
 }
 
+/// Noise-free readings: positioning, then pivot swing by swing.
+type PredictedReadings = (Vec<[Real; 3]>, Vec<Vec<[Real; 3]>>);
+
 /// The noise-free readings of `plan` on `actual` commanded through `controller`.
 fn predicted(
     controller: &Hexapod,
     actual: &Hexapod,
     plan: &ProbePlan,
-) -> Result<(Vec<[Real; 3]>, Vec<Vec<[Real; 3]>>), ProbeError> {
+) -> Result<PredictedReadings, ProbeError> {
     let reach = |pose: &Pose, what: &dyn Fn() -> String| {
         twin_pose(controller, actual, pose)
             .map(|p| p.position)
@@ -738,9 +741,8 @@ mod tests {
         let r = measure(&nominal, &actual, &plan, 0.0, 1).expect("measures");
         let pose = plan.positioning[5];
         let jo = nominal.output_jacobian(&pose).expect("jacobian");
-        for k in 0..3 {
+        for (k, got) in r.positioning_mm[5].iter().enumerate() {
             let expect = 0.01 * jo[(k, 1)];
-            let got = r.positioning_mm[5][k];
             assert!((got - expect).abs() < 2e-6, "{k}: {got} vs {expect}");
         }
         let mut actual = nominal.clone();
