@@ -731,7 +731,7 @@ mod tests {
     }
 
     #[test]
-    fn an_l0_offset_reads_as_its_strut_direction_and_is_identified() {
+    fn an_l0_offset_reads_as_its_strut_direction_and_is_calibrated_out() {
         // A strut δ = 0.01 mm longer than the controller believes moves the tool point by
         // δ along the output Jacobian's column (second order: δ²·K_p²/L ≈ 1e-6 mm of it).
         let nominal = machine();
@@ -749,11 +749,19 @@ mod tests {
         actual.add_deviation("l0_2", 0.1).expect("l0_2");
         let r = measure(&nominal, &actual, &plan, 1e-3, 3).expect("measures");
         let id = identify(&nominal, &plan, &r, false).expect("identifies");
-        let l0 = id.parameters[ParameterId::from_name("l0_2").expect("l0").index()]
-            - nominal.reference_lengths()[1];
-        let s = id.parameter_sigma[ParameterId::from_name("l0_2").expect("l0").index()];
-        assert!((l0 - 0.1).abs() < 4.0 * s, "{l0} ± {s}");
-        // The platform turned about the tool point is invisible: three directions.
-        assert_eq!(id.rank, PARAMETERS - 3, "{:?}", id.not_determined);
+        assert!(id.fit.fits, "{}", id.fit.describe());
+        // The platform turned about the tool point is invisible: at least three directions
+        // are not determined.
+        assert!(id.rank <= PARAMETERS - 3, "{:?}", id.not_determined);
+        // The updated controller drives the machine to within a few σ of the commanded
+        // points (before: 0.1 mm times the output Jacobian's entries).
+        let before = survey(&nominal, &actual, &ws()).expect("survey");
+        let updated = nominal.with_parameters(&id.parameters).expect("updated");
+        let after = survey(&updated, &actual, &ws()).expect("survey");
+        assert!(before.positioning_mm > 0.05, "{before:?}");
+        assert!(
+            after.positioning_mm < 0.01 && after.pivot_mm < 0.01,
+            "{after:?}"
+        );
     }
 }
