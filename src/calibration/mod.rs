@@ -5,7 +5,8 @@
 //! ([`design`]) and NC-program correction with its verification ([`correct`]), and a hexapod's kinematic
 //! parameters from double-ball-bar lengths ([`hexapod_calibrate`]); one engine for any
 //! forward model ([`engine`]) and a serial machine identified on it from laser readings and
-//! ball-bar circles together ([`instruments`]).
+//! ball-bar circles together ([`instruments`]), and a hexapod calibrated in rounds from
+//! touch-probe readings of positioning and pivot accuracy on it ([`hexapod_probe`]).
 //!
 //! May use everything below it: [`crate::math`], [`crate::nc`], [`crate::machine`],
 //! [`crate::cutting`] (the verification sweeps the corrected program) and
@@ -21,3 +22,4 @@ pub mod hexapod_calibrate;
 pub mod hexapod_design;
 pub mod engine;
 pub mod instruments;
+pub mod hexapod_probe;

@@ -1,5 +1,5 @@
 //! `twinmill hexapod`: the analyses of a hexapod (Stewart platform) scene — kinematics,
-//! resolution amplification, homing, pivot accuracy.
+//! resolution amplification, homing, pivot accuracy, the probe calibration.
 
 use super::{fail, numbers, print_out, write};
 use clap::Subcommand;
@@ -157,6 +157,30 @@ pub enum HexapodCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Seed 001's calibration from gauge-block / touch-probe readings of positioning and
+    /// pivot accuracy, in rounds on the corrected controller (needs [workspace]).
+    ProbeCalibrate {
+        /// The hexapod scene file.
+        scene: PathBuf,
+        /// Calibration rounds.
+        #[arg(long, default_value_t = 2)]
+        rounds: usize,
+        /// The probe's noise σ (mm).
+        #[arg(long, default_value_t = 0.0015)]
+        sigma: f64,
+        /// Seed of the probe's noise.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Keep a calibration whose readings the noise cannot explain.
+        #[arg(long)]
+        accept_misfit: bool,
+        /// Write corrected-deviations.toml and report.json into this folder.
+        #[arg(long, value_name = "DIR")]
+        out: Option<PathBuf>,
+        /// Print the report as JSON.
+        #[arg(long)]
+        json: bool,
+    },
 }
 
 /// A pose X,Y,Z,A,B,C (mm, degrees).
@@ -173,7 +197,7 @@ fn range_arg(text: &str, what: &str) -> Result<(f64, f64), String> {
     Ok((v[0], v[1]))
 }
 
-/// `twinmill hexapod ik | fk | amplification | homing | pivot`.
+/// `twinmill hexapod ik | fk | amplification | homing | pivot | probe-calibrate`.
 pub fn exec(a: HexapodArgs) -> ExitCode {
     match hexapod_run(a.command) {
         Ok(code) => code,
@@ -381,6 +405,43 @@ fn hexapod_run(command: HexapodCommand) -> Result<ExitCode, String> {
                 None => None,
             };
             let o = hexapod_pivot(&s, point, tilt, steps, 5).map_err(|e| e.to_string())?;
+            print_out(
+                || o.summary.clone(),
+                json.then(|| serde_json::to_string_pretty(&o)),
+            )
+        }
+        HexapodCommand::ProbeCalibrate {
+            scene,
+            rounds,
+            sigma,
+            seed,
+            accept_misfit,
+            out,
+            json,
+        } => {
+            use twinmill::calibration::hexapod_probe::ProbeOptions;
+            let s = load(&scene)?;
+            let o = twinmill::pipeline::hexapod_probe::hexapod_probe_calibrate(
+                &s,
+                &ProbeOptions {
+                    rounds,
+                    sigma_mm: sigma,
+                    seed,
+                    accept_misfit,
+                },
+            )
+            .map_err(|e| e.to_string())?;
+            if let Some(dir) = &out {
+                let report = serde_json::to_string_pretty(&o).map_err(|e| e.to_string())?;
+                twinmill::output::write_files(
+                    dir,
+                    &[
+                        ("corrected-deviations.toml", o.fragment.clone().into_bytes()),
+                        ("report.json", report.into_bytes()),
+                    ],
+                )
+                .map_err(|e| e.to_string())?;
+            }
             print_out(
                 || o.summary.clone(),
                 json.then(|| serde_json::to_string_pretty(&o)),

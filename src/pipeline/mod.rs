@@ -7,7 +7,8 @@
 //! [`instrument_pages`] the pages of the instrument commands; [`evaluate`] the standards'
 //! evaluations of measurement files, [`measure`] the virtual instruments on a scene's machine
 //! (serial or hexapod) as plain requests and outcomes, [`measurements`] the identification
-//! from several instruments' files;
+//! from several instruments' files, [`hexapod_probe`] seed 001's probe calibration of a
+//! hexapod;
 //! this file holds what they share: the stock, the sweep of the program through the deviated
 //! machine, and the errors.
 //!
@@ -28,6 +29,7 @@ pub mod instrument_pages;
 pub mod evaluate;
 pub mod measure;
 pub mod measurements;
+pub mod hexapod_probe;
 
 pub use correct::{CorrectOutcome, correct, identified_model};
 pub use design::{DesignOutcome, MAX_DESIGN_ROUNDS, design_scene};

@@ -62,6 +62,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "hexapod_design",
             "engine",
             "instruments",
+            "hexapod_probe",
         ],
     ),
     (
@@ -121,6 +122,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "evaluate",
             "measure",
             "measurements",
+            "hexapod_probe",
         ],
     ),
     ("output", &[]),

@@ -20,6 +20,7 @@ mod study;
 mod hexapod;
 mod html;
 mod hexapod_calibration;
+mod hexapod_probe;
 mod hexapod_cut;
 mod hexapod_controller;
 mod verbs;
