@@ -174,7 +174,11 @@ pub enum HexapodCommand {
         /// Keep a calibration whose readings the noise cannot explain.
         #[arg(long)]
         accept_misfit: bool,
-        /// Write corrected-deviations.toml and report.json into this folder.
+        /// Start from the controller of this file (the `[controller]` file a calibration
+        /// wrote), not the scene's.
+        #[arg(long, value_name = "FILE")]
+        controller: Option<PathBuf>,
+        /// Write controller.toml (for --controller) and report.json into this folder.
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
         /// Print the report as JSON.
@@ -416,11 +420,12 @@ fn hexapod_run(command: HexapodCommand) -> Result<ExitCode, String> {
             sigma,
             seed,
             accept_misfit,
+            controller,
             out,
             json,
         } => {
             use twinmill::calibration::hexapod_probe::ProbeOptions;
-            let s = load(&scene)?;
+            let s = load(&scene, &controller)?;
             let o = twinmill::pipeline::hexapod_probe::hexapod_probe_calibrate(
                 &s,
                 &ProbeOptions {
@@ -436,7 +441,7 @@ fn hexapod_run(command: HexapodCommand) -> Result<ExitCode, String> {
                 twinmill::output::write_files(
                     dir,
                     &[
-                        ("corrected-deviations.toml", o.fragment.clone().into_bytes()),
+                        ("controller.toml", o.fragment.clone().into_bytes()),
                         ("report.json", report.into_bytes()),
                     ],
                 )

@@ -25,7 +25,7 @@ pub struct ProbeOutcome {
     /// Per parameter: the scene's deviation, the final controller's deviation from nominal,
     /// and the last round's σ along the determined subspace (mm).
     pub parameters: Vec<ProbeParameterRow>,
-    /// The final controller as a `[deviations]` fragment (deviations from nominal, σ in
+    /// The final controller as a `[controller]` file (deviations from nominal, σ in
     /// comments).
     #[serde(skip)]
     pub fragment: String,
@@ -47,8 +47,9 @@ pub struct ProbeParameterRow {
     pub sigma_mm: Real,
 }
 
-/// Runs seed 001's calibration on the scene's machine (nominal controller, actual machine,
-/// `[workspace]`).
+/// Runs seed 001's calibration on the scene's machine (its controller — nominal unless a
+/// `[controller]` section or file says otherwise — the actual machine and `[workspace]`);
+/// the fragment is a controller file for `--controller`.
 pub fn hexapod_probe_calibrate(
     scene: &HexapodScene,
     options: &ProbeOptions,
@@ -64,7 +65,7 @@ pub fn hexapod_probe_calibrate(
         accept_misfit: options.accept_misfit || scene.accept_misfit,
         ..*options
     };
-    let cal = calibrate(&scene.nominal, &scene.actual, &ws, &options)
+    let cal = calibrate(&scene.controller, &scene.actual, &ws, &options)
         .map_err(|e| error(e.to_string()))?;
     let last = cal
         .rounds
@@ -88,8 +89,9 @@ pub fn hexapod_probe_calibrate(
     let mut fragment = format!(
         "# Corrected parameters of {} identified by `twinmill hexapod probe-calibrate`\n\
          # ({} rounds of gauge-block / touch-probe readings, σ {} µm, seed {}).\n\
-         # Deviations from nominal (mm); σ of the last round along what the readings\n\
-         # determine. Directions they do not determine are the controller's values.\n[deviations]\n",
+         # The controller's parameters as deviations from nominal (mm), for --controller;\n\
+         # σ of the last round along what the readings determine. Directions they do not\n\
+         # determine keep the starting controller's values.\n[controller]\n",
         scene.name,
         options.rounds,
         options.sigma_mm * 1e3,

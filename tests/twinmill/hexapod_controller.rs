@@ -483,3 +483,70 @@ fn bad_controller_files_and_misplaced_controllers_are_one_line() {
         "{err}"
     );
 }
+
+/// Seed 001's probe calibration → `controller.toml` → `--controller`: the file holds the
+/// calibrated controller (this test's kinematics: the µm class from the nominal
+/// controller's 0.3 mm), `hexapod pivot` runs on it, and a further `probe-calibrate` starts
+/// from it (its "before" is the calibrated level, not the nominal one).
+#[test]
+fn the_probe_calibration_writes_a_controller_file_the_machine_runs_on() {
+    let sb = Sandbox::new("hexapod-controller-probe");
+    let s = centre();
+    let ws = s.workspace.expect("workspace");
+    let home = s.home.position;
+    let (code, out, err) = sb.run(&[
+        "hexapod",
+        "probe-calibrate",
+        HEXAPOD_CENTRE,
+        "--out",
+        "probe",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let first = json(&out);
+    let fragment = std::fs::read_to_string(sb.dir.join("probe/controller.toml")).expect("written");
+    let controller = controller_of(&s.nominal, &fragment);
+    let (pos, piv) = own_pose_errors(&s.nominal, &controller, &s.actual, &ws);
+    let (pos0, piv0) = own_pose_errors(&s.nominal, &s.nominal, &s.actual, &ws);
+    assert!(
+        pos0 > 0.3 && piv0 > 0.3,
+        "nominal controller {pos0} / {piv0}"
+    );
+    assert!(
+        pos < 0.015 && piv < 0.02,
+        "calibrated controller {pos} / {piv}"
+    );
+    let (code, out, err) = sb.run(&[
+        "hexapod",
+        "pivot",
+        HEXAPOD_CENTRE,
+        "--controller",
+        "probe/controller.toml",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let own = own_pivot(&controller, &s.actual, [home.x, home.y, home.z]);
+    let cli = num(&json(&out)["pivot"]["pivot_error_mm"]);
+    assert!((cli - own).abs() < 1e-6, "{cli} vs {own}");
+    assert!(cli < 0.02, "{cli}");
+    // A third round on the calibrated controller starts where the file left the machine.
+    let (code, out, err) = sb.run(&[
+        "hexapod",
+        "probe-calibrate",
+        HEXAPOD_CENTRE,
+        "--controller",
+        "probe/controller.toml",
+        "--rounds",
+        "1",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let again = json(&out);
+    let before = num(&again["calibration"]["before"]["positioning_mm"]);
+    let nominal_before = num(&first["calibration"]["before"]["positioning_mm"]);
+    assert!(nominal_before > 0.3, "{nominal_before}");
+    assert!(
+        before < 0.015,
+        "starts from the file's controller: {before}"
+    );
+}
