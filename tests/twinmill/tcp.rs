@@ -8,7 +8,6 @@ use nalgebra::{Matrix3, Vector3};
 use std::path::Path;
 use twinmill::cutting::stock::TriDexel;
 use twinmill::cutting::sweep::{SweepOptions, sweep_program};
-use twinmill::machine::tcp::TCP_PATH_BOUND_MM;
 use twinmill::math::Real;
 use twinmill::nc::{AxisLetter, Move};
 use twinmill::progress::NoProgress;
@@ -23,6 +22,9 @@ fn rz(t: Real) -> Matrix3<Real> {
     let (s, c) = t.to_radians().sin_cos();
     Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0)
 }
+
+/// The documented bound on the tip's distance from its TCP path (docs/nc.md): 0.1 µm.
+const TCP_PATH_BOUND_MM: Real = 1e-4;
 
 /// Axis values in the order X Y Z A B C.
 type Q = [Real; 6];
