@@ -4,7 +4,8 @@
 //! functions of its position ([`error_motion`]); a parallel machine is a hexapod (Stewart
 //! platform) of six struts with its 42 kinematic parameters ([`hexapod`]), and seed 001's
 //! accuracy measures on it ([`hexapod_accuracy`]). A scene describes either as data, never
-//! as code.
+//! as code. A serial machine's controller may run tool-centre-point programs, which it
+//! turns into joint moves through the nominal chain ([`tcp`]).
 //!
 //! Owns the chain, the deviation names (`dy_AY`, `gamma_YX`, …), the six components of a
 //! deviation ([`Component`]), the error-motion names (`EXX`, `EBX`, …) and their exact
@@ -17,6 +18,7 @@ pub mod error_motion;
 pub mod chain;
 pub mod hexapod;
 pub mod hexapod_accuracy;
+pub mod tcp;
 
 use crate::math::{Isometry3, Real};
 use crate::nc::{AxisLetter, AxisValues};

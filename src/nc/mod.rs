@@ -338,6 +338,24 @@ impl AxisValues {
     }
 }
 
+/// The length a feed-per-minute controller applies F to (LinuxCNC's, its interpreter's
+/// `find_straight_length`): the XYZ length of a straight move (mm) when it is not zero,
+/// else its A B C length (degrees).
+pub fn controller_length(from: &AxisValues, to: &AxisValues) -> Real {
+    let d = |ls: [AxisLetter; 3]| {
+        ls.iter()
+            .map(|&l| (to.get(l) - from.get(l)).powi(2))
+            .sum::<Real>()
+            .sqrt()
+    };
+    let xyz = d([AxisLetter::X, AxisLetter::Y, AxisLetter::Z]);
+    if xyz > 0.0 {
+        xyz
+    } else {
+        d([AxisLetter::A, AxisLetter::B, AxisLetter::C])
+    }
+}
+
 /// Options from a tool table, var file and INI file (each optional), lengths in `unit`.
 pub fn options_from_files(
     tool_table: Option<&Path>,

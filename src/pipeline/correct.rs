@@ -4,11 +4,12 @@
 
 use super::{PipelineError, machine_part};
 use crate::calibration::correct::{
-    CorrectError, CorrectOptions, CorrectedProgram, correct_program, face_errors, part_error,
-    path_error, uncorrected,
+    CorrectError, CorrectOptions, CorrectedProgram, correct_program, face_errors, in_tcp,
+    part_error, path_error, uncorrected,
 };
 use crate::cutting::sweep::{SweepOptions, SweepReport};
 use crate::machine::chain::Chain;
+use crate::machine::tcp::Controller;
 use crate::math::Real;
 use crate::nc::Program;
 use crate::progress::Progress;
@@ -243,6 +244,13 @@ pub fn correct(
         );
     }
     let corrected = last.unwrap_or(given);
+    // A TCP controller gets the corrected poses as tool-tip coordinates.
+    let tcp = scene.controller() == Controller::Tcp;
+    let corrected = if tcp {
+        in_tcp(&corrected, &nominal)
+    } else {
+        corrected
+    };
     // Each deviation alone: what no axis command removes.
     let clock = Instant::now();
     let mut uncorrectable = Vec::new();
@@ -298,6 +306,13 @@ pub fn correct(
             "predicted on the twin: {faces}path within {:.6} mm, accuracy asked {} mm",
             f.path.max_mm, accuracy_mm
         ));
+    }
+    if tcp {
+        header.push(
+            "tool-centre-point program (machine.controller = tcp): X Y Z the tool tip in the \
+             workpiece frame, A B C the rotary axes, through the nominal kinematics"
+                .into(),
+        );
     }
     header.push("each block names its source line, subdivided moves also their part k/n".into());
     let report = CorrectReport {

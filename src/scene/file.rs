@@ -180,6 +180,23 @@ pub(super) struct SerialMachineFile {
     pub spindle: String,
     #[serde(default)]
     pub home: BTreeMap<String, Spanned<Real>>,
+    /// "joint" (the default) or "tcp": how the controller reads the program's axis words.
+    #[serde(default)]
+    pub controller: Option<Spanned<String>>,
+}
+
+/// `[machine] controller`'s value and where it stands, if the text has one as a string (read
+/// leniently, as [`machine_kind`]).
+pub(super) fn machine_controller_at(text: &str) -> Option<Spanned<String>> {
+    #[derive(Deserialize)]
+    struct Peek {
+        machine: Option<ControllerPeek>,
+    }
+    #[derive(Deserialize)]
+    struct ControllerPeek {
+        controller: Option<Spanned<String>>,
+    }
+    toml::from_str::<Peek>(text).ok()?.machine?.controller
 }
 
 /// `[machine] kind` of a scene text, if it has one (read leniently: the full parse reports

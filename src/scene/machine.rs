@@ -12,6 +12,7 @@ use crate::cutting::sweep::Kinematics;
 use crate::machine::chain::{Axis, AxisKind, Chain};
 use crate::machine::error_motion::{self, AxisErrorMotions};
 use crate::machine::hexapod::HexapodTwin;
+use crate::machine::tcp::{self, Controller};
 use crate::math::{Point3, Real};
 use crate::nc::{AxisLetter, AxisValues};
 use std::collections::BTreeMap;
@@ -42,6 +43,8 @@ pub struct SerialMachine {
     pub known: BTreeMap<String, Real>,
     /// Axis values before the first move.
     pub home: AxisValues,
+    /// How the controller reads the program (`[machine] controller`).
+    pub controller: Controller,
 }
 
 /// A hexapod that cuts: the machine the sweep drives pose by pose, and the controller's
@@ -104,6 +107,16 @@ impl Scene {
         match &self.machine {
             Machine::Serial(m) => m.home,
             Machine::Hexapod(h) => h.home,
+        }
+    }
+
+    /// How the controller reads the program's axis words: joint values, or the tool tip in
+    /// the workpiece frame (`[machine] controller = "tcp"`; a hexapod's program is its own
+    /// Cartesian one, `Joint` here).
+    pub fn controller(&self) -> Controller {
+        match &self.machine {
+            Machine::Serial(m) => m.controller,
+            Machine::Hexapod(_) => Controller::Joint,
         }
     }
 
@@ -242,6 +255,26 @@ pub(super) fn read_serial(
         };
         home.set(letter, x);
     }
+    let controller = match file.machine.controller.as_ref() {
+        None => Controller::Joint,
+        Some(c) => match c.get_ref().as_str() {
+            "joint" => Controller::Joint,
+            "tcp" if tcp::has_rotary(&chain) => Controller::Tcp,
+            "tcp" => {
+                return Err(ctx.err(
+                    c.span(),
+                    "machine.controller = \"tcp\" needs a rotary axis: on a machine of linear \
+                     axes the program's X Y Z already move the tool tip (use \"joint\")",
+                ));
+            }
+            other => {
+                return Err(ctx.err(
+                    c.span(),
+                    format!("machine.controller must be \"joint\" or \"tcp\", got \"{other}\""),
+                ));
+            }
+        },
+    };
     let model_nominal = chain.nominal();
     let injected = deviation_map(&ctx, &mut chain, &file.deviations)?;
     error_motions(&ctx, &mut chain, &file.error_motions, &file.reversal)?;
@@ -258,6 +291,7 @@ pub(super) fn read_serial(
         model,
         known,
         home,
+        controller,
     })
 }
 

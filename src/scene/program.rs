@@ -7,6 +7,7 @@ use super::SceneError;
 use super::file::NcFile;
 use super::line_col;
 use super::read_text;
+use crate::machine::tcp::{self, Controller};
 use crate::nc::{InterpOptions, LengthUnit, Program, interpret_program, options_from_texts};
 use std::path::{Path, PathBuf};
 use toml::Spanned;
@@ -121,6 +122,10 @@ impl Scene {
 
     /// Parses `text` as the scene's NC program (with the scene's `[nc]` files), checking
     /// that it drives only axes the machine has; messages name the scene's program file.
+    /// With `[machine] controller = "tcp"` the program is a tool-centre-point one, started at
+    /// the tip's position at home, and is returned as the joint moves its controller makes
+    /// through the nominal chain ([`tcp::joint_program`]): every command downstream reads
+    /// joint moves.
     pub fn program_from_text(&self, text: &str) -> Result<Program, SceneError> {
         let f = &self.nc_files;
         let read = |p: &Option<PathBuf>| p.as_ref().map(|p| self.read_named(p)).transpose();
@@ -132,11 +137,18 @@ impl Scene {
             f.external_unit,
         )
         .map_err(SceneError::Program)?;
+        let controller = self.controller();
+        let nominal = self.chain().nominal();
+        // A TCP controller starts where the tool tip is at home.
+        let start = match controller {
+            Controller::Joint => self.home(),
+            Controller::Tcp => tcp::tcp_from_joint(&nominal, &self.home()),
+        };
         let program = interpret_program(
             text,
             &self.program_path,
             InterpOptions {
-                start: self.home(),
+                start,
                 max_idle_blocks: f.max_idle_blocks.unwrap_or(opts.max_idle_blocks),
                 ..opts
             },
@@ -168,6 +180,16 @@ impl Scene {
                 ),
             });
         }
-        Ok(program)
+        match controller {
+            Controller::Joint => Ok(program),
+            Controller::Tcp => {
+                tcp::joint_program(&nominal, &program).map_err(|e| SceneError::Invalid {
+                    path: self.program_path.clone(),
+                    line: e.line(),
+                    column: 1,
+                    message: format!("tool-centre-point program: {e}"),
+                })
+            }
+        }
     }
 }

@@ -9,8 +9,8 @@ use super::Scene;
 use super::SceneError;
 use super::cut::read_cut;
 use super::file::{
-    HexapodMachineFile, Required, SceneFile, SerialMachineFile, StockFile, ToolFile, machine_kind,
-    machine_kind_at,
+    HexapodMachineFile, Required, SceneFile, SerialMachineFile, StockFile, ToolFile,
+    machine_controller_at, machine_kind, machine_kind_at,
 };
 use super::hexapod::{HexapodScene, read_hexapod};
 use super::identify::{IdentifySetup, identify_setup};
@@ -32,8 +32,9 @@ fn parse_file<M: DeserializeOwned>(ctx: &Ctx) -> Result<SceneFile<M>, SceneError
     toml::from_str(ctx.text).map_err(|e| toml_error(ctx.text, ctx.path, &e))
 }
 
-/// Refuses a `[machine] kind` that is neither machine, at its line and column, before the
-/// sections are read by a kind's rules.
+/// Refuses a `[machine] kind` that is neither machine, and a hexapod's `[machine]
+/// controller` (a string: TCP mode), at its line and column, before the sections are read by
+/// a kind's rules.
 fn known_kind(ctx: &Ctx) -> Result<(), SceneError> {
     match machine_kind_at(ctx.text) {
         Some(k) if !["serial", "hexapod"].contains(&k.get_ref().as_str()) => Err(ctx.err(
@@ -43,6 +44,15 @@ fn known_kind(ctx: &Ctx) -> Result<(), SceneError> {
                 k.get_ref()
             ),
         )),
+        Some(k) if k.get_ref() == "hexapod" => match machine_controller_at(ctx.text) {
+            Some(c) => Err(ctx.err(
+                c.span(),
+                "machine.controller applies to serial machines: a hexapod's program is \
+                 already Cartesian (the tool's pose), its controller's kinematics turn it into \
+                 strut lengths",
+            )),
+            None => Ok(()),
+        },
         _ => Ok(()),
     }
 }

@@ -23,7 +23,13 @@ const LAYOUT: &[(&str, &[&str])] = &[
     ),
     (
         "machine",
-        &["error_motion", "chain", "hexapod", "hexapod_accuracy"],
+        &[
+            "error_motion",
+            "chain",
+            "tcp",
+            "hexapod",
+            "hexapod_accuracy",
+        ],
     ),
     (
         "cutting",

@@ -82,6 +82,12 @@
 //! swept stock: the dexel crossings cut by a face's source line inside the face region,
 //! against the nominal flank plane — exact along each ray, no scanner, no grid bias.
 //!
+//! # Tool-centre-point programs
+//!
+//! A scene whose controller runs TCP programs is corrected on the joint moves its program
+//! becomes ([`crate::machine::tcp`]); [`in_tcp`] writes the corrected joint poses back as
+//! the TCP coordinates the controller turns into them.
+//!
 //! **Invariant:** correction reads moves and chains and writes G-code into a writer it is
 //! given; it never parses text, opens files or runs the scanner.
 
@@ -89,6 +95,7 @@ mod gcode;
 mod path;
 mod pose;
 mod program;
+mod tcp;
 #[cfg(test)]
 mod tests;
 mod verify;
@@ -103,6 +110,7 @@ pub use program::{
     Block, CorrectedProgram, CorrectionSummary, MoveCorrection, as_printed, controller_length,
     correct_program, uncorrected,
 };
+pub use tcp::in_tcp;
 pub use verify::{
     FaceCheck, FaceError, PartError, PathError, axis_angle_error, face_errors, nominal_face,
     part_error, path_error,

@@ -372,23 +372,7 @@ pub fn correct_program(
     })
 }
 
-/// The length a feed-per-minute controller applies F to (LinuxCNC's, its interpreter's
-/// `find_straight_length`): the XYZ length of a straight move (mm) when it is not zero,
-/// else its A B C length (degrees).
-pub fn controller_length(from: &AxisValues, to: &AxisValues) -> Real {
-    let d = |ls: [AxisLetter; 3]| {
-        ls.iter()
-            .map(|&l| (to.get(l) - from.get(l)).powi(2))
-            .sum::<Real>()
-            .sqrt()
-    };
-    let xyz = d([AxisLetter::X, AxisLetter::Y, AxisLetter::Z]);
-    if xyz > 0.0 {
-        xyz
-    } else {
-        d([AxisLetter::A, AxisLetter::B, AxisLetter::C])
-    }
-}
+pub use crate::nc::controller_length;
 
 /// The length a feed-per-minute controller applies a source move's F to: a straight move's
 /// [`controller_length`]; an arc's helix in X Y Z (LinuxCNC's `find_arc_length`: the start
