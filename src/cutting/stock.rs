@@ -1127,7 +1127,7 @@ impl TriDexel {
             max: Point3::new(f[3], f[4], f[5]),
         };
         let pitch = f[6];
-        if !bounds.is_proper_box() || !(pitch.is_finite() && pitch > 0.0) {
+        if !(bounds.is_proper_box() && pitch.is_finite() && pitch > 0.0) {
             return None;
         }
         // The grids laid out by the box and pitch (refused if absurdly many rays).

@@ -9,7 +9,9 @@
 //! the union of the grown tools' intervals. When none of those meets a material segment
 //! (open intervals, as [`crate::cutting::stock`] subtracts them), every interval the
 //! envelope returns misses the material too and the ray comes out unchanged: skipping its
-//! solve changes nothing, bit for bit.
+//! solve changes nothing, bit for bit. (The envelope joins intervals less than
+//! [`tol::SLIVER`] apart; a material segment is at least that long, so it cannot lie in
+//! such a gap clear of both grown ends.)
 //!
 //! A cell's middle pose grown by the envelope's `δ` holds the tool over the whole cell: a
 //! ray whose material that misses is culled for the cell at once.
