@@ -63,7 +63,8 @@
 //!
 //! **Files.** This one holds the tolerances, the error and [`RotaryEnvelope`] as a
 //! [`Cutter`]; `path` the move's poses and speed bounds, `probe` the tool at one pose against
-//! a ray, `solve` the envelope's construction and the per-ray solve, `tests` the unit tests.
+//! a ray, `solve` the envelope's construction and the per-ray solve, `cull` the test that skips
+//! rays the move cannot change, `tests` the unit tests.
 
 use crate::cutting::stock::{Cutter, RayCut, Segment};
 use crate::cutting::tool::{Tool, ToolKind};
