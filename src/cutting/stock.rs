@@ -175,6 +175,14 @@ pub trait Cutter: Sync {
     fn costly_rays(&self) -> bool {
         false
     }
+    /// Whether the cutter may change the ray `origin + t·e_axis` whose material is `segs`:
+    /// `false` only when every interval [`Cutter::ray_cuts_in_span`] would give misses
+    /// every segment (touching an end at most), so the ray would come out unchanged. The
+    /// default: yes.
+    fn may_cut(&self, origin: &Point3, axis: usize, segs: &[Segment]) -> bool {
+        let _ = (origin, axis, segs);
+        true
+    }
     /// Like [`Cutter::ray_cuts_lined`] for a caller that only keeps what lies in `span`
     /// along the ray (the material's extent): an interval end outside `span` may be anywhere
     /// outside it, and an interval wholly outside may be left out. The default is exact.
@@ -597,6 +605,9 @@ impl CutContext<'_> {
                 let mut o = Point3::origin();
                 o[self.u] = self.u0 + iu as Real * self.du;
                 o[self.v] = self.v0 + iv as Real * self.dv;
+                if !self.cutter.may_cut(&o, self.axis, segs) {
+                    continue;
+                }
                 cuts.clear();
                 lines.clear();
                 self.cutter
@@ -1055,6 +1066,159 @@ impl TriDexel {
     pub fn memory_bytes(&self) -> usize {
         self.grids.iter().map(DexelGrid::heap_bytes).sum()
     }
+
+    /// The stock as bytes, every crossing bit for bit (little-endian: a magic, the box and
+    /// pitch, each grid's blocks with their offset tables and segments, then an FNV-1a 64
+    /// checksum of all before it); read back by [`TriDexel::from_bytes`].
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(64 + self.memory_bytes());
+        out.extend_from_slice(DEXEL_MAGIC);
+        for x in [self.bounds.min, self.bounds.max]
+            .iter()
+            .flat_map(|p| p.coords.iter().copied())
+            .chain([self.pitch])
+        {
+            out.extend_from_slice(&x.to_le_bytes());
+        }
+        let crossing = |out: &mut Vec<u8>, c: &Crossing| {
+            out.extend_from_slice(&c.t.to_le_bytes());
+            for n in c.normal {
+                out.extend_from_slice(&n.to_le_bytes());
+            }
+            out.extend_from_slice(&c.line.to_le_bytes());
+        };
+        for g in &self.grids {
+            out.extend_from_slice(&(g.blocks.len() as u64).to_le_bytes());
+            for b in &g.blocks {
+                out.extend_from_slice(&(b.offsets.len() as u32).to_le_bytes());
+                out.extend_from_slice(&(b.segs.len() as u32).to_le_bytes());
+                for o in &b.offsets {
+                    out.extend_from_slice(&o.to_le_bytes());
+                }
+                for s in &b.segs {
+                    crossing(&mut out, &s.lo);
+                    crossing(&mut out, &s.hi);
+                }
+            }
+        }
+        let sum = fnv1a(&out);
+        out.extend_from_slice(&sum.to_le_bytes());
+        out
+    }
+
+    /// The stock [`TriDexel::to_bytes`] wrote; `None` for anything else (another format, a
+    /// checksum that does not match, a truncated or inconsistent layout), so that a
+    /// damaged copy is never taken for a stock.
+    pub fn from_bytes(bytes: &[u8]) -> Option<Self> {
+        let body_len = bytes.len().checked_sub(8)?;
+        let (body, sum) = bytes.split_at(body_len);
+        if !body.starts_with(DEXEL_MAGIC) || fnv1a(body).to_le_bytes() != sum {
+            return None;
+        }
+        let mut r = ByteReader {
+            bytes: &body[DEXEL_MAGIC.len()..],
+        };
+        let mut f = [0.0; 7];
+        for x in &mut f {
+            *x = Real::from_le_bytes(r.take()?);
+        }
+        let bounds = Aabb {
+            min: Point3::new(f[0], f[1], f[2]),
+            max: Point3::new(f[3], f[4], f[5]),
+        };
+        let pitch = f[6];
+        if !(bounds.is_proper_box() && pitch.is_finite() && pitch > 0.0) {
+            return None;
+        }
+        // The grids laid out by the box and pitch (refused if absurdly many rays).
+        let rays: Real = (0..3)
+            .map(|k| ((bounds.max[k] - bounds.min[k]) / pitch).round().max(1.0))
+            .product();
+        if rays > 1e12 {
+            return None;
+        }
+        let mut grids = [0, 1, 2].map(|axis| DexelGrid::new(&bounds, axis, pitch));
+        for g in &mut grids {
+            if u64::from_le_bytes(r.take()?) != g.blocks.len() as u64 {
+                return None;
+            }
+            for (i, b) in g.blocks.iter_mut().enumerate() {
+                let n_off = u32::from_le_bytes(r.take()?) as usize;
+                let n_seg = u32::from_le_bytes(r.take()?) as usize;
+                if n_off == 0 {
+                    if n_seg != 0 {
+                        return None;
+                    }
+                    continue;
+                }
+                if n_off != BLOCK * BLOCK + 1 || r.bytes.len() < 4 * n_off + 48 * n_seg {
+                    return None;
+                }
+                let offsets: Vec<u32> = (0..n_off)
+                    .map(|_| r.take().map(u32::from_le_bytes))
+                    .collect::<Option<_>>()?;
+                let valid = offsets[0] == 0
+                    && offsets.windows(2).all(|w| w[0] <= w[1])
+                    && offsets[n_off - 1] as usize == n_seg;
+                // Rays outside the grid hold nothing.
+                let (bu, bv) = (i % g.nbu, i / g.nbu);
+                let outside = (0..BLOCK * BLOCK).any(|l| {
+                    let out = bu * BLOCK + l % BLOCK >= g.nu || bv * BLOCK + l / BLOCK >= g.nv;
+                    out && offsets[l] != offsets[l + 1]
+                });
+                if !valid || outside {
+                    return None;
+                }
+                let mut crossing = || -> Option<Crossing> {
+                    let t = Real::from_le_bytes(r.take()?);
+                    let normal = [0; 3].map(|_| r.take().map(f32::from_le_bytes));
+                    let line = u32::from_le_bytes(r.take()?);
+                    Some(Crossing {
+                        t,
+                        normal: [normal[0]?, normal[1]?, normal[2]?],
+                        line,
+                    })
+                };
+                let mut segs = Vec::with_capacity(n_seg);
+                for _ in 0..n_seg {
+                    let (lo, hi) = (crossing()?, crossing()?);
+                    if !(lo.t.is_finite() && hi.t.is_finite() && lo.t < hi.t) {
+                        return None;
+                    }
+                    segs.push(Segment { lo, hi });
+                }
+                *b = Block { offsets, segs };
+            }
+        }
+        r.bytes.is_empty().then_some(Self {
+            bounds,
+            pitch,
+            grids,
+        })
+    }
+}
+
+/// The first bytes of [`TriDexel::to_bytes`]: the format and its version.
+const DEXEL_MAGIC: &[u8; 8] = b"TMDEXEL1";
+
+/// FNV-1a 64 of `bytes`.
+fn fnv1a(bytes: &[u8]) -> u64 {
+    bytes.iter().fold(0xcbf2_9ce4_8422_2325, |h, &b| {
+        (h ^ b as u64).wrapping_mul(0x0100_0000_01b3)
+    })
+}
+
+/// Reads fixed-size little-endian values off the front of a byte slice.
+struct ByteReader<'a> {
+    bytes: &'a [u8],
+}
+
+impl ByteReader<'_> {
+    fn take<const N: usize>(&mut self) -> Option<[u8; N]> {
+        let (head, rest) = self.bytes.split_first_chunk::<N>()?;
+        self.bytes = rest;
+        Some(*head)
+    }
 }
 
 #[cfg(test)]
@@ -1213,5 +1377,46 @@ mod tests {
             })
         };
         assert_eq!(run(1), run(2));
+    }
+
+    /// Every crossing of `s` with its point, in grid order.
+    fn all_crossings(s: &TriDexel) -> Vec<(Point3, Crossing)> {
+        let mut all = Vec::new();
+        for g in s.grids() {
+            g.for_each_crossing(|p, c| all.push((p, *c)));
+        }
+        all
+    }
+
+    #[test]
+    fn bytes_read_back_to_the_same_stock_and_damage_is_refused() {
+        // A box with a pocket (blocks touched and untouched, rays with two segments).
+        let mut s = TriDexel::new_box(unit_box(10.0), 0.3, 1e9).expect("fits");
+        let pocket = Aabb {
+            min: Point3::new(2.05, -1.0, 5.01),
+            max: Point3::new(8.7, 8.2, 7.0),
+        };
+        s.remove(&BoxCutter(pocket), 7);
+        let bytes = s.to_bytes();
+        let back = TriDexel::from_bytes(&bytes).expect("reads back");
+        assert_eq!(all_crossings(&back), all_crossings(&s));
+        assert_eq!(back.bounds(), s.bounds());
+        assert_eq!(back.volume().to_bits(), s.volume().to_bits());
+        // The pocket's volume, independently: 6.65 × 8.2 (from y = 0) × 1.99 mm, within
+        // the rays' coverage of its sides (half a 0.3 mm pitch each way: under 15 %).
+        let removed = 1000.0 - back.volume();
+        let exact = 6.65 * 8.2 * 1.99;
+        assert!((removed - exact).abs() < 0.15 * exact, "{removed}");
+        // Any flipped bit, a cut short or a longer file: refused.
+        for at in [0, 9, bytes.len() / 3, bytes.len() / 2, bytes.len() - 1] {
+            let mut bad = bytes.clone();
+            bad[at] ^= 0x10;
+            assert!(TriDexel::from_bytes(&bad).is_none(), "flip at {at}");
+        }
+        assert!(TriDexel::from_bytes(&bytes[..bytes.len() - 9]).is_none());
+        assert!(TriDexel::from_bytes(&[]).is_none());
+        let mut long = bytes.clone();
+        long.push(0);
+        assert!(TriDexel::from_bytes(&long).is_none());
     }
 }

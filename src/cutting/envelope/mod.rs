@@ -63,9 +63,10 @@
 //!
 //! **Files.** This one holds the tolerances, the error and [`RotaryEnvelope`] as a
 //! [`Cutter`]; `path` the move's poses and speed bounds, `probe` the tool at one pose against
-//! a ray, `solve` the envelope's construction and the per-ray solve, `tests` the unit tests.
+//! a ray, `solve` the envelope's construction and the per-ray solve, `cull` the test that skips
+//! rays the move cannot change, `tests` the unit tests.
 
-use crate::cutting::stock::{Cutter, RayCut};
+use crate::cutting::stock::{Cutter, RayCut, Segment};
 use crate::cutting::tool::{Tool, ToolKind};
 use crate::machine::chain::{AxisKind, Chain};
 use crate::machine::error_motion::{self, AxisErrorMotions, Directions};
@@ -73,6 +74,7 @@ use crate::math::{Aabb, Isometry3, Matrix3, Point3, Real, Vector3, tol};
 use crate::nc::AxisValues;
 use std::cell::Cell;
 
+mod cull;
 mod path;
 mod probe;
 mod solve;
@@ -146,6 +148,8 @@ pub struct RotaryEnvelope {
     /// Box of each cell's grown tool.
     cell_boxes: Vec<Aabb>,
     bounds: Aabb,
+    /// The poses of the cull test ([`RotaryEnvelope::may_cut`]).
+    cull: cull::CullPoses,
 }
 
 impl Cutter for RotaryEnvelope {
@@ -168,6 +172,12 @@ impl Cutter for RotaryEnvelope {
 
     fn costly_rays(&self) -> bool {
         true
+    }
+
+    fn may_cut(&self, origin: &Point3, axis: usize, segs: &[Segment]) -> bool {
+        let mut e = Vector3::zeros();
+        e[axis] = 1.0;
+        RotaryEnvelope::may_cut(self, origin, &e, segs)
     }
 
     fn ray_cuts_in_span(

@@ -78,7 +78,9 @@ impl RotaryEnvelope {
                 (mid, path.sample(mid))
             })
             .collect();
+        let cull = cull::CullPoses::new(&path, cells, speed);
         Ok(Self {
+            cull,
             shape,
             r,
             l,
