@@ -1037,6 +1037,22 @@ pub struct PoseErrors {
 /// Pivot tilt of the survey at most (degrees): seed 001's pivot check.
 pub const PIVOT_TILT_DEG: Real = 15.0;
 
+/// The points a pivot survey swings about: the workspace's centre and the four points half
+/// way to its corners, at mid height (mm).
+pub fn pivot_survey_points(ws: &Workspace) -> [Vector3; 5] {
+    let (xc, yc) = (0.5 * (ws.x_mm.0 + ws.x_mm.1), 0.5 * (ws.y_mm.0 + ws.y_mm.1));
+    let (hx, hy) = (0.5 * (ws.x_mm.1 - ws.x_mm.0), 0.5 * (ws.y_mm.1 - ws.y_mm.0));
+    let z = 0.5 * (ws.z_mm.0 + ws.z_mm.1);
+    [
+        (0.0, 0.0),
+        (0.5, 0.5),
+        (-0.5, 0.5),
+        (-0.5, -0.5),
+        (0.5, -0.5),
+    ]
+    .map(|(fx, fy)| Vector3::new(xc + fx * hx, yc + fy * hy, z))
+}
+
 /// The pose errors of the `actual` machine commanded through `controller` over `ws`.
 pub fn pose_errors(
     controller: &Hexapod,
@@ -1045,19 +1061,9 @@ pub fn pose_errors(
 ) -> Result<PoseErrors, HexapodError> {
     let position_mm =
         level_positioning(controller, actual, ws, [5, 5, 5])?.map_or(Real::NAN, |l| l.max_error_mm);
-    let (xc, yc) = (0.5 * (ws.x_mm.0 + ws.x_mm.1), 0.5 * (ws.y_mm.0 + ws.y_mm.1));
-    let (hx, hy) = (0.5 * (ws.x_mm.1 - ws.x_mm.0), 0.5 * (ws.y_mm.1 - ws.y_mm.0));
-    let z = 0.5 * (ws.z_mm.0 + ws.z_mm.1);
     let tilt = ws.tilt_deg.min(PIVOT_TILT_DEG);
     let mut pivot_mm: Real = 0.0;
-    for (fx, fy) in [
-        (0.0, 0.0),
-        (0.5, 0.5),
-        (-0.5, 0.5),
-        (-0.5, -0.5),
-        (0.5, -0.5),
-    ] {
-        let pt = Vector3::new(xc + fx * hx, yc + fy * hy, z);
+    for pt in pivot_survey_points(ws) {
         let r = pivot_test(controller, actual, &pt, tilt, 5)?;
         pivot_mm = pivot_mm.max(r.pivot_error_mm);
     }

@@ -40,7 +40,9 @@
 
 use crate::calibration::engine::{Block, Forward, Outcome, Problem, Unknown, solve};
 use crate::calibration::goodness::FitCheck;
-use crate::calibration::hexapod_calibrate::{JOINT_MAGNITUDE_MM, STRUT_MAGNITUDE_MM};
+use crate::calibration::hexapod_calibrate::{
+    JOINT_MAGNITUDE_MM, STRUT_MAGNITUDE_MM, pivot_survey_points,
+};
 use crate::machine::hexapod::{
     Hexapod, HexapodError, PARAMETERS, ParameterId, ParameterKind, Pose, twin_pose,
 };
@@ -515,20 +517,11 @@ pub fn survey(
     let positioning_mm = level_positioning(controller, actual, ws, [SURVEY_STEPS; 3])
         .map_err(kin("survey positioning"))?
         .map_or(Real::NAN, |l| l.max_error_mm);
-    let (xc, yc) = (0.5 * (ws.x_mm.0 + ws.x_mm.1), 0.5 * (ws.y_mm.0 + ws.y_mm.1));
-    let (hx, hy) = (0.5 * (ws.x_mm.1 - ws.x_mm.0), 0.5 * (ws.y_mm.1 - ws.y_mm.0));
-    let z = 0.5 * (ws.z_mm.0 + ws.z_mm.1);
     let mut pivot_mm: Real = 0.0;
     let lin = |k: usize| -ws.tilt_deg + 2.0 * ws.tilt_deg * k as Real / (SURVEY_STEPS - 1) as Real;
-    for (fx, fy) in [
-        (0.0, 0.0),
-        (0.5, 0.5),
-        (-0.5, 0.5),
-        (-0.5, -0.5),
-        (0.5, -0.5),
-    ] {
+    for p in pivot_survey_points(ws) {
         let swing = PivotSwing {
-            point_mm: [xc + fx * hx, yc + fy * hy, z],
+            point_mm: [p.x, p.y, p.z],
             angles_deg: Vec::new(),
         };
         let level = twin_pose(controller, actual, &swing.pose(0.0, 0.0))
