@@ -28,6 +28,7 @@ mod misfit;
 mod identify_instruments;
 mod axis_comp;
 mod iso_names;
+mod design_rotary;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};
