@@ -195,6 +195,10 @@ pub struct Design {
     pub safe_z_mm: Real,
 }
 
+#[expect(
+    clippy::large_enum_variant,
+    reason = "a few hundred candidates, copied by the search; boxing buys nothing"
+)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Cut {
     /// X-shoulder at `index`, on the base edge `side` (±1), at depth `depth`.
@@ -563,8 +567,8 @@ fn block_candidates(
         if t.z < -0.05 {
             continue;
         }
-        for along in 0..3 {
-            let d = cols[along].normalize();
+        for (along, col) in cols.iter().enumerate() {
+            let d = col.normalize();
             if d.dot(&t).abs() > 1e-6 {
                 continue;
             }

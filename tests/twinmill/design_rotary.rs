@@ -305,10 +305,6 @@ fn ball_sensor_and_the_designed_part_identify_the_trunnion_together() {
             find(&part.identified, n),
         );
         let t = truth.iter().find(|(k, _)| k == n).map_or(0.0, |(_, v)| *v);
-        eprintln!(
-            "{n}: truth {t:e}  ball {:e} ± {:e}  part {:e} ± {:e}  both {:e} ± {:e}",
-            a.value, a.sigma, p.value, p.sigma, b.value, b.sigma
-        );
         for (what, e) in [("ball", &a), ("joint", &b)] {
             assert!(
                 (e.value - t).abs() <= 3.0 * e.sigma,
