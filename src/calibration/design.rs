@@ -125,6 +125,16 @@ impl DesignOptions {
         }
     }
 
+    /// The block of [`Family::Block`] (workpiece frame): a cube of the bar's section,
+    /// `2·half` on each side, standing on the W xy plane and centred on W z.
+    pub fn block(&self) -> Aabb {
+        let h = self.half_section_mm;
+        Aabb {
+            min: Point3::new(-h, -h, 0.0),
+            max: Point3::new(h, h, 2.0 * h),
+        }
+    }
+
     /// The bar (workpiece frame).
     pub fn stock(&self) -> Aabb {
         let (h, l) = (self.half_section_mm, self.length_mm / 2.0);
@@ -177,8 +187,18 @@ pub struct Design {
     /// heights separates (`beta_XZ`/`beta_ZS`, `alpha_YX`/`alpha_ZS`), that spread and the
     /// expected standard uncertainty of the difference.
     pub notes: Vec<String>,
+    /// The family of test part.
+    pub family: Family,
+    /// The part (workpiece frame): the bar or the block.
+    pub stock: Aabb,
+    /// The program's rapid plane (Z, mm).
+    pub safe_z_mm: Real,
 }
 
+#[expect(
+    clippy::large_enum_variant,
+    reason = "a few hundred candidates, copied by the search; boxing buys nothing"
+)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Cut {
     /// X-shoulder at `index`, on the base edge `side` (±1), at depth `depth`.
@@ -189,39 +209,81 @@ enum Cut {
     },
     /// Y-shoulder across the +x end at `index`, depth `depth`.
     YShoulder { index: Real, depth: Real },
+    /// A shoulder on an edge of the block (the family for any chain with a rotary axis).
+    Block(BlockCut),
 }
 
-fn check_machine(chain: &Chain) -> Result<(), DesignError> {
+/// A shoulder on the block at one rotary pose: a straight cut along the linear axis
+/// `along` (0 X, 1 Y, perpendicular to the tool there), its flank `width` in from the
+/// block's face on the side `side` of the cut and its tip `depth` below the block's top
+/// along the tool axis.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct BlockCut {
+    /// The rotary axes' letters and values (degrees), in chain order.
+    pose: [(AxisLetter, Real); 3],
+    /// How many entries of `pose` are used.
+    rotaries: usize,
+    /// The pose's place in the candidate order (program order).
+    order: usize,
+    /// The linear axis moved: 0 X, 1 Y, 2 Z.
+    along: usize,
+    /// Which side of the cut the shoulder is on (±1: along ±(cut direction × tool axis)).
+    side: Real,
+    /// Which way the cut runs along its axis (±1): from the block's low end towards its
+    /// high end, or back.
+    from: Real,
+    /// Depth of the tip below the block's top along the tool axis (mm).
+    depth: Real,
+    /// The straight cut in axis values.
+    mv: Move,
+    /// The part of the block the cut removes, as a box in W (for conflicts).
+    removed: Aabb,
+    /// The face's length along the cut inside the block (mm).
+    length: Real,
+}
+
+/// The family of test parts a chain is designed with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Family {
+    /// The square bar along a rotary axis about W x through the origin, first in the chain.
+    Bar,
+    /// The block on (or under) any other rotary axes: shoulders cut at several positions of
+    /// each rotary axis.
+    Block,
+}
+
+fn check_machine(chain: &Chain) -> Result<Family, DesignError> {
     let axes = chain.axes();
-    let first = axes
-        .first()
-        .ok_or_else(|| DesignError::Machine("a chain".into()))?;
-    if first.kind != AxisKind::Rotary
-        || (first.direction.into_inner() - Vector3::x()).norm() > 1e-12
-        || first.origin.y != 0.0
-        || first.origin.z != 0.0
-    {
-        return Err(DesignError::Machine(
-            "the workpiece on a rotary axis about W x through the origin (first in the chain)"
-                .into(),
-        ));
-    }
     for (letter, dir) in [
         (AxisLetter::X, Vector3::x()),
         (AxisLetter::Y, Vector3::y()),
         (AxisLetter::Z, Vector3::z()),
     ] {
-        if !axes
-            .iter()
-            .any(|a| a.letter == letter && (a.direction.into_inner() - dir).norm() < 1e-12)
-        {
+        if !axes.iter().any(|a| {
+            a.letter == letter
+                && a.kind == AxisKind::Linear
+                && (a.direction.into_inner() - dir).norm() < 1e-12
+        }) {
             return Err(DesignError::Machine(format!(
                 "a linear {} axis along {dir:?}",
                 letter.as_char()
             )));
         }
     }
-    Ok(())
+    let rotaries = axes.iter().filter(|a| a.kind == AxisKind::Rotary).count();
+    if rotaries == 0 || rotaries > 3 {
+        return Err(DesignError::Machine(
+            "one to three rotary axes (a rotary table or head to index the part or tool)".into(),
+        ));
+    }
+    let first = &axes[0];
+    let bar = first.kind == AxisKind::Rotary
+        && first.letter == AxisLetter::A
+        && rotaries == 1
+        && (first.direction.into_inner() - Vector3::x()).norm() <= 1e-12
+        && first.origin.y == 0.0
+        && first.origin.z == 0.0;
+    Ok(if bar { Family::Bar } else { Family::Block })
 }
 
 fn axes(a: Real, x: Real, y: Real, z: Real) -> AxisValues {
@@ -240,12 +302,39 @@ impl Cut {
                 if side < 0.0 { "m" } else { "p" }
             ),
             Cut::YShoulder { index, depth } => format!("a{index:.0}-end-d{depth:.0}"),
+            Cut::Block(b) => {
+                let pose: String = b.pose[..b.rotaries]
+                    .iter()
+                    .map(|(l, v)| format!("{}{v:.0}", l.as_char().to_ascii_lowercase()))
+                    .collect();
+                format!(
+                    "{pose}-{}{}{}-d{:.0}",
+                    ["x", "y", "z"][b.along],
+                    if b.side < 0.0 { "m" } else { "p" },
+                    if b.from < 0.0 { "r" } else { "" },
+                    b.depth
+                )
+            }
         }
     }
 
     fn index(&self) -> Real {
         match *self {
             Cut::XShoulder { index, .. } | Cut::YShoulder { index, .. } => index,
+            // The first rotary value that is not zero (the axis this pose turns).
+            Cut::Block(b) => b.pose[..b.rotaries]
+                .iter()
+                .map(|p| p.1)
+                .find(|v| *v != 0.0)
+                .unwrap_or(0.0),
+        }
+    }
+
+    /// Program order: the bar's by index, the block's by pose.
+    fn order(&self) -> Real {
+        match self {
+            Cut::Block(b) => b.order as Real,
+            _ => self.index(),
         }
     }
 
@@ -257,6 +346,12 @@ impl Cut {
                 ([side * (h - o.width_mm), side * h], index, depth)
             }
             Cut::YShoulder { index, depth } => ([-h, h], index, depth),
+            Cut::Block(b) => {
+                return (
+                    [b.removed.min.y, b.removed.min.z],
+                    [b.removed.max.y, b.removed.max.z],
+                );
+            }
         };
         let (s, c) = index.to_radians().sin_cos();
         let mut lo = [Real::INFINITY; 2];
@@ -277,6 +372,7 @@ impl Cut {
     fn motion(&self, o: &DesignOptions, r: Real) -> Move {
         let (h, l) = (o.half_section_mm, o.length_mm / 2.0);
         let (start, end) = match *self {
+            Cut::Block(b) => return b.mv,
             Cut::XShoulder { index, side, depth } => {
                 let y = side * (h - o.width_mm + r);
                 let z = h - depth;
@@ -320,6 +416,7 @@ impl Cut {
         let (along, depth) = match *self {
             Cut::XShoulder { depth, .. } => (l - o.width_mm - 2.0, depth),
             Cut::YShoulder { depth, .. } => (2.0 * h, depth),
+            Cut::Block(b) => (b.length, b.depth),
         };
         match kind {
             FaceKind::Flank => ((along - m).max(0.0), (depth - m).max(0.0)),
@@ -370,6 +467,201 @@ fn candidates(o: &DesignOptions, tool: &Tool) -> Vec<Cut> {
     out
 }
 
+/// The rotary positions of the block family: per rotary axis, its values with the other
+/// rotary axes at zero — the four quarter turns for an axis parallel to the tool at the
+/// zero pose (a C table under a vertical spindle), −90°, 0 and 90° for one across it (a
+/// trunnion's A, a head's B): every pose keeps the block's faces square to the tool, so
+/// each shoulder's flank and floor are faces of the block.
+fn block_poses(model: &Chain) -> Vec<[(AxisLetter, Real); 3]> {
+    let rot: Vec<_> = model
+        .axes()
+        .iter()
+        .filter(|a| a.kind == AxisKind::Rotary)
+        .collect();
+    let tool_axis = model.w_from_t(&AxisValues::default()).rotation * Vector3::z();
+    let mut zero = [(AxisLetter::X, 0.0); 3];
+    for (k, a) in rot.iter().enumerate() {
+        zero[k] = (a.letter, 0.0);
+    }
+    let mut out = vec![zero];
+    for (k, a) in rot.iter().enumerate() {
+        let parallel = a.direction.dot(&tool_axis).abs() > 0.99;
+        let values: &[Real] = if parallel {
+            &[90.0, 180.0, 270.0]
+        } else {
+            &[-90.0, 90.0]
+        };
+        for &v in values {
+            let mut p = zero;
+            p[k].1 = v;
+            out.push(p);
+        }
+    }
+    out
+}
+
+/// The block family's candidate cuts: at every pose of [`block_poses`], shoulders along X
+/// and along Y (where the cut is across the tool) on both sides, at every depth the tool
+/// reaches that leaves a margin of the block, whose flank and floor face sideways or up in
+/// W (the scanner looks from around and above). Each cut enters from outside one end of an
+/// edge and stops short of the edge's middle: the shoulders compete for the block's few
+/// edges, and half-edge cuts leave room for the positions of every axis.
+fn block_candidates(
+    model: &Chain,
+    tool: &Tool,
+    o: &DesignOptions,
+) -> Result<Vec<Cut>, DesignError> {
+    let stock = o.block();
+    let r = tool.radius();
+    let reach = tool.length() - o.margin_mm;
+    let rotaries = model
+        .axes()
+        .iter()
+        .filter(|a| a.kind == AxisKind::Rotary)
+        .count();
+    let corners: Vec<Point3> = (0..8)
+        .map(|i| {
+            Point3::new(
+                if i & 1 == 0 { stock.min.x } else { stock.max.x },
+                if i & 2 == 0 { stock.min.y } else { stock.max.y },
+                if i & 4 == 0 { stock.min.z } else { stock.max.z },
+            )
+        })
+        .collect();
+    let range = |w: &Vector3| {
+        corners
+            .iter()
+            .fold((Real::INFINITY, Real::NEG_INFINITY), |(lo, hi), c| {
+                let x = w.dot(&c.coords);
+                (lo.min(x), hi.max(x))
+            })
+    };
+    let letters = [AxisLetter::X, AxisLetter::Y, AxisLetter::Z];
+    let mut out = Vec::new();
+    for (order, pose) in block_poses(model).into_iter().enumerate() {
+        let mut q = AxisValues::default();
+        for (l, v) in &pose[..rotaries] {
+            q = q.with(*l, *v);
+        }
+        // The tip is affine in the linear axes at a fixed pose.
+        let tip = |p: &[Real; 3]| {
+            let mut a = q;
+            for k in 0..3 {
+                a = a.with(letters[k], p[k]);
+            }
+            model.w_from_t(&a) * Point3::origin()
+        };
+        let p0 = tip(&[0.0; 3]);
+        let cols: Vec<Vector3> = (0..3)
+            .map(|k| {
+                let mut e = [0.0; 3];
+                e[k] = 1.0;
+                tip(&e) - p0
+            })
+            .collect();
+        let m = crate::math::Matrix3::from_columns(&cols);
+        let Some(inv) = m.try_inverse() else {
+            continue;
+        };
+        let t = model.w_from_t(&q).rotation * Vector3::z();
+        if t.z < -0.05 {
+            continue;
+        }
+        for (along, col) in cols.iter().enumerate() {
+            let d = col.normalize();
+            if d.dot(&t).abs() > 1e-6 {
+                continue;
+            }
+            for side in [-1.0, 1.0] {
+                let n = (d.cross(&t) * side).normalize();
+                // The flank faces +n (from the material towards the tool), the floor +t.
+                if n.z < -0.05 {
+                    continue;
+                }
+                let (s_lo, s_hi) = range(&n);
+                let (h_lo, h_hi) = range(&t);
+                let (d_lo, d_hi) = range(&d);
+                // Half an edge: from outside one end to a face margin short of the edge's
+                // middle, so the two halves of an edge are two cuts (the conflict test
+                // grows the removed boxes by the margin).
+                let mid = 0.5 * (d_lo + d_hi);
+                for from in [1.0, -1.0] {
+                    let (a0, a1) = if from > 0.0 {
+                        (d_lo - r - 1.0, mid - r - o.margin_mm)
+                    } else {
+                        (d_hi + r + 1.0, mid + r + o.margin_mm)
+                    };
+                    let b = s_hi - o.width_mm + r;
+                    for &depth in &o.depths_mm {
+                        if depth <= 0.0
+                            || depth > reach
+                            || depth > (h_hi - h_lo) / 3.0
+                            || depth >= (h_hi - h_lo) - o.margin_mm
+                            || o.width_mm >= (s_hi - s_lo) - o.margin_mm
+                        {
+                            continue;
+                        }
+                        let c = h_hi - depth;
+                        let axes_at = |a: Real| {
+                            let p = d * a + n * b + t * c;
+                            let v = inv * (p - p0.coords);
+                            let mut out = q;
+                            for k in 0..3 {
+                                out = out.with(letters[k], v[k]);
+                            }
+                            out
+                        };
+                        let mut lo = Point3::new(Real::INFINITY, Real::INFINITY, Real::INFINITY);
+                        let mut hi = -lo;
+                        for a in [a0.min(a1) - r, a0.max(a1) + r] {
+                            for bb in [s_hi - o.width_mm, s_hi] {
+                                for cc in [c, h_hi] {
+                                    let p = d * a + n * bb + t * cc;
+                                    for k in 0..3 {
+                                        lo[k] = lo[k].min(p[k]).max(stock.min[k]);
+                                        hi[k] = hi[k].max(p[k]).min(stock.max[k]);
+                                    }
+                                }
+                            }
+                        }
+                        // A cut along Z starts above its end: the rapid down to its start
+                        // runs outside the block only then.
+                        if along == 2
+                            && axes_at(a0).get(AxisLetter::Z) < axes_at(a1).get(AxisLetter::Z)
+                        {
+                            continue;
+                        }
+                        out.push(Cut::Block(BlockCut {
+                            pose,
+                            rotaries,
+                            order,
+                            along,
+                            side,
+                            from,
+                            depth,
+                            mv: Move {
+                                kind: MoveKind::Linear,
+                                start: axes_at(a0),
+                                end: axes_at(a1),
+                                feed_mm_per_min: Some(FEED_MM_PER_MIN),
+                                line: 0,
+                            },
+                            removed: Aabb { min: lo, max: hi },
+                            length: if from > 0.0 { a1 - d_lo } else { d_hi - a1 },
+                        }));
+                    }
+                }
+            }
+        }
+    }
+    if out.is_empty() {
+        return Err(DesignError::Machine(
+            "a pose at which the tool reaches the block's edges".into(),
+        ));
+    }
+    Ok(out)
+}
+
 /// The rotary indices the bar is cut at (degrees).
 const INDICES_DEG: [Real; 4] = [0.0, 90.0, 180.0, 270.0];
 
@@ -380,11 +672,11 @@ pub type MeasuredFaces = BTreeMap<String, PlaneFeature>;
 fn features_of(
     cuts: &[Cut],
     o: &DesignOptions,
+    stock: Aabb,
     model: &Chain,
     tool: &Tool,
     measured: &MeasuredFaces,
 ) -> Option<Vec<Feature>> {
-    let stock = o.stock();
     let r = tool.radius();
     let mut out = Vec::new();
     for c in cuts {
@@ -433,13 +725,13 @@ pub fn kind_name(kind: FaceKind) -> &'static str {
 
 fn evaluate(
     cuts: &[Cut],
-    o: &DesignOptions,
+    (o, stock): (&DesignOptions, Aabb),
     model: &Chain,
     tool: &Tool,
     (ids, iso): (&[DeviationId], &[IsoTerm]),
     measured: &MeasuredFaces,
 ) -> Option<(Identifiability, Vec<(String, Real)>)> {
-    let feats = features_of(cuts, o, model, tool, measured)?;
+    let feats = features_of(cuts, o, stock, model, tool, measured)?;
     let m = Model {
         chain: model,
         ids,
@@ -491,7 +783,7 @@ pub fn design_with(
     o: &DesignOptions,
     measured: &MeasuredFaces,
 ) -> Result<Design, DesignError> {
-    check_machine(model)?;
+    let family = check_machine(model)?;
     if tool.kind() != ToolKind::Flat {
         return Err(DesignError::Tool);
     }
@@ -511,7 +803,10 @@ pub fn design_with(
     if params.is_empty() && iso.is_empty() {
         return Err(DesignError::Calibrate(CalibrateError::NoParameters));
     }
-    let pool = candidates(o, tool);
+    let (pool, stock) = match family {
+        Family::Bar => (candidates(o, tool), o.stock()),
+        Family::Block => (block_candidates(model, tool, o)?, o.block()),
+    };
     // Beam search over sets of compatible cuts (indices into the pool, kept sorted): each
     // round extends every design in the beam by every compatible cut, keeps the BEAM_WIDTH
     // best distinct designs, and stops when the best no longer improves. A greedy search
@@ -549,7 +844,8 @@ pub fn design_with(
             .par_iter()
             .map(|set| {
                 let cuts: Vec<Cut> = set.iter().map(|&k| pool[k]).collect();
-                let (ident, rel) = evaluate(&cuts, o, model, tool, (params, iso), measured)?;
+                let (ident, rel) =
+                    evaluate(&cuts, (o, stock), model, tool, (params, iso), measured)?;
                 Some((key_of(&ident, params.len() + iso.len()), ident, rel))
             })
             .collect();
@@ -560,7 +856,10 @@ pub fn design_with(
             .collect();
         // Stable sort: ties keep the pool order, so the design is deterministic.
         round.sort_by(|a, b| order(&a.1.0, &b.1.0));
-        round.truncate(BEAM_WIDTH);
+        round.truncate(match family {
+            Family::Bar => BEAM_WIDTH,
+            Family::Block => BLOCK_BEAM_WIDTH,
+        });
         let Some(top) = round.first() else {
             break;
         };
@@ -581,9 +880,9 @@ pub fn design_with(
     let (set, (_, ident, rel)) =
         best.ok_or_else(|| DesignError::Machine("a bar the candidate cuts can reach".into()))?;
     let mut chosen: Vec<Cut> = set.iter().map(|&k| pool[k]).collect();
-    chosen.sort_by(|a, b| a.index().total_cmp(&b.index()));
-    let feats = features_of(&chosen, o, model, tool, measured);
-    let mut d = finish(chosen, ident, rel, o, tool, evaluated);
+    chosen.sort_by(|a, b| a.order().total_cmp(&b.order()));
+    let feats = features_of(&chosen, o, stock, model, tool, measured);
+    let mut d = finish(chosen, ident, rel, o, (family, stock), tool, evaluated);
     d.notes = feats.map_or_else(Vec::new, |f| {
         lever_notes(&d.cuts, &f, model, tool, params, iso)
     });
@@ -608,6 +907,11 @@ fn weakest(i: &Identifiability) -> Real {
 /// Designs kept per round of the beam search: enough to carry the alternatives a greedy
 /// choice would drop, few enough that the nine deviations design in well under a second.
 const BEAM_WIDTH: usize = 6;
+
+/// Designs kept per round for the block: its shoulders compete for the block's few edges
+/// (a cut on an edge excludes the others there), so a narrow beam settles on cuts that
+/// leave no edge for an axis's other positions.
+const BLOCK_BEAM_WIDTH: usize = 16;
 
 /// A cut that determines nothing new is added only if it raises the information score (the
 /// sum of the logs of the capped singular values) by at least this: ln 2, a doubling of the
@@ -641,6 +945,12 @@ pub fn order(a: &Key, b: &Key) -> std::cmp::Ordering {
 /// meet).
 fn conflicts(a: &Cut, b: &Cut, o: &DesignOptions) -> bool {
     match (a, b) {
+        (Cut::Block(a), Cut::Block(b)) => {
+            let m = o.margin_mm;
+            (0..3).all(|k| {
+                a.removed.min[k] < b.removed.max[k] + m && b.removed.min[k] < a.removed.max[k] + m
+            })
+        }
         (Cut::XShoulder { .. }, Cut::XShoulder { .. })
         | (Cut::YShoulder { .. }, Cut::YShoulder { .. }) => {
             let ((alo, ahi), (blo, bhi)) = (a.section(o), b.section(o));
@@ -727,15 +1037,54 @@ pub fn lever_notes(
     out
 }
 
+/// The rotary words of a cut's pose (`A90`; `C90 A0` for the block family).
+fn pose_words(c: &Cut) -> String {
+    match c {
+        Cut::Block(b) => b.pose[..b.rotaries]
+            .iter()
+            .map(|(l, v)| format!("{}{}", l.as_char(), fmt(*v)))
+            .collect::<Vec<_>>()
+            .join(" "),
+        _ => format!("A{}", fmt(c.index())),
+    }
+}
+
+/// The rapid plane of the block family (Z, mm): above the block turned about any rotary
+/// axis (its corners' farthest reach from the workpiece origin, twice over for axes whose
+/// lines lie away from it) and above every cut's start by the tool's length.
+fn block_safe_z(cuts: &[Cut], o: &DesignOptions, tool: &Tool) -> Real {
+    let b = o.block();
+    let reach = b.min.coords.norm().max(b.max.coords.norm());
+    cuts.iter()
+        .map(|c| c.motion(o, tool.radius()).start.get(AxisLetter::Z) + tool.length() + 10.0)
+        .fold(2.0 * reach + tool.length() + 10.0, Real::max)
+        .ceil()
+}
+
 fn finish(
     cuts: Vec<Cut>,
     identifiability: Identifiability,
     relative_sigma: Vec<(String, Real)>,
     o: &DesignOptions,
+    (family, stock): (Family, Aabb),
     tool: &Tool,
     evaluated: usize,
 ) -> Design {
     let r = tool.radius();
+    let safe_z = match family {
+        Family::Bar => o.safe_z_mm,
+        Family::Block => block_safe_z(&cuts, o, tool),
+    };
+    let zero = cuts.first().map_or_else(
+        || "A0".to_string(),
+        |c| {
+            pose_words(c)
+                .split(' ')
+                .map(|w| format!("{}0", &w[..1]))
+                .collect::<Vec<_>>()
+                .join(" ")
+        },
+    );
     let mut text = String::new();
     let mut line = 0;
     let mut push = |text: &mut String, s: String| {
@@ -746,16 +1095,22 @@ fn finish(
     push(&mut text, "%".into());
     push(
         &mut text,
-        "(twinmill test cuts: shoulders on a square bar about the A axis)".into(),
+        match family {
+            Family::Bar => "(twinmill test cuts: shoulders on a square bar about the A axis)",
+            Family::Block => {
+                "(twinmill test cuts: shoulders on a block at positions of each rotary axis)"
+            }
+        }
+        .into(),
     );
     push(&mut text, "G21 G90".into());
-    push(&mut text, format!("G0 Z{} A0", o.safe_z_mm));
+    push(&mut text, format!("G0 Z{safe_z} {zero}"));
     let mut designed = Vec::new();
     let mut faces = Vec::new();
     for c in &cuts {
         let mut mv = c.motion(o, r);
         let (s, e) = (mv.start, mv.end);
-        push(&mut text, format!("G0 A{}", fmt(c.index())));
+        push(&mut text, format!("G0 {}", pose_words(c)));
         push(
             &mut text,
             format!(
@@ -765,17 +1120,21 @@ fn finish(
             ),
         );
         push(&mut text, format!("G0 Z{}", fmt(s.get(AxisLetter::Z))));
+        let z = match c {
+            Cut::Block(_) => format!(" Z{}", fmt(e.get(AxisLetter::Z))),
+            _ => String::new(),
+        };
         let l = push(
             &mut text,
             format!(
-                "G1 X{} Y{} F{} ({})",
+                "G1 X{} Y{}{z} F{} ({})",
                 fmt(e.get(AxisLetter::X)),
                 fmt(e.get(AxisLetter::Y)),
                 FEED_MM_PER_MIN,
                 c.name()
             ),
         );
-        push(&mut text, format!("G0 Z{}", o.safe_z_mm));
+        push(&mut text, format!("G0 Z{safe_z}"));
         mv.line = l;
         let kinds = c.faces(o);
         for &kind in &kinds {
@@ -793,7 +1152,7 @@ fn finish(
             faces: kinds,
         });
     }
-    push(&mut text, "G0 A0".into());
+    push(&mut text, format!("G0 {zero}"));
     push(&mut text, "M30".into());
     push(&mut text, "%".into());
     Design {
@@ -804,6 +1163,9 @@ fn finish(
         relative_sigma,
         evaluated,
         notes: Vec::new(),
+        family,
+        stock,
+        safe_z_mm: safe_z,
     }
 }
 
@@ -820,6 +1182,7 @@ mod tests {
     fn depth_of(c: &Cut) -> Real {
         match *c {
             Cut::XShoulder { depth, .. } | Cut::YShoulder { depth, .. } => depth,
+            Cut::Block(b) => b.depth,
         }
     }
 

@@ -388,14 +388,33 @@ impl Chain {
     /// zero) and is left out.
     pub fn apply_iso_term(&mut self, name: &str, value: Real) -> Result<(), KinematicsError> {
         let (i, values) = self.iso_term(name, value)?;
-        let l = error_motion::transform(&values, &self.error_centre(i));
+        self.apply_term_values(i, &values);
+        Ok(())
+    }
+
+    /// [`Chain::apply_iso_term`], taking also the two terms of a rotary axis that are not
+    /// location errors — its offset along its own line and the zero of its angle — as
+    /// [`Chain::iso_term_id`] takes them for identification: what an identification that
+    /// solved for them applies (on the first axis they move the rest of the machine against
+    /// the workpiece frame; elsewhere they leave the motion unchanged).
+    pub fn apply_identified_term(
+        &mut self,
+        name: &str,
+        value: Real,
+    ) -> Result<(), KinematicsError> {
+        let (i, values) = self.iso_term_with(name, value, true)?;
+        self.apply_term_values(i, &values);
+        Ok(())
+    }
+
+    fn apply_term_values(&mut self, i: usize, values: &[Real; 6]) {
+        let l = error_motion::transform(values, &self.error_centre(i));
         let after = l.inverse() * self.deviations[i].transform();
         self.deviations[i] = Deviation::from_transform(&after);
         if i > 0 {
             let before = self.deviations[i - 1].transform() * l;
             self.deviations[i - 1] = Deviation::from_transform(&before);
         }
-        Ok(())
     }
 
     /// The joint an ISO location or squareness term acts on and its component of `L`: the

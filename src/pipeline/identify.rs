@@ -254,7 +254,7 @@ pub fn correction_loop_terms(
             .collect();
         for (k, t) in terms.iter().enumerate() {
             let step = ident.solution[ids.len() + k];
-            twin.apply_iso_term(&t.name, step)
+            twin.apply_identified_term(&t.name, step)
                 .map_err(|e| CalibrateError::Parameter(e.to_string()))?;
             total[k] += step;
         }

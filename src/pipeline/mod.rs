@@ -37,7 +37,7 @@ pub use fit::{FitRequest, Selection, Shape, fit_cloud};
 pub use identify::{IdentifyOutcome, correction_loop, extract_features, identify_scene};
 pub use rotary::{
     LocationReport, RotaryInstrument, RotaryOutcome, RotaryReport, RotaryRequest, TermReport,
-    default_setup, is_angle_term, rotary_test,
+    default_setup, identify_location_with, is_angle_term, rotary_test,
 };
 pub use run::{Outcome, extract_faces, run, scanner_study};
 pub use simulate::{Simulation, simulate};

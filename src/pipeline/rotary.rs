@@ -199,6 +199,21 @@ fn identify_location(
     samples: &[Sample],
     setup: &Setup,
 ) -> Result<LocationReport, String> {
+    identify_location_with(scene, names, samples, setup, &[])
+}
+
+/// The location terms `names` (empty: every rotary axis's) identified in one solve from the
+/// rotary test's `samples` and the faces `planes` of a part cut on the same machine and
+/// scanned (plane features, as `identify` extracts them, e.g. from `design`'s part): the
+/// balls with their fixed point, the faces with the scan's registration estimated, both
+/// predicted by the one model of the machine. Either may be empty.
+pub fn identify_location_with(
+    scene: &Scene,
+    names: &[String],
+    samples: &[Sample],
+    setup: &Setup,
+    planes: &[crate::calibration::calibrate::Feature],
+) -> Result<LocationReport, String> {
     let names = if names.is_empty() {
         scene.model().rotary_location_terms()
     } else {
@@ -208,9 +223,14 @@ fn identify_location(
         .iter()
         .map(|n| IsoTerm::parse(scene.model(), n).map_err(|e| e.to_string()))
         .collect::<Result<Vec<_>, _>>()?;
-    let features = ball_features(samples, setup.tool_offset, 0);
-    // Ball features do not use the tool; the model takes one for plane features.
-    let tool = Tool::try_new(ToolKind::Ball, 1.0, 1.0).map_err(|e| e.to_string())?;
+    let mut features = ball_features(samples, setup.tool_offset, 0);
+    features.extend(planes.iter().cloned());
+    // Ball features do not use the tool; plane features use the scene's, which cut them.
+    let tool = if planes.is_empty() {
+        Tool::try_new(ToolKind::Ball, 1.0, 1.0).map_err(|e| e.to_string())?
+    } else {
+        scene.tool.clone()
+    };
     let chain = test_model(scene, &terms).map_err(|e| e.to_string())?;
     let model = Model {
         chain: &chain,
@@ -218,7 +238,12 @@ fn identify_location(
         iso_terms: &terms,
         tool: &tool,
         features: &features,
-        registration: Registration::Workpiece,
+        // The scan's placement is unknown: estimated (used only by plane features).
+        registration: if planes.is_empty() {
+            Registration::Workpiece
+        } else {
+            Registration::Estimate
+        },
     };
     let mut r = solve(&model).map_err(|e| format!("identification: {e}"))?;
     r.fit

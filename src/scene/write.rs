@@ -6,9 +6,10 @@ use crate::machine::chain::AxisKind;
 use crate::math::{Real, Vector3};
 
 /// A scene file (TOML text) for a designed test: the machine, deviations, tool, sweep and
-/// face options of `scene`, the design's bar as stock, a scanner on a turntable about the
-/// rotary axis (four views at the bar's corners, the camera 30° off the axis so that faces
-/// across the bar's +x end are seen too), the design's faces and the parameters.
+/// face options of `scene`, the design's part as stock, a scanner on a turntable (for the
+/// bar: about the rotary axis, four views at the bar's corners, the camera 30° off the axis
+/// so that faces across the bar's +x end are seen too; for the block: about its vertical
+/// axis, four views at its corners from 35° above), the design's faces and the parameters.
 pub fn design_scene_toml(
     scene: &Scene,
     design: &crate::calibration::design::Design,
@@ -47,7 +48,14 @@ pub fn design_scene_toml(
     }
     let spindle = scene.chain().joint_name(scene.chain().axes().len() - 1);
     let _ = writeln!(s, "]\nspindle = \"{}\"", &spindle[1..]);
-    let _ = writeln!(s, "home = {{ Z = {}, A = 0 }}\n", opts.safe_z_mm);
+    let rotaries: String = scene
+        .chain()
+        .axes()
+        .iter()
+        .filter(|a| a.kind == AxisKind::Rotary)
+        .map(|a| format!(", {} = 0", a.letter.as_char()))
+        .collect();
+    let _ = writeln!(s, "home = {{ Z = {}{rotaries} }}\n", design.safe_z_mm);
     // The simulated machine carries only the requested deviations: one outside them is held
     // at zero by the identification, so its faces could not fit (the misfit refusal), and
     // the promise is made on a scan the requested model can produce.
@@ -95,7 +103,7 @@ pub fn design_scene_toml(
             2.0 * scene.tool.radius()
         ),
     };
-    let st = opts.stock();
+    let st = design.stock;
     let _ = writeln!(
         s,
         "\n[tool]\n{tool_fields}\nlength_mm = {}\n",
@@ -114,21 +122,49 @@ pub fn design_scene_toml(
         scene.sweep.rotary_step_bound_mm
     );
     let dist = 0.5 * (sc.working_range_mm.0 + sc.working_range_mm.1);
-    let (sn, cs) = SCANNER_TILT_DEG.to_radians().sin_cos();
+    let block = design.family == crate::calibration::design::Family::Block;
+    // The bar: the camera leans from the rotary axis's normal towards +x and turns about the
+    // bar's axis (W x). The block: the camera looks down from the elevation and turns about
+    // the block's vertical axis (W z), seeing its sides and top.
+    let (tilt, fov, centre, axis, up) = if block {
+        let c = 0.5 * (st.min.coords + st.max.coords);
+        let e = 2.0 * (st.max - st.min).amax();
+        (
+            BLOCK_SCANNER_ELEVATION_DEG,
+            [e, e],
+            c,
+            [0.0, 0.0, 1.0],
+            [0.0, 0.0, 1.0],
+        )
+    } else {
+        (
+            SCANNER_TILT_DEG,
+            [opts.length_mm * 1.5, opts.half_section_mm * 5.0],
+            Vector3::zeros(),
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+        )
+    };
+    let (sn, cs) = tilt.to_radians().sin_cos();
+    let position = if block {
+        // Elevated over the block's centre towards −y.
+        centre + Vector3::new(0.0, -dist * cs, dist * sn)
+    } else {
+        Vector3::new(dist * sn, 0.0, dist * cs)
+    };
     let _ = writeln!(
         s,
-        "[scanner]\nposition = [{}, 0.0, {}]\ntarget = [0.0, 0.0, 0.0]\nup = [0.0, 1.0, 0.0]",
-        dist * sn,
-        dist * cs
+        "[scanner]\nposition = {}\ntarget = {}\nup = [{}, {}, {}]",
+        v(&position),
+        v(&centre),
+        up[0],
+        up[1],
+        up[2]
     );
     let _ = writeln!(
         s,
         "baseline_mm = {}\nfov_mm = [{}, {}]\npitch_mm = {}\nnoise_sigma_mm = {}",
-        sc.baseline_mm,
-        opts.length_mm * 1.5,
-        opts.half_section_mm * 5.0,
-        sc.pitch_mm,
-        sc.noise_sigma_mm
+        sc.baseline_mm, fov[0], fov[1], sc.pitch_mm, sc.noise_sigma_mm
     );
     let _ = writeln!(
         s,
@@ -137,7 +173,11 @@ pub fn design_scene_toml(
     );
     let _ = writeln!(
         s,
-        "turntable = {{ axis_point = [0.0, 0.0, 0.0], axis = [1.0, 0.0, 0.0], angles_deg = [45.0, 135.0, 225.0, 315.0] }}\n"
+        "turntable = {{ axis_point = {}, axis = [{}, {}, {}], angles_deg = [45.0, 135.0, 225.0, 315.0] }}\n",
+        v(&centre),
+        axis[0],
+        axis[1],
+        axis[2]
     );
     let _ = writeln!(s, "[identify]\nfaces = [");
     for f in &design.faces {
@@ -163,6 +203,10 @@ pub fn design_scene_toml(
     let _ = writeln!(s, "known = {{}}");
     Ok(s)
 }
+
+/// The block's camera elevation above the horizontal (degrees): the sides seen at 35°
+/// incidence, the top at 55°.
+const BLOCK_SCANNER_ELEVATION_DEG: Real = 35.0;
 
 /// How far the designed scene's camera leans from the rotary axis's normal towards +x
 /// (degrees): enough to see the faces across the bar's +x end at 60° incidence.

@@ -31,6 +31,7 @@ mod identify_instruments;
 mod axis_comp;
 mod iso_names;
 mod tcp;
+mod design_rotary;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};
