@@ -443,16 +443,20 @@ fn linuxcnc_length(a: &[Real; 6], b: &[Real; 6]) -> Real {
     if xyz > 0.0 { xyz } else { d(3..6) }
 }
 
-#[test]
-fn corrected_rotary_moves_keep_their_duration_in_inverse_time() {
+/// `src` corrected to 2 µm on the trunnion scene: the correction, the written program and
+/// the scene's home.
+fn corrected_on_the_trunnion(
+    src: &str,
+) -> (
+    twinmill::calibration::correct::CorrectedProgram,
+    String,
+    twinmill::nc::AxisValues,
+) {
     use twinmill::calibration::correct::{CorrectOptions, correct_program, write_gcode};
     let s = Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/trunnion-ac.toml"))
         .expect("loads");
     let home = s.home();
-    let src = "G21 G90 G94\nG1 X10 A10 C30 F600\nM30\n";
     let program = twinmill::nc::parse_program(src, Path::new("move.ngc"), home).expect("parses");
-    // By hand: LinuxCNC feeds the XYZ length, 10 mm at 600 mm/min: 1/60 min (1 s).
-    let nominal_min = 10.0 / 600.0;
     let cp = correct_program(
         s.chain(),
         &s.tool,
@@ -463,7 +467,14 @@ fn corrected_rotary_moves_keep_their_duration_in_inverse_time() {
     .expect("corrects");
     let mut text = Vec::new();
     write_gcode(&cp, &[], &mut text).expect("writes");
-    let text = String::from_utf8(text).expect("utf-8");
+    (cp, String::from_utf8(text).expect("utf-8"), home)
+}
+
+#[test]
+fn corrected_rotary_moves_keep_their_duration_in_inverse_time() {
+    let (cp, text, home) = corrected_on_the_trunnion("G21 G90 G94\nG1 X10 A10 C30 F600\nM30\n");
+    // By hand: LinuxCNC feeds the XYZ length, 10 mm at 600 mm/min: 1/60 min (1 s).
+    let nominal_min = 10.0 / 600.0;
     // Inverse time around the corrected move, units per minute again after it.
     let g93 = text.find("\nG93\n").expect("G93");
     let g94 = text.rfind("\nG94\n").expect("G94 restored");
@@ -551,26 +562,12 @@ fn linuxcnc_arc_length(radius: Real, turned_rad: Real, along: Real) -> Real {
 
 #[test]
 fn a_corrected_arc_that_turns_a_rotary_axis_keeps_its_helix_duration() {
-    use twinmill::calibration::correct::{CorrectOptions, correct_program, write_gcode};
-    let s = Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/trunnion-ac.toml"))
-        .expect("loads");
-    let home = s.home();
     // A half turn of radius 5 mm in XY, 2 mm down in Z, while C turns 30°, at 600 mm/min.
-    let src = "G21 G90 G94 G17\nG0 X0 Y0 Z10\nG3 X10 Y0 Z8 I5 J0 C30 F600\nM30\n";
-    let program = twinmill::nc::parse_program(src, Path::new("arc.ngc"), home).expect("parses");
+    let (_, text, home) = corrected_on_the_trunnion(
+        "G21 G90 G94 G17\nG0 X0 Y0 Z10\nG3 X10 Y0 Z8 I5 J0 C30 F600\nM30\n",
+    );
     // By hand: the helix 5π mm around and 2 mm along, at 600 mm/min.
     let nominal_min = linuxcnc_arc_length(5.0, std::f64::consts::PI, 2.0) / 600.0;
-    let cp = correct_program(
-        s.chain(),
-        &s.tool,
-        &program,
-        &home,
-        &CorrectOptions::for_accuracy(0.002),
-    )
-    .expect("corrects");
-    let mut text = Vec::new();
-    write_gcode(&cp, &[], &mut text).expect("writes");
-    let text = String::from_utf8(text).expect("utf-8");
     assert!(text.contains("\nG93\n"), "{text}");
     let read = twinmill::nc::parse_program(&text, Path::new("corrected.ngc"), home)
         .expect("the corrected program parses");

@@ -879,6 +879,40 @@ fn cli_design_writes_the_plan_identify_reads_on_a_hexapod() {
     }
 }
 
+/// The default ball-plate circles measured on `actual` driven by `controller` (σ 0.5 µm,
+/// `seed`, one stream a circle) and written as `<stem>N.csv` under `header`: the files'
+/// names, in the plan's order.
+pub(crate) fn ball_plate_readings(
+    sb: &Sandbox,
+    controller: &Hexapod,
+    actual: &Hexapod,
+    ws: &Workspace,
+    seed: u64,
+    stem: &str,
+    header: &str,
+) -> Vec<String> {
+    let plan = default_plan(Procedure::BallPlate, ws, DEFAULT_POINTS);
+    let mut names = Vec::new();
+    for (j, c) in plan.circles.iter().enumerate() {
+        let inst = DbbInstrument {
+            mount_mm: Vector3::zeros(),
+            noise_sigma_mm: 0.5e-3,
+            seed,
+            stream: (j as u64) << 32,
+        };
+        let m = measure(controller, actual, c, &inst).expect("measures");
+        let name = format!("{stem}{}.csv", j + 1);
+        let header: Vec<String> = if header.is_empty() {
+            Vec::new()
+        } else {
+            vec![header.into()]
+        };
+        std::fs::write(sb.dir.join(&name), m.csv(&header)).expect("writes");
+        names.push(name);
+    }
+    names
+}
+
 /// `identify --readings` on a hexapod: bar readings measured elsewhere (here on the scene's machine,
 /// written as `twinmill measure --instrument ballbar` writes them) identify the parameters the scene file
 /// injects — read from its `[deviations]` table, not from the code — within 3σ; the
@@ -891,19 +925,7 @@ fn calibrate_reads_measured_dbb_files_and_writes_the_corrected_parameters() {
     let s = HexapodScene::load(&path).expect("scene");
     let ws = s.workspace.expect("workspace");
     let plan = default_plan(Procedure::BallPlate, &ws, DEFAULT_POINTS);
-    let mut names = Vec::new();
-    for (j, c) in plan.circles.iter().enumerate() {
-        let inst = DbbInstrument {
-            mount_mm: Vector3::zeros(),
-            noise_sigma_mm: 0.5e-3,
-            seed: 11,
-            stream: (j as u64) << 32,
-        };
-        let m = measure(&s.nominal, &s.actual, c, &inst).expect("measures");
-        let name = format!("circle{}.csv", j + 1);
-        std::fs::write(sb.dir.join(&name), m.csv(&["# measured".into()])).expect("writes");
-        names.push(name);
-    }
+    let names = ball_plate_readings(&sb, &s.nominal, &s.actual, &ws, 11, "circle", "# measured");
     let list = names.join(",");
     let scene = path.to_str().expect("utf-8");
     let (code, out, err) = sb.run(&[

@@ -4,13 +4,11 @@
 //! it leaves worked out by this test's own kinematics and compared with what `identify`
 //! promised, for both procedures — the genhexkins pins it writes beside it, and bad input.
 
-use super::hexapod_calibration::{Geometry, own_pose_errors};
+use super::hexapod_calibration::{Geometry, ball_plate_readings, own_pose_errors};
 use super::{HEXAPOD_CENTRE, Sandbox, hexapod_centre as centre};
 use std::path::Path;
-use twinmill::calibration::hexapod_calibrate::{DEFAULT_POINTS, Procedure, default_plan};
 use twinmill::machine::hexapod::{Hexapod, ParameterId};
 use twinmill::math::{Real, Vector3};
-use twinmill::metrology::hexapod_dbb::{DbbInstrument, measure};
 
 /// The controller a controller file describes, as this test reads it: the nominal
 /// machine's parameters plus the `[controller]` values, by name.
@@ -134,21 +132,7 @@ fn readings_calibrate_the_controller_and_write_its_page_and_genhexkins_pins() {
     let sb = Sandbox::new("hexapod-controller-readings");
     let s = centre();
     let ws = s.workspace.expect("workspace");
-    let plan = default_plan(Procedure::BallPlate, &ws, DEFAULT_POINTS);
-    let mut names = Vec::new();
-    for (j, c) in plan.circles.iter().enumerate() {
-        let inst = DbbInstrument {
-            mount_mm: Vector3::zeros(),
-            noise_sigma_mm: 0.5e-3,
-            seed: 5,
-            stream: (j as u64) << 32,
-        };
-        let m = measure(&s.controller, &s.actual, c, &inst).expect("measures");
-        let name = format!("c{}.csv", j + 1);
-        std::fs::write(sb.dir.join(&name), m.csv(&[])).expect("writes");
-        names.push(name);
-    }
-    let list = names.join(",");
+    let list = ball_plate_readings(&sb, &s.controller, &s.actual, &ws, 5, "c", "").join(",");
     let (code, out, err) = sb.run(&[
         "identify",
         HEXAPOD_CENTRE,
