@@ -11,7 +11,7 @@ use twinmill::pipeline::{correct, identified_model, run};
 use twinmill::scene::Need;
 
 /// Why `correct` does not apply to a hexapod.
-const CORRECT_HEXAPOD: &str = "the correction inverts a serial chain's deviated axes; a hexapod is corrected through its identified parameters (`identify --readings … --corrected`)";
+const CORRECT_HEXAPOD: &str = "the correction inverts a serial chain's deviated axes; a hexapod is corrected in its controller: `identify … --corrected FILE` writes the calibrated controller, and `--controller FILE` runs simulate, measure and pivot on it";
 
 /// Which deviations `correct` corrects for.
 #[derive(Clone, Copy, clap::ValueEnum)]
