@@ -3,6 +3,8 @@
 //! or stale are refused by name.
 
 use crate::{Sandbox, builtin};
+use twinmill::pipeline::identify_scene;
+use twinmill::progress::NoProgress;
 use twinmill::study::{self, Row};
 
 /// The built-in step scene, coarse (tri-dexel 0.2 mm, scanner pitch 0.3 mm), identifying
@@ -84,10 +86,22 @@ fn shards_run_as_separate_processes_merge_to_the_one_process_result() {
     }
 }
 
+/// `identify` on `s` scanned with trial `t`'s scanner seed and noise: its first
+/// identified parameter.
+fn first_identified_with_the_trials_scanner(
+    s: &mut twinmill::scene::Scene,
+    t: &study::TrialInputs,
+) -> twinmill::report::EstimateReport {
+    let sc = s.scanner.as_mut().expect("scanner");
+    sc.seed = t.scanner_seed;
+    sc.noise_sigma_mm = t.noise_sigma_mm;
+    let program = s.load_program().expect("program");
+    let out = identify_scene(s, &program, None, Some(0), &NoProgress).expect("identifies");
+    out.report.identified[0].clone()
+}
+
 #[test]
 fn a_trial_is_what_identify_gives_on_its_inputs() {
-    use twinmill::pipeline::identify_scene;
-    use twinmill::progress::NoProgress;
     let sb = Sandbox::new("study-trial");
     files(&sb, 2);
     let m = study::plan(&sb.dir.join("study.toml"), 1).expect("plans");
@@ -100,12 +114,7 @@ fn a_trial_is_what_identify_gives_on_its_inputs() {
         let id = chain.deviation_id(name).expect("name");
         chain.set_deviation(id, *v);
     }
-    let sc = s.scanner.as_mut().expect("scanner");
-    sc.seed = t.scanner_seed;
-    sc.noise_sigma_mm = t.noise_sigma_mm;
-    let program = s.load_program().expect("program");
-    let out = identify_scene(&s, &program, None, Some(0), &NoProgress).expect("identifies");
-    let e = &out.report.identified[0];
+    let e = first_identified_with_the_trials_scanner(&mut s, t);
     assert_eq!(e.name, "dy_AY");
     assert_eq!(rows[1].estimates[0], Some((e.value, e.sigma)));
     let dy = t
@@ -250,8 +259,6 @@ fn missing_foreign_and_stale_shards_are_refused_by_name() {
 
 #[test]
 fn a_study_of_scanner_seeds_gives_the_spread_identify_monte_carlo_gives() {
-    use twinmill::pipeline::identify_scene;
-    use twinmill::progress::NoProgress;
     let sb = Sandbox::new("study-mc");
     files(&sb, 1);
     let s = twinmill::scene::Scene::load(&sb.dir.join("s.toml")).expect("scene");
@@ -289,8 +296,6 @@ fn a_study_of_scanner_seeds_gives_the_spread_identify_monte_carlo_gives() {
 
 #[test]
 fn a_study_varies_and_identifies_an_iso_term_by_its_name() {
-    use twinmill::pipeline::identify_scene;
-    use twinmill::progress::NoProgress;
     let sb = Sandbox::new("study-iso");
     sb.write("mdx50-step.ngc", builtin("mdx50-step.ngc").as_bytes());
     let scene = builtin("mdx50-step.toml")
@@ -320,12 +325,7 @@ fn a_study_varies_and_identifies_an_iso_term_by_its_name() {
             .as_bytes(),
     );
     let mut s = twinmill::scene::Scene::load(&sb.dir.join("s2.toml")).expect("scene");
-    let sc = s.scanner.as_mut().expect("scanner");
-    sc.seed = t.scanner_seed;
-    sc.noise_sigma_mm = t.noise_sigma_mm;
-    let program = s.load_program().expect("program");
-    let out = identify_scene(&s, &program, None, Some(0), &NoProgress).expect("identifies");
-    let e = &out.report.identified[0];
+    let e = first_identified_with_the_trials_scanner(&mut s, t);
     assert_eq!(e.name, "EY0A");
     assert_eq!(rows[0].estimates[0], Some((e.value, e.sigma)));
     assert!(

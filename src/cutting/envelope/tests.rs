@@ -262,50 +262,39 @@ fn a_half_turn_leaves_two_intervals_on_a_ray_the_tool_crosses_twice() {
     assert!(cuts[1].n_in.z > 0.99 && cuts[0].n_in.z > 0.0, "{cuts:?}");
 }
 
-/// The envelope without its cull test: every ray in its box is solved.
-struct Unculled<'a>(&'a RotaryEnvelope);
+/// The envelope with its cull test (`cull`, counting the rays it skips) or without it (every
+/// ray in its box solved).
+struct Wrapped<'a> {
+    env: &'a RotaryEnvelope,
+    cull: bool,
+    skipped: std::sync::atomic::AtomicUsize,
+}
 
-impl Cutter for Unculled<'_> {
-    fn bounds(&self) -> Aabb {
-        self.0.bounds()
-    }
-    fn ray_cut(&self, origin: &Point3, axis: usize) -> Option<RayCut> {
-        self.0.ray_cut(origin, axis)
-    }
-    fn costly_rays(&self) -> bool {
-        true
-    }
-    fn ray_cuts_in_span(
-        &self,
-        origin: &Point3,
-        axis: usize,
-        span: (Real, Real),
-        line: u32,
-        out: &mut Vec<RayCut>,
-        lines: &mut Vec<[u32; 2]>,
-    ) {
-        self.0
-            .ray_cuts_in_span(origin, axis, span, line, out, lines);
+impl<'a> Wrapped<'a> {
+    fn new(env: &'a RotaryEnvelope, cull: bool) -> Self {
+        Wrapped {
+            env,
+            cull,
+            skipped: Default::default(),
+        }
     }
 }
 
-/// The envelope counting the rays its cull test skips.
-struct Counted<'a>(&'a RotaryEnvelope, std::sync::atomic::AtomicUsize);
-
-impl Cutter for Counted<'_> {
+impl Cutter for Wrapped<'_> {
     fn bounds(&self) -> Aabb {
-        self.0.bounds()
+        self.env.bounds()
     }
     fn ray_cut(&self, origin: &Point3, axis: usize) -> Option<RayCut> {
-        self.0.ray_cut(origin, axis)
+        self.env.ray_cut(origin, axis)
     }
     fn costly_rays(&self) -> bool {
         true
     }
     fn may_cut(&self, origin: &Point3, axis: usize, segs: &[Segment]) -> bool {
-        let may = Cutter::may_cut(self.0, origin, axis, segs);
+        let may = !self.cull || Cutter::may_cut(self.env, origin, axis, segs);
         if !may {
-            self.1.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            self.skipped
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         }
         may
     }
@@ -318,7 +307,7 @@ impl Cutter for Counted<'_> {
         out: &mut Vec<RayCut>,
         lines: &mut Vec<[u32; 2]>,
     ) {
-        self.0
+        self.env
             .ray_cuts_in_span(origin, axis, span, line, out, lines);
     }
 }
@@ -373,10 +362,10 @@ proptest! {
                 at.get(AxisLetter::A) + da,
             );
             let env = RotaryEnvelope::new(&c, &tool, &at, &next).expect("supported");
-            let counted = Counted(&env, Default::default());
+            let counted = Wrapped::new(&env, true);
             culled.remove(&counted, k as u32 + 1);
-            plain.remove(&Unculled(&env), k as u32 + 1);
-            skipped += counted.1.into_inner();
+            plain.remove(&Wrapped::new(&env, false), k as u32 + 1);
+            skipped += counted.skipped.into_inner();
             at = next;
         }
         prop_assert!(skipped > 0, "no ray was culled");
