@@ -721,14 +721,44 @@ pub fn fragment(
 ) -> Result<String, String> {
     let params = &model.params;
     let chain = chain_with(&model.base, params, &outcome.solution)?;
-    let note = |name: &str| -> String {
-        match outcome.parameters.iter().find(|e| e.name == name) {
-            Some(e) => format!("{name}: σ {:.3e}", e.sigma),
-            None if outcome.identifiability.no_data.iter().any(|n| n == name) => {
-                format!("{name}: no measurement sees it, the scene's value kept")
-            }
-            None => format!("{name}: not determined on its own, not identified"),
+    let notes: Vec<(String, String)> = params
+        .iter()
+        .map(|p| {
+            let name = p.name.as_str();
+            let n = match outcome.parameters.iter().find(|e| e.name == name) {
+                Some(e) => format!("{name}: σ {:.3e}", e.sigma),
+                None if outcome.identifiability.no_data.iter().any(|n| n == name) => {
+                    format!("{name}: no measurement sees it, the scene's value kept")
+                }
+                None => format!("{name}: not determined on its own, not identified"),
+            };
+            (p.name.clone(), n)
+        })
+        .collect();
+    let mut dev = deviations.clone();
+    for (p, v) in params.iter().zip(&outcome.solution) {
+        if matches!(p.target, Target::Deviation(_) | Target::Iso) {
+            dev.insert(p.name.clone(), *v);
         }
+    }
+    Ok(machine_sections(&chain, &dev, &notes, sources))
+}
+
+/// The machine `chain` as the `[deviations]` (the entries of `deviations`), `[error_motions]`
+/// and `[reversal]` sections a deviations file holds, one format for every identification:
+/// each value followed by its note from `notes` (by name; an error motion's by its
+/// function's prefix `EXX.`), the rest marked as the scene's, not identified.
+pub fn machine_sections(
+    chain: &Chain,
+    deviations: &BTreeMap<String, Real>,
+    notes: &[(String, String)],
+    sources: &[String],
+) -> String {
+    let note = |name: &str| {
+        notes
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, t)| t.clone())
     };
     let mut s = String::new();
     let _ = writeln!(
@@ -738,18 +768,9 @@ pub fn fragment(
         sources.join(", ")
     );
     let _ = writeln!(s, "[deviations]");
-    let mut dev: BTreeMap<String, (Real, Option<String>)> = deviations
-        .iter()
-        .map(|(k, v)| (k.clone(), (*v, None)))
-        .collect();
-    for (p, v) in params.iter().zip(&outcome.solution) {
-        if matches!(p.target, Target::Deviation(_) | Target::Iso) {
-            dev.insert(p.name.clone(), (*v, Some(note(&p.name))));
-        }
-    }
-    for (k, (v, n)) in &dev {
+    for (k, v) in deviations {
         let _ = write!(s, "\"{k}\" = {}", toml_number(*v));
-        match n {
+        match note(k) {
             Some(n) => {
                 let _ = writeln!(s, "  # {n}");
             }
@@ -801,10 +822,10 @@ pub fn fragment(
             if !periodic.is_empty() {
                 parts.push(format!("periodic = [{}]", periodic.join(", ")));
             }
-            let notes: Vec<String> = params
+            let notes: Vec<String> = notes
                 .iter()
-                .filter(|p| p.name.starts_with(&format!("{f}.")))
-                .map(|p| note(&p.name))
+                .filter(|(n, _)| n.starts_with(&format!("{f}.")))
+                .map(|(_, t)| t.clone())
                 .collect();
             let _ = write!(s, "{f} = {{ {} }}", parts.join(", "));
             if notes.is_empty() {
@@ -820,14 +841,10 @@ pub fn fragment(
     let _ = writeln!(s, "\n[reversal]");
     for (a, b) in reversals {
         let name = format!("reversal.{}", a.as_char());
-        let n = if params.iter().any(|p| p.name == name) {
-            note(&name)
-        } else {
-            "the scene's, not identified".into()
-        };
+        let n = note(&name).unwrap_or_else(|| "the scene's, not identified".into());
         let _ = writeln!(s, "{} = {}  # {n}", a.as_char(), toml_number(b));
     }
-    Ok(s)
+    s
 }
 
 #[cfg(test)]

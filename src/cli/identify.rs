@@ -12,10 +12,12 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use twinmill::metrology::cloud::read_cloud_file;
 use twinmill::pipeline::dbb::{calibrate_measured, calibrate_scene, load_plan};
-use twinmill::pipeline::identify_scene;
 use twinmill::pipeline::instrument_pages::{calibrate_page, measured_calibrate_page};
-use twinmill::pipeline::measurements::{IdentifyRequest, MeasurementKind, identify_measurements};
+use twinmill::pipeline::measurements::{
+    IdentifyRequest, MeasurementKind, ROTARY_APART, identify_measurements,
+};
 use twinmill::pipeline::pages::identify_page;
+use twinmill::pipeline::{identify_location_files, identify_scene, part_faces};
 use twinmill::scene::HexapodScene;
 use twinmill::scene::Need;
 
@@ -58,13 +60,16 @@ pub struct IdentifyArgs {
 pub struct InstrumentOptions {
     /// Identify the machine's deviations, error motions and reversals from this laser
     /// readings or ball-bar trace file (as `measure --instrument laser|ballbar` writes it),
-    /// repeatable: [KIND:]FILE with KIND laser[:AXIS] or ballbar[:PLANE]; without a kind,
-    /// the file's set-up record says what it is.
+    /// or its rotary axes' location terms from ball-sensor or probe traces (`measure
+    /// --instrument ball-sensor|probe`), repeatable: [KIND:]FILE with KIND laser[:AXIS],
+    /// ballbar[:PLANE], ball-sensor or probe; without a kind, the file's set-up record says
+    /// what it is.
     #[arg(long, value_name = "[KIND:]FILE")]
     measurement: Vec<String>,
     /// With --measurement: the parameters to identify, by the scene's names
     /// (EXX.polynomial[1], EYX.periodic[0], EBX.table[1], EC(0X)Y, dy_AY, reversal.X;
-    /// default: every one the scene models).
+    /// default: every one the scene models); with ball-sensor or probe traces, the rotary
+    /// axes' location terms (EX0C, EB0A, …; default: all of them).
     #[arg(long, value_name = "NAME,…", value_delimiter = ',')]
     parameters: Vec<String>,
     /// With --measurement: write the identified machine (the scene's [deviations],
@@ -72,29 +77,16 @@ pub struct InstrumentOptions {
     /// [identified.sigma]) into this file, which --deviations reads.
     #[arg(long, value_name = "FILE")]
     deviations_out: Option<PathBuf>,
+    /// With ball-sensor or probe traces: identify from them and the faces of the part the
+    /// scene's program cuts, in one solve — the part's cloud from --cloud, else the
+    /// scene's simulated scan.
+    #[arg(long)]
+    part: bool,
 }
 
-/// `identify --measurement`: the scene's serial machine from laser and ball-bar files.
+/// `identify --measurement`: the scene's serial machine from laser and ball-bar files, or
+/// its rotary axes' location terms from ball-sensor and probe traces (and a cut part).
 fn identify_instruments(a: &IdentifyArgs) -> ExitCode {
-    let serial = [
-        ("--cloud", a.cloud.is_some()),
-        ("--monte-carlo", a.monte_carlo.is_some()),
-    ];
-    let given = serial.iter().find_map(|(o, given)| given.then_some(*o));
-    if let Some(option) = given.or_else(|| a.hexapod.first_given()) {
-        return fail(format!(
-            "{option} cannot go with --measurement (a serial machine identified from laser \
-             and ball-bar files)"
-        ));
-    }
-    let scene = match load_machine(
-        &a.args,
-        "identify --measurement",
-        "a hexapod is identified from its double-ball-bar traces (--readings)",
-    ) {
-        Ok(s) => s,
-        Err(code) => return code,
-    };
     let mut measurements = Vec::with_capacity(a.instruments.measurement.len());
     for spec in &a.instruments.measurement {
         let (kind, path) = match MeasurementKind::parse_spec(spec) {
@@ -110,6 +102,36 @@ fn identify_instruments(a: &IdentifyArgs) -> ExitCode {
         };
         measurements.push((kind, path));
     }
+    let rotary = measurements
+        .iter()
+        .filter(|(k, _)| *k == MeasurementKind::Rotary)
+        .count();
+    if rotary == measurements.len() {
+        return identify_traces(a, &measurements);
+    }
+    if rotary > 0 {
+        return fail(ROTARY_APART);
+    }
+    let serial = [
+        ("--cloud", a.cloud.is_some()),
+        ("--monte-carlo", a.monte_carlo.is_some()),
+        ("--part", a.instruments.part),
+    ];
+    let given = serial.iter().find_map(|(o, given)| given.then_some(*o));
+    if let Some(option) = given.or_else(|| a.hexapod.first_given()) {
+        return fail(format!(
+            "{option} cannot go with laser and ball-bar files (a serial machine's error \
+             motions identified from its instruments)"
+        ));
+    }
+    let scene = match load_machine(
+        &a.args,
+        "identify --measurement",
+        "a hexapod is identified from its double-ball-bar traces (--readings)",
+    ) {
+        Ok(s) => s,
+        Err(code) => return code,
+    };
     let parameters = &a.instruments.parameters;
     let request = IdentifyRequest {
         measurements,
@@ -128,6 +150,92 @@ fn identify_instruments(a: &IdentifyArgs) -> ExitCode {
     print_out(
         || {
             let mut s = o.report.summary();
+            if let Some(out) = &a.instruments.deviations_out {
+                s.push_str(&format!("  wrote         {}\n", out.display()));
+            }
+            s
+        },
+        a.args.json.then(|| serde_json::to_string_pretty(&o.report)),
+    )
+}
+
+/// `identify --measurement ball-sensor:FILE …`: the rotary axes' location terms from
+/// the traces, with the cut part's faces when `--part` (or `--cloud`) is given.
+fn identify_traces(a: &IdentifyArgs, files: &[(MeasurementKind, PathBuf)]) -> ExitCode {
+    let with_part = a.instruments.part || a.cloud.is_some();
+    if let Some(option) = [("--monte-carlo", a.monte_carlo.is_some())]
+        .iter()
+        .find_map(|(o, given)| given.then_some(*o))
+        .or_else(|| a.hexapod.first_given())
+    {
+        return fail(format!(
+            "{option} cannot go with ball-sensor or probe traces (a serial machine's rotary \
+             axes identified from them and a cut part)"
+        ));
+    }
+    let needs: &[Need] = match (&a.cloud, with_part) {
+        (None, true) => &[Need::Scanner],
+        _ => &[],
+    };
+    let (scene, program) = match load(&a.args, "identify --measurement", needs) {
+        Ok(Loaded::Serial(scene, program)) => (*scene, program),
+        Ok(Loaded::Hexapod(path)) => {
+            return fail(format!(
+                "{}: a ball-sensor or probe trace identifies a serial machine's rotary axes; \
+                 a hexapod is identified from its double-ball-bar traces (--readings)",
+                path.display()
+            ));
+        }
+        Err(code) => return code,
+    };
+    let given = match &a.cloud {
+        Some(path) => match read_cloud_file(path) {
+            Ok(c) => Some((c, path.display().to_string())),
+            Err(e) => return fail(e),
+        },
+        None => None,
+    };
+    let (planes, source) = if with_part {
+        match part_faces(
+            &scene,
+            &program,
+            given.as_ref().map(|(c, s)| (c, s.as_str())),
+            &bars(a.args.json),
+        ) {
+            Ok((f, s)) => (f, Some(s)),
+            Err(e) => return fail(e),
+        }
+    } else {
+        (Vec::new(), None)
+    };
+    let paths: Vec<PathBuf> = files.iter().map(|(_, p)| p.clone()).collect();
+    let o = match identify_location_files(
+        &scene,
+        &a.instruments.parameters,
+        &paths,
+        &planes,
+        source.as_deref(),
+    ) {
+        Ok(o) => o,
+        Err(e) => return fail(e),
+    };
+    if let Some(out) = &a.instruments.deviations_out
+        && let Err(e) = write(out, o.file.as_bytes())
+    {
+        return fail(e);
+    }
+    print_out(
+        || {
+            let mut s = String::new();
+            if let Some(w) = o.report.fit.accepted_line() {
+                s.push_str(&format!("{w}\n"));
+            }
+            s.push_str(&format!("scene         {}\n", scene.name));
+            s.push_str(&format!("from          {}\n", o.sources.join(", ")));
+            if with_part {
+                s.push_str(&format!("part          {} faces\n", o.faces));
+            }
+            s.push_str(&o.report.summary());
             if let Some(out) = &a.instruments.deviations_out {
                 s.push_str(&format!("  wrote         {}\n", out.display()));
             }
@@ -315,6 +423,7 @@ pub fn exec(a: IdentifyArgs) -> ExitCode {
     if let Some(option) = [
         ("--parameters", !i.parameters.is_empty()),
         ("--deviations-out", i.deviations_out.is_some()),
+        ("--part", i.part),
     ]
     .iter()
     .find_map(|(o, given)| given.then_some(o))

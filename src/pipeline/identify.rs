@@ -111,7 +111,7 @@ fn scene_params(scene: &Scene) -> Result<(Vec<DeviationId>, Vec<IsoTerm>), Pipel
 
 /// The value of the ISO term `term` in `values` (deviations by name, as a scene writes
 /// them), under any of its names; zero when absent.
-fn iso_value(chain: &Chain, values: &BTreeMap<String, Real>, term: &IsoTerm) -> Real {
+pub(crate) fn iso_value(chain: &Chain, values: &BTreeMap<String, Real>, term: &IsoTerm) -> Real {
     values
         .iter()
         .filter(|(n, _)| !n.contains('_'))
@@ -317,6 +317,52 @@ fn plane_feature_report(p: &PlaneFeature, residuals: [Real; 3]) -> FeatureReport
     }
 }
 
+/// The part's points: the given cloud, or the scene's program cut on its machine and
+/// scanned by its scanner; with the source's name, and for a simulated scan its surface and
+/// cut stock.
+#[allow(clippy::type_complexity)]
+fn scanned_part(
+    scene: &Scene,
+    program: &Program,
+    cloud: Option<(&PointCloud, &str)>,
+    progress: &dyn Progress,
+) -> Result<(PointCloud, String, Option<Surface>, Option<TriDexel>), PipelineError> {
+    Ok(match cloud {
+        Some((c, src)) => (c.clone(), src.to_string(), None, None),
+        None => {
+            let scanner = scene.scanner_for("identify")?;
+            let part = machine_part(scene, program, progress)?;
+            let surface = Surface::new(&part.stock);
+            let scanned =
+                surface
+                    .scan(scanner, progress)
+                    .map_err(|source| PipelineError::Scan {
+                        path: scene.path.display().to_string(),
+                        source,
+                    })?;
+            (
+                scanned.cloud,
+                "simulated scan".to_string(),
+                Some(surface),
+                Some(part.stock),
+            )
+        }
+    })
+}
+
+/// The faces of the part the scene's program cuts, as plane features: from `cloud` (a
+/// measured part) or the scene's simulated scan; with the source's name.
+pub fn part_faces(
+    scene: &Scene,
+    program: &Program,
+    cloud: Option<(&PointCloud, &str)>,
+    progress: &dyn Progress,
+) -> Result<(Vec<Feature>, String), PipelineError> {
+    let (cloud, source, _, stock) = scanned_part(scene, program, cloud, progress)?;
+    let features = extract_features(scene, program, &cloud.points, stock.as_ref())?;
+    Ok((features, source))
+}
+
 /// General identification of the scene's `[identify] parameters` from its faces: in the
 /// scene's simulated scan, or in `cloud` (a real scan, `source` naming it); with the
 /// model-correction loop, and Monte-Carlo trials over scanner noise (simulated scans only;
@@ -349,27 +395,7 @@ pub fn identify_scene(
         timings.push((name.to_string(), clock.elapsed().as_secs_f64()));
         clock = Instant::now();
     };
-    let (cloud, source, surface, stock) = match cloud {
-        Some((c, src)) => (c.clone(), src.to_string(), None, None),
-        None => {
-            let scanner = scene.scanner_for("identify")?;
-            let part = machine_part(scene, program, progress)?;
-            let surface = Surface::new(&part.stock);
-            let scanned =
-                surface
-                    .scan(scanner, progress)
-                    .map_err(|source| PipelineError::Scan {
-                        path: spath.clone(),
-                        source,
-                    })?;
-            (
-                scanned.cloud,
-                "simulated scan".to_string(),
-                Some(surface),
-                Some(part.stock),
-            )
-        }
-    };
+    let (cloud, source, surface, stock) = scanned_part(scene, program, cloud, progress)?;
     lap("scan", &mut timings);
     let features = extract_features(scene, program, &cloud.points, stock.as_ref())?;
     lap("fit", &mut timings);

@@ -580,52 +580,7 @@ fn measure_rotary(scene: &Scene, r: &MeasureRequest) -> Result<Reading, String> 
         }
     }
     if let Some(id) = &rep.identification {
-        let _ = writeln!(
-            s,
-            "identified    location errors (offsets µm, tilts µrad; ± one standard uncertainty):"
-        );
-        let show = |t: &super::rotary::TermReport| {
-            let k = if super::rotary::is_angle_term(&t.name) {
-                1e6
-            } else {
-                1e3
-            };
-            let inj = t.injected.map_or(String::new(), |v| {
-                format!("   (scene injects {:+.3})", v * k)
-            });
-            format!(
-                "  {:<24} {:+10.3} ± {:.3}{inj}",
-                t.name,
-                t.value * k,
-                t.sigma * k
-            )
-        };
-        for t in id.identified.iter().chain(&id.combinations) {
-            let _ = writeln!(s, "{}", show(t));
-        }
-        if !id.not_determined.is_empty() {
-            let _ = writeln!(
-                s,
-                "not determined {} (held at the model's values; a table-side point cannot see them)",
-                id.not_determined.join(", ")
-            );
-        }
-        if !id.no_data.is_empty() {
-            let _ = writeln!(
-                s,
-                "no data       {} (no measurement depends on them: add sweeps of their axis)",
-                id.no_data.join(", ")
-            );
-        }
-        let _ = writeln!(
-            s,
-            "fit           {}; the point at ({:.4}, {:.4}, {:.4}) mm",
-            id.fit.describe(),
-            id.fixed_point_mm[0],
-            id.fixed_point_mm[1],
-            id.fixed_point_mm[2]
-        );
-        let _ = writeln!(s, "rank          {}", id.margin.describe());
+        s.push_str(&id.summary());
     }
     Ok(Reading {
         text: out.trace_csv.clone(),

@@ -11,6 +11,7 @@
 use crate::calibration::engine::Outcome;
 use crate::calibration::instruments::{self, MachineParameter, Measurement, Slot, Target};
 use crate::machine::chain::Chain;
+use crate::math::Real;
 use crate::metrology::ballbar::{BallBarSetup, Plane};
 use crate::metrology::circular::parse_trace;
 use crate::metrology::interferometer::LaserSetup;
@@ -29,6 +30,9 @@ pub enum MeasurementKind {
     /// An ISO 230-4 trace of `measure --instrument ballbar`; the plane, when given,
     /// overrides the file's record.
     Ballbar(Option<Plane>),
+    /// A rotary-axis test's trace of `measure --instrument ball-sensor|probe` (its set-up
+    /// record says which): the rotary axes' location terms, with a cut part's faces if given.
+    Rotary,
 }
 
 impl MeasurementKind {
@@ -50,11 +54,12 @@ impl MeasurementKind {
                 }
             }
             ("ballbar", None) => Ok(Self::Ballbar(None)),
+            ("ball-sensor" | "probe", None) => Ok(Self::Rotary),
             ("ballbar", Some(p)) => Plane::from_name(p)
                 .map(|p| Self::Ballbar(Some(p)))
                 .ok_or_else(|| format!("'{s}': '{p}' is not a plane (XY, YZ or ZX)")),
             _ => Err(format!(
-                "'{s}': the kinds are laser[:AXIS] and ballbar[:PLANE]"
+                "'{s}': the kinds are laser[:AXIS], ballbar[:PLANE], ball-sensor and probe"
             )),
         }
     }
@@ -65,7 +70,7 @@ impl MeasurementKind {
     /// (no kind: [`MeasurementKind::of_file`] decides).
     pub fn parse_spec(spec: &str) -> Result<(Option<Self>, PathBuf), String> {
         let lower = spec.to_ascii_lowercase();
-        let Some(kind) = ["laser", "ballbar"]
+        let Some(kind) = ["laser", "ballbar", "ball-sensor", "probe"]
             .into_iter()
             .find(|k| lower.starts_with(&format!("{k}:")))
         else {
@@ -80,7 +85,8 @@ impl MeasurementKind {
         }
         if rest.is_empty() {
             return Err(format!(
-                "--measurement '{spec}': expected [KIND:]FILE (KIND laser[:AXIS] or ballbar[:PLANE])"
+                "--measurement '{spec}': expected [KIND:]FILE (KIND laser[:AXIS], ballbar[:PLANE], \
+                 ball-sensor or probe)"
             ));
         }
         Ok((Some(Self::parse(kind)?), PathBuf::from(rest)))
@@ -102,24 +108,29 @@ impl MeasurementKind {
         match found[..] {
             [(_, "laser")] => Ok(Self::Laser(None)),
             [(_, "ballbar")] => Ok(Self::Ballbar(None)),
+            [(_, "ball-sensor" | "probe")] => Ok(Self::Rotary),
             [] => Err(file_error(
                 path,
                 None,
-                "no set-up record (a '# set-up: laser …' or '# set-up: ballbar …' line, as                  `twinmill measure` writes): give the kind, laser[:AXIS]:FILE or                  ballbar[:PLANE]:FILE"
+                "no set-up record (a '# set-up: laser|ballbar|ball-sensor|probe …' line, as \
+                 `twinmill measure` writes): give the kind, laser[:AXIS]:FILE, \
+                 ballbar[:PLANE]:FILE, ball-sensor:FILE or probe:FILE"
                     .into(),
             )),
             [(line, w)] => Err(file_error(
                 path,
                 Some(line),
                 format!(
-                    "the set-up record is of the {w}, not of a laser or a ball bar:                      `identify --measurement` takes laser readings and ball-bar traces"
+                    "the set-up record is of the {w}: `identify --measurement` takes laser \
+                     readings, ball-bar traces and ball-sensor or probe traces"
                 ),
             )),
             [_, (line, w), ..] => Err(file_error(
                 path,
                 Some(line),
                 format!(
-                    "a second set-up record ({w}): the file's kind is ambiguous; give it,                      laser[:AXIS]:FILE or ballbar[:PLANE]:FILE"
+                    "a second set-up record ({w}): the file's kind is ambiguous; give it, \
+                     laser[:AXIS]:FILE or ballbar[:PLANE]:FILE"
                 ),
             )),
         }
@@ -343,8 +354,14 @@ pub fn read_measurement(
                 samples,
             })
         }
+        MeasurementKind::Rotary => Err(file_error(path, None, ROTARY_APART.into())),
     }
 }
+
+/// Why a rotary-axis trace does not go with laser and ball-bar files.
+pub const ROTARY_APART: &str = "a ball-sensor or probe trace identifies the rotary axes' \
+     location terms (with a cut part's faces, --part), laser readings and ball-bar traces the \
+     error motions: give them to separate `identify --measurement` runs";
 
 /// Identifies the scene's machine from the request's files (see the module documentation).
 pub fn identify_measurements(
@@ -497,6 +514,46 @@ fn toml_strings(v: &[String]) -> String {
 
 /// The deviations file: the fragment, then `[identified]` and `[identified.sigma]`.
 fn deviations_file(fragment: &str, report: &MeasurementsReport, outcome: &Outcome) -> String {
+    let sigma: Vec<(String, Real)> = report
+        .identified
+        .iter()
+        .map(|e| (e.name.clone(), e.sigma))
+        .collect();
+    identified_file(
+        fragment,
+        &IdentifiedRecord {
+            machine: &report.machine,
+            scene: &report.scene,
+            axes: &report.axes,
+            sources: &report.sources,
+            misfit_accepted: outcome.fit.misfit_accepted,
+            not_determined: &report.not_determined,
+            sigma: &sigma,
+        },
+    )
+}
+
+/// What a deviations file records of its identification (its `[identified]` section).
+pub(crate) struct IdentifiedRecord<'a> {
+    /// The machine's name.
+    pub machine: &'a str,
+    /// The scene's name.
+    pub scene: &'a str,
+    /// The machine's axes, in chain order.
+    pub axes: &'a [String],
+    /// The measurement files.
+    pub sources: &'a [String],
+    /// Whether a misfit was accepted on request.
+    pub misfit_accepted: bool,
+    /// The parameters not determined on their own.
+    pub not_determined: &'a [String],
+    /// Each identified parameter's standard uncertainty.
+    pub sigma: &'a [(String, Real)],
+}
+
+/// The deviations file of every identification: the machine's sections (`fragment`), then
+/// `[identified]` and `[identified.sigma]`, which `--deviations` reads back.
+pub(crate) fn identified_file(fragment: &str, r: &IdentifiedRecord) -> String {
     use std::fmt::Write as _;
     let mut s = fragment.to_string();
     let _ = writeln!(
@@ -504,23 +561,19 @@ fn deviations_file(fragment: &str, report: &MeasurementsReport, outcome: &Outcom
         "\n# What these sections were identified for and from; read back by `--deviations`."
     );
     let _ = writeln!(s, "[identified]");
-    let _ = writeln!(s, "machine = {}", toml_string(&report.machine));
-    let _ = writeln!(s, "scene = {}", toml_string(&report.scene));
-    let _ = writeln!(s, "axes = {}", toml_strings(&report.axes));
-    let _ = writeln!(s, "sources = {}", toml_strings(&report.sources));
-    let _ = writeln!(s, "misfit_accepted = {}", outcome.fit.misfit_accepted);
-    let _ = writeln!(
-        s,
-        "not_determined = {}",
-        toml_strings(&report.not_determined)
-    );
+    let _ = writeln!(s, "machine = {}", toml_string(r.machine));
+    let _ = writeln!(s, "scene = {}", toml_string(r.scene));
+    let _ = writeln!(s, "axes = {}", toml_strings(r.axes));
+    let _ = writeln!(s, "sources = {}", toml_strings(r.sources));
+    let _ = writeln!(s, "misfit_accepted = {}", r.misfit_accepted);
+    let _ = writeln!(s, "not_determined = {}", toml_strings(r.not_determined));
     let _ = writeln!(
         s,
         "\n# Each identified parameter's standard uncertainty (its units)."
     );
     let _ = writeln!(s, "[identified.sigma]");
-    for e in &report.identified {
-        let _ = writeln!(s, "{} = {:?}", toml_string(&e.name), e.sigma);
+    for (name, sigma) in r.sigma {
+        let _ = writeln!(s, "{} = {:?}", toml_string(name), sigma);
     }
     s
 }

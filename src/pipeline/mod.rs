@@ -34,10 +34,13 @@ pub mod hexapod_probe;
 pub use correct::{CorrectOutcome, correct, identified_model};
 pub use design::{DesignOutcome, MAX_DESIGN_ROUNDS, design_scene};
 pub use fit::{FitRequest, Selection, Shape, fit_cloud};
-pub use identify::{IdentifyOutcome, correction_loop, extract_features, identify_scene};
+pub use identify::{
+    IdentifyOutcome, correction_loop, extract_features, identify_scene, part_faces,
+};
 pub use rotary::{
     LocationReport, RotaryInstrument, RotaryOutcome, RotaryReport, RotaryRequest, TermReport,
-    default_setup, identify_location_with, is_angle_term, rotary_test,
+    TraceIdentification, default_setup, identify_location_files, identify_location_with,
+    is_angle_term, rotary_test,
 };
 pub use run::{Outcome, extract_faces, run, scanner_study};
 pub use simulate::{Simulation, simulate};

@@ -109,6 +109,57 @@ pub struct LocationReport {
     pub fit: FitCheck,
 }
 
+impl LocationReport {
+    /// The identification as text: each term with its σ (offsets in µm, tilts in µrad)
+    /// and the value the scene injects where it names the term, what is not determined,
+    /// the fit, the fixed point and the rank's margin.
+    pub fn summary(&self) -> String {
+        use std::fmt::Write as _;
+        let mut s = String::new();
+        let _ = writeln!(
+            s,
+            "identified    location errors (offsets µm, tilts µrad; ± one standard uncertainty):"
+        );
+        for t in self.identified.iter().chain(&self.combinations) {
+            let k = if is_angle_term(&t.name) { 1e6 } else { 1e3 };
+            let inj = t.injected.map_or(String::new(), |v| {
+                format!("   (scene injects {:+.3})", v * k)
+            });
+            let _ = writeln!(
+                s,
+                "  {:<24} {:+10.3} ± {:.3}{inj}",
+                t.name,
+                t.value * k,
+                t.sigma * k
+            );
+        }
+        if !self.not_determined.is_empty() {
+            let _ = writeln!(
+                s,
+                "not determined {} (held at the model's values; a table-side point cannot see them)",
+                self.not_determined.join(", ")
+            );
+        }
+        if !self.no_data.is_empty() {
+            let _ = writeln!(
+                s,
+                "no data       {} (no measurement depends on them: add sweeps of their axis)",
+                self.no_data.join(", ")
+            );
+        }
+        let _ = writeln!(
+            s,
+            "fit           {}; the point at ({:.4}, {:.4}, {:.4}) mm",
+            self.fit.describe(),
+            self.fixed_point_mm[0],
+            self.fixed_point_mm[1],
+            self.fixed_point_mm[2]
+        );
+        let _ = writeln!(s, "rank          {}", self.margin.describe());
+        s
+    }
+}
+
 /// The report of a rotary-axis test.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct RotaryReport {
@@ -187,7 +238,7 @@ pub fn rotary_test(scene: &Scene, req: &RotaryRequest) -> Result<RotaryOutcome, 
         identification,
     };
     Ok(RotaryOutcome {
-        trace_csv: trace_csv(scene.chain(), &samples),
+        trace_csv: trace_csv(scene.chain(), &samples, &req.setup, instrument),
         report,
         samples,
     })
@@ -214,6 +265,26 @@ pub fn identify_location_with(
     setup: &Setup,
     planes: &[crate::calibration::calibrate::Feature],
 ) -> Result<LocationReport, String> {
+    let traces: Vec<(&[Sample], Vector3, &str)> = if samples.is_empty() {
+        Vec::new()
+    } else {
+        vec![(samples, setup.tool_offset, "")]
+    };
+    Ok(identify_location_traces(scene, names, &traces, planes, "measure")?.0)
+}
+
+/// [`identify_location_with`] from any number of traces, each with its spindle-side ball
+/// (`tool_offset`), its own fixed point and its file's name (which prefixes its samples' in
+/// the fit, so a misfit names the file; empty for one trace of the twin): the report, and
+/// the full solved vector of the terms in the report's order (undetermined directions at
+/// their start). `what` is the command a refusal names.
+fn identify_location_traces(
+    scene: &Scene,
+    names: &[String],
+    traces: &[(&[Sample], Vector3, &str)],
+    planes: &[crate::calibration::calibrate::Feature],
+    what: &str,
+) -> Result<(LocationReport, Vec<Real>), String> {
     let names = if names.is_empty() {
         scene.model().rotary_location_terms()
     } else {
@@ -223,7 +294,21 @@ pub fn identify_location_with(
         .iter()
         .map(|n| IsoTerm::parse(scene.model(), n).map_err(|e| e.to_string()))
         .collect::<Result<Vec<_>, _>>()?;
-    let mut features = ball_features(samples, setup.tool_offset, 0);
+    let mut features: Vec<_> = traces
+        .iter()
+        .enumerate()
+        .flat_map(|(k, (samples, tool_offset, file))| {
+            let mut f = ball_features(samples, *tool_offset, k);
+            if !file.is_empty() {
+                for b in &mut f {
+                    if let crate::calibration::calibrate::Feature::Ball(b) = b {
+                        b.name = format!("{file}: {}", b.name);
+                    }
+                }
+            }
+            f
+        })
+        .collect();
     features.extend(planes.iter().cloned());
     // Ball features do not use the tool; plane features use the scene's, which cut them.
     let tool = if planes.is_empty() {
@@ -247,7 +332,7 @@ pub fn identify_location_with(
     };
     let mut r = solve(&model).map_err(|e| format!("identification: {e}"))?;
     r.fit
-        .enforce("measure", scene.accept_misfit)
+        .enforce(what, scene.accept_misfit)
         .map_err(|e| e.to_string())?;
     let injected = |n: &str| scene.injected().get(n).copied();
     let term = |e: &crate::calibration::calibrate::Estimate| TermReport {
@@ -262,7 +347,7 @@ pub fn identify_location_with(
         .copied()
         .unwrap_or((Point3::origin(), [Real::NAN; 3]));
     let ident = &r.identifiability;
-    Ok(LocationReport {
+    let report = LocationReport {
         terms: names,
         identified: r.parameters.iter().map(term).collect(),
         combinations: r.combinations.iter().map(term).collect(),
@@ -279,7 +364,162 @@ pub fn identify_location_with(
         chi2: r.solver.chi2,
         dof: r.solver.dof,
         fit: r.fit.clone(),
+    };
+    Ok((report, r.solution))
+}
+
+/// The rotary axes' location terms identified from trace files (as `measure --instrument
+/// ball-sensor|probe` writes them) and, when given, a cut part's faces.
+#[derive(Clone, Debug)]
+pub struct TraceIdentification {
+    /// The identification's account.
+    pub report: LocationReport,
+    /// The trace files, then the part's source when faces were used.
+    pub sources: Vec<String>,
+    /// How many faces of the part took part.
+    pub faces: usize,
+    /// The identified machine as a deviations file (`--deviations` reads it).
+    pub file: String,
+}
+
+/// Reads the trace `files` of `scene`'s machine and identifies the location terms `names`
+/// (empty: every rotary axis's) from them and the part's faces `planes` (from
+/// `part_source`), in one solve: each trace with its own fixed point, the faces with
+/// their scan's registration. A misfit is refused naming the file and sample.
+pub fn identify_location_files(
+    scene: &Scene,
+    names: &[String],
+    files: &[std::path::PathBuf],
+    planes: &[crate::calibration::calibrate::Feature],
+    part_source: Option<&str>,
+) -> Result<TraceIdentification, PipelineError> {
+    let err = |path: &std::path::Path, message: String| PipelineError::Rotary {
+        path: path.display().to_string(),
+        message,
+    };
+    let mut traces = Vec::with_capacity(files.len());
+    for f in files {
+        let text = crate::scene::read_text(f).map_err(|e| err(f, e.to_string()))?;
+        // The reader's errors name the file, line and column themselves.
+        let t =
+            crate::metrology::rotary_test::parse_trace(&text, f, scene.chain()).map_err(|e| {
+                PipelineError::Rotary {
+                    path: format!("{}:{}:{}", e.path.display(), e.line, e.column),
+                    message: e.message,
+                }
+            })?;
+        traces.push((f.display().to_string(), t));
+    }
+    if traces.is_empty() && planes.is_empty() {
+        return Err(err(
+            &scene.path,
+            "no trace and no face to identify the location terms from".into(),
+        ));
+    }
+    let inputs: Vec<(&[Sample], Vector3, &str)> = traces
+        .iter()
+        .map(|(name, t)| (t.samples.as_slice(), t.setup.tool_offset, name.as_str()))
+        .collect();
+    let (report, solution) = identify_location_traces(scene, names, &inputs, planes, "identify")
+        .map_err(|m| err(&scene.path, m))?;
+    let mut sources: Vec<String> = traces.iter().map(|(n, _)| n.clone()).collect();
+    sources.extend(part_source.map(str::to_string));
+    let file =
+        location_file(scene, &report, &solution, &sources).map_err(|m| err(&scene.path, m))?;
+    Ok(TraceIdentification {
+        report,
+        sources,
+        faces: planes.len(),
+        file,
     })
+}
+
+/// A solved change below this (mm or rad) is the solver's rounding, not a value: far
+/// below any σ of a location term (µm and µrad), far above rounding near zero.
+const UNMOVED: Real = 1e-12;
+
+/// The deviations file of a location identification: the scene's `[deviations]` with each
+/// solved term at its value (the model's known value plus the solved change; a term the
+/// data do not determine on its own is written at that value and said to be not
+/// identified), the scene's error motions and reversals unchanged, and the `[identified]`
+/// record.
+fn location_file(
+    scene: &Scene,
+    report: &LocationReport,
+    solution: &[Real],
+    sources: &[String],
+) -> Result<String, String> {
+    let model = scene.model();
+    let terms = report
+        .terms
+        .iter()
+        .map(|n| IsoTerm::parse(model, n).map_err(|e| e.to_string()))
+        .collect::<Result<Vec<_>, _>>()?;
+    let same = |name: &str, t: &IsoTerm| {
+        !name.contains('_')
+            && model
+                .iso_term_id(name)
+                .is_ok_and(|(a, c)| a == t.axis && c == t.component)
+    };
+    let mut deviations: BTreeMap<String, Real> = scene
+        .injected()
+        .iter()
+        .filter(|(n, _)| !terms.iter().any(|t| same(n, t)))
+        .map(|(n, v)| (n.clone(), *v))
+        .collect();
+    let mut notes = Vec::new();
+    for ((name, t), x) in report.terms.iter().zip(&terms).zip(solution) {
+        let start = super::identify::iso_value(model, scene.known(), t);
+        let identified = report.identified.iter().any(|e| &e.name == name);
+        // A direction the data do not determine stays at its start; a term held there
+        // (the C table's zero, its offset along itself) is written only if it has a value.
+        if identified || x.abs() > UNMOVED || start != 0.0 {
+            deviations.insert(name.clone(), start + x);
+        }
+        let note = match report.identified.iter().find(|e| &e.name == name) {
+            Some(e) => format!("{name}: σ {:.3e}", e.sigma),
+            None if report.no_data.contains(name) => {
+                format!("{name}: no measurement sees it, the model's value kept")
+            }
+            None => format!("{name}: not determined on its own, not identified"),
+        };
+        notes.push((name.clone(), note));
+    }
+    let fragment = crate::calibration::instruments::machine_sections(
+        scene.chain(),
+        &deviations,
+        &notes,
+        sources,
+    );
+    let axes: Vec<String> = scene
+        .chain()
+        .axes()
+        .iter()
+        .map(|a| a.letter.as_char().to_string())
+        .collect();
+    let not_determined: Vec<String> = report
+        .terms
+        .iter()
+        .filter(|n| !report.identified.iter().any(|e| &e.name == *n))
+        .cloned()
+        .collect();
+    let sigma: Vec<(String, Real)> = report
+        .identified
+        .iter()
+        .map(|e| (e.name.clone(), e.sigma))
+        .collect();
+    Ok(super::measurements::identified_file(
+        &fragment,
+        &super::measurements::IdentifiedRecord {
+            machine: scene.machine_name(),
+            scene: &scene.name,
+            axes: &axes,
+            sources,
+            misfit_accepted: report.fit.misfit_accepted,
+            not_determined: &not_determined,
+            sigma: &sigma,
+        },
+    ))
 }
 
 /// The chain the identification fits: the scene's machine with everything it has — its

@@ -331,3 +331,245 @@ fn ball_sensor_and_the_designed_part_identify_the_trunnion_together() {
         assert!(b.sigma < a.sigma, "{n}: the part adds nothing");
     }
 }
+
+/// A scanner that sees the trunnion's four shoulders: the block turned on a turntable to
+/// four views (the views `design` places).
+const TURNTABLE_SCANNER: &str = "
+[scanner]
+position = [0.0, -315.4, 240.8]
+target = [0.0, 0.0, 20.0]
+up = [0.0, 0.0, 1.0]
+baseline_mm = 100.0
+fov_mm = [80.0, 80.0]
+pitch_mm = 0.3
+noise_sigma_mm = 0.01
+working_range_mm = [290.0, 480.0]
+grazing_limit_deg = 80.0
+seed = 2002
+turntable = { axis_point = [0.0, 0.0, 20.0], axis = [0.0, 0.0, 1.0], angles_deg = [45.0, 135.0, 225.0, 315.0] }
+";
+
+/// The flanks of the four shoulders trunnion-ac.ngc cuts at C = 0, 90, 180, 270 (its feed
+/// lines 10, 15, 20, 25).
+const SHOULDER_FLANKS: &str = "
+[identify]
+faces = [
+  { name = \"c0\", line = 10, kind = \"flank\" },
+  { name = \"c90\", line = 15, kind = \"flank\" },
+  { name = \"c180\", line = 20, kind = \"flank\" },
+  { name = \"c270\", line = 25, kind = \"flank\" },
+]
+parameters = [\"EX0C\", \"EY0C\"]
+registration = \"estimate\"
+";
+
+/// A report's terms as (name, value, σ), read from its JSON.
+fn json_terms(v: &serde_json::Value) -> Vec<(String, Real, Real)> {
+    v["identified"]
+        .as_array()
+        .expect("identified")
+        .iter()
+        .map(|t| {
+            (
+                t["name"].as_str().expect("name").to_string(),
+                t["value"].as_f64().expect("value"),
+                t["sigma"].as_f64().expect("sigma"),
+            )
+        })
+        .collect()
+}
+
+/// The ball-sensor trace that `measure` writes, given back to `identify --measurement`
+/// (alone, then with the part the scene's program cuts, `--part`), through the binary:
+///
+/// - alone it identifies exactly what `measure` identified from the same samples (the
+///   file carries the test bit for bit: samples, stylus and fixed point);
+/// - with the four shoulders (their flanks face machine −Y at C = 0, 90, 180, 270, so they
+///   see the C line's offsets across it, by the argument at the top) every term lies
+///   within 3σ of the scene's injected value, read from its text; no σ grows (least
+///   squares with more data) and one at least shrinks by 5 %; the joint and the ball-alone
+///   values differ within 3 of the σ of their difference; the same two are named not
+///   determined;
+/// - `--deviations-out` writes each identified value, not the undetermined two, and
+///   `measure --deviations` runs on the identified machine;
+/// - a second trace whose one sweep is bent by 10 µm is refused, naming that file; a
+///   malformed trace, a trace beside a laser file and --monte-carlo are refused in one
+///   line; nothing is written.
+#[test]
+fn ball_sensor_traces_and_the_cut_part_identify_through_the_binary() {
+    let sb = crate::Sandbox::new("traces-and-part");
+    let text = format!(
+        "{}{TURNTABLE_SCANNER}{SHOULDER_FLANKS}",
+        crate::builtin("trunnion-ac.toml")
+    );
+    let truth = injected(&text);
+    sb.write("ts.toml", text.as_bytes());
+    sb.write(
+        "trunnion-ac.ngc",
+        crate::builtin("trunnion-ac.ngc").as_bytes(),
+    );
+    let run_json = |args: &[&str]| -> serde_json::Value {
+        let (code, out, err) = sb.run(args);
+        assert_eq!(code, 0, "{args:?}: {err}");
+        serde_json::from_str(&out).unwrap_or_else(|e| panic!("{args:?}: {e}: {out}"))
+    };
+    let measured = run_json(&[
+        "measure",
+        "ts.toml",
+        "--instrument",
+        "ball-sensor",
+        "--out",
+        "bs.csv",
+        "--json",
+    ]);
+    let alone = run_json(&["identify", "ts.toml", "--measurement", "bs.csv", "--json"]);
+    assert_eq!(
+        json_terms(&alone),
+        json_terms(&measured["identification"]),
+        "the trace read back identifies as measure did"
+    );
+    let both = run_json(&[
+        "identify",
+        "ts.toml",
+        "--measurement",
+        "ball-sensor:bs.csv",
+        "--part",
+        "--deviations-out",
+        "dev.toml",
+        "--json",
+    ]);
+    let mut nd: Vec<&str> = both["not_determined"]
+        .as_array()
+        .expect("not_determined")
+        .iter()
+        .map(|v| v.as_str().expect("name"))
+        .collect();
+    nd.sort();
+    assert_eq!(nd, ["EC0C", "EZ0C"]);
+    let (a, b) = (json_terms(&alone), json_terms(&both));
+    assert_eq!(a.len(), 8);
+    assert_eq!(b.len(), 8);
+    let dev = std::fs::read_to_string(sb.dir.join("dev.toml")).expect("dev.toml");
+    for ((name, va, sa), (nb, vb, sb_)) in a.iter().zip(&b) {
+        assert_eq!(name, nb);
+        let t = truth
+            .iter()
+            .find(|(k, _)| k == name)
+            .map_or(0.0, |(_, v)| *v);
+        assert!(
+            (vb - t).abs() <= 3.0 * sb_,
+            "{name}: {vb} ± {sb_} against {t}"
+        );
+        assert!(*sb_ <= sa * (1.0 + 1e-6), "{name}: σ {sb_} against {sa}");
+        let spread = (sa * sa - sb_ * sb_).max(0.0).sqrt();
+        assert!((vb - va).abs() <= 3.0 * spread + 1e-12, "{name}");
+        let written = dev
+            .lines()
+            .find_map(|l| l.strip_prefix(&format!("\"{name}\" = ")))
+            .and_then(|r| r.split_whitespace().next())
+            .and_then(|v| v.parse::<Real>().ok())
+            .unwrap_or_else(|| panic!("{name} in {dev}"));
+        assert!(
+            (written - vb).abs() <= 1e-12,
+            "{name}: wrote {written}, identified {vb}"
+        );
+    }
+    assert!(
+        b.iter()
+            .zip(&a)
+            .any(|((n, _, sb_), (_, _, sa))| n.starts_with("E") && *sb_ < 0.95 * sa),
+        "the part adds information"
+    );
+    assert!(
+        !dev.lines()
+            .any(|l| l.starts_with("\"EC0C\" =") || l.starts_with("\"EZ0C\" =")),
+        "{dev}"
+    );
+    let on_twin = run_json(&[
+        "measure",
+        "ts.toml",
+        "--deviations",
+        "dev.toml",
+        "--instrument",
+        "ball-sensor",
+        "--out",
+        "bs2.csv",
+        "--json",
+    ]);
+    assert_eq!(json_terms(&on_twin["identification"]).len(), 8);
+
+    // A second set-up whose sweep 2 reads 10 µm more along X: no rigid fixed point explains it.
+    let trace = std::fs::read_to_string(sb.dir.join("bs.csv")).expect("trace");
+    let bent: String = trace
+        .lines()
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            if f.first() == Some(&"2") {
+                let mut f: Vec<String> = f.iter().map(|s| s.to_string()).collect();
+                let k = f.len() - 6;
+                let v: Real = f[k].parse().expect("dx");
+                f[k] = format!("{:?}", v + 0.010);
+                f.join(",") + "\n"
+            } else {
+                format!("{l}\n")
+            }
+        })
+        .collect();
+    sb.write("bent.csv", bent.as_bytes());
+    let refused = |args: &[&str], names: &[&str]| {
+        let _ = std::fs::remove_file(sb.dir.join("out.toml"));
+        let (code, out, err) = sb.run(args);
+        assert_ne!(code, 0, "{args:?}: {out}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
+        for n in names {
+            assert!(err.contains(n), "{args:?}: '{n}' in {err}");
+        }
+        assert!(!sb.dir.join("out.toml").exists(), "{args:?} wrote");
+    };
+    let with_out = |a: &[&'static str]| -> Vec<&'static str> {
+        let mut v = a.to_vec();
+        v.extend(["--deviations-out", "out.toml"]);
+        v
+    };
+    refused(
+        &with_out(&[
+            "identify",
+            "ts.toml",
+            "--measurement",
+            "bs.csv",
+            "--measurement",
+            "bent.csv",
+        ]),
+        &["bent.csv", "refused"],
+    );
+    sb.write(
+        "bad.csv",
+        trace.replacen("\n1,C,30.0,", "\n1,Q,30.0,", 1).as_bytes(),
+    );
+    refused(
+        &with_out(&["identify", "ts.toml", "--measurement", "bad.csv"]),
+        &["bad.csv:4:3", "not a rotary axis"],
+    );
+    refused(
+        &with_out(&[
+            "identify",
+            "ts.toml",
+            "--measurement",
+            "bs.csv",
+            "--measurement",
+            "laser:bs.csv",
+        ]),
+        &["ball-sensor or probe trace"],
+    );
+    refused(
+        &with_out(&[
+            "identify",
+            "ts.toml",
+            "--measurement",
+            "bs.csv",
+            "--monte-carlo",
+            "3",
+        ]),
+        &["--monte-carlo"],
+    );
+}

@@ -215,9 +215,20 @@ fn measure_ball_sensor_identifies_the_scene_s_location_errors_and_writes_the_tra
             );
         }
         let csv = std::fs::read_to_string(sb.dir.join("t.csv")).expect("trace");
-        // Header plus the default test's 12 + 12 + 9 + 13 positions.
-        assert_eq!(csv.lines().count(), 1 + 46);
-        assert!(csv.starts_with("sweep,axis,angle_deg,C_deg,A_deg,Y_mm,X_mm,Z_mm,dx_mm"));
+        // The set-up record, the header, and the default test's 12 + 12 + 9 + 13 positions.
+        assert_eq!(csv.lines().count(), 2 + 46);
+        let mut lines = csv.lines();
+        let record = lines.next().expect("record");
+        assert!(
+            record.starts_with(&format!("# set-up: {instrument} point_mm=60.0,0.0,30.0 ")),
+            "{record}"
+        );
+        assert!(
+            lines
+                .next()
+                .expect("header")
+                .starts_with("sweep,axis,angle_deg,C_deg,A_deg,Y_mm,X_mm,Z_mm,dx_mm")
+        );
         assert!(sb.dir.join("t.png").exists());
     }
 }
