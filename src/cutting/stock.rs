@@ -24,6 +24,8 @@ use rayon::prelude::*;
 /// Rays per block side.
 const BLOCK: usize = 16;
 
+mod batch;
+
 /// Errors in creating a stock.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum StockError {
@@ -585,52 +587,18 @@ impl CutContext<'_> {
     /// Cuts the rays of rows `rows` of block `(bu, bv)` in range, reading the block only.
     fn cut_rows(&self, bu: usize, block: &Block, rows: std::ops::RangeInclusive<usize>) -> RowsCut {
         let mut used = Vec::new();
-        let (mut cuts, mut lines) = (Vec::new(), Vec::new());
-        let (mut scratch, mut next) = (Vec::new(), Vec::new());
+        let mut bufs = RayBuffers::default();
         let mut new: Vec<Segment> = Vec::new();
         let mut changes: Vec<RayChange> = Vec::new();
-        let (lo_a, hi_a) = self.along;
-        let iv_range = rows;
         let iu_range = self.iu.0.max(bu * BLOCK)..=self.iu.1.min(bu * BLOCK + BLOCK - 1);
-        for iv in iv_range {
+        for iv in rows {
             for iu in iu_range.clone() {
                 let local = (iv % BLOCK) * BLOCK + iu % BLOCK;
                 let segs = block.ray(local, &self.fill);
-                // A ray with no material inside the cutter's extent along it cannot change.
-                let mut inside = segs.iter().filter(|s| s.hi.t > lo_a && s.lo.t < hi_a);
-                let Some(first) = inside.next() else {
-                    continue;
-                };
-                let span = (first.lo.t, inside.next_back().unwrap_or(first).hi.t);
-                let mut o = Point3::origin();
-                o[self.u] = self.u0 + iu as Real * self.du;
-                o[self.v] = self.v0 + iv as Real * self.dv;
-                if !self.cutter.may_cut(&o, self.axis, segs) {
-                    continue;
-                }
-                cuts.clear();
-                lines.clear();
-                self.cutter
-                    .ray_cuts_in_span(&o, self.axis, span, self.line, &mut cuts, &mut lines);
+                let o = self.origin(iu, iv);
                 let start = new.len();
-                let changed = match cuts.as_slice() {
-                    [] => false,
-                    [c] => subtract(segs, c, lines[0], &mut new, &mut used),
-                    many => {
-                        // Subtract the cuts one after another through a scratch buffer.
-                        scratch.clear();
-                        scratch.extend_from_slice(segs);
-                        let mut changed = false;
-                        for (c, l) in many.iter().zip(&lines) {
-                            next.clear();
-                            changed |= subtract(&scratch, c, *l, &mut next, &mut used);
-                            std::mem::swap(&mut scratch, &mut next);
-                        }
-                        new.extend_from_slice(&scratch);
-                        changed
-                    }
-                };
-                if changed {
+                let cutter = (self.cutter, self.line, self.along);
+                if cut_ray(cutter, &o, self.axis, segs, &mut bufs, &mut new, &mut used) {
                     changes.push(RayChange {
                         local,
                         start,
@@ -642,6 +610,74 @@ impl CutContext<'_> {
             }
         }
         RowsCut { new, changes, used }
+    }
+
+    /// The origin of ray `(iu, iv)`.
+    fn origin(&self, iu: usize, iv: usize) -> Point3 {
+        let mut o = Point3::origin();
+        o[self.u] = self.u0 + iu as Real * self.du;
+        o[self.v] = self.v0 + iv as Real * self.dv;
+        o
+    }
+}
+
+/// Scratch buffers of [`cut_ray`], reused from ray to ray.
+#[derive(Default)]
+struct RayBuffers {
+    cuts: Vec<RayCut>,
+    lines: Vec<[u32; 2]>,
+    scratch: Vec<Segment>,
+    next: Vec<Segment>,
+}
+
+/// Cuts the ray `o + t·e_axis` whose material is `segs` by `cutter` (with its NC line and
+/// its bounds `along` the ray): appends the ray's new segments to `new` when it changed
+/// (returning true; nothing appended, or something to truncate, otherwise) and the lines
+/// used to `used`.
+fn cut_ray(
+    (cutter, line, along): (&dyn Cutter, u32, (Real, Real)),
+    o: &Point3,
+    axis: usize,
+    segs: &[Segment],
+    bufs: &mut RayBuffers,
+    new: &mut Vec<Segment>,
+    used: &mut Vec<u32>,
+) -> bool {
+    let (lo_a, hi_a) = along;
+    // A ray with no material inside the cutter's extent along it cannot change.
+    let mut inside = segs.iter().filter(|s| s.hi.t > lo_a && s.lo.t < hi_a);
+    let Some(first) = inside.next() else {
+        return false;
+    };
+    let span = (first.lo.t, inside.next_back().unwrap_or(first).hi.t);
+    if !cutter.may_cut(o, axis, segs) {
+        return false;
+    }
+    let RayBuffers {
+        cuts,
+        lines,
+        scratch,
+        next,
+    } = bufs;
+    cuts.clear();
+    lines.clear();
+    cutter.ray_cuts_in_span(o, axis, span, line, cuts, lines);
+    match cuts.as_slice() {
+        [] => false,
+        [c] => subtract(segs, c, lines[0], new, used),
+        many => {
+            // Subtract the cuts one after another through a scratch buffer.
+            scratch.clear();
+            scratch.extend_from_slice(segs);
+            let mut changed = false;
+            for (c, l) in many.iter().zip(lines.iter()) {
+                next.clear();
+                changed |= subtract(scratch, c, *l, next, used);
+                std::mem::swap(scratch, next);
+            }
+            new.extend_from_slice(scratch);
+            changed
+        }
     }
 }
 

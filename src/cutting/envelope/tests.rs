@@ -372,3 +372,56 @@ proptest! {
         prop_assert!(crossing_bits(&culled) == crossing_bits(&plain));
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 12, failure_persistence: None, rng_seed: proptest::test_runner::RngSeed::Fixed(0xba7c), ..ProptestConfig::default() })]
+
+    /// Cutting a chain of small rotary moves together (each ray taken through every move in
+    /// turn, [`TriDexel::remove_each`]) leaves the same crossings, bit for bit, as removing
+    /// them one after another, and says of each move whether it cut as its own removal does;
+    /// some moves of the chain cut and a far one does not.
+    #[test]
+    fn moves_cut_together_are_bit_identical_to_moves_cut_in_turn(
+        ball in any::<bool>(), a0 in -30.0..30.0f64, y0 in -2.0..2.0f64, z0 in 3.0..4.5f64,
+        steps in proptest::collection::vec(
+            (0.2..2.0f64, -0.3..0.3f64, -0.05..0.05f64, -0.1..0.05f64), 6..14),
+    ) {
+        use crate::cutting::stock::TriDexel;
+        let c = deviated();
+        let kind = if ball { ToolKind::Ball } else { ToolKind::Flat };
+        let tool = Tool::try_new(kind, 4.0, 10.0).expect("valid");
+        let bounds = Aabb { min: Point3::new(-5.0, -5.0, -5.0), max: Point3::new(5.0, 5.0, 5.0) };
+        let mut together = TriDexel::new_box(bounds, 0.2, 1e9).expect("fits");
+        let mut in_turn = together.clone();
+        let mut at = q(-1.0, y0, z0, a0);
+        let mut envs = Vec::new();
+        for &(da, dx, dy, dz) in &steps {
+            let next = q(
+                at.get(AxisLetter::X) + dx,
+                at.get(AxisLetter::Y) + dy,
+                at.get(AxisLetter::Z) + dz,
+                at.get(AxisLetter::A) + da,
+            );
+            envs.push(RotaryEnvelope::new(&c, &tool, &at, &next).expect("supported"));
+            at = next;
+        }
+        // A move far above the stock, in the middle of the chain: it cuts nothing.
+        let high = |z| q(0.0, 0.0, z, a0);
+        envs.insert(3, RotaryEnvelope::new(&c, &tool, &high(40.0), &high(41.0)).expect("supported"));
+        let expected: Vec<bool> = envs
+            .iter()
+            .enumerate()
+            .map(|(k, env)| in_turn.remove(env, k as u32 + 1))
+            .collect();
+        let cutters: Vec<(&dyn Cutter, u32)> = envs
+            .iter()
+            .enumerate()
+            .map(|(k, env)| (env as &dyn Cutter, k as u32 + 1))
+            .collect();
+        let removed = together.remove_each(&cutters);
+        prop_assert!(expected.iter().filter(|&&c| c).count() >= 2, "{expected:?}");
+        prop_assert!(!expected[3]);
+        prop_assert_eq!(removed, expected);
+        prop_assert!(crossing_bits(&together) == crossing_bits(&in_turn));
+    }
+}

@@ -87,13 +87,67 @@ pub trait SweepObserver {
         let _ = (stock, k, mv, piece);
         Ok(())
     }
+
+    /// Whether the observer looks at the stock at all. One that does not lets the driver
+    /// cut consecutive envelope moves together ([`TriDexel::remove_each`], the same stock
+    /// bit for bit), calling [`SweepObserver::after_move`] for them once they are all
+    /// removed. The default: it looks.
+    fn looks(&self) -> bool {
+        true
+    }
 }
 
 /// The observer of the plain sweep: looks at nothing.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct NoObserver;
 
-impl SweepObserver for NoObserver {}
+impl SweepObserver for NoObserver {
+    fn looks(&self) -> bool {
+        false
+    }
+}
+
+/// Most envelope moves cut together when the observer does not look
+/// ([`SweepObserver::looks`]).
+const BATCH: usize = 16;
+
+/// Envelope moves waiting to be cut together: each with its index, move and reversal state.
+struct Batch<'m> {
+    moves: Vec<(RotaryEnvelope, usize, &'m Move, [Real; 6])>,
+}
+
+impl Batch<'_> {
+    /// Cuts the waiting moves, each in turn for each ray, counting those that removed
+    /// material, and shows each to the observer.
+    fn flush(
+        &mut self,
+        stock: &mut TriDexel,
+        report: &mut SweepReport,
+        observer: &mut dyn SweepObserver,
+    ) -> Result<(), SweepError> {
+        if self.moves.is_empty() {
+            return Ok(());
+        }
+        let cutters: Vec<(&dyn Cutter, u32)> = self
+            .moves
+            .iter()
+            .map(|(env, _, mv, _)| (env as &dyn Cutter, mv.line as u32))
+            .collect();
+        let removed = stock.remove_each(&cutters);
+        drop(cutters);
+        for ((_, k, mv, state), cut) in self.moves.drain(..).zip(removed) {
+            if cut {
+                report.cutting_moves += 1;
+            }
+            let piece = Piece::Rotary {
+                envelope: true,
+                state,
+            };
+            observer.after_move(stock, k, mv, &piece)?;
+        }
+        Ok(())
+    }
+}
 
 /// The largest distance (mm) of the chords replacing the arc `mv` ([`Move::chords`] with
 /// sagitta at most `bound`) from the arc: `r·(1 − cos(θ/2))` for chords spanning the angle
@@ -162,6 +216,7 @@ pub fn sweep_observed<'a>(
     progress.start("sweep", moves.len() as u64);
     let joinable = TranslatedTool::has_closed_form(tool);
     let mut run: Option<Run> = None;
+    let mut batch = Batch { moves: Vec::new() };
     // Before the first move every axis is taken as last moved in +.
     let (errors, mut state) = match machine {
         Kinematics::Chain(chain) => (
@@ -179,6 +234,7 @@ pub fn sweep_observed<'a>(
             .into_iter()
             .find(|&l| !machine.has_axis(l) && mv.start.get(l) != mv.end.get(l))
         {
+            batch.flush(stock, &mut report, observer)?;
             flush(run.take(), stock, tool, moves, &mut report, observer)?;
             return Err(SweepError::MissingAxis {
                 line: mv.line,
@@ -226,6 +282,7 @@ pub fn sweep_observed<'a>(
             }
         };
         if let Step::Straight((p0, p1)) = step {
+            batch.flush(stock, &mut report, observer)?;
             let tip0 = p0 * Point3::origin();
             let tip1 = p1 * Point3::origin();
             if let Some(r) = &mut run
@@ -254,7 +311,7 @@ pub fn sweep_observed<'a>(
                     &before,
                     bound,
                     &mut report,
-                    observer,
+                    (observer, &mut batch),
                 )?,
                 Kinematics::Poses(src) => sweep_sampled(
                     stock,
@@ -273,6 +330,7 @@ pub fn sweep_observed<'a>(
         }
         progress.advance(1);
     }
+    batch.flush(stock, &mut report, observer)?;
     flush(run.take(), stock, tool, moves, &mut report, observer)?;
     progress.finish();
     Ok(report)
@@ -439,15 +497,15 @@ fn cut_substeps(
     clippy::too_many_arguments,
     reason = "the driver's state, passed down for one move"
 )]
-fn sweep_rotary(
+fn sweep_rotary<'m>(
     stock: &mut TriDexel,
     chain: &Chain,
     tool: &Tool,
-    (k, mv): (usize, &Move),
+    (k, mv): (usize, &'m Move),
     state: &[Real; 6],
     bound: Real,
     report: &mut SweepReport,
-    observer: &mut dyn SweepObserver,
+    (observer, batch): (&mut dyn SweepObserver, &mut Batch<'m>),
 ) -> Result<Real, SweepError> {
     let line = mv.line as u32;
     let rapid = mv.kind == MoveKind::Rapid;
@@ -456,6 +514,18 @@ fn sweep_rotary(
     let envelope = (bound >= ENVELOPE_TOL)
         .then(|| RotaryEnvelope::with_state(chain, tool, &mv.start, &mv.end, state).ok())
         .flatten();
+    let envelope = match envelope {
+        Some(env) if !observer.looks() => {
+            report.sweeps += 1;
+            batch.moves.push((env, k, mv, *state));
+            if batch.moves.len() >= BATCH {
+                batch.flush(stock, report, observer)?;
+            }
+            return Ok(ENVELOPE_TOL);
+        }
+        e => e,
+    };
+    batch.flush(stock, report, observer)?;
     if let Some(env) = envelope {
         let piece = Piece::Rotary {
             envelope: true,

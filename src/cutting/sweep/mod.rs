@@ -31,7 +31,10 @@
 //! sagitta reported), consecutive collinear straight moves are joined into one sweep (a
 //! rapid always starts a new run), rotary moves go to the envelope or to sub-steps. The plain
 //! sweep ([`sweep_program`]) and the collision checks ([`crate::cutting::collide`], through the
-//! [`SweepObserver`] trait) both use it, so they remove the same material bit for bit.
+//! [`SweepObserver`] trait) both use it, so they remove the same material bit for bit. When
+//! the observer does not look at the stock (the plain sweep), up to 16 consecutive envelope
+//! moves are cut together, each ray through all of them in turn
+//! ([`TriDexel::remove_each`]): the same stock, bit for bit, as move by move.
 //!
 //! **Invariant:** the sweep reads moves and poses; it never parses text or touches files; an
 //! observer only reads the stock.

@@ -406,3 +406,66 @@ fn p1_ball_surface_is_exact_in_bounded_memory() {
         "scallop {crest} mm, formula {scallop} mm"
     );
 }
+
+/// An observer that looks (so the driver cuts every move on its own) and counts the moves
+/// it is shown.
+struct Counting(usize);
+
+impl SweepObserver for Counting {
+    fn after_move(
+        &mut self,
+        _: &TriDexel,
+        _: usize,
+        _: &Move,
+        _: &Piece,
+    ) -> Result<(), SweepError> {
+        self.0 += 1;
+        Ok(())
+    }
+}
+
+/// The plain sweep cuts runs of envelope moves together; an observer that looks has them
+/// cut one by one. A program of 40 small A turns (more than two batches), a straight move
+/// in their middle and more turns after it leaves the same crossings bit for bit and the
+/// same report either way, and the observer is shown every move.
+#[test]
+fn envelope_moves_cut_together_match_moves_cut_one_by_one() {
+    let chain = crate::machine::chain::mdx50_for_tests();
+    let tool = Tool::try_new(ToolKind::Flat, 3.0, 10.0).expect("valid");
+    let at = |k: usize| {
+        let k = k as Real;
+        AxisValues::from_array([-4.0 + 0.2 * k, -1.0, 1.5 - 0.02 * k, -20.0 + k, 0.0, 0.0])
+    };
+    let mut moves: Vec<Move> = (0..40).map(|k| linear(at(k), at(k + 1), k + 1)).collect();
+    let mut side = at(40);
+    side.set(AxisLetter::Y, 1.0);
+    moves.push(linear(at(40), side, 41));
+    let mut back = side;
+    back.set(AxisLetter::A, 10.0);
+    moves.push(linear(side, back, 42));
+    let bounds = Aabb {
+        min: Point3::new(-8.0, -8.0, -4.0),
+        max: Point3::new(8.0, 8.0, 4.0),
+    };
+    let stock = TriDexel::new_box(bounds, 0.1, 1e9).expect("fits");
+    let mut together = stock.clone();
+    let plain =
+        sweep_program(&mut together, &chain, &tool, &moves, &opts(), &NoProgress).expect("sweeps");
+    let mut one_by_one = stock;
+    let mut seen = Counting(0);
+    let watched = sweep_observed(
+        &mut one_by_one,
+        &chain,
+        &tool,
+        &moves,
+        &opts(),
+        &NoProgress,
+        &mut seen,
+    )
+    .expect("sweeps");
+    assert_eq!(seen.0, moves.len());
+    assert_eq!(plain, watched);
+    assert_eq!(plain.rotary_moves, 41);
+    assert!(plain.cutting_moves > 20, "{plain:?}");
+    assert_eq!(crossings(&together), crossings(&one_by_one));
+}
