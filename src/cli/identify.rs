@@ -142,20 +142,37 @@ fn identify_instruments(a: &IdentifyArgs) -> ExitCode {
         Ok(o) => o,
         Err(e) => return fail(e),
     };
-    if let Some(out) = &a.instruments.deviations_out
-        && let Err(e) = write(out, o.file.as_bytes())
+    print_identified(
+        a,
+        &o.file,
+        || o.report.summary(),
+        || serde_json::to_string_pretty(&o.report),
+    )
+}
+
+/// Writes the identified machine to `--deviations-out` (if given), then prints `summary`
+/// with the file it wrote, or the JSON.
+fn print_identified(
+    a: &IdentifyArgs,
+    file: &str,
+    summary: impl FnOnce() -> String,
+    json: impl FnOnce() -> serde_json::Result<String>,
+) -> ExitCode {
+    let out = &a.instruments.deviations_out;
+    if let Some(out) = out
+        && let Err(e) = write(out, file.as_bytes())
     {
         return fail(e);
     }
     print_out(
         || {
-            let mut s = o.report.summary();
-            if let Some(out) = &a.instruments.deviations_out {
+            let mut s = summary();
+            if let Some(out) = out {
                 s.push_str(&format!("  wrote         {}\n", out.display()));
             }
             s
         },
-        a.args.json.then(|| serde_json::to_string_pretty(&o.report)),
+        a.args.json.then(json),
     )
 }
 
@@ -219,12 +236,9 @@ fn identify_traces(a: &IdentifyArgs, files: &[(MeasurementKind, PathBuf)]) -> Ex
         Ok(o) => o,
         Err(e) => return fail(e),
     };
-    if let Some(out) = &a.instruments.deviations_out
-        && let Err(e) = write(out, o.file.as_bytes())
-    {
-        return fail(e);
-    }
-    print_out(
+    print_identified(
+        a,
+        &o.file,
         || {
             let mut s = String::new();
             if let Some(w) = o.report.fit.accepted_line() {
@@ -236,12 +250,9 @@ fn identify_traces(a: &IdentifyArgs, files: &[(MeasurementKind, PathBuf)]) -> Ex
                 s.push_str(&format!("part          {} faces\n", o.faces));
             }
             s.push_str(&o.report.summary());
-            if let Some(out) = &a.instruments.deviations_out {
-                s.push_str(&format!("  wrote         {}\n", out.display()));
-            }
             s
         },
-        a.args.json.then(|| serde_json::to_string_pretty(&o.report)),
+        || serde_json::to_string_pretty(&o.report),
     )
 }
 

@@ -516,11 +516,21 @@ impl DexelGrid {
             nv: self.nv,
             nbu_blocks: self.nbu,
         };
-        let (nbu, bu0, bu1) = (self.nbu, iu0 / BLOCK, iu1 / BLOCK);
-        let (bv0, bv1) = (iv0 / BLOCK, iv1 / BLOCK);
-        // Only the blocks in the index range, in a fixed order.
-        let touched: Vec<(usize, &mut Block)> = self
-            .blocks
+        let touched = Self::blocks_in(&mut self.blocks, self.nbu, (iu0, iu1), (iv0, iv1));
+        Some((ctx, touched))
+    }
+
+    /// The blocks of `blocks` (rows of `nbu`) that hold the cell index ranges `iu`, `iv`,
+    /// with their indices, in a fixed order (row by row).
+    fn blocks_in(
+        blocks: &mut [Block],
+        nbu: usize,
+        iu: (usize, usize),
+        iv: (usize, usize),
+    ) -> Vec<(usize, &mut Block)> {
+        let (bu0, bu1) = (iu.0 / BLOCK, iu.1 / BLOCK);
+        let (bv0, bv1) = (iv.0 / BLOCK, iv.1 / BLOCK);
+        blocks
             .chunks_mut(nbu)
             .enumerate()
             .skip(bv0)
@@ -531,8 +541,7 @@ impl DexelGrid {
                     .enumerate()
                     .map(move |(k, b)| (bv * nbu + bu0 + k, b))
             })
-            .collect();
-        Some((ctx, touched))
+            .collect()
     }
 }
 

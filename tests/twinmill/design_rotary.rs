@@ -516,16 +516,8 @@ fn ball_sensor_traces_and_the_cut_part_identify_through_the_binary() {
         })
         .collect();
     sb.write("bent.csv", bent.as_bytes());
-    let refused = |args: &[&str], names: &[&str]| {
-        let _ = std::fs::remove_file(sb.dir.join("out.toml"));
-        let (code, out, err) = sb.run(args);
-        assert_ne!(code, 0, "{args:?}: {out}");
-        assert_eq!(err.trim_end().lines().count(), 1, "{args:?}: {err}");
-        for n in names {
-            assert!(err.contains(n), "{args:?}: '{n}' in {err}");
-        }
-        assert!(!sb.dir.join("out.toml").exists(), "{args:?} wrote");
-    };
+    let refused =
+        |args: &[&str], names: &[&str]| crate::identify_instruments::refused(&sb, args, names);
     let with_out = |a: &[&'static str]| -> Vec<&'static str> {
         let mut v = a.to_vec();
         v.extend(["--deviations-out", "out.toml"]);

@@ -394,7 +394,7 @@ fn identify_from_files_writes_a_machine_that_simulates_bit_for_bit_as_pasted_in(
 }
 
 /// One refusal: exit non-zero, one line on stderr containing each of `names`, no file.
-fn refused(sb: &Sandbox, args: &[&str], names: &[&str]) {
+pub(crate) fn refused(sb: &Sandbox, args: &[&str], names: &[&str]) {
     let _ = std::fs::remove_file(sb.dir.join("out.toml"));
     let (code, out, err) = sb.run(args);
     assert_ne!(code, 0, "{args:?}: {out}");

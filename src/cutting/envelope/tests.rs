@@ -333,6 +333,29 @@ fn crossing_bits(s: &crate::cutting::stock::TriDexel) -> Vec<[u64; 8]> {
     out
 }
 
+/// A chain of small rotary moves from X −1 and the given `[y, z, a]`, each step
+/// `(da, dx, dy, dz)` added to the last pose: their envelopes.
+fn move_chain(
+    c: &Chain,
+    tool: &Tool,
+    [y0, z0, a0]: [Real; 3],
+    steps: &[(Real, Real, Real, Real)],
+) -> Vec<RotaryEnvelope> {
+    let mut at = q(-1.0, y0, z0, a0);
+    let mut out = Vec::with_capacity(steps.len());
+    for &(da, dx, dy, dz) in steps {
+        let next = q(
+            at.get(AxisLetter::X) + dx,
+            at.get(AxisLetter::Y) + dy,
+            at.get(AxisLetter::Z) + dz,
+            at.get(AxisLetter::A) + da,
+        );
+        out.push(RotaryEnvelope::new(c, tool, &at, &next).expect("supported"));
+        at = next;
+    }
+    out
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 12, failure_persistence: None, rng_seed: proptest::test_runner::RngSeed::Fixed(0xc011), ..ProptestConfig::default() })]
 
@@ -352,21 +375,12 @@ proptest! {
         let bounds = Aabb { min: Point3::new(-5.0, -5.0, -5.0), max: Point3::new(5.0, 5.0, 5.0) };
         let mut culled = TriDexel::new_box(bounds, 0.2, 1e9).expect("fits");
         let mut plain = culled.clone();
-        let mut at = q(-1.0, y0, z0, a0);
         let mut skipped = 0;
-        for (k, &(da, dx, dy, dz)) in steps.iter().enumerate() {
-            let next = q(
-                at.get(AxisLetter::X) + dx,
-                at.get(AxisLetter::Y) + dy,
-                at.get(AxisLetter::Z) + dz,
-                at.get(AxisLetter::A) + da,
-            );
-            let env = RotaryEnvelope::new(&c, &tool, &at, &next).expect("supported");
-            let counted = Wrapped::new(&env, true);
+        for (k, env) in move_chain(&c, &tool, [y0, z0, a0], &steps).iter().enumerate() {
+            let counted = Wrapped::new(env, true);
             culled.remove(&counted, k as u32 + 1);
-            plain.remove(&Wrapped::new(&env, false), k as u32 + 1);
+            plain.remove(&Wrapped::new(env, false), k as u32 + 1);
             skipped += counted.skipped.into_inner();
-            at = next;
         }
         prop_assert!(skipped > 0, "no ray was culled");
         prop_assert!(crossing_bits(&culled) == crossing_bits(&plain));
@@ -393,18 +407,7 @@ proptest! {
         let bounds = Aabb { min: Point3::new(-5.0, -5.0, -5.0), max: Point3::new(5.0, 5.0, 5.0) };
         let mut together = TriDexel::new_box(bounds, 0.2, 1e9).expect("fits");
         let mut in_turn = together.clone();
-        let mut at = q(-1.0, y0, z0, a0);
-        let mut envs = Vec::new();
-        for &(da, dx, dy, dz) in &steps {
-            let next = q(
-                at.get(AxisLetter::X) + dx,
-                at.get(AxisLetter::Y) + dy,
-                at.get(AxisLetter::Z) + dz,
-                at.get(AxisLetter::A) + da,
-            );
-            envs.push(RotaryEnvelope::new(&c, &tool, &at, &next).expect("supported"));
-            at = next;
-        }
+        let mut envs = move_chain(&c, &tool, [y0, z0, a0], &steps);
         // A move far above the stock, in the middle of the chain: it cuts nothing.
         let high = |z| q(0.0, 0.0, z, a0);
         envs.insert(3, RotaryEnvelope::new(&c, &tool, &high(40.0), &high(41.0)).expect("supported"));

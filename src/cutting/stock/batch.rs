@@ -107,21 +107,7 @@ impl DexelGrid {
             nv: self.nv,
             nbu_blocks: self.nbu,
         };
-        let (nbu, bu0, bu1) = (self.nbu, iu.0 / BLOCK, iu.1 / BLOCK);
-        let (bv0, bv1) = (iv.0 / BLOCK, iv.1 / BLOCK);
-        let touched: Vec<(usize, &mut Block)> = self
-            .blocks
-            .chunks_mut(nbu)
-            .enumerate()
-            .skip(bv0)
-            .take(bv1 - bv0 + 1)
-            .flat_map(|(bv, row)| {
-                row[bu0..=bu1]
-                    .iter_mut()
-                    .enumerate()
-                    .map(move |(k, b)| (bv * nbu + bu0 + k, b))
-            })
-            .collect();
+        let touched = Self::blocks_in(&mut self.blocks, self.nbu, iu, iv);
         Some((BatchContext { ctx, cutters, each }, touched))
     }
 }
