@@ -448,11 +448,19 @@ pub fn identify_dbb_and_probe(
     let plan = procedure_plan(scene, procedure, plan, &ws)?;
     let circles = measured_circles(scene, &plan, dbb)?;
     let probe_plan = default_plan(&scene.controller, &ws);
-    let probed = parse_probe_readings(&probe.1, &probe.0, &probe_plan).map_err(|m| HexapodCommandError {
-        path: probe.0.display().to_string(),
-        message: m
-            .strip_prefix(&format!("{}:", probe.0.display()))
-            .map_or(m.clone(), |r| format!("line {r}")),
+    // The reader's `FILE:LINE: what` as the error's place and message.
+    let probed = parse_probe_readings(&probe.1, &probe.0, &probe_plan).map_err(|m| {
+        let file = probe.0.display().to_string();
+        match m
+            .strip_prefix(&format!("{file}:"))
+            .and_then(|r| r.split_once(": "))
+        {
+            Some((line, what)) => HexapodCommandError {
+                path: format!("{file}:{line}"),
+                message: what.to_string(),
+            },
+            None => HexapodCommandError { path: file, message: m },
+        }
     })?;
     let files: Vec<String> = dbb.iter().map(|(p, _)| p.display().to_string()).collect();
     let probe_file = probe.0.display().to_string();

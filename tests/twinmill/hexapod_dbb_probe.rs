@@ -182,3 +182,123 @@ fn a_file_with_a_planted_bias_is_refused_by_name() {
         other => panic!("expected a misfit naming probe.csv, got {other:?}"),
     }
 }
+
+/// The command line: `hexapod probe-calibrate --readings-out` writes the probe's readings,
+/// `identify --readings … --probe FILE` identifies them with the bar's ball-plate traces
+/// — rank 39 (the three platform rotations about the tool point named), every parameter of
+/// the controller file within 3σ of the scene file's `[deviations]` once those rotations
+/// are taken out — and a bad probe file is one line naming file and line, nothing written.
+#[test]
+fn cli_identify_reads_bar_traces_and_a_probe_file_together() {
+    use super::Sandbox;
+    use super::hexapod_calibration::ball_plate_readings;
+    let sb = Sandbox::new("hexapod-dbb-probe");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("scenes/hexapod-machining-centre.toml");
+    let scene = path.to_str().expect("utf-8");
+    let s = centre();
+    let ws = s.workspace.expect("workspace");
+    let (code, _, err) = sb.run(&[
+        "hexapod",
+        "probe-calibrate",
+        scene,
+        "--rounds",
+        "1",
+        "--readings-out",
+        "probe.csv",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let names = ball_plate_readings(&sb, &s.nominal, &s.actual, &ws, 3, "plate", "");
+    let list = names.join(",");
+    let (code, out, err) = sb.run(&[
+        "identify",
+        scene,
+        "--procedure",
+        "ball-plate",
+        "--readings",
+        &list,
+        "--probe",
+        "probe.csv",
+        "--corrected",
+        "both.toml",
+        "--json",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let v: serde_json::Value = serde_json::from_str(&out).expect("json");
+    assert_eq!(v["identification"]["rank"], PARAMETERS - 3);
+    // The controller file against the scene file's own [deviations] (absent names: 0).
+    let file: toml::Table = std::fs::read_to_string(&path)
+        .expect("reads")
+        .parse()
+        .expect("toml");
+    let injected = file["deviations"].as_table().expect("deviations");
+    let text = std::fs::read_to_string(sb.dir.join("both.toml")).expect("written");
+    let corrected: toml::Table = text.parse().expect("TOML");
+    let corrected = corrected["controller"].as_table().expect("[controller]");
+    let names: Vec<String> = (0..PARAMETERS)
+        .map(|k| {
+            twinmill::machine::hexapod::ParameterId::new(k)
+                .expect("a parameter")
+                .name()
+        })
+        .collect();
+    let value = |t: &toml::Table, n: &str| t.get(n).and_then(|v| v.as_float()).unwrap_or(0.0);
+    let err = nalgebra::DVector::from_fn(PARAMETERS, |k, _| {
+        value(corrected, &names[k]) - value(injected, &names[k])
+    });
+    let g = platform_rotations(&s.nominal);
+    let seen = &err - &g * (g.transpose() * &err);
+    // σ from the file's comments (`# σ 0.0000123`).
+    let sigma: Vec<Real> = names
+        .iter()
+        .map(|n| {
+            let line = text
+                .lines()
+                .find(|l| l.starts_with(&format!("{n} =")))
+                .expect("every parameter written");
+            line.rsplit("σ").next().expect("σ").trim().parse().expect("σ")
+        })
+        .collect();
+    let inside = (0..PARAMETERS)
+        .filter(|&k| seen[k].abs() <= 3.0 * sigma[k])
+        .count();
+    assert!(inside >= 40, "{inside} of 42 within 3σ");
+    // Bad probe files: one line naming file and line; nothing written.
+    let good = std::fs::read_to_string(sb.dir.join("probe.csv")).expect("written");
+    let header_line = good
+        .lines()
+        .position(|l| l.starts_with("item,"))
+        .expect("column line")
+        + 1;
+    let mut lines: Vec<String> = good.lines().map(String::from).collect();
+    lines[header_line] = lines[header_line].replace("positioning,1,", "pivot,1,");
+    let wrong_item = lines.join("\n");
+    let mut lines: Vec<String> = good.lines().map(String::from).collect();
+    let last = lines.len() - 1;
+    lines[last] = lines[last].replacen(",", ",x", 8);
+    let bad_number = lines.join("\n");
+    let truncated: String = good.lines().take(header_line + 3).collect::<Vec<_>>().join("\n");
+    for (bad, line) in [
+        (wrong_item, header_line + 1),
+        (bad_number, last + 1),
+        (truncated, header_line + 3),
+    ] {
+        sb.write("bad.csv", bad.as_bytes());
+        let (code, out, err) = sb.run(&[
+            "identify",
+            scene,
+            "--procedure",
+            "ball-plate",
+            "--readings",
+            &list,
+            "--probe",
+            "bad.csv",
+            "--corrected",
+            "bad.toml",
+        ]);
+        assert_ne!(code, 0, "{out}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(err.contains(&format!("bad.csv:{line}")), "{err}");
+        assert!(!sb.dir.join("bad.toml").exists());
+    }
+}
