@@ -238,7 +238,9 @@ impl Whitened<'_, '_> {
                 row /= *s;
             }
             if !j.iter().all(|v| v.is_finite()) {
-                return Err(EngineError::Model("the model's Jacobian is not finite".into()));
+                return Err(EngineError::Model(
+                    "the model's Jacobian is not finite".into(),
+                ));
             }
             return Ok(match dirs {
                 Some(d) => j * d,

@@ -426,6 +426,9 @@ pub fn calibrate(
     calibrate_commanded(nominal, nominal, known, plan, readings, sigma_mm)
 }
 
+/// Predicted readings and, when asked for, their rows of the Jacobian.
+type Rows = (Vec<Real>, DMatrix<Real>);
+
 /// Double-ball-bar lengths as the engine's forward model ([`Forward`]): the unknowns are
 /// the `solved` parameters of `machine` (its others as given), then — when the table balls
 /// are estimated — three coordinates (mm, base frame) per circle's ball from `balls_at`
@@ -490,7 +493,7 @@ impl DbbLengths<'_> {
         j: usize,
         n: usize,
         with_jacobian: bool,
-    ) -> Result<(Vec<Real>, DMatrix<Real>), String> {
+    ) -> Result<Rows, String> {
         let r = &self.readings[j];
         let rows = if with_jacobian { r.commands.len() } else { 0 };
         let mut a = DMatrix::zeros(rows, n);
@@ -518,9 +521,9 @@ impl DbbLengths<'_> {
         Ok((f, a))
     }
 
-    fn evaluate(&self, x: &[Real], with_jacobian: bool) -> Result<(Vec<Real>, DMatrix<Real>), String> {
+    fn evaluate(&self, x: &[Real], with_jacobian: bool) -> Result<Rows, String> {
         let (model, balls) = self.at(x)?;
-        let parts: Vec<Result<(Vec<Real>, DMatrix<Real>), String>> = (0..self.circles.len())
+        let parts: Vec<Result<Rows, String>> = (0..self.circles.len())
             .into_par_iter()
             .map(|j| self.circle(&model, &balls[j], j, x.len(), with_jacobian))
             .collect();
@@ -565,11 +568,14 @@ pub fn ball_unknowns(circles: &[DbbCircle], prefix: &str) -> Vec<Unknown> {
         .iter()
         .enumerate()
         .flat_map(|(j, c)| {
-            ["x", "y", "z"].into_iter().enumerate().map(move |(q, axis)| Unknown {
-                name: format!("{prefix}ball{}_{axis}", j + 1),
-                start: c.centre_mm[q],
-                magnitude: BALL_MAGNITUDE_MM,
-            })
+            ["x", "y", "z"]
+                .into_iter()
+                .enumerate()
+                .map(move |(q, axis)| Unknown {
+                    name: format!("{prefix}ball{}_{axis}", j + 1),
+                    start: c.centre_mm[q],
+                    magnitude: BALL_MAGNITUDE_MM,
+                })
         })
         .collect()
 }
@@ -624,13 +630,14 @@ pub fn calibrate_commanded(
     for id in &ids {
         p0[id.index()] = pn[id.index()];
     }
-    let start = known
-        .with_parameters(&p0)
-        .map_err(|source| HexapodCalibrationError::Kinematics {
-            circle: 1,
-            reading: 0,
-            source,
-        })?;
+    let start =
+        known
+            .with_parameters(&p0)
+            .map_err(|source| HexapodCalibrationError::Kinematics {
+                circle: 1,
+                reading: 0,
+                source,
+            })?;
     let model = DbbLengths {
         controller,
         machine: &start,
@@ -678,10 +685,9 @@ pub fn calibrate_commanded(
         .unwrap_or_else(|| Err("no Jacobian".into()))
         .map_err(HexapodCalibrationError::Identification)?
         / sigma_mm;
-    let mut scaled = jac.clone();
-    for c in 0..n {
-        let s = if c < SOLVED { scale[c] } else { BALL_MAGNITUDE_MM };
-        scaled.column_mut(c).scale_mut(s);
+    let mut scaled = jac;
+    for (c, mut col) in scaled.column_iter_mut().enumerate() {
+        col *= scale.get(c).copied().unwrap_or(BALL_MAGNITUDE_MM);
     }
     let mut all_sv: Vec<Real> = scaled.singular_values().iter().copied().collect();
     all_sv.sort_by(|a, b| b.total_cmp(a));
@@ -693,7 +699,9 @@ pub fn calibrate_commanded(
     let sigma_post = (chi2 / dof as Real).sqrt() * sigma_mm;
     let inflate = sigma_post / sigma_mm;
     // The gauge: the base joints' rigid motions (scaled units of the 24), without a jig.
-    let (solved_machine, _) = model.at(&x).map_err(HexapodCalibrationError::Identification)?;
+    let (solved_machine, _) = model
+        .at(&x)
+        .map_err(HexapodCalibrationError::Identification)?;
     let gauge_scaled = if nb > 0 {
         let g = rigid_fields(&base_of(&start));
         let mut gs = DMatrix::zeros(SOLVED, 6);
@@ -732,7 +740,8 @@ pub fn calibrate_commanded(
         let sub = scaled.columns(0, SOLVED).into_owned().svd(false, true);
         let vt = sub.v_t.unwrap_or_else(|| DMatrix::zeros(0, SOLVED));
         let cut = sub.singular_values.amax() * RANK_TOLERANCE;
-        let proj = DMatrix::<Real>::identity(SOLVED, SOLVED) - &gauge_scaled * gauge_scaled.transpose();
+        let proj =
+            DMatrix::<Real>::identity(SOLVED, SOLVED) - &gauge_scaled * gauge_scaled.transpose();
         let mut known_var = 0.0;
         for (i, s) in sub.singular_values.iter().enumerate() {
             if *s > cut {

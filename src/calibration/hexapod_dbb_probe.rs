@@ -34,7 +34,7 @@ use crate::calibration::hexapod_calibrate::{
 use crate::calibration::hexapod_probe::{
     ProbeError, ProbeIdentification, ProbePlan, ProbeReadings, identification_of,
 };
-use crate::machine::hexapod::{Hexapod, PARAMETERS, ParameterId, twin_pose};
+use crate::machine::hexapod::{Hexapod, PARAMETERS, ParameterId, ParameterJacobian, twin_pose};
 use crate::math::{Real, Vector3};
 use nalgebra::DMatrix;
 
@@ -98,22 +98,20 @@ impl ProbeRows<'_> {
         };
         let mut a = DMatrix::zeros(rows, n);
         let mut f = Vec::with_capacity(self.plan.readings());
-        let mut put = |f: &mut Vec<Real>,
-                       v: Vector3,
-                       j: Option<(
-            &crate::machine::hexapod::ParameterJacobian,
-            Option<&crate::machine::hexapod::ParameterJacobian>,
-        )>| {
-            let row = f.len();
-            for k in 0..3 {
-                f.push(v[k]);
-                if let Some((jp, minus)) = j {
-                    for p in 0..PARAMETERS {
-                        a[(row + k, p)] = jp[(k, p)] - minus.map_or(0.0, |m| m[(k, p)]);
+        let mut put =
+            |f: &mut Vec<Real>,
+             v: Vector3,
+             j: Option<(&ParameterJacobian, Option<&ParameterJacobian>)>| {
+                let row = f.len();
+                for k in 0..3 {
+                    f.push(v[k]);
+                    if let Some((jp, minus)) = j {
+                        for p in 0..PARAMETERS {
+                            a[(row + k, p)] = jp[(k, p)] - minus.map_or(0.0, |m| m[(k, p)]);
+                        }
                     }
                 }
-            }
-        };
+            };
         for pose in &self.plan.positioning {
             let (p, j) = reach(pose)?;
             put(&mut f, p - pose.position, j.as_ref().map(|j| (j, None)));
@@ -217,7 +215,10 @@ pub fn identify(
             ));
         }
         if !(d.sigma_mm.is_finite() && d.sigma_mm > 0.0) {
-            return input(format!("the bar's noise σ {} mm must be positive", d.sigma_mm));
+            return input(format!(
+                "the bar's noise σ {} mm must be positive",
+                d.sigma_mm
+            ));
         }
         for (j, (r, file)) in d.readings.iter().zip(d.files).enumerate() {
             if r.commands.len() != r.lengths_mm.len() || r.commands.is_empty() {
@@ -248,13 +249,15 @@ pub fn identify(
         }
         if r.positioning_mm.len() != p.plan.positioning.len()
             || r.pivot_mm.len() != p.plan.pivots.len()
-            || r
-                .pivot_mm
+            || r.pivot_mm
                 .iter()
                 .zip(&p.plan.pivots)
                 .any(|(v, s)| v.len() != s.angles_deg.len())
         {
-            return input(format!("{}: the readings do not match the plan's points", p.file));
+            return input(format!(
+                "{}: the readings do not match the plan's points",
+                p.file
+            ));
         }
         let flat3 = |v: &[[Real; 3]]| v.iter().flatten().copied().collect::<Vec<Real>>();
         let block = |name: String, values: Vec<Real>| Block {

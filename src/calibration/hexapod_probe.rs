@@ -429,7 +429,11 @@ pub fn identify(
     o.fit
         .enforce("probe calibration", accept_misfit)
         .map_err(|m| ProbeError::Misfit(m.to_string()))?;
-    Ok(identification_of(o, &controller.parameters(), plan.readings()))
+    Ok(identification_of(
+        o,
+        &controller.parameters(),
+        plan.readings(),
+    ))
 }
 
 /// The engine's outcome on the 42 parameters (started at `start`, the controller's) as a

@@ -251,7 +251,9 @@ fn calibrate(
         _ => procedure,
     };
     if a.probe.is_some() && a.readings.is_empty() {
-        return Err("--probe goes with --readings (the bar's trace files of the same machine)".into());
+        return Err(
+            "--probe goes with --readings (the bar's trace files of the same machine)".into(),
+        );
     }
     if !a.readings.is_empty() {
         if a.trials > 0 {
@@ -264,7 +266,9 @@ fn calibrate(
         }
         if let Some(probe) = &a.probe {
             if a.html.is_some() {
-                return Err("--html is not written for --probe (the summary and --json are)".into());
+                return Err(
+                    "--html is not written for --probe (the summary and --json are)".into(),
+                );
             }
             let text = twinmill::scene::read_text(probe).map_err(|e| e.to_string())?;
             let o = twinmill::pipeline::hexapod_probe::identify_dbb_and_probe(

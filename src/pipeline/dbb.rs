@@ -439,7 +439,9 @@ pub fn calibration_trials(
 }
 
 /// The scene's `[workspace]`, which a calibration needs.
-pub(crate) fn calibration_workspace(scene: &HexapodScene) -> Result<Workspace, HexapodCommandError> {
+pub(crate) fn calibration_workspace(
+    scene: &HexapodScene,
+) -> Result<Workspace, HexapodCommandError> {
     scene.workspace.ok_or_else(|| {
         error(
             scene,

@@ -13,11 +13,11 @@ use crate::calibration::hexapod_probe::{
     ProbeCalibration, ProbeIdentification, ProbeOptions, ProbePlan, ProbeReadings, calibrate,
     default_plan,
 };
+use crate::machine::hexapod::{PARAMETERS, ParameterId};
+use crate::math::Real;
 use crate::pipeline::dbb::{
     CALIBRATION_NOISE_MM, calibration_workspace, measured_circles, procedure_plan,
 };
-use crate::machine::hexapod::{PARAMETERS, ParameterId};
-use crate::math::Real;
 use crate::pipeline::hexapod::HexapodCommandError;
 use crate::scene::HexapodScene;
 use serde::Serialize;
@@ -272,7 +272,12 @@ pub fn probe_readings_csv(plan: &ProbePlan, readings: &ProbeReadings, header: &[
             p[0], p[1], p[2], ab[0], ab[1], r[0], r[1], r[2], readings.sigma_mm
         );
     };
-    for (k, (pose, r)) in plan.positioning.iter().zip(&readings.positioning_mm).enumerate() {
+    for (k, (pose, r)) in plan
+        .positioning
+        .iter()
+        .zip(&readings.positioning_mm)
+        .enumerate()
+    {
         let p = pose.position;
         row(&mut t, "positioning", k + 1, [p.x, p.y, p.z], [0.0, 0.0], r);
     }
@@ -343,7 +348,12 @@ pub fn parse_probe_readings(
             f[k].parse::<Real>()
                 .ok()
                 .filter(|v| v.is_finite())
-                .ok_or_else(|| at(line, format!("field {}: `{}` is not a finite number", k + 1, f[k])))
+                .ok_or_else(|| {
+                    at(
+                        line,
+                        format!("field {}: `{}` is not a finite number", k + 1, f[k]),
+                    )
+                })
         };
         if f[0] != item || f[1].parse::<usize>().ok() != Some(point) {
             return Err(at(
@@ -363,7 +373,16 @@ pub fn parse_probe_readings(
                 line,
                 format!(
                     "the pose ({:.6}, {:.6}, {:.6}; a {:.6}°, b {:.6}°) is not the plan's ({:.6}, {:.6}, {:.6}; a {:.6}°, b {:.6}°)",
-                    pose[0], pose[1], pose[2], pose[3], pose[4], want[0], want[1], want[2], want[3], want[4]
+                    pose[0],
+                    pose[1],
+                    pose[2],
+                    pose[3],
+                    pose[4],
+                    want[0],
+                    want[1],
+                    want[2],
+                    want[3],
+                    want[4]
                 ),
             ));
         }
@@ -373,14 +392,20 @@ pub fn parse_probe_readings(
         }
         match sigma {
             Some(s0) if s0 != s => {
-                return Err(at(line, format!("σ {s} mm differs from the file's {s0} mm")));
+                return Err(at(
+                    line,
+                    format!("σ {s} mm differs from the file's {s0} mm"),
+                ));
             }
             _ => sigma = Some(s),
         }
         values.push([num(7)?, num(8)?, num(9)?]);
     }
     if !header_seen {
-        return Err(at(last_line.max(1), format!("no column line `{PROBE_READINGS_COLUMNS}`")));
+        return Err(at(
+            last_line.max(1),
+            format!("no column line `{PROBE_READINGS_COLUMNS}`"),
+        ));
     }
     if values.len() != expected.len() {
         return Err(at(
@@ -459,7 +484,10 @@ pub fn identify_dbb_and_probe(
                 path: format!("{file}:{line}"),
                 message: what.to_string(),
             },
-            None => HexapodCommandError { path: file, message: m },
+            None => HexapodCommandError {
+                path: file,
+                message: m,
+            },
         }
     })?;
     let files: Vec<String> = dbb.iter().map(|(p, _)| p.display().to_string()).collect();
@@ -521,7 +549,10 @@ pub fn identify_dbb_and_probe(
         id.combinations.len()
     );
     for n in &id.not_determined {
-        let _ = writeln!(summary, "  not determined  {n} (held at the controller's value)");
+        let _ = writeln!(
+            summary,
+            "  not determined  {n} (held at the controller's value)"
+        );
     }
     for n in &id.borderline {
         let _ = writeln!(summary, "  borderline      {n}");

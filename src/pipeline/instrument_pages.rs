@@ -224,10 +224,7 @@ fn identification_sections(
                 "σ of a reading (µm)".into(),
                 format!("{:.4}", c.sigma_mm * 1e3),
             ],
-            vec![
-                "Levenberg–Marquardt steps".into(),
-                c.iterations.to_string(),
-            ],
+            vec!["Levenberg–Marquardt steps".into(), c.iterations.to_string()],
         ],
     }];
     sections.push(page::fit_section(&c.fit));

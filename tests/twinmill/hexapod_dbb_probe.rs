@@ -13,8 +13,7 @@ use twinmill::calibration::hexapod_calibrate::{
 };
 use twinmill::calibration::hexapod_dbb_probe::{DbbData, ProbeData, identify};
 use twinmill::calibration::hexapod_probe::{
-    ProbeError, ProbeIdentification, ProbePlan, ProbeReadings, default_plan as probe_plan,
-    measure,
+    ProbeError, ProbeIdentification, ProbePlan, ProbeReadings, default_plan as probe_plan, measure,
 };
 use twinmill::machine::hexapod::{Hexapod, PARAMETERS};
 use twinmill::math::{Real, Vector3};
@@ -83,7 +82,9 @@ fn run(
 /// Whether a named direction holds platform joints only (`ax_1`, …, no base joint or
 /// reference length).
 fn platform_only(name: &str) -> bool {
-    !["bx_", "by_", "bz_", "l0_"].iter().any(|b| name.contains(b))
+    !["bx_", "by_", "bz_", "l0_"]
+        .iter()
+        .any(|b| name.contains(b))
 }
 
 /// The platform joints turned about the tool point, worked out here: for joint `a_i` (the
@@ -124,6 +125,16 @@ fn dbb_and_probe_together_determine_what_neither_does_alone_and_recover_the_scen
         probe.not_determined
     );
     assert!(bar.rank <= PARAMETERS - 9, "{:?}", bar.not_determined);
+    // And what both determine, they determine closer: the reference lengths' σ (along the
+    // determined directions) under 0.6 of the probe's alone.
+    for k in PARAMETERS - 6..PARAMETERS {
+        assert!(
+            both.parameter_sigma[k] < 0.6 * probe.parameter_sigma[k],
+            "{k}: σ {} mm together, {} mm the probe alone",
+            both.parameter_sigma[k],
+            probe.parameter_sigma[k]
+        );
+    }
     // Within 3σ of the scene's deviations, once the three invisible rotations are taken out
     // of the error (the engine's determined subspace is orthogonal to them).
     let (pa, pn) = (d.s.actual.parameters(), d.s.nominal.parameters());
@@ -256,7 +267,12 @@ fn cli_identify_reads_bar_traces_and_a_probe_file_together() {
                 .lines()
                 .find(|l| l.starts_with(&format!("{n} =")))
                 .expect("every parameter written");
-            line.rsplit("σ").next().expect("σ").trim().parse().expect("σ")
+            line.rsplit("σ")
+                .next()
+                .expect("σ")
+                .trim()
+                .parse()
+                .expect("σ")
         })
         .collect();
     let inside = (0..PARAMETERS)
@@ -277,7 +293,11 @@ fn cli_identify_reads_bar_traces_and_a_probe_file_together() {
     let last = lines.len() - 1;
     lines[last] = lines[last].replacen(",", ",x", 8);
     let bad_number = lines.join("\n");
-    let truncated: String = good.lines().take(header_line + 3).collect::<Vec<_>>().join("\n");
+    let truncated: String = good
+        .lines()
+        .take(header_line + 3)
+        .collect::<Vec<_>>()
+        .join("\n");
     for (bad, line) in [
         (wrong_item, header_line + 1),
         (bad_number, last + 1),
