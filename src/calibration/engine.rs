@@ -10,7 +10,8 @@
 //! **Jacobian.** Central differences, column by column, at a step of [`FD_STEP`] of each
 //! unknown's realistic magnitude (the models are smooth at that scale; a reversal's take-up
 //! is piecewise linear in `B` and exact either side). Columns are independent, evaluated in
-//! parallel and stored by index, so the result does not depend on the thread count.
+//! parallel and stored by index, so the result does not depend on the thread count. A
+//! model that has its derivatives in closed form gives them instead ([`Forward::jacobian`]).
 //!
 //! **What is determined.** [`calibrate::identifiability_of`] on the whitened Jacobian at the
 //! start, the parameters scaled by their realistic magnitudes and the nuisance columns
@@ -95,6 +96,16 @@ pub enum EngineError {
 pub trait Forward: Sync {
     /// The predicted observations at `x` (parameters, then nuisance unknowns).
     fn predict(&self, x: &[Real]) -> Result<Vec<Real>, String>;
+
+    /// The predictions' derivatives at `x` (one row a prediction, one column an unknown,
+    /// physical units), when the model has them in closed form; `None` (the default): the
+    /// engine differences [`Forward::predict`] centrally. A model whose predictions are
+    /// solved iteratively to a tolerance (a forward kinematics) gives them here, so that
+    /// directions the observations cannot see come out at rounding (1e-16 of the largest
+    /// singular value), not at the difference quotient's noise.
+    fn jacobian(&self, _x: &[Real]) -> Option<Result<DMatrix<Real>, String>> {
+        None
+    }
 }
 
 /// An unknown: a parameter of the machine or a nuisance of a set-up.
@@ -150,6 +161,8 @@ pub struct Outcome {
     pub solution_sigma: Vec<Real>,
     /// The nuisance unknowns at the solution.
     pub nuisance: Vec<Real>,
+    /// Nuisance directions the data constrain (solved with the parameters).
+    pub nuisance_rank: usize,
     /// χ² (whitened residuals) at the start and after each accepted step.
     pub chi2_history: Vec<Real>,
     /// Model evaluations.
@@ -210,6 +223,30 @@ impl Whitened<'_, '_> {
             .chain(&self.problem.nuisance)
             .map(|u| u.magnitude)
             .collect();
+        if let Some(j) = self.problem.forward.jacobian(x) {
+            let mut j = j.map_err(EngineError::Model)?;
+            if j.shape() != (self.values.len(), x.len()) {
+                return Err(EngineError::Model(format!(
+                    "the model's Jacobian is {} × {} for {} observations and {} unknowns",
+                    j.nrows(),
+                    j.ncols(),
+                    self.values.len(),
+                    x.len()
+                )));
+            }
+            for (mut row, s) in j.row_iter_mut().zip(&self.sigma) {
+                row /= *s;
+            }
+            if !j.iter().all(|v| v.is_finite()) {
+                return Err(EngineError::Model(
+                    "the model's Jacobian is not finite".into(),
+                ));
+            }
+            return Ok(match dirs {
+                Some(d) => j * d,
+                None => j,
+            });
+        }
         let n = dirs.map_or(x.len(), |d| d.ncols());
         let cols: Vec<Result<DVector<Real>, EngineError>> = (0..n)
             .into_par_iter()
@@ -420,6 +457,7 @@ pub fn solve(problem: &Problem) -> Result<Outcome, EngineError> {
         solution: x[..np].to_vec(),
         solution_sigma: (0..np).map(|k| cov_p[(k, k)].max(0.0).sqrt()).collect(),
         nuisance: x[np..].to_vec(),
+        nuisance_rank: nuisance_dirs.len(),
         chi2_history: history,
         evaluations: w.evaluations.load(std::sync::atomic::Ordering::Relaxed),
         termination,

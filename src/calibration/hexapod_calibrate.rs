@@ -1,5 +1,6 @@
 //! Calibration of a hexapod's kinematic parameters from double-ball-bar lengths (seed 000,
-//! eq. 1–4): `r_k = f(P, T_k)`, linearised `ΔR = A·ΔP`, solved by Gauss–Newton.
+//! eq. 1–4): `r_k = f(P, T_k)`, identified on the one engine ([`crate::calibration::engine`])
+//! with the lengths as its forward model ([`DbbLengths`]).
 //!
 //! # Model
 //!
@@ -19,42 +20,45 @@
 //! estimated with the parameters (the offset "removed in the calculation"). A DBB reads
 //! lengths only: moving every base joint and every table ball by one rigid motion leaves
 //! every reading unchanged, so the base frame's six degrees of freedom are not observable —
-//! the normal matrix has rank (parameters − 6), its null space exactly those six named gauge
+//! the Jacobian has rank (unknowns − 6), its null space exactly those six named gauge
 //! directions. The 24 parameters are reported in the gauge where the base joints' deviations
 //! carry no rigid motion (the base joints best-fitted to the nominal ones): 18 determined
 //! combinations; the rigid part is what seed 000's separate table calibration fixes.
 //! *Ball plate* (seed 000 §4): the 7 balls' centres are known in the table frame, so no
 //! centre is estimated and the table frame fixes the gauge: all 24 parameters determined.
 //!
-//! **Identifiability.** The singular value decomposition of the scaled, whitened Jacobian
-//! itself (never of the normal matrix `AᵀA`, whose spectrum is the square of it and whose
-//! rounding would lift the null directions to about 1e-8 of the largest): a direction whose
-//! singular value is below [`RANK_TOLERANCE`] of the largest is not determined (without a
-//! jig exactly the six gauge directions, which a direct SVD puts near 1e-16) and is held at
-//! the prior (nominal) value, never given a value; the solve runs in the rest, and the
-//! report gives the margin (the gap between the last kept and the first dropped singular
-//! value). Directions the readings see only weakly — standard uncertainty above
-//! [`DETERMINED_FRACTION`] of the magnitude, typically a base joint moved along its strut
-//! against that strut's reference length, which the strut directions' small variation over
-//! the workspace barely separates — are named as *weak*; they are solved and their large σ
-//! carried into the parameters'.
+//! **Identifiability and solve.** The engine's: the parameters' columns of the scaled,
+//! whitened Jacobian (closed-form, so the gauge comes out at rounding, about 1e-16 of the
+//! largest singular value, never at a difference quotient's noise) with the table balls'
+//! columns projected out; a direction is determined when its σ is below
+//! [`DETERMINED_FRACTION`] of its magnitude, and the rest — without a jig exactly the six
+//! gauge directions — is held at the prior (nominal) value, never given a value.
+//! Levenberg–Marquardt runs in the determined subspace and the balls' directions. The
+//! report adds the whole spectrum (parameters and balls) at the solution, its rank and
+//! margin, and names as *weak* any undetermined direction outside the gauge (with the
+//! default circles, all tilted, there is none) and any borderline one. The parameters' σ
+//! are the engine's, scaled by the residuals' σ over the stated one.
 //!
-//! **Goodness of fit.** The lengths' residuals at the stated σ after the solve, whole and
-//! circle by circle ([`crate::calibration::goodness`]): readings that cannot come from the
+//! **Goodness of fit.** The engine's: the lengths' residuals at the stated σ after the
+//! solve, whole and circle by circle (one block a circle, [`crate::calibration::goodness`]): readings that cannot come from the
 //! machine at that noise — a circle's file swapped with another's, another plan's circles —
 //! are named in [`HexapodCalibration::fit`] for the caller to refuse.
 //!
 //! **Invariant:** reads readings and hexapods; never touches files; a parameter direction
 //! the readings do not determine is named, never valued.
 
-use crate::calibration::calibrate::DETERMINED_FRACTION;
-use crate::calibration::goodness::{FitCheck, RankMargin, least_squares_check};
-use crate::machine::hexapod::{Hexapod, HexapodError, PARAMETERS, ParameterId, Pose, twin_pose};
+use crate::calibration::calibrate::{DETERMINED_FRACTION, Identifiability};
+use crate::calibration::engine::{self, Block, Forward, Problem, Unknown};
+use crate::calibration::goodness::{FitCheck, RankMargin};
+use crate::machine::hexapod::{
+    Hexapod, HexapodError, PARAMETERS, ParameterId, ParameterKind, Pose, twin_pose,
+};
 use crate::machine::hexapod_accuracy::{Workspace, level_positioning, pivot_test};
 use crate::math::{Matrix3, Real, Vector3};
 use crate::metrology::ballbar::Turns;
 use crate::metrology::hexapod_dbb::{DbbCircle, DbbPlane};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
+use rayon::prelude::*;
 use serde::Serialize;
 
 /// Realistic magnitude of a joint coordinate's deviation (mm): the scale of its column.
@@ -64,20 +68,11 @@ pub const STRUT_MAGNITUDE_MM: Real = 0.2;
 /// Realistic magnitude of a table ball's mounting error (mm).
 pub const BALL_MAGNITUDE_MM: Real = 0.5;
 /// Relative singular value below which a direction of the scaled, whitened Jacobian is
-/// numerically null (not determined at all): far above the rounding of the lengths'
+/// numerically null (the design's rank, and the same circles with the balls known in
+/// [`HexapodCalibration::centre_removal_cost`]): far above the rounding of the lengths'
 /// Jacobian (FK to 1e-9 mm on 1e3 mm struts; a direct SVD puts the gauge near 1e-16), far
 /// below any direction a circle sees (the weakest about 1e-4 of the largest).
 pub const RANK_TOLERANCE: Real = 1e-7;
-/// Gauss–Newton stops when a step lowers the whitened sum of squares by less than this
-/// fraction: what is left is the lengths' rounding (FK to 1e-9 mm) seen through the weak
-/// directions.
-const COST_TOLERANCE: Real = 1e-9;
-/// Gauss–Newton iterations at most.
-pub const MAX_ITERATIONS: usize = 20;
-/// Gauss–Newton stops when the scaled step is below this (a thousandth of a nanometre on a
-/// 0.5 mm scale: far below any σ).
-const STEP_TOLERANCE: Real = 1e-9;
-
 /// The 24 solved parameters: base joints (0–17) and reference lengths (36–41).
 pub fn solved_parameters() -> Vec<ParameterId> {
     (0..18)
@@ -268,9 +263,9 @@ pub enum HexapodCalibrationError {
         /// Why.
         source: HexapodError,
     },
-    /// The normal matrix is not finite.
-    #[error("calibration: the normal equations are not finite")]
-    Degenerate,
+    /// The identification failed (a model evaluation at a reading, or no data).
+    #[error("calibration: {0}")]
+    Identification(String),
 }
 
 /// One solved parameter in the report's gauge.
@@ -291,17 +286,22 @@ pub struct HexapodIdentifiability {
     pub unknowns: usize,
     /// Table-ball coordinates among them.
     pub ball_unknowns: usize,
-    /// Dimension of the determined subspace.
+    /// Dimension of the determined subspace: the parameters' directions determined and
+    /// the balls' directions the readings constrain.
     pub rank: usize,
     /// Rank of the 24 parameters' part in the report's gauge (18 without a jig, 24 with
-    /// the plate).
+    /// the plate): the engine's determined directions.
     pub parameters_determined: usize,
-    /// Singular values of the scaled, whitened Jacobian (descending), from its SVD.
+    /// Singular values of the scaled, whitened Jacobian of every unknown at the solution
+    /// (descending), from its SVD.
     pub singular_values: Vec<Real>,
-    /// How clearly the rank was decided: the singular values either side of
-    /// [`RANK_TOLERANCE`] of the largest.
+    /// How clearly the rank was decided: the last kept and first dropped of
+    /// `singular_values`; the cut is the engine's (σ a tenth of the magnitude: singular
+    /// value [`DETERMINED_FRACTION`]⁻¹), which it applies to the parameters' columns with
+    /// the balls' projected out.
     pub margin: RankMargin,
-    /// Condition number within the determined subspace.
+    /// Condition number within the determined subspace (the parameters', balls projected
+    /// out).
     pub condition_number: Real,
     /// The named gauge directions (the base frame's rigid motions), when the table balls
     /// are estimated.
@@ -309,9 +309,9 @@ pub struct HexapodIdentifiability {
     /// The largest part of an undetermined direction outside the gauge span (0: the
     /// undetermined subspace is exactly the named gauge).
     pub undetermined_outside_gauge: Real,
-    /// Directions the readings determine only weakly: standard uncertainty above
-    /// [`DETERMINED_FRACTION`] of the magnitude (named by their largest terms, scaled
-    /// units). Solved, with their large σ carried into the parameters'.
+    /// Directions the readings see too weakly to determine — undetermined outside the
+    /// gauge, σ above [`DETERMINED_FRACTION`] of the magnitude (named by their largest
+    /// terms, scaled units), held at nominal — and those near the cut (borderline).
     pub weak: Vec<String>,
 }
 
@@ -332,7 +332,7 @@ pub struct HexapodCalibration {
     pub residual_rms_mm: Real,
     /// σ used for the uncertainties: the residuals' (mm).
     pub sigma_mm: Real,
-    /// Gauss–Newton iterations.
+    /// Levenberg–Marquardt steps accepted.
     pub iterations: usize,
     /// Jig-free: RMS σ of the 24 parameters with the ball centres estimated over the same
     /// with them known (what removing the centre offsets costs).
@@ -426,10 +426,166 @@ pub fn calibrate(
     calibrate_commanded(nominal, nominal, known, plan, readings, sigma_mm)
 }
 
+/// Predicted readings and, when asked for, their rows of the Jacobian.
+type Rows = (Vec<Real>, DMatrix<Real>);
+
+/// Double-ball-bar lengths as the engine's forward model ([`Forward`]): the unknowns are
+/// the `solved` parameters of `machine` (its others as given), then — when the table balls
+/// are estimated — three coordinates (mm, base frame) per circle's ball from `balls_at`
+/// on; further unknowns (another instrument's) are not the bar's and have zero columns.
+/// Reading `k` of circle `j` is `|p_k(P) − c_j|`, `p_k` the tool point of
+/// `FK_P(IK_controller(T_k))`; its derivatives are closed-form (`uᵀ·∂p/∂P` and `−uᵀ`).
+pub struct DbbLengths<'a> {
+    /// The controller that ran the circles (its inverse kinematics gives the readings).
+    pub controller: &'a Hexapod,
+    /// The machine whose `solved` parameters are unknowns (the rest known).
+    pub machine: &'a Hexapod,
+    /// The parameters solved, in the unknowns' order (the first unknowns).
+    pub solved: Vec<ParameterId>,
+    /// The circles, one table ball each (nominal centre `centre_mm`).
+    pub circles: &'a [DbbCircle],
+    /// Their readings, one entry per circle.
+    pub readings: &'a [CircleReadings],
+    /// Index of the first ball coordinate among the unknowns (`None`: the balls are known,
+    /// at the circles' centres).
+    pub balls_at: Option<usize>,
+}
+
+impl DbbLengths<'_> {
+    /// Readings in all.
+    pub fn len(&self) -> usize {
+        self.readings.iter().map(|r| r.lengths_mm.len()).sum()
+    }
+
+    /// Whether there is no reading.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The machine and the table balls at the unknowns `x`.
+    fn at(&self, x: &[Real]) -> Result<(Hexapod, Vec<Vector3>), String> {
+        let mut p = self.machine.parameters();
+        for (c, id) in self.solved.iter().enumerate() {
+            p[id.index()] = x[c];
+        }
+        let balls = self
+            .circles
+            .iter()
+            .enumerate()
+            .map(|(j, c)| match self.balls_at {
+                None => c.centre_mm,
+                Some(b) => Vector3::new(x[b + 3 * j], x[b + 3 * j + 1], x[b + 3 * j + 2]),
+            })
+            .collect();
+        let m = self
+            .machine
+            .with_parameters(&p)
+            .map_err(|e| format!("the machine at the unknowns: {e}"))?;
+        Ok((m, balls))
+    }
+
+    /// Circle `j`'s lengths and, if `with_jacobian`, their rows (physical units, `n`
+    /// columns).
+    fn circle(
+        &self,
+        model: &Hexapod,
+        ball: &Vector3,
+        j: usize,
+        n: usize,
+        with_jacobian: bool,
+    ) -> Result<Rows, String> {
+        let r = &self.readings[j];
+        let rows = if with_jacobian { r.commands.len() } else { 0 };
+        let mut a = DMatrix::zeros(rows, n);
+        let mut f = Vec::with_capacity(r.commands.len());
+        for (k, cmd) in r.commands.iter().enumerate() {
+            let at = |e: HexapodError| format!("circle {}, reading {k}: {e}", j + 1);
+            let reached = twin_pose(self.controller, model, cmd).map_err(at)?;
+            let d = reached.position - ball;
+            let l = d.norm();
+            f.push(l);
+            if with_jacobian {
+                let u = d / l;
+                let jp = model.pose_parameter_jacobian(&reached).map_err(at)?;
+                for (c, id) in self.solved.iter().enumerate() {
+                    let pi = id.index();
+                    a[(k, c)] = u.x * jp[(0, pi)] + u.y * jp[(1, pi)] + u.z * jp[(2, pi)];
+                }
+                if let Some(b) = self.balls_at {
+                    for q in 0..3 {
+                        a[(k, b + 3 * j + q)] = -u[q];
+                    }
+                }
+            }
+        }
+        Ok((f, a))
+    }
+
+    fn evaluate(&self, x: &[Real], with_jacobian: bool) -> Result<Rows, String> {
+        let (model, balls) = self.at(x)?;
+        let parts: Vec<Result<Rows, String>> = (0..self.circles.len())
+            .into_par_iter()
+            .map(|j| self.circle(&model, &balls[j], j, x.len(), with_jacobian))
+            .collect();
+        let m = self.len();
+        let mut f = Vec::with_capacity(m);
+        let mut a = DMatrix::zeros(if with_jacobian { m } else { 0 }, x.len());
+        for part in parts {
+            let (fj, aj) = part?;
+            if with_jacobian {
+                a.view_mut((f.len(), 0), (aj.nrows(), aj.ncols()))
+                    .copy_from(&aj);
+            }
+            f.extend(fj);
+        }
+        Ok((f, a))
+    }
+}
+
+impl Forward for DbbLengths<'_> {
+    fn predict(&self, x: &[Real]) -> Result<Vec<Real>, String> {
+        self.evaluate(x, false).map(|(f, _)| f)
+    }
+
+    fn jacobian(&self, x: &[Real]) -> Option<Result<DMatrix<Real>, String>> {
+        Some(self.evaluate(x, true).map(|(_, a)| a))
+    }
+}
+
+/// The realistic magnitude of a parameter's deviation (mm): joints
+/// [`JOINT_MAGNITUDE_MM`], reference lengths [`STRUT_MAGNITUDE_MM`].
+pub fn magnitude(id: ParameterId) -> Real {
+    match id.kind() {
+        ParameterKind::Reference => STRUT_MAGNITUDE_MM,
+        _ => JOINT_MAGNITUDE_MM,
+    }
+}
+
+/// The table balls' unknowns of `circles` (named `{prefix}ball3_x`): three coordinates
+/// each, starting at the circle's nominal centre, magnitude [`BALL_MAGNITUDE_MM`].
+pub fn ball_unknowns(circles: &[DbbCircle], prefix: &str) -> Vec<Unknown> {
+    circles
+        .iter()
+        .enumerate()
+        .flat_map(|(j, c)| {
+            ["x", "y", "z"]
+                .into_iter()
+                .enumerate()
+                .map(move |(q, axis)| Unknown {
+                    name: format!("{prefix}ball{}_{axis}", j + 1),
+                    start: c.centre_mm[q],
+                    magnitude: BALL_MAGNITUDE_MM,
+                })
+        })
+        .collect()
+}
+
 /// [`calibrate`] of circles run by a `controller` other than the nominal machine (a second
 /// round, on a controller already calibrated): the readings are modelled as
 /// `FK_P(IK_controller(T_k))`; the start, the estimates' deviations and the report's gauge
-/// stay the `nominal` machine's.
+/// stay the `nominal` machine's. The identification is [`crate::calibration::engine`]'s on
+/// [`DbbLengths`]: one block a circle (`circle 3`), the table balls as nuisance unknowns
+/// without a jig.
 pub fn calibrate_commanded(
     controller: &Hexapod,
     nominal: &Hexapod,
@@ -468,278 +624,104 @@ pub fn calibrate_commanded(
     } else {
         plan.circles.len()
     };
-    let n = SOLVED + 3 * nb;
-    let scale: Vec<Real> = (0..n)
-        .map(|c| match c {
-            0..18 => JOINT_MAGNITUDE_MM,
-            18..SOLVED => STRUT_MAGNITUDE_MM,
-            _ => BALL_MAGNITUDE_MM,
-        })
-        .collect();
     // Start: nominal base joints and reference lengths, the known platform joints.
     let mut p0 = known.parameters();
     let pn = nominal.parameters();
     for id in &ids {
         p0[id.index()] = pn[id.index()];
     }
-    let model_at = |x: &DVector<Real>| -> Result<(Hexapod, Vec<Vector3>), HexapodError> {
-        let mut p = p0;
-        for (c, id) in ids.iter().enumerate() {
-            p[id.index()] += x[c] * scale[c];
-        }
-        let balls = plan
-            .circles
+    let start =
+        known
+            .with_parameters(&p0)
+            .map_err(|source| HexapodCalibrationError::Kinematics {
+                circle: 1,
+                reading: 0,
+                source,
+            })?;
+    let model = DbbLengths {
+        controller,
+        machine: &start,
+        solved: ids.clone(),
+        circles: &plan.circles,
+        readings,
+        balls_at: (nb > 0).then_some(SOLVED),
+    };
+    let scale: Vec<Real> = ids.iter().map(|&id| magnitude(id)).collect();
+    let problem = Problem {
+        parameters: ids
+            .iter()
+            .zip(&scale)
+            .map(|(id, &magnitude)| Unknown {
+                name: id.name(),
+                start: p0[id.index()],
+                magnitude,
+            })
+            .collect(),
+        nuisance: if nb > 0 {
+            ball_unknowns(&plan.circles, "")
+        } else {
+            Vec::new()
+        },
+        blocks: readings
             .iter()
             .enumerate()
-            .map(|(j, c)| {
-                if nb == 0 {
-                    c.centre_mm
-                } else {
-                    c.centre_mm
-                        + Vector3::new(
-                            x[SOLVED + 3 * j],
-                            x[SOLVED + 3 * j + 1],
-                            x[SOLVED + 3 * j + 2],
-                        ) * BALL_MAGNITUDE_MM
-                }
+            .map(|(j, r)| Block {
+                name: format!("circle {}", j + 1),
+                values: r.lengths_mm.clone(),
+                sigma: vec![sigma_mm; r.lengths_mm.len()],
             })
-            .collect();
-        Ok((known.with_parameters(&p)?, balls))
+            .collect(),
+        forward: &model,
+        statistic: format!("bar lengths at the stated σ {} µm", sigma_mm * 1e3),
     };
-    let kin = |circle: usize, reading: usize| {
-        move |source| HexapodCalibrationError::Kinematics {
-            circle: circle + 1,
-            reading,
-            source,
-        }
-    };
-    // The whitened residuals (and the scaled, whitened Jacobian) at x: one row a reading,
-    // the circles in order.
-    let m: usize = readings.iter().map(|r| r.lengths_mm.len()).sum();
-    let system = |x: &DVector<Real>,
-                  with_jacobian: bool|
-     -> Result<(DMatrix<Real>, DVector<Real>), HexapodCalibrationError> {
-        let (model, balls) = model_at(x).map_err(kin(0, 0))?;
-        let mut a = DMatrix::zeros(if with_jacobian { m } else { 0 }, n);
-        let mut res = DVector::zeros(m);
-        let idx: Vec<usize> = ids.iter().map(|id| id.index()).collect();
-        let mut i = 0;
-        for (j, r) in readings.iter().enumerate() {
-            for (k, (cmd, len)) in r.commands.iter().zip(&r.lengths_mm).enumerate() {
-                let reached = twin_pose(controller, &model, cmd).map_err(kin(j, k))?;
-                let d = reached.position - balls[j];
-                let l = d.norm();
-                res[i] = (l - len) / sigma_mm;
-                if with_jacobian {
-                    let u = d / l;
-                    let jp = model.pose_parameter_jacobian(&reached).map_err(kin(j, k))?;
-                    for (c, &pi) in idx.iter().enumerate() {
-                        let v = u.x * jp[(0, pi)] + u.y * jp[(1, pi)] + u.z * jp[(2, pi)];
-                        a[(i, c)] = v * scale[c] / sigma_mm;
-                    }
-                    if nb > 0 {
-                        for q in 0..3 {
-                            a[(i, SOLVED + 3 * j + q)] = -u[q] * BALL_MAGNITUDE_MM / sigma_mm;
-                        }
-                    }
-                }
-                i += 1;
-            }
-        }
-        Ok((a, res))
-    };
-    let weak_below = 1.0 / DETERMINED_FRACTION;
-    let mut x = DVector::zeros(n);
-    let mut iterations = 0;
-    let mut ss;
-    let mut spectrum;
-    let mut jac;
-    let mut res;
-    loop {
-        let (a, r) = system(&x, true)?;
-        ss = r.norm_squared();
-        if !a.iter().all(|v| v.is_finite()) || !ss.is_finite() {
-            return Err(HexapodCalibrationError::Degenerate);
-        }
-        // The rank from the Jacobian's own singular values (never from AᵀA, whose
-        // spectrum squares the condition number).
-        let svd = a.clone().svd(false, true);
-        let g = a.transpose() * &r;
-        spectrum = Spectrum::of(svd);
-        jac = a;
-        res = r;
-        let threshold = spectrum.largest() * RANK_TOLERANCE;
-        // Gauss–Newton step in the determined subspace: −Σ v·(vᵀ·Aᵀr)/s².
-        let mut dx = DVector::zeros(n);
-        for (sv, v) in spectrum.pairs() {
-            if sv > threshold {
-                dx -= &v * (v.dot(&g) / (sv * sv));
-            }
-        }
-        // Halve the step while it worsens the fit.
-        let mut step = 1.0;
-        let mut accepted = false;
-        let before = ss;
-        for _ in 0..6 {
-            let trial = &x + &dx * step;
-            if let Ok((_, rt)) = system(&trial, false)
-                && rt.norm_squared() <= ss * (1.0 + 1e-12)
-            {
-                x = trial;
-                ss = rt.norm_squared();
-                accepted = true;
-                break;
-            }
-            step *= 0.5;
-        }
-        iterations += 1;
-        let settled = before - ss <= COST_TOLERANCE * before.max(1.0);
-        if !accepted || settled || dx.amax() * step < STEP_TOLERANCE || iterations >= MAX_ITERATIONS
-        {
-            break;
-        }
+    let o = engine::solve(&problem)
+        .map_err(|e| HexapodCalibrationError::Identification(e.to_string()))?;
+    let n = SOLVED + 3 * nb;
+    let m = model.len();
+    let x: Vec<Real> = o.solution.iter().chain(&o.nuisance).copied().collect();
+    // The whole spectrum (parameters and balls, scaled, whitened) at the solution.
+    let jac = model
+        .jacobian(&x)
+        .unwrap_or_else(|| Err("no Jacobian".into()))
+        .map_err(HexapodCalibrationError::Identification)?
+        / sigma_mm;
+    let mut scaled = jac;
+    for (c, mut col) in scaled.column_iter_mut().enumerate() {
+        col *= scale.get(c).copied().unwrap_or(BALL_MAGNITUDE_MM);
     }
-    // The Jacobian and residuals at the solution (the last step moved x by less than the
-    // noise; the spectrum is that of the last linearisation).
-    let (jac, res) = match system(&x, true) {
-        Ok((a, r)) if a.iter().all(|v| v.is_finite()) => {
-            spectrum = Spectrum::of(a.clone().svd(false, true));
-            (a, r)
-        }
-        _ => (jac, res),
-    };
-    // Identifiability at the solution.
-    let sv: Vec<(Real, usize)> = spectrum.sorted();
-    let threshold = sv.first().map_or(0.0, |s| s.0) * RANK_TOLERANCE;
-    let determined: Vec<usize> = sv
-        .iter()
-        .filter(|(s, _)| *s > threshold)
-        .map(|&(_, k)| k)
-        .collect();
-    let rank = determined.len();
-    let names: Vec<String> = ids
-        .iter()
-        .map(|id| id.name())
-        .chain((0..nb).flat_map(|j| ["x", "y", "z"].map(|c| format!("ball{}_{c}", j + 1))))
-        .collect();
-    let weak: Vec<String> = sv
-        .iter()
-        .filter(|(s, _)| *s > threshold && *s <= weak_below)
-        .map(|&(s, k)| {
-            let v = spectrum.vector(k);
-            let big = v.amax();
-            let mut terms: Vec<(Real, usize)> = (0..n)
-                .filter(|&c| v[c].abs() >= 0.2 * big)
-                .map(|c| (v[c], c))
-                .collect();
-            terms.sort_by(|a, b| b.0.abs().total_cmp(&a.0.abs()));
-            let t: Vec<String> = terms
-                .iter()
-                .take(4)
-                .map(|(x, c)| format!("{:+.2}·{}", x / scale[*c] * scale[0], names[*c]))
-                .collect();
-            format!("{} (σ {:.3} mm)", t.join(" "), JOINT_MAGNITUDE_MM / s)
-        })
-        .collect();
+    let mut all_sv: Vec<Real> = scaled.singular_values().iter().copied().collect();
+    all_sv.sort_by(|a, b| b.total_cmp(a));
+    let ident = &o.identifiability;
+    let rank = ident.rank + o.nuisance_rank;
+    let chi2 = o.chi2_history.last().copied().unwrap_or(0.0);
     let dof = m.saturating_sub(rank).max(1);
-    let residual_rms_mm = (ss / m as Real).sqrt() * sigma_mm;
-    let sigma_post = (ss / dof as Real).sqrt() * sigma_mm;
-    // Goodness of fit at the stated σ, one part per circle.
-    let mut parts = Vec::with_capacity(readings.len());
-    let mut row = 0;
-    for (j, r) in readings.iter().enumerate() {
-        parts.push((format!("circle {}", j + 1), row..row + r.lengths_mm.len()));
-        row += r.lengths_mm.len();
-    }
-    let fit = least_squares_check(
-        &format!("bar lengths at the stated σ {} µm", sigma_mm * 1e3),
-        &res,
-        &jac,
-        &parts,
-    );
-    // Covariance (physical units) of the 24 parameters: Σ v·vᵀ/s² over the determined
-    // directions, scaled by the residuals' σ.
-    let cov_of = |dirs: &[(Real, DVector<Real>)]| {
-        let mut c = DMatrix::zeros(SOLVED, SOLVED);
-        for (s, v) in dirs {
-            let w = (sigma_post / sigma_mm).powi(2) / (s * s);
-            for p in 0..SOLVED {
-                for q in 0..SOLVED {
-                    c[(p, q)] += w * v[p] * v[q] * scale[p] * scale[q];
-                }
-            }
-        }
-        c
-    };
-    let det_dirs: Vec<(Real, DVector<Real>)> = determined
-        .iter()
-        .map(|&k| (spectrum.value(k), spectrum.vector(k)))
-        .collect();
-    let cov = cov_of(&det_dirs);
-    // The report's gauge: without a jig, project the base joints' rigid motion out.
-    let nominal_base = base_of(nominal);
-    let mut proj = DMatrix::<Real>::identity(SOLVED, SOLVED);
-    let mut gauge = Vec::new();
-    let mut outside: Real = 0.0;
-    if nb > 0 {
-        let gb = rigid_fields(&nominal_base);
-        let qr = gb.clone().qr();
-        let q = qr.q();
-        let pb = DMatrix::<Real>::identity(18, 18) - &q * q.transpose();
-        proj.view_mut((0, 0), (18, 18)).copy_from(&pb);
-        gauge = gauge_names();
-        // The full gauge in the scaled unknowns: base joints and balls.
-        let (m, balls) = model_at(&x).map_err(kin(0, 0))?;
-        let mut pts = base_of(&m);
-        pts.extend(balls);
-        let gf = rigid_fields(&pts);
-        let mut gs = DMatrix::zeros(n, 6);
-        for k in 0..6 {
-            for r in 0..18 {
-                gs[(r, k)] = gf[(r, k)] / JOINT_MAGNITUDE_MM;
-            }
-            for r in 18..gf.nrows() {
-                gs[(SOLVED + r - 18, k)] = gf[(r, k)] / BALL_MAGNITUDE_MM;
-            }
-        }
-        let qg = gs.qr().q();
-        for &(s, k) in &sv {
-            if s > threshold {
-                continue;
-            }
-            let v = spectrum.vector(k);
-            let out = &v - &qg * (qg.transpose() * &v);
-            outside = outside.max(out.norm());
-        }
+    let residual_rms_mm = (chi2 / m as Real).sqrt() * sigma_mm;
+    let sigma_post = (chi2 / dof as Real).sqrt() * sigma_mm;
+    let inflate = sigma_post / sigma_mm;
+    // The gauge: the base joints' rigid motions (scaled units of the 24), without a jig.
+    let (solved_machine, _) = model
+        .at(&x)
+        .map_err(HexapodCalibrationError::Identification)?;
+    let gauge_scaled = if nb > 0 {
+        let g = rigid_fields(&base_of(&start));
+        let mut gs = DMatrix::zeros(SOLVED, 6);
+        gs.view_mut((0, 0), (18, 6))
+            .copy_from(&(g / JOINT_MAGNITUDE_MM));
+        gs.qr().q()
     } else {
-        for &(s, k) in &sv {
-            if s <= threshold {
-                let v = spectrum.vector(k);
-                outside = outside.max(v.norm());
-            }
-        }
-    }
-    let cov_g = &proj * &cov * proj.transpose();
-    // The rank of the 24 parameters' part in the gauge: of the square root of cov_g,
-    // P·V·S⁻¹ over the determined directions (scaled units), by its own singular values.
-    let parameters_determined = {
-        let mut root = DMatrix::zeros(SOLVED, det_dirs.len());
-        for (c, (s, v)) in det_dirs.iter().enumerate() {
-            for p in 0..SOLVED {
-                root[(p, c)] = v[p] / s;
-            }
-        }
-        let root = &proj * root;
-        let sv = root.singular_values();
-        let big = sv.amax();
-        sv.iter()
-            .filter(|l| **l > big * GAUGE_RANK_EPS && big > 0.0)
-            .count()
+        DMatrix::zeros(SOLVED, 0)
     };
-    let (model, _) = model_at(&x).map_err(kin(0, 0))?;
-    let parameters = model.parameters();
+    let (weak, outside) = undetermined_outside(ident, &gauge_scaled, &scale);
+    let mut weak = weak;
+    weak.extend(
+        ident
+            .borderline
+            .iter()
+            .map(|(c, s)| format!("{} (borderline: singular value {s:.3})", c.name)),
+    );
+    let parameters = solved_machine.parameters();
     let shown = if nb > 0 {
-        aligned_base(&parameters, &nominal_base)
+        aligned_base(&parameters, &base_of(nominal))
     } else {
         parameters
     };
@@ -749,39 +731,40 @@ pub fn calibrate_commanded(
         .map(|(c, id)| ParameterEstimate {
             name: id.name(),
             value_mm: shown[id.index()] - pn[id.index()],
-            sigma_mm: cov_g[(c, c)].max(0.0).sqrt(),
+            sigma_mm: o.solution_sigma[c] * inflate,
         })
         .collect();
-    // What removing the centre offsets costs: the same circles with the centres known.
+    // What removing the centre offsets costs: the same circles with the centres known (the
+    // parameters' columns alone), in the same gauge.
     let centre_removal_cost = if nb > 0 {
-        // The parameters' columns alone: the balls' centres taken as known.
-        let sub = Spectrum::of(jac.columns(0, SOLVED).into_owned().svd(false, true));
-        let cut = threshold.max(sub.largest() * RANK_TOLERANCE);
-        let dirs: Vec<(Real, DVector<Real>)> = sub.pairs().filter(|(s, _)| *s > cut).collect();
-        let ck = &proj * cov_of(&dirs) * proj.transpose();
-        let rms = |c: &DMatrix<Real>| (c.trace() / SOLVED as Real).sqrt();
-        let known_rms = rms(&ck);
-        (known_rms > 0.0).then(|| rms(&cov_g) / known_rms)
+        let sub = scaled.columns(0, SOLVED).into_owned().svd(false, true);
+        let vt = sub.v_t.unwrap_or_else(|| DMatrix::zeros(0, SOLVED));
+        let cut = sub.singular_values.amax() * RANK_TOLERANCE;
+        let proj =
+            DMatrix::<Real>::identity(SOLVED, SOLVED) - &gauge_scaled * gauge_scaled.transpose();
+        let mut known_var = 0.0;
+        for (i, s) in sub.singular_values.iter().enumerate() {
+            if *s > cut {
+                let v = &proj * vt.row(i).transpose();
+                known_var += (0..SOLVED).map(|p| (v[p] * scale[p]).powi(2)).sum::<Real>() / (s * s);
+            }
+        }
+        let removed_var: Real = o.solution_sigma.iter().map(|s| s * s).sum();
+        (known_var > 0.0).then(|| (removed_var / known_var).sqrt())
     } else {
         None
     };
-    let smax = sv.first().map_or(0.0, |s| s.0);
-    let smin = determined
-        .iter()
-        .map(|&k| spectrum.value(k))
-        .fold(Real::INFINITY, Real::min);
-    let all_sv: Vec<Real> = sv.iter().map(|s| s.0).collect();
     Ok(HexapodCalibration {
         procedure: plan.procedure,
         identifiability: HexapodIdentifiability {
             unknowns: n,
             ball_unknowns: 3 * nb,
             rank,
-            parameters_determined,
-            margin: RankMargin::new(&all_sv, rank, threshold),
+            parameters_determined: ident.rank,
+            margin: RankMargin::new(&all_sv, rank, 1.0 / DETERMINED_FRACTION),
             singular_values: all_sv,
-            condition_number: smax / smin,
-            gauge,
+            condition_number: ident.condition_number_determined,
+            gauge: if nb > 0 { gauge_names() } else { Vec::new() },
             undetermined_outside_gauge: outside,
             weak,
         },
@@ -789,55 +772,52 @@ pub fn calibrate_commanded(
         parameters,
         residual_rms_mm,
         sigma_mm: sigma_post,
-        iterations,
+        iterations: o.chi2_history.len().saturating_sub(1),
         centre_removal_cost,
-        fit,
+        fit: o.fit,
     })
 }
 
-/// Relative singular value of the gauge-projected covariance root below which a direction
-/// of the 24 parameters is not determined in the report's gauge: the rigid motion projected
-/// out leaves exact zeros there (rounding, 1e-16), the weakest determined direction about
-/// 1e-4 of the strongest.
-const GAUGE_RANK_EPS: Real = 1e-9;
-
-/// The singular values and right singular vectors of a whitened, scaled Jacobian.
-struct Spectrum {
-    values: DVector<Real>,
-    v_t: DMatrix<Real>,
-}
-
-impl Spectrum {
-    fn of(svd: nalgebra::SVD<Real, nalgebra::Dyn, nalgebra::Dyn>) -> Self {
-        let values = svd.singular_values;
-        let v_t = svd
-            .v_t
-            .unwrap_or_else(|| DMatrix::zeros(values.len(), values.len()));
-        Spectrum { values, v_t }
+/// The directions the engine left undetermined outside the orthonormal `gauge` (scaled
+/// units, columns): named by their largest terms, and the largest part of an undetermined
+/// direction outside the gauge's span (0: the undetermined subspace lies in the gauge).
+fn undetermined_outside(
+    ident: &Identifiability,
+    gauge: &DMatrix<Real>,
+    scale: &[Real],
+) -> (Vec<String>, Real) {
+    let np = scale.len();
+    let b = &ident.determined_basis;
+    let mut undetermined = DMatrix::<Real>::identity(np, np);
+    if b.ncols() > 0 {
+        undetermined -= b * b.transpose();
     }
-    fn largest(&self) -> Real {
-        self.values.amax()
+    if gauge.ncols() > 0 {
+        undetermined = &undetermined - gauge * (gauge.transpose() * &undetermined);
     }
-    fn value(&self, k: usize) -> Real {
-        self.values[k]
-    }
-    fn vector(&self, k: usize) -> DVector<Real> {
-        self.v_t.row(k).transpose()
-    }
-    /// Every (singular value, right singular vector); a Jacobian with fewer rows than
-    /// columns has `n − m` further null directions, which the SVD does not list and
-    /// nothing here needs (they are never solved).
-    fn pairs(&self) -> impl Iterator<Item = (Real, DVector<Real>)> + '_ {
-        (0..self.values.len()).map(|k| (self.value(k), self.vector(k)))
-    }
-    /// (value, index), descending.
-    fn sorted(&self) -> Vec<(Real, usize)> {
-        let mut sv: Vec<(Real, usize)> = (0..self.values.len())
-            .map(|k| (self.values[k], k))
+    let svd = undetermined.svd(false, true);
+    let outside = svd.singular_values.amax();
+    let vt = svd.v_t.unwrap_or_else(|| DMatrix::zeros(0, np));
+    let mut named = Vec::new();
+    for (i, s) in svd.singular_values.iter().enumerate() {
+        if *s <= 0.5 {
+            continue;
+        }
+        let v = vt.row(i);
+        let big = v.amax();
+        let mut terms: Vec<(Real, usize)> = (0..np)
+            .filter(|&c| v[c].abs() >= 0.2 * big)
+            .map(|c| (v[c], c))
             .collect();
-        sv.sort_by(|a, b| b.0.total_cmp(&a.0));
-        sv
+        terms.sort_by(|a, b| b.0.abs().total_cmp(&a.0.abs()));
+        let t: Vec<String> = terms
+            .iter()
+            .take(4)
+            .map(|(x, c)| format!("{:+.2}·{}", x, ident.parameters[*c]))
+            .collect();
+        named.push(format!("{} (not determined: held at nominal)", t.join(" ")));
     }
+    (named, outside)
 }
 
 /// The true deviations of the 24 parameters in the report's gauge (jig-free: the actual

@@ -40,12 +40,8 @@
 
 use crate::calibration::engine::{Block, Forward, Outcome, Problem, Unknown, solve};
 use crate::calibration::goodness::FitCheck;
-use crate::calibration::hexapod_calibrate::{
-    JOINT_MAGNITUDE_MM, STRUT_MAGNITUDE_MM, pivot_survey_points,
-};
-use crate::machine::hexapod::{
-    Hexapod, HexapodError, PARAMETERS, ParameterId, ParameterKind, Pose, twin_pose,
-};
+use crate::calibration::hexapod_calibrate::pivot_survey_points;
+use crate::machine::hexapod::{Hexapod, HexapodError, PARAMETERS, ParameterId, Pose, twin_pose};
 use crate::machine::hexapod_accuracy::{Workspace, level_positioning};
 use crate::math::{CounterRng, Real, Vector3};
 use serde::Serialize;
@@ -85,7 +81,8 @@ pub struct PivotSwing {
 }
 
 impl PivotSwing {
-    fn pose(&self, a_deg: Real, b_deg: Real) -> Pose {
+    /// The pose swung to `a_deg`, `b_deg` about the fixed point (c = 0).
+    pub fn pose(&self, a_deg: Real, b_deg: Real) -> Pose {
         let p = self.point_mm;
         Pose::from_mm_deg([p[0], p[1], p[2], a_deg, b_deg, 0.0])
     }
@@ -285,12 +282,7 @@ pub fn measure(
 }
 
 /// The realistic magnitude of a parameter's deviation (mm): the engine's column scale.
-pub fn magnitude(id: ParameterId) -> Real {
-    match id.kind() {
-        ParameterKind::Reference => STRUT_MAGNITUDE_MM,
-        _ => JOINT_MAGNITUDE_MM,
-    }
-}
+pub use crate::calibration::hexapod_calibrate::magnitude;
 
 /// The readings as the engine's forward model: the 42 parameters of the machine.
 struct ProbeModel<'a> {
@@ -437,7 +429,20 @@ pub fn identify(
     o.fit
         .enforce("probe calibration", accept_misfit)
         .map_err(|m| ProbeError::Misfit(m.to_string()))?;
-    let start = controller.parameters();
+    Ok(identification_of(
+        o,
+        &controller.parameters(),
+        plan.readings(),
+    ))
+}
+
+/// The engine's outcome on the 42 parameters (started at `start`, the controller's) as a
+/// [`ProbeIdentification`] of `readings` readings: values as deviations from the start.
+pub fn identification_of(
+    mut o: Outcome,
+    start: &[Real; PARAMETERS],
+    readings: usize,
+) -> ProbeIdentification {
     let ident = &o.identifiability;
     let mut parameters = [0.0; PARAMETERS];
     parameters.copy_from_slice(&o.solution);
@@ -445,11 +450,11 @@ pub fn identify(
     parameter_sigma.copy_from_slice(&o.solution_sigma);
     let combination_value = |e: &crate::calibration::calibrate::Estimate| {
         // A combination's value less the controller's.
-        let c0: Real = e.coefficients.iter().zip(&start).map(|(c, s)| c * s).sum();
+        let c0: Real = e.coefficients.iter().zip(start).map(|(c, s)| c * s).sum();
         e.value - c0
     };
-    Ok(ProbeIdentification {
-        readings: plan.readings(),
+    ProbeIdentification {
+        readings,
         rank: ident.rank,
         identified: o
             .parameters
@@ -485,7 +490,7 @@ pub fn identify(
         fit: o.fit,
         parameters,
         parameter_sigma,
-    })
+    }
 }
 
 /// The two calibration items over a workspace: seed 001's figures.
@@ -569,6 +574,9 @@ pub struct ProbeRound {
     pub identification: ProbeIdentification,
     /// The twin's figures after the round (noise-free survey, independent poses).
     pub after: Accuracy,
+    /// The probe's readings of the round (on the controller it started with).
+    #[serde(skip)]
+    pub readings: ProbeReadings,
 }
 
 /// The whole calibration.
@@ -653,6 +661,7 @@ pub fn calibrate(
             measured: figures(&readings),
             identification,
             after,
+            readings,
         });
     }
     let check = read(&current, options.rounds as u64 + 1)?;

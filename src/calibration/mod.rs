@@ -2,11 +2,13 @@
 //! corrected program. The goodness of fit every identification checks its result with
 //! ([`goodness`]), the 0°/180° step experiment ([`identify`]), general identification
 //! of any set of deviations with its identifiability report ([`calibrate`]), test-cut design
-//! ([`design`]) and NC-program correction with its verification ([`correct`]), and a hexapod's kinematic
-//! parameters from double-ball-bar lengths ([`hexapod_calibrate`]); one engine for any
-//! forward model ([`engine`]) and a serial machine identified on it from laser readings and
-//! ball-bar circles together ([`instruments`]), and a hexapod calibrated in rounds from
-//! touch-probe readings of positioning and pivot accuracy on it ([`hexapod_probe`]).
+//! ([`design`]) and NC-program correction with its verification ([`correct`]); one engine
+//! for any forward model ([`engine`]), and on it a hexapod's kinematic parameters from
+//! double-ball-bar lengths ([`hexapod_calibrate`], its circles by design in
+//! [`hexapod_design`]), a serial machine from laser readings and ball-bar circles together
+//! ([`instruments`]), a hexapod calibrated in rounds from touch-probe readings of
+//! positioning and pivot accuracy ([`hexapod_probe`]), and a hexapod from bar and probe
+//! readings at once ([`hexapod_dbb_probe`]).
 //!
 //! May use everything below it: [`crate::math`], [`crate::nc`], [`crate::machine`],
 //! [`crate::cutting`] (the verification sweeps the corrected program) and
@@ -18,8 +20,9 @@ pub mod identify;
 pub mod calibrate;
 pub mod design;
 pub mod correct;
+pub mod engine;
 pub mod hexapod_calibrate;
 pub mod hexapod_design;
-pub mod engine;
 pub mod instruments;
 pub mod hexapod_probe;
+pub mod hexapod_dbb_probe;

@@ -181,6 +181,10 @@ pub enum HexapodCommand {
         /// Write controller.toml (for --controller) and report.json into this folder.
         #[arg(long, value_name = "DIR")]
         out: Option<PathBuf>,
+        /// Write the first round's probe readings (taken through the starting controller)
+        /// into this CSV file: what `identify SCENE --readings … --probe FILE` reads.
+        #[arg(long, value_name = "FILE")]
+        readings_out: Option<PathBuf>,
         /// Print the report as JSON.
         #[arg(long)]
         json: bool,
@@ -422,6 +426,7 @@ fn hexapod_run(command: HexapodCommand) -> Result<ExitCode, String> {
             accept_misfit,
             controller,
             out,
+            readings_out,
             json,
         } => {
             use twinmill::calibration::hexapod_probe::ProbeOptions;
@@ -446,6 +451,9 @@ fn hexapod_run(command: HexapodCommand) -> Result<ExitCode, String> {
                     ],
                 )
                 .map_err(|e| e.to_string())?;
+            }
+            if let Some(file) = &readings_out {
+                write(file, o.readings_csv.as_bytes())?;
             }
             print_out(
                 || o.summary.clone(),

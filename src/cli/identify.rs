@@ -282,6 +282,11 @@ pub struct CalibrateOptions {
     /// its order, in the format `measure --instrument ballbar` writes.
     #[arg(long, value_name = "FILE,…", value_delimiter = ',')]
     readings: Vec<PathBuf>,
+    /// With --readings: also the touch probe's readings of positioning and pivot accuracy
+    /// (the file `hexapod probe-calibrate --readings-out` writes), identified together with
+    /// the bar's in one identification of all 42 parameters.
+    #[arg(long, value_name = "FILE")]
+    probe: Option<PathBuf>,
     /// Write the calibrated controller (a `[controller]` file: the identified parameters as
     /// deviations from nominal, for `--controller FILE` or the scene) into this file, and
     /// its LinuxCNC genhexkins joint coordinates beside it (`FILE` with `.hal`).
@@ -298,6 +303,7 @@ impl CalibrateOptions {
             ("--plan", self.plan.is_some()),
             ("--html", self.html.is_some()),
             ("--readings", !self.readings.is_empty()),
+            ("--probe", self.probe.is_some()),
             ("--corrected", self.corrected.is_some()),
         ]
         .into_iter()
@@ -363,6 +369,11 @@ fn calibrate(
         (Some(p), false) => p.procedure,
         _ => procedure,
     };
+    if a.probe.is_some() && a.readings.is_empty() {
+        return Err(
+            "--probe goes with --readings (the bar's trace files of the same machine)".into(),
+        );
+    }
     if !a.readings.is_empty() {
         if a.trials > 0 {
             return Err("--trials runs on the twin; it cannot go with --readings".into());
@@ -371,6 +382,31 @@ fn calibrate(
         for p in &a.readings {
             let text = twinmill::scene::read_text(p).map_err(|e| e.to_string())?;
             files.push((p.clone(), text));
+        }
+        if let Some(probe) = &a.probe {
+            if a.html.is_some() {
+                return Err(
+                    "--html is not written for --probe (the summary and --json are)".into(),
+                );
+            }
+            let text = twinmill::scene::read_text(probe).map_err(|e| e.to_string())?;
+            let o = twinmill::pipeline::hexapod_probe::identify_dbb_and_probe(
+                &s,
+                procedure,
+                plan,
+                &files,
+                &(probe.clone(), text),
+            )
+            .map_err(|e| e.to_string())?;
+            let mut wrote = String::new();
+            if let Some(out) = &a.corrected {
+                write(out, o.fragment.as_bytes())?;
+                wrote = format!("  wrote         {} (controller)\n", out.display());
+            }
+            return Ok(print_out(
+                || o.summary.clone() + &wrote,
+                json.then(|| serde_json::to_string_pretty(&o)),
+            ));
         }
         let o = calibrate_measured(&s, procedure, plan, &files).map_err(|e| e.to_string())?;
         let page = a

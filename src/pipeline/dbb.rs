@@ -439,7 +439,9 @@ pub fn calibration_trials(
 }
 
 /// The scene's `[workspace]`, which a calibration needs.
-fn calibration_workspace(scene: &HexapodScene) -> Result<Workspace, HexapodCommandError> {
+pub(crate) fn calibration_workspace(
+    scene: &HexapodScene,
+) -> Result<Workspace, HexapodCommandError> {
     scene.workspace.ok_or_else(|| {
         error(
             scene,
@@ -450,7 +452,7 @@ fn calibration_workspace(scene: &HexapodScene) -> Result<Workspace, HexapodComma
 
 /// The circles of a calibration by `procedure`: `plan` (a designed one, whose procedure
 /// must agree) or the procedure's fixed plan.
-fn procedure_plan(
+pub(crate) fn procedure_plan(
     scene: &HexapodScene,
     procedure: Procedure,
     plan: Option<Plan>,
@@ -621,7 +623,7 @@ fn calibration_summary(
     let _ = writeln!(t, "  rank          {}", id.margin.describe());
     let _ = writeln!(
         t,
-        "  residual      rms {:.3} µm after {} Gauss–Newton steps",
+        "  residual      rms {:.3} µm after {} Levenberg–Marquardt steps",
         c.residual_rms_mm * 1e3,
         c.iterations
     );
@@ -996,26 +998,15 @@ pub struct MeasuredCalibrationOutcome {
     pub summary: String,
 }
 
-/// Seed 000's calibration from readings measured on the machine: one trace file per circle
-/// of the plan (`plan`, whose procedure must agree, or `procedure`'s fixed plan), in its
-/// order, in the format `twinmill ballbar --out` writes (`circular`'s
-/// CSV: turn, angle, deviation = bar length − radius). Each file must hold the circle's
-/// samples in the plan's order (its turns and angles, to 1e-6 rad), and a file whose header
-/// records its circle (as `ballbar --out` writes it) must record the plan's circle; the
-/// platform joints are taken from the scene (known from a CMM, as in seed 000), nothing else
-/// of the scene's machine is used. The identification is refused when the lengths cannot
-/// come from the identified machine at the DBB's σ ([`crate::calibration::goodness`]),
-/// naming the files out of line, unless the scene accepts misfits.
-pub fn calibrate_measured(
+/// The bar readings of `plan`'s circles from their trace files (one a circle, in the plan's
+/// order; see [`calibrate_measured`]): each file's header, sample count, turns and angles
+/// checked against its circle, a mismatch one line naming the file (and line).
+pub fn measured_circles(
     scene: &HexapodScene,
-    procedure: Procedure,
-    plan: Option<Plan>,
+    plan: &Plan,
     files: &[(std::path::PathBuf, String)],
-) -> Result<MeasuredCalibrationOutcome, HexapodCommandError> {
+) -> Result<Vec<CircleReadings>, HexapodCommandError> {
     use crate::metrology::circular::parse_trace;
-    use std::fmt::Write as _;
-    let ws = calibration_workspace(scene)?;
-    let plan = &procedure_plan(scene, procedure, plan, &ws)?;
     if files.len() != plan.circles.len() {
         return Err(error(
             scene,
@@ -1084,6 +1075,29 @@ pub fn calibrate_measured(
             commands: angles.iter().map(|&(_, t)| c.command(t)).collect(),
         });
     }
+    Ok(readings)
+}
+
+/// Seed 000's calibration from readings measured on the machine: one trace file per circle
+/// of the plan (`plan`, whose procedure must agree, or `procedure`'s fixed plan), in its
+/// order, in the format `twinmill ballbar --out` writes (`circular`'s
+/// CSV: turn, angle, deviation = bar length − radius). Each file must hold the circle's
+/// samples in the plan's order (its turns and angles, to 1e-6 rad), and a file whose header
+/// records its circle (as `ballbar --out` writes it) must record the plan's circle; the
+/// platform joints are taken from the scene (known from a CMM, as in seed 000), nothing else
+/// of the scene's machine is used. The identification is refused when the lengths cannot
+/// come from the identified machine at the DBB's σ ([`crate::calibration::goodness`]),
+/// naming the files out of line, unless the scene accepts misfits.
+pub fn calibrate_measured(
+    scene: &HexapodScene,
+    procedure: Procedure,
+    plan: Option<Plan>,
+    files: &[(std::path::PathBuf, String)],
+) -> Result<MeasuredCalibrationOutcome, HexapodCommandError> {
+    use std::fmt::Write as _;
+    let ws = calibration_workspace(scene)?;
+    let plan = &procedure_plan(scene, procedure, plan, &ws)?;
+    let readings = measured_circles(scene, plan, files)?;
     // The platform joints (the CMM's) are the scene's; nothing else of its machine is used.
     let mut cal = calibrate_commanded(
         &scene.controller,
@@ -1155,7 +1169,7 @@ pub fn calibrate_measured(
     );
     let _ = writeln!(
         summary,
-        "  residual      rms {:.3} µm after {} Gauss–Newton steps",
+        "  residual      rms {:.3} µm after {} Levenberg–Marquardt steps",
         cal.residual_rms_mm * 1e3,
         cal.iterations
     );

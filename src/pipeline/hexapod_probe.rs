@@ -7,9 +7,17 @@
 //! **Invariant:** the same scene and request give the same outcome, bit for bit (the
 //! noise from a counter-based generator of the given seed).
 
-use crate::calibration::hexapod_probe::{ProbeCalibration, ProbeOptions, calibrate};
+use crate::calibration::hexapod_calibrate::{Plan, Procedure};
+use crate::calibration::hexapod_dbb_probe::{DbbData, ProbeData, identify};
+use crate::calibration::hexapod_probe::{
+    ProbeCalibration, ProbeIdentification, ProbeOptions, ProbePlan, ProbeReadings, calibrate,
+    default_plan,
+};
 use crate::machine::hexapod::{PARAMETERS, ParameterId};
 use crate::math::Real;
+use crate::pipeline::dbb::{
+    CALIBRATION_NOISE_MM, calibration_workspace, measured_circles, procedure_plan,
+};
 use crate::pipeline::hexapod::HexapodCommandError;
 use crate::scene::HexapodScene;
 use serde::Serialize;
@@ -29,6 +37,10 @@ pub struct ProbeOutcome {
     /// comments).
     #[serde(skip)]
     pub fragment: String,
+    /// The first round's probe readings (taken through the starting controller) as a
+    /// readings file ([`probe_readings_csv`]): what `identify --probe` reads.
+    #[serde(skip)]
+    pub readings_csv: String,
     /// The summary text.
     #[serde(skip)]
     pub summary: String,
@@ -105,11 +117,28 @@ pub fn hexapod_probe_calibrate(
         );
     }
     let summary = summary(scene, &cal, &parameters);
+    let readings_csv = cal.rounds.first().map_or(String::new(), |r| {
+        probe_readings_csv(
+            &default_plan(&scene.controller, &ws),
+            &r.readings,
+            &[
+                format!(
+                    "Touch-probe readings of {} by `twinmill hexapod probe-calibrate` (round 1, through {}; σ {} µm, seed {}).",
+                    scene.name,
+                    scene.controller_label(),
+                    options.sigma_mm * 1e3,
+                    options.seed
+                ),
+                "positioning: the tool point's displacement from the commanded point, platform level; pivot: the tip's travel from its level position (mm).".into(),
+            ],
+        )
+    });
     Ok(ProbeOutcome {
         scene: scene.name.clone(),
         calibration: cal,
         parameters,
         fragment,
+        readings_csv,
         summary,
     })
 }
@@ -219,4 +248,334 @@ fn summary(scene: &HexapodScene, cal: &ProbeCalibration, rows: &[ProbeParameterR
         }
     }
     s
+}
+
+/// The columns of a probe readings file.
+pub const PROBE_READINGS_COLUMNS: &str =
+    "item,point,x_mm,y_mm,z_mm,a_deg,b_deg,read_x_mm,read_y_mm,read_z_mm,sigma_mm";
+
+/// A probe's readings of `plan` as a file: `#` lines of `header`, the column line
+/// ([`PROBE_READINGS_COLUMNS`]), then one row a probed pose — `positioning` rows (the
+/// commanded point, a = b = 0, the tool point's displacement from it), then `pivot` rows
+/// (the fixed point, the swung a, b, the tip's travel from its level position) — each with
+/// the probe's σ. Fixed decimals, so the same readings write the same bytes.
+pub fn probe_readings_csv(plan: &ProbePlan, readings: &ProbeReadings, header: &[String]) -> String {
+    let mut t = String::new();
+    for h in header {
+        let _ = writeln!(t, "# {h}");
+    }
+    let _ = writeln!(t, "{PROBE_READINGS_COLUMNS}");
+    let row = |t: &mut String, item: &str, k: usize, p: [Real; 3], ab: [Real; 2], r: &[Real; 3]| {
+        let _ = writeln!(
+            t,
+            "{item},{k},{:.6},{:.6},{:.6},{:.6},{:.6},{:.7},{:.7},{:.7},{}",
+            p[0], p[1], p[2], ab[0], ab[1], r[0], r[1], r[2], readings.sigma_mm
+        );
+    };
+    for (k, (pose, r)) in plan
+        .positioning
+        .iter()
+        .zip(&readings.positioning_mm)
+        .enumerate()
+    {
+        let p = pose.position;
+        row(&mut t, "positioning", k + 1, [p.x, p.y, p.z], [0.0, 0.0], r);
+    }
+    for (k, (s, rs)) in plan.pivots.iter().zip(&readings.pivot_mm).enumerate() {
+        for (ab, r) in s.angles_deg.iter().zip(rs) {
+            row(&mut t, "pivot", k + 1, s.point_mm, *ab, r);
+        }
+    }
+    t
+}
+
+/// Reads a probe readings file ([`probe_readings_csv`]) of `plan`: every row's item,
+/// point, pose (to 1e-6 mm and degrees) in the plan's order, finite readings, one σ > 0
+/// throughout. A bad file is one line naming `path`, the line and what is wrong.
+pub fn parse_probe_readings(
+    text: &str,
+    path: &std::path::Path,
+    plan: &ProbePlan,
+) -> Result<ProbeReadings, String> {
+    let at = |line: usize, m: String| format!("{}:{line}: {m}", path.display());
+    // The expected rows: item, point, position, angles.
+    let mut expected: Vec<(&str, usize, [Real; 3], [Real; 2])> = plan
+        .positioning
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let q = p.position;
+            ("positioning", k + 1, [q.x, q.y, q.z], [0.0, 0.0])
+        })
+        .collect();
+    for (k, s) in plan.pivots.iter().enumerate() {
+        for ab in &s.angles_deg {
+            expected.push(("pivot", k + 1, s.point_mm, *ab));
+        }
+    }
+    let mut values: Vec<[Real; 3]> = Vec::with_capacity(expected.len());
+    let mut sigma: Option<Real> = None;
+    let mut header_seen = false;
+    let mut last_line = 0;
+    for (i, raw) in text.lines().enumerate() {
+        let line = i + 1;
+        last_line = line;
+        let l = raw.trim();
+        if l.is_empty() || l.starts_with('#') {
+            continue;
+        }
+        if !header_seen {
+            if l != PROBE_READINGS_COLUMNS {
+                return Err(at(
+                    line,
+                    format!("expected the column line `{PROBE_READINGS_COLUMNS}`"),
+                ));
+            }
+            header_seen = true;
+            continue;
+        }
+        let f: Vec<&str> = l.split(',').map(str::trim).collect();
+        if f.len() != 11 {
+            return Err(at(line, format!("{} fields, expected 11", f.len())));
+        }
+        let Some(&(item, point, p, ab)) = expected.get(values.len()) else {
+            return Err(at(
+                line,
+                format!("more rows than the plan's {} probed poses", expected.len()),
+            ));
+        };
+        let num = |k: usize| -> Result<Real, String> {
+            f[k].parse::<Real>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| {
+                    at(
+                        line,
+                        format!("field {}: `{}` is not a finite number", k + 1, f[k]),
+                    )
+                })
+        };
+        if f[0] != item || f[1].parse::<usize>().ok() != Some(point) {
+            return Err(at(
+                line,
+                format!(
+                    "`{},{}`, but row {} of the plan is {item} {point}",
+                    f[0],
+                    f[1],
+                    values.len() + 1
+                ),
+            ));
+        }
+        let pose = [num(2)?, num(3)?, num(4)?, num(5)?, num(6)?];
+        let want = [p[0], p[1], p[2], ab[0], ab[1]];
+        if pose.iter().zip(&want).any(|(a, b)| (a - b).abs() > 1e-6) {
+            return Err(at(
+                line,
+                format!(
+                    "the pose ({:.6}, {:.6}, {:.6}; a {:.6}°, b {:.6}°) is not the plan's ({:.6}, {:.6}, {:.6}; a {:.6}°, b {:.6}°)",
+                    pose[0],
+                    pose[1],
+                    pose[2],
+                    pose[3],
+                    pose[4],
+                    want[0],
+                    want[1],
+                    want[2],
+                    want[3],
+                    want[4]
+                ),
+            ));
+        }
+        let s = num(10)?;
+        if s <= 0.0 {
+            return Err(at(line, format!("σ {s} mm must be positive")));
+        }
+        match sigma {
+            Some(s0) if s0 != s => {
+                return Err(at(
+                    line,
+                    format!("σ {s} mm differs from the file's {s0} mm"),
+                ));
+            }
+            _ => sigma = Some(s),
+        }
+        values.push([num(7)?, num(8)?, num(9)?]);
+    }
+    if !header_seen {
+        return Err(at(
+            last_line.max(1),
+            format!("no column line `{PROBE_READINGS_COLUMNS}`"),
+        ));
+    }
+    if values.len() != expected.len() {
+        return Err(at(
+            last_line,
+            format!(
+                "{} rows, but the plan probes {} poses",
+                values.len(),
+                expected.len()
+            ),
+        ));
+    }
+    let np = plan.positioning.len();
+    let mut rest = values[np..].iter();
+    let pivot_mm = plan
+        .pivots
+        .iter()
+        .map(|s| rest.by_ref().take(s.angles_deg.len()).copied().collect())
+        .collect();
+    Ok(ProbeReadings {
+        positioning_mm: values[..np].to_vec(),
+        pivot_mm,
+        sigma_mm: sigma.unwrap_or(Real::NAN),
+    })
+}
+
+/// One identification from the bar's trace files and a probe's readings file together.
+#[derive(Clone, Debug, Serialize)]
+pub struct JointOutcome {
+    /// The scene's name.
+    pub scene: String,
+    /// The procedure of the circles.
+    pub procedure: Procedure,
+    /// The bar's trace files, one a circle in the plan's order.
+    pub dbb_files: Vec<String>,
+    /// The probe's readings file.
+    pub probe_file: String,
+    /// The identification (the 42 parameters, deviations from the controller's).
+    pub identification: ProbeIdentification,
+    /// The identified controller as a `[controller]` file (deviations from nominal, σ in
+    /// comments).
+    #[serde(skip)]
+    pub fragment: String,
+    /// The summary text.
+    #[serde(skip)]
+    pub summary: String,
+}
+
+/// Identifies the scene's machine from the bar's trace `dbb` (one a circle of `plan` or the
+/// procedure's fixed plan, σ [`CALIBRATION_NOISE_MM`]) and the probe's readings `probe` of
+/// the default probe plan (its σ in the file), both taken through the scene's controller:
+/// one identification ([`crate::calibration::hexapod_dbb_probe`]), refused naming the file
+/// that does not fit unless the scene accepts misfits.
+pub fn identify_dbb_and_probe(
+    scene: &HexapodScene,
+    procedure: Procedure,
+    plan: Option<Plan>,
+    dbb: &[(std::path::PathBuf, String)],
+    probe: &(std::path::PathBuf, String),
+) -> Result<JointOutcome, HexapodCommandError> {
+    let error = |message: String| HexapodCommandError {
+        path: scene.path.display().to_string(),
+        message,
+    };
+    let ws = calibration_workspace(scene)?;
+    let plan = procedure_plan(scene, procedure, plan, &ws)?;
+    let circles = measured_circles(scene, &plan, dbb)?;
+    let probe_plan = default_plan(&scene.controller, &ws);
+    // The reader's `FILE:LINE: what` as the error's place and message.
+    let probed = parse_probe_readings(&probe.1, &probe.0, &probe_plan).map_err(|m| {
+        let file = probe.0.display().to_string();
+        match m
+            .strip_prefix(&format!("{file}:"))
+            .and_then(|r| r.split_once(": "))
+        {
+            Some((line, what)) => HexapodCommandError {
+                path: format!("{file}:{line}"),
+                message: what.to_string(),
+            },
+            None => HexapodCommandError {
+                path: file,
+                message: m,
+            },
+        }
+    })?;
+    let files: Vec<String> = dbb.iter().map(|(p, _)| p.display().to_string()).collect();
+    let probe_file = probe.0.display().to_string();
+    let id = identify(
+        &scene.controller,
+        Some(DbbData {
+            plan: &plan,
+            readings: &circles,
+            files: &files,
+            sigma_mm: CALIBRATION_NOISE_MM,
+        }),
+        Some(ProbeData {
+            plan: &probe_plan,
+            readings: &probed,
+            file: &probe_file,
+        }),
+        scene.accept_misfit,
+    )
+    .map_err(|e| error(e.to_string()))?;
+    let pn = scene.nominal.parameters();
+    let mut fragment = format!(
+        "# The calibrated controller of {} identified by `twinmill identify --readings … --probe {probe_file}`\n\
+         # ({} circles, {}, and the touch probe's readings) as deviations from nominal (mm), for\n\
+         # --controller; σ along what the readings determine. Directions they do not determine keep\n\
+         # the controller's values.\n[controller]\n",
+        scene.name,
+        plan.circles.len(),
+        plan.procedure.name()
+    );
+    for k in ParameterId::all() {
+        let i = k.index();
+        let _ = writeln!(
+            fragment,
+            "{} = {:.7}   # σ {:.7}",
+            k.name(),
+            id.parameters[i] - pn[i],
+            id.parameter_sigma[i]
+        );
+    }
+    let mut summary = id
+        .fit
+        .accepted_line()
+        .map_or(String::new(), |w| format!("twinmill: {w}\n"));
+    let _ = writeln!(
+        summary,
+        "twinmill: identify {} from {} measured circles ({}) and the probe's {}\n  readings      {} ({} bar lengths at σ {:.2} µm, {} probe readings at σ {:.2} µm)\n  determined    rank {} of {PARAMETERS}; {} parameters on their own, {} combinations",
+        scene.name,
+        plan.circles.len(),
+        plan.procedure.name(),
+        probe_file,
+        id.readings,
+        plan.readings(),
+        CALIBRATION_NOISE_MM * 1e3,
+        probe_plan.readings(),
+        probed.sigma_mm * 1e3,
+        id.rank,
+        id.identified.len(),
+        id.combinations.len()
+    );
+    for n in &id.not_determined {
+        let _ = writeln!(
+            summary,
+            "  not determined  {n} (held at the controller's value)"
+        );
+    }
+    for n in &id.borderline {
+        let _ = writeln!(summary, "  borderline      {n}");
+    }
+    let _ = writeln!(summary, "  fit           {}", id.fit.describe());
+    let _ = writeln!(summary, "  parameter     controller (mm)   σ (µm)");
+    for k in ParameterId::all() {
+        let i = k.index();
+        let _ = writeln!(
+            summary,
+            "  {:<12} {:+12.5}    {:8.3}",
+            k.name(),
+            id.parameters[i] - pn[i],
+            id.parameter_sigma[i] * 1e3
+        );
+    }
+    Ok(JointOutcome {
+        scene: scene.name.clone(),
+        procedure: plan.procedure,
+        dbb_files: files,
+        probe_file,
+        identification: id,
+        fragment,
+        summary,
+    })
 }

@@ -185,20 +185,20 @@ pub fn hexapod_ballbar_page(scene: &str, o: &super::dbb::BallbarOutcome) -> Stri
 fn identification_sections(
     c: &crate::calibration::hexapod_calibrate::HexapodCalibration,
 ) -> Vec<crate::report::html::Section> {
-    use crate::calibration::hexapod_calibrate::RANK_TOLERANCE;
     use crate::report::html::Section;
     let id = &c.identifiability;
     let mut sections = vec![Section {
         heading: "Identifiability".into(),
         intro: format!(
-            "{} unknowns ({} parameters{}); a direction is determined when its singular value is at least {RANK_TOLERANCE:e} of the largest.",
+            "{} unknowns ({} parameters{}); a direction of the parameters is determined when its σ is below a tenth of its realistic magnitude (singular value ≥ {}, the balls' coordinates projected out).",
             id.unknowns,
             id.unknowns - id.ball_unknowns,
             if id.ball_unknowns > 0 {
                 format!(" and {} table-ball coordinates", id.ball_unknowns)
             } else {
                 String::new()
-            }
+            },
+            id.margin.cut
         ),
         columns: vec!["figure".into(), "value".into()],
         rows: vec![
@@ -224,7 +224,7 @@ fn identification_sections(
                 "σ of a reading (µm)".into(),
                 format!("{:.4}", c.sigma_mm * 1e3),
             ],
-            vec!["Gauss–Newton iterations".into(), c.iterations.to_string()],
+            vec!["Levenberg–Marquardt steps".into(), c.iterations.to_string()],
         ],
     }];
     sections.push(page::fit_section(&c.fit));
@@ -244,7 +244,7 @@ fn identification_sections(
     }
     sections.extend(page::list_section(
         "Weakly determined",
-        "Directions the readings determine with σ above a tenth of their magnitude: solved, their large σ carried into the parameters'.",
+        "Directions outside the gauge the readings see with σ above a tenth of their magnitude (held at nominal, never valued), and those near that cut.",
         &id.weak,
     ));
     sections
@@ -254,10 +254,9 @@ fn identification_sections(
 fn singular_value_section(
     c: &crate::calibration::hexapod_calibrate::HexapodCalibration,
 ) -> (crate::report::html::Section, Real) {
-    use crate::calibration::hexapod_calibrate::RANK_TOLERANCE;
     use crate::report::html::Section;
     let id = &c.identifiability;
-    let threshold = id.singular_values.first().copied().unwrap_or(0.0) * RANK_TOLERANCE;
+    let threshold = id.margin.cut;
     let section = Section {
         heading: "Singular values".into(),
         intro: "Of the scaled, whitened Jacobian, largest first.".into(),

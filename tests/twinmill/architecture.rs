@@ -64,11 +64,12 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "calibrate",
             "design",
             "correct",
+            "engine",
             "hexapod_calibrate",
             "hexapod_design",
-            "engine",
             "instruments",
             "hexapod_probe",
+            "hexapod_dbb_probe",
         ],
     ),
     (

@@ -21,6 +21,7 @@ mod hexapod;
 mod html;
 mod hexapod_calibration;
 mod hexapod_probe;
+mod hexapod_dbb_probe;
 mod hexapod_cut;
 mod hexapod_controller;
 mod verbs;
