@@ -22,6 +22,7 @@ mod html;
 mod hexapod_calibration;
 mod hexapod_probe;
 mod hexapod_cut;
+mod hexapod_correct;
 mod hexapod_controller;
 mod verbs;
 mod fuzz;
