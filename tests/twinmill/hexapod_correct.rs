@@ -109,9 +109,17 @@ fn block_end_errors(
                 want[5].to_radians(),
             ),
         );
-        // The rotation between them: its angle.
+        // The rotation between them: its angle, from its skew part (sin of the angle, exact
+        // to rounding for small angles, where the trace's acos is not).
         let d = rg.transpose() * rw;
-        let angle = ((d.trace() - 1.0) / 2.0).clamp(-1.0, 1.0).acos();
+        let angle = (Vector3::new(
+            d[(2, 1)] - d[(1, 2)],
+            d[(0, 2)] - d[(2, 0)],
+            d[(1, 0)] - d[(0, 1)],
+        )
+        .norm()
+            / 2.0)
+            .asin();
         dp = dp.max(pos);
         da = da.max(angle);
         n += 1;
@@ -119,9 +127,67 @@ fn block_end_errors(
     (dp, da, n)
 }
 
+/// The controller's interpolation between the written block ends at ¼, ½ and ¾ of every
+/// block against the nominal pose at the same parameter of its source move: the largest
+/// distance of the tool tip or the flute's end (`flute` mm up the tool axis) (mm), and the
+/// number of blocks that are parts of a split move.
+fn chord_error(
+    written: &str,
+    source: &str,
+    home: [Real; 6],
+    controller: &Oracle,
+    actual: &Oracle,
+    flute: Real,
+) -> (Real, usize) {
+    let moves = source_moves(source, home);
+    let blocks = written_blocks(written);
+    let (mut worst, mut split) = (0.0 as Real, 0);
+    let axis_points = |p: &Vector6<Real>| {
+        let tip = Vector3::new(p[0], p[1], p[2]);
+        [
+            tip,
+            tip + rpy(p[3], p[4], p[5]) * Vector3::new(0.0, 0.0, flute),
+        ]
+    };
+    for w in blocks.windows(2) {
+        let (from, (to, src)) = (w[0].0, w[1]);
+        let Some((line, k, parts)) = src else {
+            continue;
+        };
+        split += usize::from(parts > 1);
+        let (_, a, b) = moves
+            .iter()
+            .find(|m| m.0 == line)
+            .copied()
+            .unwrap_or_else(|| panic!("source line {line}"));
+        for t in [0.25, 0.5, 0.75] {
+            let cmd: [Real; 6] = std::array::from_fn(|i| from[i] + (to[i] - from[i]) * t);
+            let s = (k as Real - 1.0 + t) / parts as Real;
+            let want: [Real; 6] = std::array::from_fn(|i| a[i] + (b[i] - a[i]) * s);
+            let want = Vector6::new(
+                want[0],
+                want[1],
+                want[2],
+                want[3].to_radians(),
+                want[4].to_radians(),
+                want[5].to_radians(),
+            );
+            let got = reached(controller, actual, cmd);
+            for (g, n) in axis_points(&got).iter().zip(axis_points(&want)) {
+                worst = worst.max((g - n).norm());
+            }
+        }
+    }
+    (worst, split)
+}
+
 fn oracle(h: &twinmill::machine::hexapod::Hexapod) -> Oracle {
     Oracle::new(&h.parameters(), h.tool_offset())
 }
+
+/// The orientation the written angles can hold: each printed to 1e-7° (rounding up to
+/// 8.7e-10 rad), three of them.
+const ANGLE_PRINTED_RAD: Real = 3e-9;
 
 const HOME: [Real; 6] = [0.0, 0.0, 300.0, 0.0, 0.0, 0.0];
 
@@ -133,7 +199,7 @@ fn report(sb: &Sandbox, name: &str) -> serde_json::Value {
 
 /// The step experiment (strut 1 0.1 mm long): the uncorrected faces stand apart by the step
 /// the oracle derives; after `correct` the written program's block ends reach their nominal
-/// poses within 0.1 µm and 1e-9 rad, and the program cut on the deviated machine leaves both
+/// poses within 0.1 µm and 3e-9 rad (the printing: 1e-7° per angle), and the program cut on the deviated machine leaves both
 /// faces at the commanded height: they meet within 1 µm.
 #[test]
 fn correct_makes_the_hexapod_step_faces_meet() {
@@ -176,8 +242,20 @@ fn correct_makes_the_hexapod_step_faces_meet() {
         "a block end reaches {dp} mm off its nominal pose"
     );
     assert!(
-        da < 1e-9,
+        da < ANGLE_PRINTED_RAD,
         "a block end is turned {da} rad off its nominal pose"
+    );
+    // Between them, the controller's interpolation: within the path tolerance (a quarter of
+    // the 1 µm accuracy) plus the ends' printing (1 nm, 1e-7°), on moves split for it.
+    let flute = scene.tool.length();
+    let (chord, split) = chord_error(&written, &source, HOME, &nominal, &actual, flute);
+    assert!(
+        chord <= 0.25e-3 + 2e-6,
+        "the interpolated path is {chord} mm off"
+    );
+    assert!(split > 0, "no move split");
+    println!(
+        "step: block ends {dp:.3e} mm, {da:.3e} rad; chords {chord:.3e} mm, {split} split blocks"
     );
 
     // The verification's own figures: the part as given off by the step's faces, the
@@ -203,6 +281,11 @@ fn correct_makes_the_hexapod_step_faces_meet() {
     assert!((za - 159.0).abs() < 1e-3, "face A at {za}");
     assert!((zb - 159.0).abs() < 1e-3, "face B at {zb}");
     assert!((zb - za).abs() < 1e-3, "step after correction {}", zb - za);
+    println!(
+        "step: uncorrected (oracle) A {oa:.6} B {ob:.6} step {:.6}; corrected A {za:.6} B {zb:.6} step {:.3e} mm",
+        ob - oa,
+        zb - za
+    );
 }
 
 /// The machining centre's twelve deviations on the step program, run by a partly calibrated
@@ -249,7 +332,17 @@ fn correct_of_a_hexapod_with_several_deviations_and_a_calibrated_controller() {
     let (dp, da, n) = block_end_errors(&written, &source, HOME, &controller, &actual);
     assert!(n >= 10, "{n}");
     assert!(dp < 1e-4, "{dp} mm");
-    assert!(da < 1e-9, "{da} rad");
+    assert!(da < ANGLE_PRINTED_RAD, "{da} rad");
+    // The tool of hexapod-step.toml: 40 mm long.
+    let (chord, split) = chord_error(&written, &source, HOME, &controller, &actual, 40.0);
+    assert!(
+        chord <= 0.25e-3 + 2e-6,
+        "the interpolated path is {chord} mm off"
+    );
+    assert!(split > 0, "no move split");
+    println!(
+        "several: block ends {dp:.3e} mm, {da:.3e} rad; chords {chord:.3e} mm, {split} split blocks"
+    );
     // The program as given misses by the deviations (tenths of a mm).
     let (dp0, _, _) = block_end_errors(
         &source_as_written(&source),
