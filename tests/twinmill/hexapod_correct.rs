@@ -255,9 +255,6 @@ fn correct_makes_the_hexapod_step_faces_meet() {
         "the interpolated path is {chord} mm off"
     );
     assert!(split > 0, "no move split");
-    println!(
-        "step: block ends {dp:.3e} mm, {da:.3e} rad; chords {chord:.3e} mm, {split} split blocks"
-    );
 
     // The verification's own figures: the part as given off by the step's faces, the
     // corrected one within 1 µm.
@@ -283,11 +280,6 @@ fn correct_makes_the_hexapod_step_faces_meet() {
     assert!((za - 159.0).abs() < 1e-3, "face A at {za}");
     assert!((zb - 159.0).abs() < 1e-3, "face B at {zb}");
     assert!((zb - za).abs() < 1e-3, "step after correction {}", zb - za);
-    println!(
-        "step: uncorrected (oracle) A {oa:.6} B {ob:.6} step {:.6}; corrected A {za:.6} B {zb:.6} step {:.3e} mm",
-        ob - oa,
-        zb - za
-    );
 }
 
 /// The machining centre's twelve deviations on the step program, run by a partly calibrated
@@ -343,9 +335,6 @@ fn correct_of_a_hexapod_with_several_deviations_and_a_calibrated_controller() {
         "the interpolated path is {chord} mm off"
     );
     assert!(split > 0, "no move split");
-    println!(
-        "several: block ends {dp:.3e} mm, {da:.3e} rad; chords {chord:.3e} mm, {split} split blocks"
-    );
     // The program as given misses by the deviations (tenths of a mm).
     let (dp0, _, _) = block_end_errors(
         &source_as_written(&source),
