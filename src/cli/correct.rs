@@ -7,11 +7,11 @@ use std::process::ExitCode;
 use twinmill::calibration::correct::write_gcode;
 use twinmill::output::{json_bytes, write_streamed};
 use twinmill::pipeline::pages::correct_page;
-use twinmill::pipeline::{correct, identified_model, run};
-use twinmill::scene::Need;
+use twinmill::pipeline::{correct, correct_hexapod, identified_model, run};
+use twinmill::scene::{Machine, Need};
 
-/// Why `correct` does not apply to a hexapod.
-const CORRECT_HEXAPOD: &str = "the correction inverts a serial chain's deviated axes; a hexapod is corrected in its controller: `identify … --corrected FILE` writes the calibrated controller, and `--controller FILE` runs simulate, measure and pivot on it";
+/// Why `correct --model identified` does not apply to a hexapod.
+const CORRECT_HEXAPOD: &str = "--model identified identifies a serial chain's deviations from a scanned part; a hexapod's parameters come from `identify --readings … --corrected FILE`, and `correct --controller FILE` corrects the program for the machine run by that controller";
 
 /// Which deviations `correct` corrects for.
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -27,7 +27,9 @@ pub enum ModelSource {
 /// Correct the scene's NC program for its machine's deviations: simulate the corrected
 /// program on the deviated machine, compare the milled faces and the tool path with the
 /// nominal ones, refine until within the accuracy; write <out>/<scene>-corrected.ngc and
-/// <out>/<scene>-correct.json. Serial machines only.
+/// <out>/<scene>-correct.json. On a hexapod every commanded pose is rewritten so that the
+/// machine as built, run by its controller (the scene's, or `--controller FILE`), reaches
+/// the nominal pose in all six degrees of freedom.
 #[derive(clap::Args)]
 pub struct CorrectArgs {
     #[command(flatten)]
@@ -61,7 +63,9 @@ pub fn exec(a: CorrectArgs) -> ExitCode {
         Err(code) => return code,
     };
     let bars = bars(a.args.json);
+    let hexapod = matches!(scene.machine, Machine::Hexapod(_));
     let (chain, warning) = match a.model {
+        ModelSource::Injected if hexapod => (scene.chain().clone(), None),
         ModelSource::Injected => (scene.chain().clone(), None),
         ModelSource::Identified => {
             match run(&scene, &program, &bars)
@@ -72,7 +76,12 @@ pub fn exec(a: CorrectArgs) -> ExitCode {
             }
         }
     };
-    let mut outcome = match correct(&scene, &program, &chain, a.accuracy_mm, &bars) {
+    let corrected = if hexapod {
+        correct_hexapod(&scene, &program, a.accuracy_mm, &bars)
+    } else {
+        correct(&scene, &program, &chain, a.accuracy_mm, &bars)
+    };
+    let mut outcome = match corrected {
         Ok(o) => o,
         Err(e) => return fail(e),
     };

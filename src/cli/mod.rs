@@ -101,7 +101,7 @@ pub fn set_threads(threads: Option<usize>) -> Result<(), ExitCode> {
 
 /// Sets the thread count, loads the scene, and for a serial machine checks that it has what
 /// `command` needs and loads its program. A hexapod scene comes back unloaded, except for
-/// `simulate`, which cuts a hexapod scene's program.
+/// `simulate` and `correct`, which cut a hexapod scene's program.
 pub fn load(a: &SceneArgs, command: &str, needs: &[Need]) -> Result<Loaded, ExitCode> {
     set_threads(a.threads)?;
     let budget = match &a.memory {
@@ -109,7 +109,7 @@ pub fn load(a: &SceneArgs, command: &str, needs: &[Need]) -> Result<Loaded, Exit
         None => MemoryBudget::installed(),
     };
     let scene = match Scene::load_with(&a.scene, &budget) {
-        Err(SceneError::Hexapod { .. }) if command == "simulate" => {
+        Err(SceneError::Hexapod { .. }) if matches!(command, "simulate" | "correct") => {
             let mut s = Scene::load_hexapod_cut(&a.scene, &budget).map_err(fail)?;
             if let Some(c) = &a.controller {
                 s.apply_controller_file(c).map_err(fail)?;

@@ -367,3 +367,200 @@ pub fn identified_model(scene: &Scene, report: &Report) -> Result<Chain, Pipelin
     }
     Ok(model)
 }
+
+/// The correction of a hexapod scene's program (see
+/// [`crate::calibration::correct::correct_hexapod_program`]): every commanded pose rewritten
+/// so that the machine as built, driven by the scene's controller, reaches the nominal pose
+/// in all six degrees of freedom; the corrected program simulated on the scene's machine,
+/// its path and whole part measured against the nominal ones (the program as given on the
+/// nominal machine), the subdivision refined until within `accuracy_mm`. Pass 0 is the
+/// program as given. Six struts correct every deviation of the 42 parameters: nothing is
+/// uncorrectable inside the workspace. A scene with table axes is refused.
+pub fn correct_hexapod(
+    scene: &Scene,
+    program: &Program,
+    accuracy_mm: Real,
+    progress: &dyn Progress,
+) -> Result<CorrectOutcome, PipelineError> {
+    use crate::calibration::correct::{correct_hexapod_program, hexapod_path_error};
+    use crate::scene::Machine;
+    let spath = scene.path.display().to_string();
+    let cerr = |source: CorrectError| {
+        let location = match source.line() {
+            Some(line) => format!("{}:{line}", program.path.display()),
+            None => spath.clone(),
+        };
+        PipelineError::Correct { location, source }
+    };
+    if !(accuracy_mm.is_finite() && accuracy_mm > 0.0) {
+        return Err(cerr(CorrectError::BadAccuracy(accuracy_mm)));
+    }
+    let Machine::Hexapod(hex) = &scene.machine else {
+        return correct(scene, program, scene.chain(), accuracy_mm, progress);
+    };
+    let twin = &hex.twin;
+    if twin.table.is_some() {
+        return Err(cerr(CorrectError::Unsupported(
+            "[table_axes]: correct of a hexapod with table axes is not supported: the platform \
+             holds the table's angle at home, five commanded degrees of freedom for a six-degree \
+             correction"
+                .into(),
+        )));
+    }
+    let start = program.moves.first().map_or(scene.home(), |m| m.start);
+    let mut timings: Vec<(String, Real)> = Vec::new();
+    let mut sweep_scene = scene.clone();
+    sweep_scene.sweep = SweepOptions {
+        rotary_step_bound_mm: scene
+            .sweep
+            .rotary_step_bound_mm
+            .min(accuracy_mm * SWEEP_BOUND_FRACTION),
+    };
+    // The nominal part: the program as given on the design (controller and machine both
+    // nominal).
+    let nominal_part = {
+        let mut nominal_scene = sweep_scene.clone();
+        if let Machine::Hexapod(h) = &mut nominal_scene.machine {
+            h.twin.controller = h.twin.nominal.clone();
+            h.twin.actual = h.twin.nominal.clone();
+        }
+        machine_part(&nominal_scene, program, progress)?
+    };
+    timings.extend(
+        nominal_part
+            .timings
+            .iter()
+            .map(|(n, t)| (format!("{n} nominal"), *t)),
+    );
+    let no_faces = || crate::calibration::correct::FaceCheck {
+        faces: Vec::new(),
+        step_mm: None,
+    };
+    let measure = |iteration: usize,
+                   tol: Option<Real>,
+                   cp: &CorrectedProgram,
+                   timings: &mut Vec<(String, Real)>|
+     -> Result<CorrectIteration, PipelineError> {
+        let as_program = Program {
+            path: program.path.clone(),
+            moves: cp.moves.clone(),
+            axes_used: cp.axes.clone(),
+            ended_by: program.ended_by,
+        };
+        let part = machine_part(&sweep_scene, &as_program, progress)?;
+        timings.extend(
+            part.timings
+                .iter()
+                .map(|(n, t)| (format!("{n} {iteration}"), *t)),
+        );
+        let clock = Instant::now();
+        let path = hexapod_path_error(twin, &scene.tool, program, cp).map_err(cerr)?;
+        let whole = part_error(&part.stock, &nominal_part.stock);
+        timings.push((
+            format!("measure {iteration}"),
+            clock.elapsed().as_secs_f64(),
+        ));
+        Ok(CorrectIteration {
+            iteration,
+            path_tolerance_mm: tol,
+            blocks: cp.blocks.len(),
+            path,
+            predicted_error_mm: None,
+            part: whole,
+            faces: no_faces(),
+            sweep: part.sweep,
+        })
+    };
+    let given = uncorrected(scene.chain(), program, &start).map_err(cerr)?;
+    let mut iterations = vec![measure(0, None, &given, &mut timings)?];
+    let mut opts = CorrectOptions::for_accuracy(accuracy_mm);
+    let mut status = String::new();
+    let mut met = false;
+    let mut last = None;
+    for pass in 1..=MAX_CORRECT_PASSES {
+        let clock = Instant::now();
+        let cp =
+            correct_hexapod_program(twin, &scene.tool, program, &start, &opts).map_err(cerr)?;
+        timings.push((format!("correct {pass}"), clock.elapsed().as_secs_f64()));
+        let it = measure(pass, Some(opts.path_tolerance_mm), &cp, &mut timings)?;
+        let (path_mm, part_mm) = (it.path.max_mm, it.part.max_mm);
+        iterations.push(it);
+        last = Some(cp);
+        if path_mm <= accuracy_mm && part_mm <= accuracy_mm {
+            met = true;
+            status = format!(
+                "met in {pass} pass(es): path and part within {accuracy_mm} mm (all six degrees \
+                 of freedom corrected)"
+            );
+            break;
+        }
+        opts.path_tolerance_mm /= 4.0;
+        status = format!(
+            "after {pass} pass(es) the path is off by {path_mm:.6} mm and the part by \
+             {part_mm:.6} mm"
+        );
+    }
+    let corrected = last.unwrap_or(given);
+    let corrected_for = scene.injected().clone();
+    let file = format!("{}-corrected.ngc", scene.name);
+    let mut header = vec![
+        format!(
+            "twinmill correct: {} corrected for the hexapod of scene {}",
+            program.path.display(),
+            scene.name
+        ),
+        format!(
+            "deviations of the machine as built, mm: {}",
+            if corrected_for.is_empty() {
+                "none".to_string()
+            } else {
+                corrected_for
+                    .iter()
+                    .map(|(k, v)| format!("{k} = {v}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            }
+        ),
+        format!(
+            "the controller's kinematics: {}",
+            if twin.controller == twin.nominal {
+                "the nominal machine's".to_string()
+            } else {
+                "calibrated parameters (poses corrected for this controller only)".to_string()
+            }
+        ),
+    ];
+    if let Some(f) = iterations.last() {
+        header.push(format!(
+            "predicted on the twin: path within {:.6} mm, part within {:.6} mm, accuracy asked {} mm",
+            f.path.max_mm, f.part.max_mm, accuracy_mm
+        ));
+    }
+    header.push(
+        "X Y Z the tool point in the base frame, A B C the platform's angles, turned about z \
+         by C, then y by B, then x by A; each block names its source line, subdivided moves \
+         also their part k/n"
+            .into(),
+    );
+    let report = CorrectReport {
+        warning: None,
+        scene: scene.name.clone(),
+        program: program.path.display().to_string(),
+        corrected_program: file,
+        corrected_for,
+        simulated: scene.injected().clone(),
+        accuracy_mm,
+        met,
+        status,
+        iterations,
+        correction: corrected.summary,
+        uncorrectable: Vec::new(),
+        moves: corrected.per_move.clone(),
+        timings_s: timings,
+    };
+    Ok(CorrectOutcome {
+        report,
+        corrected,
+        header,
+    })
+}

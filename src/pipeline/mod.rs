@@ -31,7 +31,7 @@ pub mod measure;
 pub mod measurements;
 pub mod hexapod_probe;
 
-pub use correct::{CorrectOutcome, correct, identified_model};
+pub use correct::{CorrectOutcome, correct, correct_hexapod, identified_model};
 pub use design::{DesignOutcome, MAX_DESIGN_ROUNDS, design_scene};
 pub use fit::{FitRequest, Selection, Shape, fit_cloud};
 pub use identify::{

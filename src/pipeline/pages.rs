@@ -352,7 +352,7 @@ pub fn correct_page(
     let mut stock = make_stock(scene)?;
     sweep_program(
         &mut stock,
-        scene.chain(),
+        scene.kinematics(),
         &scene.tool,
         corrected,
         &scene.sweep,

@@ -12,7 +12,7 @@ use twinmill::pipeline::machine_part;
 use twinmill::progress::NoProgress;
 use twinmill::scene::{HexapodScene, Machine, MemoryBudget, Scene, SceneError};
 
-fn scene_path(name: &str) -> PathBuf {
+pub(super) fn scene_path(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("scenes")
         .join(name)
@@ -23,14 +23,14 @@ fn scene_path(name: &str) -> PathBuf {
 // R = Rz(c)·Ry(b)·Rx(a), readings s_i = L_i − l0_i), independent of the library's
 // kinematics and sweep.
 
-struct Oracle {
+pub(super) struct Oracle {
     base: [Vector3; 6],
     platform: [Vector3; 6],
     l0: [Real; 6],
     tool: Vector3,
 }
 
-fn rpy(a: Real, b: Real, c: Real) -> Matrix3<Real> {
+pub(super) fn rpy(a: Real, b: Real, c: Real) -> Matrix3<Real> {
     let rx = Matrix3::new(1.0, 0.0, 0.0, 0.0, a.cos(), -a.sin(), 0.0, a.sin(), a.cos());
     let ry = Matrix3::new(b.cos(), 0.0, b.sin(), 0.0, 1.0, 0.0, -b.sin(), 0.0, b.cos());
     let rz = Matrix3::new(c.cos(), -c.sin(), 0.0, c.sin(), c.cos(), 0.0, 0.0, 0.0, 1.0);
@@ -39,7 +39,7 @@ fn rpy(a: Real, b: Real, c: Real) -> Matrix3<Real> {
 
 impl Oracle {
     /// From the 42 parameters in the documented order (b_i, a_i, l0_i) and the tool offset.
-    fn new(p: &[Real; 42], tool: Vector3) -> Self {
+    pub(super) fn new(p: &[Real; 42], tool: Vector3) -> Self {
         Self {
             base: std::array::from_fn(|i| Vector3::new(p[3 * i], p[3 * i + 1], p[3 * i + 2])),
             platform: std::array::from_fn(|i| {
@@ -51,7 +51,7 @@ impl Oracle {
     }
 
     /// Readings at the pose (x, y, z mm; a, b, c rad).
-    fn readings(&self, q: &Vector6<Real>) -> Vector6<Real> {
+    pub(super) fn readings(&self, q: &Vector6<Real>) -> Vector6<Real> {
         let r = rpy(q[3], q[4], q[5]);
         let t = Vector3::new(q[0], q[1], q[2]);
         Vector6::from_fn(|i, _| {
@@ -61,7 +61,7 @@ impl Oracle {
 
     /// The pose whose readings are `s`, by Newton from `near` with a central-difference
     /// Jacobian.
-    fn pose_of(&self, s: &Vector6<Real>, near: &Vector6<Real>) -> Vector6<Real> {
+    pub(super) fn pose_of(&self, s: &Vector6<Real>, near: &Vector6<Real>) -> Vector6<Real> {
         let mut q = *near;
         for _ in 0..50 {
             let f = self.readings(&q) - s;
@@ -83,9 +83,9 @@ impl Oracle {
     }
 }
 
-/// The machine's pose for a command (mm, degrees): the nominal readings, solved on the
-/// actual machine.
-fn reached(nominal: &Oracle, actual: &Oracle, cmd: [Real; 6]) -> Vector6<Real> {
+/// The machine's pose for a command (mm, degrees): the readings of the controller (`nominal`
+/// here, or calibrated parameters), solved on the actual machine.
+pub(super) fn reached(nominal: &Oracle, actual: &Oracle, cmd: [Real; 6]) -> Vector6<Real> {
     let q = Vector6::new(
         cmd[0],
         cmd[1],
@@ -101,7 +101,7 @@ fn reached(nominal: &Oracle, actual: &Oracle, cmd: [Real; 6]) -> Vector6<Real> {
 /// point (x0, y0) while its tip is commanded along x from `xs` to `xe` at (y, z) with the
 /// angles `abc`: the disc's plane at (x0, y0), wherever that point lies within the disc,
 /// minimised over poses sampled 1 µm apart near it.
-fn face_height(
+pub(super) fn face_height(
     nominal: &Oracle,
     actual: &Oracle,
     (xs, xe): (Real, Real),
@@ -130,7 +130,7 @@ fn face_height(
 }
 
 /// The top of the material along the z ray nearest (x, y): its exact (x, y) and height.
-fn z_top(stock: &TriDexel, x: Real, y: Real) -> (Real, Real, Real) {
+pub(super) fn z_top(stock: &TriDexel, x: Real, y: Real) -> (Real, Real, Real) {
     let g = &stock.grids()[2];
     let o = g.ray_origin(0, 0);
     let (du, dv) = g.pitches();
@@ -143,7 +143,7 @@ fn z_top(stock: &TriDexel, x: Real, y: Real) -> (Real, Real, Real) {
     (p.x, p.y, top)
 }
 
-fn load(path: &Path) -> (Scene, HexapodScene) {
+pub(super) fn load(path: &Path) -> (Scene, HexapodScene) {
     let scene = Scene::load_hexapod_cut(path, &MemoryBudget::installed()).expect("scene loads");
     let hex = HexapodScene::load(path).expect("hexapod loads");
     (scene, hex)

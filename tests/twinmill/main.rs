@@ -23,6 +23,7 @@ mod hexapod_calibration;
 mod hexapod_probe;
 mod hexapod_dbb_probe;
 mod hexapod_cut;
+mod hexapod_correct;
 mod hexapod_controller;
 mod verbs;
 mod fuzz;

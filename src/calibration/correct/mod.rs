@@ -92,6 +92,7 @@
 //! given; it never parses text, opens files or runs the scanner.
 
 mod gcode;
+mod hexapod;
 mod path;
 mod pose;
 mod program;
@@ -101,15 +102,16 @@ mod tests;
 mod verify;
 
 pub use gcode::write_gcode;
+pub use hexapod::{HexapodFit, HexapodSolver, correct_hexapod_program, hexapod_path_error};
 use path::{emitted_kind, lerp, taken_up};
 pub use path::{path_point, straight_at_fixed_rotary};
 use pose::axis_point;
 pub use pose::{FlutePoints, PoseFit, PoseSolver};
-use program::format_axis;
 pub use program::{
     Block, CorrectedProgram, CorrectionSummary, MoveCorrection, as_printed, controller_length,
     correct_program, uncorrected,
 };
+use program::{block_moves, format_axis, inverse_time_feeds, printed};
 pub use tcp::in_tcp;
 pub use verify::{
     FaceCheck, FaceError, PartError, PathError, axis_angle_error, face_errors, nominal_face,
@@ -177,6 +179,18 @@ pub enum CorrectError {
         /// The limit (mm or degrees).
         limit: Real,
     },
+    /// A hexapod's corrected command lies outside the controller's workspace (a strut out
+    /// of its stroke, a joint past its limit, a singular pose), or the machine cannot
+    /// reach a command.
+    #[error("line {line}: the corrected pose {pose} is outside the workspace: {message}")]
+    Workspace {
+        /// Source line.
+        line: usize,
+        /// The command (mm, degrees).
+        pose: String,
+        /// Why.
+        message: String,
+    },
     /// A rotary move would need more sub-moves than allowed to meet the path tolerance.
     #[error(
         "line {line}: meeting the path tolerance of {tolerance_mm} mm needs more than {limit} sub-moves"
@@ -189,6 +203,9 @@ pub enum CorrectError {
         /// The limit.
         limit: usize,
     },
+    /// What correction does not do on this machine.
+    #[error("{0}")]
+    Unsupported(String),
     /// A face to check has no cut on its line, or too few crossings to fit.
     #[error("face '{face}': {message}")]
     Face {
@@ -207,6 +224,7 @@ impl CorrectError {
             | CorrectError::MissingAxis { line, .. }
             | CorrectError::NotConverged { line, .. }
             | CorrectError::Unreachable { line, .. }
+            | CorrectError::Workspace { line, .. }
             | CorrectError::TooManySubmoves { line, .. } => Some(*line),
             _ => None,
         }

@@ -126,7 +126,7 @@ pub(super) fn format_axis(letter: AxisLetter, v: Real) -> String {
     }
 }
 
-fn printed(axes: &[AxisLetter], q: &AxisValues) -> AxisValues {
+pub(super) fn printed(axes: &[AxisLetter], q: &AxisValues) -> AxisValues {
     let mut out = *q;
     for &l in axes {
         out.set(l, as_printed(l, q.get(l)));
@@ -341,9 +341,26 @@ pub fn correct_program(
     }
     summary.blocks = blocks.len();
     summary.inverse_time_blocks = inverse_time_feeds(&mut blocks, &program.moves, start);
+    let moves = block_moves(&blocks, start);
+    Ok(CorrectedProgram {
+        start: *start,
+        axes,
+        blocks,
+        moves,
+        per_move,
+        summary,
+        ended: program.ended_by.is_some(),
+    })
+}
+
+pub use crate::nc::controller_length;
+
+/// The blocks as moves from `start`, as the controller runs them (a block that goes
+/// nowhere is no move).
+pub(super) fn block_moves(blocks: &[Block], start: &AxisValues) -> Vec<Move> {
     let mut moves = Vec::with_capacity(blocks.len());
     let mut at = *start;
-    for b in &blocks {
+    for b in blocks {
         if b.end != at {
             // A G93 block runs at the feed that makes its length take 1/F minutes, as the
             // controller converts it.
@@ -361,18 +378,8 @@ pub fn correct_program(
         }
         at = b.end;
     }
-    Ok(CorrectedProgram {
-        start: *start,
-        axes,
-        blocks,
-        moves,
-        per_move,
-        summary,
-        ended: program.ended_by.is_some(),
-    })
+    moves
 }
-
-pub use crate::nc::controller_length;
 
 /// The length a feed-per-minute controller applies a source move's F to: a straight move's
 /// [`controller_length`]; an arc's helix in X Y Z (LinuxCNC's `find_arc_length`: the start
@@ -407,7 +414,11 @@ fn source_length(mv: &Move) -> Real {
 /// must take `T/n`, and gets `F = n/T` in `G93` unless `controller_length / F` of the block
 /// is within [`DURATION_TOLERANCE`] of `T/n` (an arc's `T` is its helix's length at F,
 /// [`source_length`]). Returns the number of blocks put in inverse time.
-fn inverse_time_feeds(blocks: &mut [Block], source: &[Move], start: &AxisValues) -> usize {
+pub(super) fn inverse_time_feeds(
+    blocks: &mut [Block],
+    source: &[Move],
+    start: &AxisValues,
+) -> usize {
     let turns = |a: &AxisValues, b: &AxisValues| {
         [AxisLetter::A, AxisLetter::B, AxisLetter::C]
             .iter()
