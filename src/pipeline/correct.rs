@@ -103,18 +103,7 @@ pub fn correct(
                    cp: &CorrectedProgram,
                    timings: &mut Vec<(String, Real)>|
      -> Result<CorrectIteration, PipelineError> {
-        let as_program = Program {
-            path: program.path.clone(),
-            moves: cp.moves.clone(),
-            axes_used: cp.axes.clone(),
-            ended_by: program.ended_by,
-        };
-        let part = machine_part(&sweep_scene, &as_program, progress)?;
-        timings.extend(
-            part.timings
-                .iter()
-                .map(|(n, t)| (format!("{n} {iteration}"), *t)),
-        );
+        let part = cut_corrected(&sweep_scene, program, cp, iteration, timings, progress)?;
         let clock = Instant::now();
         let faces = face_errors(
             &part.stock,
@@ -441,18 +430,7 @@ pub fn correct_hexapod(
                    cp: &CorrectedProgram,
                    timings: &mut Vec<(String, Real)>|
      -> Result<CorrectIteration, PipelineError> {
-        let as_program = Program {
-            path: program.path.clone(),
-            moves: cp.moves.clone(),
-            axes_used: cp.axes.clone(),
-            ended_by: program.ended_by,
-        };
-        let part = machine_part(&sweep_scene, &as_program, progress)?;
-        timings.extend(
-            part.timings
-                .iter()
-                .map(|(n, t)| (format!("{n} {iteration}"), *t)),
-        );
+        let part = cut_corrected(&sweep_scene, program, cp, iteration, timings, progress)?;
         let clock = Instant::now();
         let path = hexapod_path_error(twin, &scene.tool, program, cp).map_err(cerr)?;
         let whole = part_error(&part.stock, &nominal_part.stock);
@@ -563,4 +541,29 @@ pub fn correct_hexapod(
         corrected,
         header,
     })
+}
+
+/// The corrected program `cp` (in the place of `program`) cut on `scene`'s machine, its
+/// timings recorded under `iteration`.
+fn cut_corrected(
+    scene: &Scene,
+    program: &Program,
+    cp: &CorrectedProgram,
+    iteration: usize,
+    timings: &mut Vec<(String, Real)>,
+    progress: &dyn Progress,
+) -> Result<super::Part, PipelineError> {
+    let as_program = Program {
+        path: program.path.clone(),
+        moves: cp.moves.clone(),
+        axes_used: cp.axes.clone(),
+        ended_by: program.ended_by,
+    };
+    let part = machine_part(scene, &as_program, progress)?;
+    timings.extend(
+        part.timings
+            .iter()
+            .map(|(n, t)| (format!("{n} {iteration}"), *t)),
+    );
+    Ok(part)
 }

@@ -296,16 +296,7 @@ pub fn correct_hexapod_program(
             if worst <= opts.path_tolerance_mm {
                 break (pts, worst, fits);
             }
-            let grow = (worst / opts.path_tolerance_mm).sqrt() * 1.2;
-            let next = ((n as Real) * grow.max(2.0)).ceil();
-            if next > MAX_SUBMOVES as Real {
-                return Err(CorrectError::TooManySubmoves {
-                    line: mv.line,
-                    tolerance_mm: opts.path_tolerance_mm,
-                    limit: MAX_SUBMOVES,
-                });
-            }
-            n = next as usize;
+            n = next_split(n, worst, opts, mv.line)?;
         };
         for (j, p) in points.iter().enumerate().skip(1) {
             blocks.push(Block {

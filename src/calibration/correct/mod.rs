@@ -296,6 +296,27 @@ const RANK_RATIO: Real = 1e-10;
 const ROTARY_DAMPING: Real = 1e-2;
 /// Largest number of sub-moves for one source move.
 pub const MAX_SUBMOVES: usize = 100_000;
+
+/// The next number of parts to split the move at `line` into, after `n` parts left a
+/// chord error of `worst` against the tolerance: the chord error falls as 1/n², so jump
+/// close to the n needed, at least doubling; refused past [`MAX_SUBMOVES`].
+pub(crate) fn next_split(
+    n: usize,
+    worst: Real,
+    opts: &CorrectOptions,
+    line: usize,
+) -> Result<usize, CorrectError> {
+    let grow = (worst / opts.path_tolerance_mm).sqrt() * 1.2;
+    let next = ((n as Real) * grow.max(2.0)).ceil();
+    if next > MAX_SUBMOVES as Real {
+        return Err(CorrectError::TooManySubmoves {
+            line,
+            tolerance_mm: opts.path_tolerance_mm,
+            limit: MAX_SUBMOVES,
+        });
+    }
+    Ok(next as usize)
+}
 /// Where a sub-move's chord is checked against the best achievable path.
 const CHECK_AT: [Real; 3] = [0.25, 0.5, 0.75];
 /// Decimals printed for linear axes (mm): 1 nm.

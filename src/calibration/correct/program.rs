@@ -301,17 +301,7 @@ pub fn correct_program(
                 solver.set_directions(&dirs);
                 break (pts, worst, fits);
             }
-            // The chord error falls as 1/n²: jump close to the n needed, at least double.
-            let grow = (worst / opts.path_tolerance_mm).sqrt() * 1.2;
-            let next = ((n as Real) * grow.max(2.0)).ceil();
-            if next > MAX_SUBMOVES as Real {
-                return Err(CorrectError::TooManySubmoves {
-                    line: mv.line,
-                    tolerance_mm: opts.path_tolerance_mm,
-                    limit: MAX_SUBMOVES,
-                });
-            }
-            n = next as usize;
+            n = next_split(n, worst, opts, mv.line)?;
         };
         for (j, p) in points.iter().enumerate().skip(1) {
             blocks.push(Block {
