@@ -9,7 +9,9 @@
 //! accepts it.
 
 use crate::calibration::engine::Outcome;
-use crate::calibration::instruments::{self, MachineParameter, Measurement, Slot, Target};
+use crate::calibration::instruments::{
+    self, IdentifiedRecord, MachineParameter, Measurement, Slot, Target, identified_file,
+};
 use crate::machine::chain::Chain;
 use crate::math::Real;
 use crate::metrology::ballbar::{BallBarSetup, Plane};
@@ -497,21 +499,6 @@ fn report_of(
     }
 }
 
-/// A TOML string (a JSON string's escapes are TOML's).
-fn toml_string(s: &str) -> String {
-    serde_json::to_string(s).unwrap_or_else(|_| "\"\"".into())
-}
-
-fn toml_strings(v: &[String]) -> String {
-    format!(
-        "[{}]",
-        v.iter()
-            .map(|s| toml_string(s))
-            .collect::<Vec<_>>()
-            .join(", ")
-    )
-}
-
 /// The deviations file: the fragment, then `[identified]` and `[identified.sigma]`.
 fn deviations_file(fragment: &str, report: &MeasurementsReport, outcome: &Outcome) -> String {
     let sigma: Vec<(String, Real)> = report
@@ -531,51 +518,6 @@ fn deviations_file(fragment: &str, report: &MeasurementsReport, outcome: &Outcom
             sigma: &sigma,
         },
     )
-}
-
-/// What a deviations file records of its identification (its `[identified]` section).
-pub(crate) struct IdentifiedRecord<'a> {
-    /// The machine's name.
-    pub machine: &'a str,
-    /// The scene's name.
-    pub scene: &'a str,
-    /// The machine's axes, in chain order.
-    pub axes: &'a [String],
-    /// The measurement files.
-    pub sources: &'a [String],
-    /// Whether a misfit was accepted on request.
-    pub misfit_accepted: bool,
-    /// The parameters not determined on their own.
-    pub not_determined: &'a [String],
-    /// Each identified parameter's standard uncertainty.
-    pub sigma: &'a [(String, Real)],
-}
-
-/// The deviations file of every identification: the machine's sections (`fragment`), then
-/// `[identified]` and `[identified.sigma]`, which `--deviations` reads back.
-pub(crate) fn identified_file(fragment: &str, r: &IdentifiedRecord) -> String {
-    use std::fmt::Write as _;
-    let mut s = fragment.to_string();
-    let _ = writeln!(
-        s,
-        "\n# What these sections were identified for and from; read back by `--deviations`."
-    );
-    let _ = writeln!(s, "[identified]");
-    let _ = writeln!(s, "machine = {}", toml_string(r.machine));
-    let _ = writeln!(s, "scene = {}", toml_string(r.scene));
-    let _ = writeln!(s, "axes = {}", toml_strings(r.axes));
-    let _ = writeln!(s, "sources = {}", toml_strings(r.sources));
-    let _ = writeln!(s, "misfit_accepted = {}", r.misfit_accepted);
-    let _ = writeln!(s, "not_determined = {}", toml_strings(r.not_determined));
-    let _ = writeln!(
-        s,
-        "\n# Each identified parameter's standard uncertainty (its units)."
-    );
-    let _ = writeln!(s, "[identified.sigma]");
-    for (name, sigma) in r.sigma {
-        let _ = writeln!(s, "{} = {:?}", toml_string(name), sigma);
-    }
-    s
 }
 
 #[cfg(test)]

@@ -508,9 +508,9 @@ fn location_file(
         .iter()
         .map(|e| (e.name.clone(), e.sigma))
         .collect();
-    Ok(super::measurements::identified_file(
+    Ok(crate::calibration::instruments::identified_file(
         &fragment,
-        &super::measurements::IdentifiedRecord {
+        &crate::calibration::instruments::IdentifiedRecord {
             machine: scene.machine_name(),
             scene: &scene.name,
             axes: &axes,
