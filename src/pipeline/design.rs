@@ -11,7 +11,8 @@
 use super::{IdentifyOutcome, PipelineError, identify_scene};
 use crate::calibration::calibrate::{Feature, IsoTerm, component_magnitude, magnitude};
 use crate::calibration::design::{
-    Design, DesignOptions, Key, MeasuredFaces, design_with, key_of, kind_name, lever_notes, order,
+    Design, DesignOptions, Family, Key, MeasuredFaces, design_with, key_of, kind_name, lever_notes,
+    order,
 };
 use crate::machine::chain::DeviationId;
 use crate::progress::Progress;
@@ -118,7 +119,41 @@ pub fn design_scene(
     if !verified.report.converged {
         how.push_str("; its model-correction loop did not converge");
     }
+    // What this part leaves undetermined, tried on a block of its own: a direction no cut
+    // of the family can see stays undetermined there too, and is not offered.
+    let (second_part, second_part_cuts) = match design.family {
+        Family::Block => {
+            let missing = |name: &str| !i.identified.iter().any(|n| n == name);
+            let name_of = |id: &DeviationId| scene.model().deviation_name(*id);
+            let ids2: Vec<DeviationId> = ids
+                .iter()
+                .filter(|id| missing(&name_of(id)))
+                .copied()
+                .collect();
+            let iso2: Vec<IsoTerm> = iso.iter().filter(|t| missing(&t.name)).cloned().collect();
+            if ids2.is_empty() && iso2.is_empty() {
+                (Vec::new(), None)
+            } else {
+                match design_with(
+                    scene.model(),
+                    &scene.tool,
+                    &ids2,
+                    &iso2,
+                    &opts,
+                    &MeasuredFaces::new(),
+                ) {
+                    Ok(d2) if !d2.identifiability.identified.is_empty() => {
+                        (d2.identifiability.identified.clone(), Some(d2.cuts.len()))
+                    }
+                    _ => (Vec::new(), None),
+                }
+            }
+        }
+        Family::Bar => (Vec::new(), None),
+    };
     let report = DesignReport {
+        second_part,
+        second_part_cuts,
         scene: scene.name.clone(),
         parameters: params.to_vec(),
         cuts: design

@@ -42,6 +42,14 @@ pub struct DesignReport {
     /// Why the weak directions are weak (the tip-height lever of the Z-squareness and
     /// spindle-tilt pairs).
     pub notes: Vec<String>,
+    /// Parameters this part leaves undetermined that a second part designed for them
+    /// alone determines (the block has no room left for the cuts that see them), and that
+    /// part's cut count; empty when there are none.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub second_part: Vec<String>,
+    /// The second part's cuts.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub second_part_cuts: Option<usize>,
 }
 
 impl DesignReport {
@@ -74,6 +82,15 @@ impl DesignReport {
         let _ = writeln!(s, "  verified      {}", self.verified);
         for n in &self.notes {
             let _ = writeln!(s, "  lever         {n}");
+        }
+        if let Some(n) = self.second_part_cuts {
+            let names = self.second_part.join(",");
+            let _ = writeln!(
+                s,
+                "  second part   {names}: no room is left on this block for the cuts that see \
+                 them; a second block designed for them alone (design --params {names}) is \
+                 expected to determine them with {n} cuts"
+            );
         }
         s
     }

@@ -87,7 +87,12 @@ fn injected(text: &str) -> Vec<(String, Real)> {
 
 /// Designs for `params` on the scene `stem` and checks the verified identification against
 /// the scene's own injected values and the hand argument's undetermined set.
-fn designed_and_recovered(stem: &str, params: &[&str], not_determined: &[&str]) {
+fn designed_and_recovered(
+    stem: &str,
+    params: &[&str],
+    not_determined: &[&str],
+    second_part: &[&str],
+) {
     let (scene, text) = scene_with_scanner(stem);
     let truth = injected(&text);
     assert!(!truth.is_empty(), "{stem}: the scene injects deviations");
@@ -156,6 +161,11 @@ fn designed_and_recovered(stem: &str, params: &[&str], not_determined: &[&str]) 
     expected.sort_unstable();
     assert_eq!(undetermined, expected, "{stem}: not determined");
     assert_eq!(out.report.not_determined.len(), expected.len());
+    // What a second block is offered for: the undetermined terms some cut could see, not
+    // those no cut of the family sees (the argument at the top).
+    let mut offered: Vec<&str> = out.report.second_part.iter().map(String::as_str).collect();
+    offered.sort_unstable();
+    assert_eq!(offered, second_part, "{stem}: second part");
     for p in params.iter().filter(|p| !not_determined.contains(p)) {
         let e = id
             .parameters
@@ -193,6 +203,7 @@ fn design_on_a_c_table_recovers_its_line() {
         "c-table-step",
         &["dx_CX", "dy_CX", "dz_CX", "alpha_CX", "beta_CX", "gamma_CX"],
         &["dz_CX", "gamma_CX"],
+        &[],
     );
 }
 
@@ -212,7 +223,48 @@ fn design_on_a_head_table_machine_recovers_both_lines() {
             "EX0C", "EY0C", "EZ0C", "EA0C", "EB0C", "EC0C", "EX0B", "EZ0B", "EA0B", "EC0B",
         ],
         &["EA0B", "EC0B", "EC0C", "EZ0C"],
+        &["EA0B", "EC0B"],
     );
+    // The second block the design offers for them: its cuts along Z at B = ±90° (the tool
+    // across Z, the flank facing ±Y) see the head's tilts, which shift and lean the tool
+    // along Y by `(1 − cos b)` (EA0B) and `sin b` (EC0B): equal at +90°, opposite at −90°,
+    // so both are determined; cut, scanned and identified, each lies within 3σ of the
+    // scene's value.
+    let (scene, text) = scene_with_scanner("head-table");
+    let truth = injected(&text);
+    let iso: Vec<IsoTerm> = ["EA0B", "EC0B"]
+        .iter()
+        .map(|n| IsoTerm::parse(scene.model(), n).expect("a term"))
+        .collect();
+    let names = vec!["EA0B".to_string(), "EC0B".to_string()];
+    let out = twinmill::pipeline::design_scene(
+        &scene,
+        &names,
+        &[],
+        &iso,
+        "head-table-second-design",
+        &NoProgress,
+    )
+    .expect("the second part's design");
+    let id = &out.verified.identification;
+    for n in &names {
+        let e = id
+            .parameters
+            .iter()
+            .find(|e| &e.name == n)
+            .unwrap_or_else(|| panic!("{n} not identified by the second part"));
+        let t = truth.iter().find(|(k, _)| k == n).map_or(0.0, |(_, v)| *v);
+        assert!(
+            (e.value - t).abs() <= 3.0 * e.sigma && e.sigma <= 1e-4,
+            "{n} = {} ± {} against {t}",
+            e.value,
+            e.sigma
+        );
+    }
+    assert!(out.design.cuts.iter().any(|c| {
+        let (s, e) = (c.cut.start, c.cut.end);
+        s.get(twinmill::nc::AxisLetter::Z) != e.get(twinmill::nc::AxisLetter::Z)
+    }));
 }
 
 /// The trunnion: C's and A's location terms (the scene's eight), with the C table's offset
@@ -225,6 +277,7 @@ fn design_on_a_trunnion_recovers_both_lines() {
             "EX0C", "EY0C", "EZ0C", "EA0C", "EB0C", "EC0C", "EY0A", "EZ0A", "EB0A", "EC0A",
         ],
         &["EC0C", "EZ0C"],
+        &[],
     );
 }
 
