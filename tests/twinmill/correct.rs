@@ -382,16 +382,18 @@ fn head_table_oracle(chain: &twinmill::machine::chain::Chain, q: &[Real; 5], h: 
     [p.x, p.y, p.z]
 }
 
-#[test]
-fn head_table_programs_at_b_zero_are_corrected_not_refused() {
-    use twinmill::nc::AxisLetter as L;
-    let s = Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/head-table.toml"))
-        .expect("loads");
+/// The scene's program corrected to 1 µm on its machine, how far the corrected program
+/// leaves the nominal path, and how far the program as given does, in mm: at nine points of
+/// every block, the tip, mid-flute and flute end, each pose mapped through `oracle` (a
+/// chain written out by hand, given the axis values in `order`).
+fn corrected_path_errors(
+    s: &Scene,
+    order: [twinmill::nc::AxisLetter; 5],
+    oracle: fn(&twinmill::machine::chain::Chain, &[Real; 5], Real) -> [Real; 3],
+) -> (twinmill::calibration::correct::CorrectedProgram, Real, Real) {
     let program = s.load_program().expect("parses");
     let start = program.moves.first().map_or(s.home(), |m| m.start);
     let opts = twinmill::calibration::correct::CorrectOptions::for_accuracy(1e-3);
-    // Every move, 3+2 at B = 0 (C parallel to the tool), at B = 30, and C and B turning
-    // while cutting, corrects; before, every pose failed with a C correction of −86°.
     let cp = twinmill::calibration::correct::correct_program(
         s.chain(),
         &s.tool,
@@ -401,7 +403,7 @@ fn head_table_programs_at_b_zero_are_corrected_not_refused() {
     )
     .expect("corrects");
     let nominal = s.chain().nominal();
-    let axes = |a: &twinmill::nc::AxisValues| [L::C, L::X, L::Y, L::Z, L::B].map(|l| a.get(l));
+    let axes = |a: &twinmill::nc::AxisValues| order.map(|l| a.get(l));
     let l = s.tool.length();
     let (mut worst, mut given): (Real, Real) = (0.0, 0.0);
     let mut at = cp.start;
@@ -419,9 +421,9 @@ fn head_table_programs_at_b_zero_are_corrected_not_refused() {
             }));
             let cmd = twinmill::calibration::correct::path_point(src, b.s.0 + (b.s.1 - b.s.0) * t);
             for h in [0.0, l / 2.0, l] {
-                let d = head_table_oracle(s.chain(), &axes(&q), h);
-                let n = head_table_oracle(&nominal, &axes(&cmd), h);
-                let g = head_table_oracle(s.chain(), &axes(&cmd), h);
+                let d = oracle(s.chain(), &axes(&q), h);
+                let n = oracle(&nominal, &axes(&cmd), h);
+                let g = oracle(s.chain(), &axes(&cmd), h);
                 let dist = |a: [Real; 3], b: [Real; 3]| {
                     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
                 };
@@ -430,6 +432,18 @@ fn head_table_programs_at_b_zero_are_corrected_not_refused() {
             }
         }
     }
+    (cp, worst, given)
+}
+
+#[test]
+fn head_table_programs_at_b_zero_are_corrected_not_refused() {
+    use twinmill::nc::AxisLetter as L;
+    let s = Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/head-table.toml"))
+        .expect("loads");
+    // Every move, 3+2 at B = 0 (C parallel to the tool), at B = 30, and C and B turning
+    // while cutting, corrects; before, every pose failed with a C correction of −86°.
+    let (cp, worst, given) =
+        corrected_path_errors(&s, [L::C, L::X, L::Y, L::Z, L::B], head_table_oracle);
     assert!(given > 0.02, "the program as given is {given} mm off");
     // Tip, mid-flute and flute end within 1 µm of the nominal path: the tilts about X that
     // no axis takes at B = 0 (EA0C + EA0B ≈ −5 µrad … 75 µrad) cost at most |δv|·L/2.
@@ -647,47 +661,8 @@ fn head_head_programs_are_corrected_to_a_micrometre() {
     let path = sb.write("hh.toml", scene.as_bytes());
     sb.write("hh.ngc", program.as_bytes());
     let s = Scene::load(&path).expect("loads");
-    let program = s.load_program().expect("parses");
-    let start = program.moves.first().map_or(s.home(), |m| m.start);
-    let opts = twinmill::calibration::correct::CorrectOptions::for_accuracy(1e-3);
-    let cp = twinmill::calibration::correct::correct_program(
-        s.chain(),
-        &s.tool,
-        &program,
-        &start,
-        &opts,
-    )
-    .expect("corrects");
-    let nominal = s.chain().nominal();
-    let axes = |a: &twinmill::nc::AxisValues| [L::X, L::Y, L::Z, L::C, L::B].map(|l| a.get(l));
-    let l = s.tool.length();
-    let (mut worst, mut given): (Real, Real) = (0.0, 0.0);
-    let mut at = cp.start;
-    for b in &cp.blocks {
-        let from = at;
-        at = b.end;
-        let Some(src) = b.source.map(|i| &program.moves[i]) else {
-            continue;
-        };
-        for i in 0..=8 {
-            let t = i as Real / 8.0;
-            let (f, e) = (from.to_array(), b.end.to_array());
-            let q = twinmill::nc::AxisValues::from_array(std::array::from_fn(|k| {
-                f[k] + (e[k] - f[k]) * t
-            }));
-            let cmd = twinmill::calibration::correct::path_point(src, b.s.0 + (b.s.1 - b.s.0) * t);
-            for h in [0.0, l / 2.0, l] {
-                let d = head_head_oracle(s.chain(), &axes(&q), h);
-                let n = head_head_oracle(&nominal, &axes(&cmd), h);
-                let g = head_head_oracle(s.chain(), &axes(&cmd), h);
-                let dist = |a: [Real; 3], b: [Real; 3]| {
-                    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-                };
-                worst = worst.max(dist(d, n));
-                given = given.max(dist(g, n));
-            }
-        }
-    }
+    let (cp, worst, given) =
+        corrected_path_errors(&s, [L::X, L::Y, L::Z, L::C, L::B], head_head_oracle);
     assert!(given > 0.005, "the program as given is {given} mm off");
     assert!(worst < 1e-3, "corrected path off by {worst} mm");
     assert!(
