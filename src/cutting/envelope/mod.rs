@@ -58,13 +58,18 @@
 //! Normals at the interval ends are the tool's outward normal of the face that bounds the
 //! interval (side, end plane, or sphere) at that point and pose.
 //!
-//! **Invariant:** the envelope knows only the tool's shape, the chain's poses and one move;
-//! it never reads programs, stock or files.
+//! **Pose sources.** A machine read pose by pose (a hexapod) has no chain: its move is the
+//! smooth curve through its pilot poses ([`SampledPath`], [`RotaryEnvelope::sampled`]), with
+//! rates in closed form and speed bounds from the curve; everything above applies to it.
+//!
+//! **Invariant:** the envelope knows only the tool's shape, the chain's poses (or a pose
+//! source's pilot poses) and one move; it never reads programs, stock or files.
 //!
 //! **Files.** This one holds the tolerances, the error and [`RotaryEnvelope`] as a
 //! [`Cutter`]; `path` the move's poses and speed bounds, `probe` the tool at one pose against
 //! a ray, `solve` the envelope's construction and the per-ray solve, `cull` the test that skips
-//! rays the move cannot change, `tests` the unit tests.
+//! rays the move cannot change, `sampled` the curve through a pose source's pilot poses,
+//! `tests` the unit tests.
 
 use crate::cutting::stock::{Cutter, RayCut, Segment};
 use crate::cutting::tool::{Tool, ToolKind};
@@ -77,6 +82,7 @@ use std::cell::Cell;
 mod cull;
 mod path;
 mod probe;
+mod sampled;
 mod solve;
 
 pub use path::{MovePath, error_motion_speed, rotation_and_travel};
@@ -85,6 +91,7 @@ use probe::{
     Face, Hit, Probe, Ray, Shape, ball_sphere, frame_box, line_segment_distance, tool_interval,
     tool_normal,
 };
+pub use sampled::SampledPath;
 
 /// Bound (mm) on the distance of the envelope's interval ends from the true swept surface
 /// along a ray: 0.1 µm, the µm-metrology budget with a factor ten to spare; the solver

@@ -43,6 +43,9 @@ enum Factor {
         off0: Real,
         target: Real,
     },
+    /// The whole path of a move read pose by pose: the curve through its pilot poses
+    /// (always the only factor).
+    Sampled(Box<SampledPath>),
 }
 
 /// A pose and its rate of change per unit `λ`.
@@ -137,6 +140,14 @@ impl MovePath {
         Self { factors }
     }
 
+    /// The path of a move read pose by pose: the curve through its pilot poses `pilot`
+    /// (at least three, evenly spaced in λ; see [`SampledPath`]).
+    pub fn sampled(pilot: &[Isometry3]) -> Self {
+        Self {
+            factors: vec![Factor::Sampled(Box::new(SampledPath::new(pilot)))],
+        }
+    }
+
     /// The tool's pose in the workpiece frame at fraction `lambda` of the move.
     pub fn w_from_t(&self, lambda: Real) -> Isometry3 {
         let s = self.sample(lambda);
@@ -150,6 +161,9 @@ impl MovePath {
     /// The pose at `lambda` and its spatial rate (angular velocity `w` and the velocity `v`
     /// of the W point at the origin, so a point `x` of the tool moves at `w × x + v`).
     pub(super) fn sample(&self, lambda: Real) -> Sample {
+        if let [Factor::Sampled(path)] = self.factors.as_slice() {
+            return path.sample(lambda);
+        }
         let (mut r, mut t) = (Matrix3::identity(), Vector3::zeros());
         let (mut w, mut v) = (Vector3::zeros(), Vector3::zeros());
         for f in &self.factors {
@@ -209,6 +223,7 @@ impl MovePath {
                     t += r * g.translation.vector;
                     r *= g.rotation.to_rotation_matrix().into_inner();
                 }
+                Factor::Sampled(_) => unreachable!("a sampled path is the only factor"),
             }
         }
         Sample {

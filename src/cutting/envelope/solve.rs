@@ -8,6 +8,17 @@
 
 use super::*;
 
+/// The heights bounding the pieces of the tool's axis whose capsules of radius `r` hold a
+/// tool of `shape`, radius `r` and length `l`: the segment from the bottom (a flat end
+/// mill) or the ball's centre up to the top, in [`PARTS`] equal pieces.
+fn capsule_heights(shape: Shape, r: Real, l: Real) -> [Real; PARTS + 1] {
+    let z0 = match shape {
+        Shape::Flat => 0.0,
+        Shape::Ball => r,
+    };
+    std::array::from_fn(|k| z0 + (l - z0) * k as Real / PARTS as Real)
+}
+
 impl RotaryEnvelope {
     /// The envelope of `tool` on the move `start → end` of `chain` (moving axes settled in
     /// their direction of motion, see [`MovePath::new`]).
@@ -38,18 +49,50 @@ impl RotaryEnvelope {
         let (r, l) = (tool.radius(), tool.length());
         let path = MovePath::with_state(chain, start, end, state);
         let speed = speed_bound(chain, l / 2.0, tool.reach_from(l / 2.0), start, end, state);
-        // The capsule of radius R about the axis segment [z0, l] holds the tool; its pieces
-        // and their own speed bounds.
-        let z0 = match shape {
-            Shape::Flat => 0.0,
-            Shape::Ball => r,
-        };
-        let part_z: [Real; PARTS + 1] =
-            std::array::from_fn(|k| z0 + (l - z0) * k as Real / PARTS as Real);
+        let part_z = capsule_heights(shape, r, l);
         let part_speed: [Real; PARTS] = std::array::from_fn(|k| {
             let half = (part_z[k + 1] - part_z[k]) / 2.0;
             speed_bound(chain, part_z[k] + half, half + r, start, end, state)
         });
+        Self::of_path(shape, (r, l), path, speed, (part_z, part_speed))
+    }
+
+    /// The envelope of `tool` on a move read pose by pose, through its pilot poses `pilot`
+    /// (at least three, evenly spaced in λ from 0 to 1): the move's path is the curve
+    /// through them, [`SampledPath`], with its speed bounds.
+    pub fn sampled(tool: &Tool, pilot: &[Isometry3]) -> Result<Self, EnvelopeError> {
+        let shape = match tool.kind() {
+            ToolKind::Flat => Shape::Flat,
+            ToolKind::Ball if tool.length() >= 2.0 * tool.radius() => Shape::Ball,
+            _ => return Err(EnvelopeError::UnsupportedTool),
+        };
+        let (r, l) = (tool.radius(), tool.length());
+        let curve = SampledPath::new(pilot);
+        let speed = curve.speed_bound(l / 2.0, tool.reach_from(l / 2.0));
+        let part_z = capsule_heights(shape, r, l);
+        let part_speed: [Real; PARTS] = std::array::from_fn(|k| {
+            let half = (part_z[k + 1] - part_z[k]) / 2.0;
+            curve.speed_bound(part_z[k] + half, half + r)
+        });
+        Self::of_path(
+            shape,
+            (r, l),
+            MovePath::sampled(pilot),
+            speed,
+            (part_z, part_speed),
+        )
+    }
+
+    /// The envelope of a tool of `shape` (radius and length `r`, `l`) on `path`, no tool
+    /// point faster than `speed` per unit λ, the capsule pieces between heights `part_z`
+    /// no faster than `part_speed`.
+    fn of_path(
+        shape: Shape,
+        (r, l): (Real, Real),
+        path: MovePath,
+        speed: Real,
+        (part_z, part_speed): ([Real; PARTS + 1], [Real; PARTS]),
+    ) -> Result<Self, EnvelopeError> {
         let want = speed / (2.0 * CELL_GROWTH * r);
         if !(want.is_finite() && want <= MAX_CELLS as Real) {
             return Err(EnvelopeError::TooManyCells(want));

@@ -52,6 +52,61 @@ fn move_path_is_the_chain_pose() {
     }
 }
 
+/// The curve through a move's pilot poses ([`SampledPath`]): on the nodes it is the pose,
+/// between them within its own error estimate of the chain's exact pose (which it never
+/// sees between the nodes), and its rates are its derivatives (central differences of its
+/// own poses).
+#[test]
+fn the_curve_through_pilot_poses_follows_the_move_within_its_estimate() {
+    let c = deviated();
+    let (a, b) = (q(-3.0, 1.0, 8.0, -25.0), q(4.0, 1.0, 6.0, 35.0));
+    let path = MovePath::new(&c, &a, &b);
+    let pilot: Vec<Isometry3> = (0..=64).map(|j| path.w_from_t(j as Real / 64.0)).collect();
+    let curve = SampledPath::new(&pilot);
+    let reach = 10.0;
+    let estimate = SampledPath::error_estimate(&pilot, reach);
+    let dist = |s: &Sample, p: &Isometry3| {
+        let r = p.rotation.to_rotation_matrix().into_inner();
+        let rel = nalgebra::Rotation3::from_matrix_unchecked(r.transpose() * s.rot);
+        let angle = nalgebra::UnitQuaternion::from_rotation_matrix(&rel).angle();
+        (s.tip.coords - p.translation.vector).norm() + angle * reach
+    };
+    for (j, p) in pilot.iter().enumerate() {
+        let s = curve.sample(j as Real / 64.0);
+        assert!(dist(&s, p) < 1e-12, "node {j}: {}", dist(&s, p));
+    }
+    let mut worst: Real = 0.0;
+    for k in 0..=3000 {
+        let l = k as Real / 3000.0;
+        worst = worst.max(dist(&curve.sample(l), &path.w_from_t(l)));
+    }
+    assert!(
+        worst > 0.0 && worst <= estimate,
+        "off by {worst} mm, estimate {estimate} mm"
+    );
+    assert!(estimate < 1e-4, "{estimate}");
+    // Rates against central differences of the curve's own poses (off the nodes).
+    let h = 1e-6;
+    for k in 0..40 {
+        let l = (k as Real + 0.37) / 40.0;
+        let (s, lo, hi) = (curve.sample(l), curve.sample(l - h), curve.sample(l + h));
+        let v = s.rot.tr_mul(&((hi.tip - lo.tip) / (2.0 * h)));
+        let dr = (hi.rot - lo.rot) / (2.0 * h);
+        let w = s.rot.transpose() * dr;
+        let w = Vector3::new(w[(2, 1)], w[(0, 2)], w[(1, 0)]);
+        assert!(
+            (v - s.v_t).norm() < 1e-6 * (1.0 + v.norm()),
+            "λ {l}: v {v} vs {}",
+            s.v_t
+        );
+        assert!(
+            (w - s.w_t).norm() < 1e-6 * (1.0 + w.norm()),
+            "λ {l}: ω {w} vs {}",
+            s.w_t
+        );
+    }
+}
+
 /// The tool's interval along the ray at λ from the cutter's sweep of the standing tool
 /// (an independent closed form), on the library chain's pose.
 fn exact_at(

@@ -111,9 +111,10 @@ impl SweepObserver for NoObserver {
 /// ([`SweepObserver::looks`]).
 const BATCH: usize = 16;
 
-/// Envelope moves waiting to be cut together: each with its index, move and reversal state.
+/// Envelope moves waiting to be cut together: each with its index, move and the piece it
+/// is shown to the observer as.
 struct Batch<'m> {
-    moves: Vec<(RotaryEnvelope, usize, &'m Move, [Real; 6])>,
+    moves: Vec<(RotaryEnvelope, usize, &'m Move, Piece)>,
 }
 
 impl Batch<'_> {
@@ -135,14 +136,10 @@ impl Batch<'_> {
             .collect();
         let removed = stock.remove_each(&cutters);
         drop(cutters);
-        for ((_, k, mv, state), cut) in self.moves.drain(..).zip(removed) {
+        for ((_, k, mv, piece), cut) in self.moves.drain(..).zip(removed) {
             if cut {
                 report.cutting_moves += 1;
             }
-            let piece = Piece::Rotary {
-                envelope: true,
-                state,
-            };
             observer.after_move(stock, k, mv, &piece)?;
         }
         Ok(())
@@ -270,7 +267,14 @@ pub fn sweep_observed<'a>(
                 }
             }
             Kinematics::Poses(src) => {
-                let pilot = pilot_poses(src, mv, &mut report)?;
+                let pilot = match pilot_poses(src, mv, &mut report) {
+                    Ok(p) => p,
+                    Err(e) => {
+                        // What came before the move is cut, as without the batch.
+                        batch.flush(stock, &mut report, observer)?;
+                        return Err(e);
+                    }
+                };
                 if src.is_translation(&mv.start, &mv.end) {
                     Step::Straight((pilot[0], pilot[PILOT_STEPS]))
                 } else {
@@ -321,7 +325,7 @@ pub fn sweep_observed<'a>(
                     &pilot,
                     bound,
                     &mut report,
-                    observer,
+                    (observer, &mut batch),
                 )?,
             };
             report.rotary_error_bound_mm = report.rotary_error_bound_mm.max(e);
@@ -415,23 +419,49 @@ fn pose_of(
     })
 }
 
-/// Cuts move `k` of a pose source in sub-steps within `bound` of its true motion (the
-/// bound estimated from its pilot poses, [`SampledBound`]), counting it in `report`;
-/// returns its error bound (mm).
+/// Cuts move `k` of a pose source, counting it in `report`; returns its error bound (mm).
+/// A flat or ball end mill is cut by the exact envelope of the curve through the pilot
+/// poses ([`RotaryEnvelope::sampled`]) when that curve's estimated distance from the
+/// machine's path ([`SampledPath::error_estimate`]) plus [`ENVELOPE_TOL`] is within
+/// `bound` (a rapid under an observer that looks is cut in sub-steps, which it sees one by
+/// one); else in sub-steps within `bound` of the true motion (the bound estimated from the
+/// pilot poses, [`SampledBound`]).
 #[expect(
     clippy::too_many_arguments,
     reason = "the driver's state, passed down for one move"
 )]
-fn sweep_sampled(
+fn sweep_sampled<'m>(
     stock: &mut TriDexel,
     src: &dyn PoseSource,
     tool: &Tool,
-    (k, mv): (usize, &Move),
+    (k, mv): (usize, &'m Move),
     pilot: &[Isometry3],
     bound: Real,
     report: &mut SweepReport,
-    observer: &mut dyn SweepObserver,
+    (observer, batch): (&mut dyn SweepObserver, &mut Batch<'m>),
 ) -> Result<Real, SweepError> {
+    let rapid = mv.kind == MoveKind::Rapid;
+    let curve_error = SampledPath::error_estimate(pilot, tool.reach_from(0.0)) + ENVELOPE_TOL;
+    let envelope = (curve_error <= bound && !(rapid && observer.looks()))
+        .then(|| RotaryEnvelope::sampled(tool, pilot).ok())
+        .flatten();
+    if let Some(env) = envelope {
+        report.sweeps += 1;
+        if observer.looks() {
+            batch.flush(stock, report, observer)?;
+            if stock.remove(&env, mv.line as u32) {
+                report.cutting_moves += 1;
+            }
+            observer.after_move(stock, k, mv, &Piece::Sampled)?;
+        } else {
+            batch.moves.push((env, k, mv, Piece::Sampled));
+            if batch.moves.len() >= BATCH {
+                batch.flush(stock, report, observer)?;
+            }
+        }
+        return Ok(curve_error);
+    }
+    batch.flush(stock, report, observer)?;
     let rb = SampledBound::of(tool, pilot);
     let n = rb.steps_for(bound, mv.line)?;
     cut_substeps(
@@ -517,7 +547,11 @@ fn sweep_rotary<'m>(
     let envelope = match envelope {
         Some(env) if !observer.looks() => {
             report.sweeps += 1;
-            batch.moves.push((env, k, mv, *state));
+            let piece = Piece::Rotary {
+                envelope: true,
+                state: *state,
+            };
+            batch.moves.push((env, k, mv, piece));
             if batch.moves.len() >= BATCH {
                 batch.flush(stock, report, observer)?;
             }

@@ -46,7 +46,7 @@
 
 use crate::cutting::cutter::{Line, Quadric, SweptTool, t_extremes};
 use crate::cutting::envelope::{
-    ENVELOPE_TOL, MovePath, RotaryEnvelope, error_motion_speed, rotation_and_travel,
+    ENVELOPE_TOL, MovePath, RotaryEnvelope, SampledPath, error_motion_speed, rotation_and_travel,
 };
 use crate::cutting::stock::{Cutter, RayCut, TriDexel};
 use crate::cutting::tool::{Tool, ToolKind};

@@ -469,3 +469,103 @@ fn envelope_moves_cut_together_match_moves_cut_one_by_one() {
     assert!(plain.cutting_moves > 20, "{plain:?}");
     assert_eq!(crossings(&together), crossings(&one_by_one));
 }
+
+/// A chain read pose by pose, as a hexapod is: the sweep sees only its poses.
+struct ChainPoses(Chain);
+
+impl PoseSource for ChainPoses {
+    fn has_axis(&self, axis: AxisLetter) -> bool {
+        self.0.has_axis(axis)
+    }
+
+    fn w_from_t(&self, q: &AxisValues) -> Result<Isometry3, crate::machine::PoseError> {
+        Ok(self.0.w_from_t(q))
+    }
+
+    fn commanded(&self, q: &AxisValues) -> Isometry3 {
+        self.0.w_from_t(q)
+    }
+
+    fn is_translation(&self, start: &AxisValues, end: &AxisValues) -> bool {
+        AxisLetter::ALL
+            .into_iter()
+            .all(|l| !l.is_rotary() || start.get(l) == end.get(l))
+    }
+}
+
+/// Moves of a machine read pose by pose are cut by the envelope of the curve through
+/// their pilot poses. The same chain cut as a chain (its own exact envelope, validated
+/// against brute force) and read pose by pose: every crossing on the same ray, the normal
+/// distance between them within the sampled run's stated bound plus the chain's envelope
+/// tolerance; one move per envelope, none in sub-steps — a move that turns 1e-6° as well.
+#[test]
+fn a_pose_source_cut_by_its_curve_envelope_matches_the_chain() {
+    let chain = crate::machine::chain::mdx50_for_tests();
+    let tool = Tool::try_new(ToolKind::Flat, 3.0, 10.0).expect("valid");
+    let ball = Tool::try_new(ToolKind::Ball, 3.0, 10.0).expect("valid");
+    // A turning 1° a move while X, Z move (some moves large: 6° and 2 mm).
+    let at = |k: usize| {
+        let k = k as Real;
+        AxisValues::from_array([-4.0 + 0.2 * k, -1.0, 1.5 - 0.03 * k, -20.0 + k, 0.0, 0.0])
+    };
+    let mut moves: Vec<Move> = (0..30).map(|k| linear(at(k), at(k + 1), k + 1)).collect();
+    let mut far = at(30);
+    far.set(AxisLetter::A, 16.0);
+    far.set(AxisLetter::X, 4.0);
+    moves.push(linear(at(30), far, 31));
+    // Nearly a translation: A turns 1e-6° while X travels 8 mm (a corrected straight move).
+    let mut back = far;
+    back.set(AxisLetter::A, 16.000001);
+    back.set(AxisLetter::X, -4.0);
+    moves.push(linear(far, back, 32));
+    let bounds = Aabb {
+        min: Point3::new(-8.0, -8.0, -4.0),
+        max: Point3::new(8.0, 8.0, 4.0),
+    };
+    let source = ChainPoses(chain.clone());
+    for tool in [&tool, &ball] {
+        let stock = TriDexel::new_box(bounds, 0.1, 1e9).expect("fits");
+        let mut exact = stock.clone();
+        sweep_program(&mut exact, &chain, tool, &moves, &opts(), &NoProgress).expect("sweeps");
+        let mut read = stock;
+        let report = sweep_program(
+            &mut read,
+            Kinematics::Poses(&source),
+            tool,
+            &moves,
+            &opts(),
+            &NoProgress,
+        )
+        .expect("sweeps");
+        assert_eq!(report.sweeps, moves.len(), "{report:?}");
+        assert!(report.rotary_error_bound_mm <= opts().rotary_step_bound_mm);
+        let tol = report.rotary_error_bound_mm + ENVELOPE_TOL + 1e-9;
+        let (a, b) = (crossings(&exact), crossings(&read));
+        assert_eq!(a.len(), b.len());
+        assert!(a.iter().filter(|(_, c)| c.line != 0).count() > 1000);
+        let (mut worst, mut other_line): (Real, usize) = (0.0, 0);
+        for ((p, c), (q, d)) in a.iter().zip(&b) {
+            let along = q - p;
+            let n = c.normal();
+            // The same ray (the points differ only along it) and the same line.
+            assert!(
+                along.iter().filter(|x| x.abs() > 1e-12).count() <= 1,
+                "{p} vs {q}"
+            );
+            // A surface two consecutive moves reach alike (to the tolerance) may be
+            // named by either.
+            if c.line != d.line {
+                other_line += 1;
+                assert!(
+                    c.line.abs_diff(d.line) == 1,
+                    "{p}: lines {} and {}",
+                    c.line,
+                    d.line
+                );
+            }
+            worst = worst.max(along.dot(&n).abs());
+        }
+        assert!(worst <= tol, "normal distance {worst} mm > {tol} mm");
+        assert!(other_line * 100 < a.len(), "{other_line} of {}", a.len());
+    }
+}
