@@ -558,6 +558,16 @@ mod tests {
             .expect("b identified");
         assert!((b.value - b_hat).abs() < 1e-9, "{} vs {b_hat}", b.value);
         assert!((b.sigma - sigma / stt.sqrt()).abs() < 1e-9 * b.sigma.max(1e-12) + 1e-12);
+        // The offset c1 is the line's intercept, σ·√(1/n + t̄²/Σ(t − t̄)²); c2 sees no sample
+        // and is held (σ 0).
+        let c1 = sigma * (1.0 / n + tm * tm / stt).sqrt();
+        assert!(
+            (o.nuisance_sigma[0] - c1).abs() < 1e-9 * c1,
+            "{} vs {c1}",
+            o.nuisance_sigma[0]
+        );
+        assert_eq!(o.nuisance_sigma[1], 0.0);
+        assert!(o.converged, "{}", o.termination);
         let ident = &o.identifiability;
         assert!(!ident.identified.contains(&"a".to_string()));
         assert!(!ident.identified.contains(&"d".to_string()));
