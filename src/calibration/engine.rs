@@ -13,7 +13,7 @@
 //! parallel and stored by index, so the result does not depend on the thread count. A
 //! model that has its derivatives in closed form gives them instead ([`Forward::jacobian`]).
 //!
-//! **What is determined.** [`calibrate::identifiability_of`] on the whitened Jacobian at the
+//! **What is determined.** [`crate::calibration::determined::identifiability_of`] on the whitened Jacobian at the
 //! start, the parameters scaled by their realistic magnitudes and the nuisance columns
 //! projected out — the same named report (identified, determined combinations, not
 //! determined, borderline, singular values, margin) the plane and ball identification gives.
@@ -23,7 +23,7 @@
 //! at the start, never given a value.
 //!
 //! **Uncertainty.** The covariance of the solved coordinates is `(J_zᵀJ_z)⁻¹` at the
-//! solution, carried to the parameters; values with σ by [`calibrate::estimates_of`].
+//! solution, carried to the parameters; values with σ by [`crate::calibration::determined::estimates_of`].
 //!
 //! **Goodness of fit.** [`goodness::least_squares_check`] with one part per block, so a
 //! misfit is refused naming the file it is blamed on.
@@ -31,7 +31,7 @@
 //! **Invariant:** knows nothing of machines, instruments or files; the same problem gives
 //! the same outcome, bit for bit, whatever the thread count.
 
-use crate::calibration::calibrate::{Estimate, Identifiability, estimates_of, identifiability_of};
+use crate::calibration::determined::{Estimate, Identifiability, estimates_of, identifiability_of};
 use crate::calibration::goodness::{FitCheck, least_squares_check};
 use crate::math::Real;
 use nalgebra::{DMatrix, DVector};
@@ -161,6 +161,8 @@ pub struct Outcome {
     pub solution_sigma: Vec<Real>,
     /// The nuisance unknowns at the solution.
     pub nuisance: Vec<Real>,
+    /// Each nuisance unknown's σ along the solved directions (0 for a direction held).
+    pub nuisance_sigma: Vec<Real>,
     /// Nuisance directions the data constrain (solved with the parameters).
     pub nuisance_rank: usize,
     /// χ² (whitened residuals) at the start and after each accepted step.
@@ -169,6 +171,10 @@ pub struct Outcome {
     pub evaluations: usize,
     /// Why the solve stopped.
     pub termination: String,
+    /// Whether it stopped at a minimum (χ² no longer decreasing, no step lowering it, or
+    /// nothing to solve); not after [`MAX_ITERATIONS`] or on normal equations that stay
+    /// singular.
+    pub converged: bool,
     /// The goodness of fit, block by block. Refuse a misfit with [`FitCheck::enforce`].
     pub fit: FitCheck,
 }
@@ -388,12 +394,14 @@ pub fn solve(problem: &Problem) -> Result<Outcome, EngineError> {
     let mut history = vec![chi2];
     let mut lambda = 1e-3;
     let mut termination = format!("{MAX_ITERATIONS} iterations without convergence");
+    let mut converged = false;
     // At the start the Jacobian along the solved directions is the full one's projection
     // (central differences are linear in the direction to their O(h²) error): no second
     // set of evaluations at x0. Each accepted step differences anew along `dirs`.
     let mut jz = &j0 * &dirs;
     if nz == 0 {
         termination = "nothing determined: no step taken".into();
+        converged = true;
     } else {
         'outer: for _ in 0..MAX_ITERATIONS {
             let a = jz.transpose() * &jz;
@@ -423,6 +431,7 @@ pub fn solve(problem: &Problem) -> Result<Outcome, EngineError> {
                     lambda = (lambda / 10.0).max(1e-12);
                     if drop <= CHI2_TOLERANCE * chi2.max(1.0) {
                         termination = "χ² no longer decreases".into();
+                        converged = true;
                         break 'outer;
                     }
                     jz = w.jacobian(&full(&z), Some(&dirs))?;
@@ -431,6 +440,7 @@ pub fn solve(problem: &Problem) -> Result<Outcome, EngineError> {
                 lambda *= 10.0;
                 if lambda > 1e16 {
                     termination = "no step lowers χ² (at its minimum to rounding)".into();
+                    converged = true;
                     break 'outer;
                 }
             }
@@ -457,10 +467,14 @@ pub fn solve(problem: &Problem) -> Result<Outcome, EngineError> {
         solution: x[..np].to_vec(),
         solution_sigma: (0..np).map(|k| cov_p[(k, k)].max(0.0).sqrt()).collect(),
         nuisance: x[np..].to_vec(),
+        nuisance_sigma: (np..np + nn)
+            .map(|k| cov_x[(k, k)].max(0.0).sqrt())
+            .collect(),
         nuisance_rank: nuisance_dirs.len(),
         chi2_history: history,
         evaluations: w.evaluations.load(std::sync::atomic::Ordering::Relaxed),
         termination,
+        converged,
         fit,
     })
 }
@@ -544,6 +558,16 @@ mod tests {
             .expect("b identified");
         assert!((b.value - b_hat).abs() < 1e-9, "{} vs {b_hat}", b.value);
         assert!((b.sigma - sigma / stt.sqrt()).abs() < 1e-9 * b.sigma.max(1e-12) + 1e-12);
+        // The offset c1 is the line's intercept, σ·√(1/n + t̄²/Σ(t − t̄)²); c2 sees no sample
+        // and is held (σ 0).
+        let c1 = sigma * (1.0 / n + tm * tm / stt).sqrt();
+        assert!(
+            (o.nuisance_sigma[0] - c1).abs() < 1e-9 * c1,
+            "{} vs {c1}",
+            o.nuisance_sigma[0]
+        );
+        assert_eq!(o.nuisance_sigma[1], 0.0);
+        assert!(o.converged, "{}", o.termination);
         let ident = &o.identifiability;
         assert!(!ident.identified.contains(&"a".to_string()));
         assert!(!ident.identified.contains(&"d".to_string()));

@@ -1,9 +1,10 @@
 //! **Calibration**: from measurements back to the machine, and from the machine to a
 //! corrected program. The goodness of fit every identification checks its result with
-//! ([`goodness`]), the 0°/180° step experiment ([`identify`]), general identification
-//! of any set of deviations with its identifiability report ([`calibrate`]), test-cut design
-//! ([`design`]) and NC-program correction with its verification ([`correct`]); one engine
-//! for any forward model ([`engine`]), and on it a hexapod's kinematic parameters from
+//! ([`goodness`]), the 0°/180° step experiment ([`identify`]), what a whitened Jacobian
+//! determines, the one report every identification gives ([`determined`]), one engine for
+//! any forward model ([`engine`]), and on it general identification of any set of
+//! deviations from planes and balls ([`calibrate`]), test-cut design ([`design`]) and
+//! NC-program correction with its verification ([`correct`]); on the engine too a hexapod's kinematic parameters from
 //! double-ball-bar lengths ([`hexapod_calibrate`], its circles by design in
 //! [`hexapod_design`]), a serial machine from laser readings and ball-bar circles together
 //! ([`instruments`]), a hexapod calibrated in rounds from touch-probe readings of
@@ -17,10 +18,11 @@
 
 pub mod goodness;
 pub mod identify;
+pub mod determined;
+pub mod engine;
 pub mod calibrate;
 pub mod design;
 pub mod correct;
-pub mod engine;
 pub mod hexapod_calibrate;
 pub mod hexapod_design;
 pub mod instruments;

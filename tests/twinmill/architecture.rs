@@ -61,10 +61,11 @@ const LAYOUT: &[(&str, &[&str])] = &[
         &[
             "goodness",
             "identify",
+            "determined",
+            "engine",
             "calibrate",
             "design",
             "correct",
-            "engine",
             "hexapod_calibrate",
             "hexapod_design",
             "instruments",

@@ -47,13 +47,14 @@
 //! residuals and in dual numbers, one parameter per pass, for the Jacobian's columns.
 //!
 //! **Identifiability.** The whitened Jacobian of the deviations, with the registration's
-//! columns projected out, is scaled by each parameter's realistic magnitude
-//! ([`magnitude`]: 0.5 mm, 5e-4 rad) and decomposed (SVD). A direction is *determined*
-//! when its standard uncertainty is below [`DETERMINED_FRACTION`] of its realistic magnitude.
-//! A parameter lying in the determined subspace is identified on its own; the rest of the
-//! subspace is reported as named combinations (e.g. `gamma_AY + gamma_YX`); the
-//! complement is *not determined*, reported in named form, held at its prior value and
-//! never given a value. Levenberg–Marquardt solves only in the determined subspace.
+//! and the fixed points' columns projected out, is scaled by each parameter's realistic
+//! magnitude ([`magnitude`]: 0.5 mm, 5e-4 rad) and decomposed
+//! ([`crate::calibration::determined`]: what is determined, identified on its own, named
+//! combinations, not determined — held at its prior value and never given a value).
+//!
+//! **Solve.** [`crate::calibration::engine`] on the model ([`FeatureForward`]: the features'
+//! whitened residuals with their closed-form Jacobian; registration and fixed points its
+//! nuisance unknowns): Levenberg–Marquardt only in the determined subspace.
 //!
 //! **Invariant:** reads features and a chain; never runs the sweep or the scanner, never
 //! touches files; never gives a value to a parameter or combination the features do not
@@ -61,12 +62,11 @@
 //!
 //! **Files.** This one holds the error; `scalar` the generic scalar and the chain's pose in
 //! it, `features` the features and their predictions, `model` the least-squares model,
-//! `identifiability` what the features determine, `solve` the identification and its fit
-//! check, `tests` the unit tests.
+//! `identifiability` the magnitudes and what the features determine, `solve` the
+//! identification on the engine and its fit check, `tests` the unit tests.
 
 use crate::calibration::goodness::{
-    FitCheck, MODEL_ACCURACY_MM, PartFit, REFUSE_P, RankMargin, ScanNoise, face_rms_check,
-    least_squares_check,
+    FitCheck, MODEL_ACCURACY_MM, PartFit, REFUSE_P, ScanNoise, face_rms_check, least_squares_check,
 };
 use crate::calibration::identify::{
     FaceDesign, FaceOptions, FaceSelection, FaceSpec, extent, face_design, fit_face, fit_selection,
@@ -77,8 +77,7 @@ use crate::machine::chain::{Chain, DeviationId};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
 use crate::metrology::fit::Plane;
 use crate::nc::{AxisValues, Move};
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
-use nalgebra::{DMatrix, DVector, Dyn, Matrix2, Owned};
+use nalgebra::{DMatrix, DVector, Matrix2};
 use std::ops::{Add, Div, Mul, Neg, Sub};
 
 pub use crate::calibration::identify::FaceKind;
@@ -89,23 +88,23 @@ mod model;
 mod scalar;
 mod solve;
 
+pub use crate::calibration::determined::{
+    BORDERLINE_FACTOR, COMBINATION_CUTOFF, Combination, DETERMINED_FRACTION, Estimate,
+    Identifiability, LEAKAGE, estimates_of, identifiability_of,
+};
 use features::feature_residuals;
 pub use features::{
     BallFeature, Feature, IsoTerm, PlaneFeature, ball_features, extract_plane_feature,
     plane_feature, predicted_plane, select_plane_face, synthetic_plane_feature,
 };
-use identifiability::RANK_EPS;
 pub use identifiability::{
-    ANGLE_MAGNITUDE_RAD, BORDERLINE_FACTOR, COMBINATION_CUTOFF, Combination, DETERMINED_FRACTION,
-    Identifiability, LEAKAGE, OFFSET_MAGNITUDE_MM, component_magnitude, identifiability,
-    identifiability_of, magnitude,
+    ANGLE_MAGNITUDE_RAD, OFFSET_MAGNITUDE_MM, component_magnitude, identifiability, magnitude,
 };
 pub use model::{Model, Registration};
 pub use scalar::{Dual, Scalar};
 use scalar::{Params, Rigid, V3, cross, dot, normalize, pose, v3, vadd, values, vscale, vsub};
-use solve::NO_DATA_SENSITIVITY;
 pub use solve::{
-    Estimate, Identification, SolveReport, estimates_of, face_rms_parts, feature_fit, identify,
+    FeatureForward, Identification, SolveReport, face_rms_parts, feature_fit, identify,
     identify_with,
 };
 

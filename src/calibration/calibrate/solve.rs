@@ -1,23 +1,12 @@
-//! Identification: Levenberg–Marquardt in the determined subspace, the estimates with
-//! their uncertainties, and the fit check of the features' residuals.
+//! Identification on [`crate::calibration::engine`]: the model as its forward model, the
+//! registration and fixed points as its nuisance unknowns, the estimates with their
+//! uncertainties, and the fit check of the features' residuals.
 //!
 //! **Invariant:** gives values only to the parameters and combinations the features
 //! determine; a solve that does not converge is an error.
 
 use super::*;
-
-/// One identified quantity: a parameter or a determined combination.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Estimate {
-    /// Name (`dy_AY`, `gamma_AY + gamma_YX`).
-    pub name: String,
-    /// Value (mm or rad; for combinations in the units of their first parameter).
-    pub value: Real,
-    /// Standard uncertainty propagated from the features' uncertainties.
-    pub sigma: Real,
-    /// Coefficients over the solved parameters (a unit vector for a single parameter).
-    pub coefficients: Vec<Real>,
-}
+use crate::calibration::engine::{self, Block, EngineError, Forward, Problem, Unknown};
 
 /// The solver's account.
 #[derive(Clone, Debug, PartialEq)]
@@ -62,35 +51,82 @@ pub struct Identification {
     pub fit: FitCheck,
 }
 
-struct Subspace<'a> {
-    model: &'a Model<'a>,
-    x0: DVector<Real>,
-    /// Columns: parameter-space directions (physical units) for each solved coordinate.
-    dirs: DMatrix<Real>,
-    z: DVector<Real>,
+/// A [`Model`] as the engine's forward model: its predictions are the features' whitened
+/// residuals (observed as 0 at σ 1, one block per feature), its Jacobian the model's
+/// closed form (forward-mode automatic differentiation).
+pub struct FeatureForward<'m, 'a> {
+    /// The model.
+    pub model: &'m Model<'a>,
 }
 
-impl Subspace<'_> {
-    fn full(&self, z: &DVector<Real>) -> DVector<Real> {
-        &self.x0 + &self.dirs * z
+impl Forward for FeatureForward<'_, '_> {
+    fn predict(&self, x: &[Real]) -> Result<Vec<Real>, String> {
+        self.model
+            .residuals(&DVector::from_column_slice(x))
+            .map(|r| r.as_slice().to_vec())
+            .ok_or_else(|| "a feature's prediction is degenerate at the solve's unknowns".into())
+    }
+
+    fn jacobian(&self, x: &[Real]) -> Option<Result<DMatrix<Real>, String>> {
+        Some(
+            self.model
+                .jacobian(&DVector::from_column_slice(x))
+                .ok_or_else(|| {
+                    "a feature's prediction is degenerate at the solve's unknowns".into()
+                }),
+        )
     }
 }
 
-impl LeastSquaresProblem<Real, Dyn, Dyn> for Subspace<'_> {
-    type ResidualStorage = Owned<Real, Dyn>;
-    type JacobianStorage = Owned<Real, Dyn, Dyn>;
-    type ParameterStorage = Owned<Real, Dyn>;
-    fn set_params(&mut self, z: &DVector<Real>) {
-        self.z.copy_from(z);
+impl FeatureForward<'_, '_> {
+    /// The engine's unknowns at the model's start ([`Model::start`]): the parameters with
+    /// their realistic magnitudes ([`Model::param_scales`]), then the registration and the
+    /// fixed points, offsets at [`OFFSET_MAGNITUDE_MM`], turns at [`ANGLE_MAGNITUDE_RAD`]
+    /// (a scan's registration and a sphere's place are unknown by more than that, but the
+    /// magnitudes only scale the nuisance columns before their rank is taken).
+    pub fn unknowns(&self) -> (Vec<Unknown>, Vec<Unknown>) {
+        let m = self.model;
+        let x0 = m.start();
+        let np = m.params();
+        let parameters = m
+            .param_names()
+            .into_iter()
+            .zip(m.param_scales())
+            .enumerate()
+            .map(|(k, (name, magnitude))| Unknown {
+                name,
+                start: x0[k],
+                magnitude,
+            })
+            .collect();
+        let nuisance = m
+            .nuisance_names()
+            .into_iter()
+            .enumerate()
+            .map(|(k, name)| Unknown {
+                start: x0[np + k],
+                magnitude: if k < m.reg_cols() && k >= 3 {
+                    ANGLE_MAGNITUDE_RAD
+                } else {
+                    OFFSET_MAGNITUDE_MM
+                },
+                name,
+            })
+            .collect();
+        (parameters, nuisance)
     }
-    fn params(&self) -> DVector<Real> {
-        self.z.clone()
-    }
-    fn residuals(&self) -> Option<DVector<Real>> {
-        self.model.residuals(&self.full(&self.z))
-    }
-    fn jacobian(&self) -> Option<DMatrix<Real>> {
-        Some(self.model.jacobian(&self.full(&self.z))? * &self.dirs)
+
+    /// The observations: each feature's three whitened residuals, observed 0 at σ 1.
+    pub fn blocks(&self) -> Vec<Block> {
+        self.model
+            .features
+            .iter()
+            .map(|f| Block {
+                name: f.name().to_string(),
+                values: vec![0.0; f.residual_count()],
+                sigma: vec![1.0; f.residual_count()],
+            })
+            .collect()
     }
 }
 
@@ -104,7 +140,8 @@ pub fn identify(model: &Model) -> Result<Identification, CalibrateError> {
 }
 
 /// [`identify`], the goodness of fit accounting for the views `scan` merged its cloud
-/// from ([`feature_fit`]).
+/// from ([`feature_fit`]). The solve is [`crate::calibration::engine`]'s on
+/// [`FeatureForward`]: the registration and the fixed points are its nuisance unknowns.
 pub fn identify_with(
     model: &Model,
     scan: Option<&ScanNoise>,
@@ -116,66 +153,41 @@ pub fn identify_with(
         return Err(CalibrateError::NoFeatures);
     }
     let x0 = model.start();
-    for f in model.features {
-        if model.residuals(&x0).is_none() {
-            return Err(CalibrateError::Degenerate(f.name().to_string()));
-        }
+    if model.residuals(&x0).is_none() || model.jacobian(&x0).is_none() {
+        let at = model
+            .features
+            .iter()
+            .find(|f| {
+                let one = Model {
+                    features: std::slice::from_ref(*f),
+                    ..model.clone()
+                };
+                one.residuals(&one.start()).is_none()
+            })
+            .or(model.features.first())
+            .map_or(String::new(), |f| f.name().to_string());
+        return Err(CalibrateError::Degenerate(at));
     }
-    let ident = identifiability(model, &x0)?;
+    let forward = FeatureForward { model };
+    let (parameters, nuisance) = forward.unknowns();
+    let problem = Problem {
+        parameters,
+        nuisance,
+        blocks: forward.blocks(),
+        forward: &forward,
+        statistic: feature_statistic(model.features).into(),
+    };
+    let o = engine::solve(&problem).map_err(|e| match e {
+        EngineError::NoData(names) => CalibrateError::NoData(names),
+        EngineError::NoParameters => CalibrateError::NoParameters,
+        EngineError::NoObservations => CalibrateError::NoFeatures,
+        other => CalibrateError::NotConverged(other.to_string()),
+    })?;
+    if !o.converged {
+        return Err(CalibrateError::NotConverged(o.termination));
+    }
     let np = model.params();
-    let scale = model.param_scales();
-    if ident.no_data.len() == np {
-        return Err(CalibrateError::NoData(ident.no_data.join(", ")));
-    }
-    // Registration directions the features constrain (the others, e.g. a slide along a
-    // lone plane, stay zero).
-    let reg_dirs: Vec<DVector<Real>> = {
-        let j = model
-            .jacobian(&x0)
-            .ok_or_else(|| CalibrateError::Degenerate(String::new()))?;
-        let jr = j.columns(np, model.cols() - np).into_owned();
-        if jr.ncols() == 0 {
-            Vec::new()
-        } else {
-            let svd = jr.svd(false, true);
-            let vt = svd.v_t.expect("requested");
-            let smax = svd.singular_values.max();
-            (0..svd.singular_values.len())
-                .filter(|&i| svd.singular_values[i] > smax * REGISTRATION_RANK_EPS)
-                .map(|i| vt.row(i).transpose())
-                .collect()
-        }
-    };
-    let nreg = reg_dirs.len();
-    let rank = ident.rank;
-    let mut dirs = DMatrix::zeros(model.cols(), rank + nreg);
-    for c in 0..rank {
-        for k in 0..np {
-            dirs[(k, c)] = ident.determined_basis[(k, c)] * scale[k];
-        }
-    }
-    for (c, d) in reg_dirs.iter().enumerate() {
-        for k in 0..d.len() {
-            dirs[(np + k, rank + c)] = d[k];
-        }
-    }
-    let chi2_start = model.residuals(&x0).map_or(Real::NAN, |r| r.norm_squared());
-    let problem = Subspace {
-        model,
-        x0: x0.clone(),
-        dirs: dirs.clone(),
-        z: DVector::zeros(rank + nreg),
-    };
-    let (solved, rep) = LevenbergMarquardt::new()
-        .with_patience(200)
-        .minimize(problem);
-    if !rep.termination.was_successful() {
-        return Err(CalibrateError::NotConverged(format!(
-            "{:?}",
-            rep.termination
-        )));
-    }
-    let x = solved.full(&solved.z);
+    let x = DVector::from_iterator(model.cols(), o.solution.iter().chain(&o.nuisance).copied());
     let r = model.residuals(&x).ok_or_else(|| {
         CalibrateError::NotConverged("residuals undefined at the solution".into())
     })?;
@@ -183,32 +195,18 @@ pub fn identify_with(
         .jacobian(&x)
         .ok_or_else(|| CalibrateError::NotConverged("Jacobian undefined at the solution".into()))?;
     let fit = fit_of(model, &r, &j_full, scan);
-    let jz = &j_full * &dirs;
-    let info = jz.transpose() * &jz;
-    let cov_z = info
-        .clone()
-        .try_inverse()
-        .or_else(|| info.pseudo_inverse(RANK_EPS).ok())
-        .ok_or_else(|| CalibrateError::NotConverged("singular normal equations".into()))?;
-    let cov_x = &dirs * cov_z * dirs.transpose();
-    let (parameters, combinations) = estimates_of(
-        &ident,
-        &x.as_slice()[..np],
-        &cov_x.view((0, 0), (np, np)).into_owned(),
-        &scale,
-    );
     let mut registration = [0.0; 6];
     for (c, r) in registration.iter_mut().enumerate().take(model.reg_cols()) {
         *r = x[np + c];
     }
-    let base = np + model.reg_cols();
+    let base = model.reg_cols();
     let anchors = (0..model.anchor_count())
         .map(|a| {
             let k = base + 3 * a;
-            let cov = |i: usize| cov_x[(k + i, k + i)].max(0.0).sqrt();
+            let s = &o.nuisance_sigma;
             (
-                Point3::new(x[k], x[k + 1], x[k + 2]),
-                [cov(0), cov(1), cov(2)],
+                Point3::new(x[np + k], x[np + k + 1], x[np + k + 2]),
+                [s[k], s[k + 1], s[k + 2]],
             )
         })
         .collect();
@@ -219,80 +217,26 @@ pub fn identify_with(
         residuals.push((f.name().to_string(), [r[i], r[i + 1], r[i + 2]]));
         i += n;
     }
-    let dof = model.rows().saturating_sub(rank + nreg);
+    let dof = model
+        .rows()
+        .saturating_sub(o.identifiability.rank + o.nuisance_rank);
     Ok(Identification {
-        identifiability: ident,
-        parameters,
-        combinations,
-        solution: x.rows(0, np).iter().copied().collect(),
+        identifiability: o.identifiability,
+        parameters: o.parameters,
+        combinations: o.combinations,
+        solution: o.solution,
         registration,
         anchors,
         solver: SolveReport {
-            evaluations: rep.number_of_evaluations,
-            termination: format!("{:?}", rep.termination),
-            chi2_start,
+            evaluations: o.evaluations,
+            termination: o.termination,
+            chi2_start: o.chi2_history.first().copied().unwrap_or(Real::NAN),
             chi2: r.norm_squared(),
             dof,
         },
         residuals,
         fit,
     })
-}
-
-/// The values with σ of what an identification determines, at the solution `x` (the
-/// parameters, physical units) with the parameters' covariance `cov` and realistic
-/// magnitudes `scale`: each parameter identified on its own, valued as the determined
-/// combination nearest to it (its projection on the determined subspace, whose other
-/// coefficients are below [`LEAKAGE`] in scaled units, so its value does not depend on the
-/// undetermined directions), then each determined combination.
-pub fn estimates_of(
-    ident: &Identifiability,
-    x: &[Real],
-    cov: &DMatrix<Real>,
-    scale: &[Real],
-) -> (Vec<Estimate>, Vec<Estimate>) {
-    let np = x.len();
-    let xp = DVector::from_column_slice(x);
-    let estimate = |name: String, c: Vec<Real>| {
-        let cv = DVector::from_iterator(np, c.iter().copied());
-        let value = cv.dot(&xp);
-        let var = (cv.transpose() * cov * &cv)[0];
-        Estimate {
-            name,
-            value,
-            sigma: var.max(0.0).sqrt(),
-            coefficients: c,
-        }
-    };
-    let basis = &ident.determined_basis;
-    let parameters = ident
-        .identified
-        .iter()
-        .map(|name| {
-            let k = ident.parameters.iter().position(|n| n == name).unwrap_or(0);
-            let a = basis * basis.row(k).transpose();
-            let c = (0..np)
-                .map(|j| {
-                    // A coupling below the numerical rank's resolution is the projection's
-                    // rounding, not a coupling: exactly 0 (a parameter nothing couples to is
-                    // valued, and compared with the truth, on its own).
-                    let r = a[j] / a[k];
-                    if j != k && r.abs() < RANK_EPS {
-                        0.0
-                    } else {
-                        scale[k] * r / scale[j]
-                    }
-                })
-                .collect();
-            estimate(name.clone(), c)
-        })
-        .collect();
-    let combinations = ident
-        .determined_combinations
-        .iter()
-        .map(|c| estimate(c.name.clone(), c.coefficients.clone()))
-        .collect();
-    (parameters, combinations)
 }
 
 /// What the features' residual χ² is of, in words.
@@ -422,11 +366,3 @@ fn plane_rewhitening(p: &PlaneFeature, scan: Option<&ScanNoise>) -> nalgebra::Ma
     }
     m
 }
-
-/// Relative singular value below which a registration direction counts as unconstrained
-/// by the features (a plane does not see a slide along itself or a turn about its normal).
-const REGISTRATION_RANK_EPS: Real = 1e-9;
-
-/// A parameter whose realistic magnitude moves no whitened residual by more than this has
-/// no data at all (a thousandth of a standard uncertainty).
-pub(super) const NO_DATA_SENSITIVITY: Real = 1e-3;
