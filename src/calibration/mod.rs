@@ -3,7 +3,8 @@
 //! ([`goodness`]), the 0°/180° step experiment ([`identify`]), general identification
 //! of any set of deviations with its identifiability report ([`calibrate`]), test-cut design
 //! ([`design`]) and NC-program correction with its verification ([`correct`]); one engine
-//! for any forward model ([`engine`]), and on it a hexapod's kinematic parameters from
+//! for any forward model ([`engine`]), and on it the step experiment's identification
+//! ([`step`]), a hexapod's kinematic parameters from
 //! double-ball-bar lengths ([`hexapod_calibrate`], its circles by design in
 //! [`hexapod_design`]), a serial machine from laser readings and ball-bar circles together
 //! ([`instruments`]), a hexapod calibrated in rounds from touch-probe readings of
@@ -21,6 +22,7 @@ pub mod calibrate;
 pub mod design;
 pub mod correct;
 pub mod engine;
+pub mod step;
 pub mod hexapod_calibrate;
 pub mod hexapod_design;
 pub mod instruments;

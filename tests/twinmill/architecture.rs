@@ -65,6 +65,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "design",
             "correct",
             "engine",
+            "step",
             "hexapod_calibrate",
             "hexapod_design",
             "instruments",
