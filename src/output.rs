@@ -207,6 +207,59 @@ pub fn write_file(path: &Path, bytes: &[u8]) -> Result<(), OutputError> {
     result
 }
 
+/// Writes several files whole or none at all: each into a temporary sibling of its path
+/// first (as [`write_file`]); only when every one is complete are they renamed into place.
+/// A failure removes the temporary files and leaves any previous files of those names
+/// untouched. Two of the paths naming the same file are refused before anything is written.
+/// Errors name the path, never a temporary file.
+pub fn write_paths(files: &[(&Path, &[u8])]) -> Result<(), OutputError> {
+    let mut targets: Vec<PathBuf> = Vec::with_capacity(files.len());
+    let mut seen: Vec<PathBuf> = Vec::with_capacity(files.len());
+    for (path, _) in files {
+        let target = target_of(path, false)?;
+        folder_exists(path, &target)?;
+        // The same file however the paths spell its folder (`a.toml`, `./a.toml`).
+        let dir = parent_of(&target);
+        let key = std::fs::canonicalize(dir)
+            .unwrap_or_else(|_| dir.to_path_buf())
+            .join(target.file_name().unwrap_or_default());
+        if seen.contains(&key) {
+            return Err(OutputError {
+                path: path.to_path_buf(),
+                source: std::io::Error::other("named twice among the files to write"),
+            });
+        }
+        seen.push(key);
+        targets.push(target);
+    }
+    let mut staged: Vec<PathBuf> = Vec::with_capacity(files.len());
+    let result = (|| {
+        for ((path, bytes), target) in files.iter().zip(&targets) {
+            let name = target
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_else(|| "out".into());
+            let staging = parent_of(target).join(format!(".{name}.partial-{}", std::process::id()));
+            staged.push(staging.clone());
+            io(
+                path,
+                std::fs::File::create(&staging)
+                    .and_then(|mut f| f.write_all(bytes).and_then(|_| f.sync_all())),
+            )?;
+        }
+        for (((path, _), target), staging) in files.iter().zip(&targets).zip(&staged) {
+            io(path, std::fs::rename(staging, target))?;
+        }
+        Ok(())
+    })();
+    if result.is_err() {
+        for staging in &staged {
+            let _ = std::fs::remove_file(staging);
+        }
+    }
+    result
+}
+
 /// Serialises `value` as pretty JSON.
 pub fn json_bytes(value: &impl serde::Serialize, path: &Path) -> Result<Vec<u8>, OutputError> {
     serde_json::to_vec_pretty(value).map_err(|e| OutputError {

@@ -15,31 +15,24 @@
 //! To first order (seed 002 eq. 6, 7, with y1 = −y2): step = −2·dy_AY,
 //! tilt = 2·(gamma_AY + gamma_YX).
 //!
-//! **Identification.** Those two measurements are matched exactly: Levenberg–Marquardt on
-//! the exact chain (the flank planes recomputed from the transforms) over an offset and an
-//! angle of the rotary axis's joint, with every other deviation held at its known value: the
-//! offset the step is most sensitive to (the axis line's offset along the faces' normal: dy
-//! for seed 002's A axis and faces normal to Y) and the angle the faces' relative tilt is
-//! most sensitive to (gamma there). When no angle of the joint tilts the faces apart about
-//! the tool axis — the rotary axis parallel to it, a C table under a vertical spindle — the
-//! offset is found from the step alone and the angles are reported not identified, saying
-//! why. The Jacobian's singular values decide whether the pair is identifiable from these
-//! faces; if not, no value is given. Everything else is reported as not observable from
-//! this experiment.
+//! **Identification** of the rotary joint's offset and angle sum from the two faces is
+//! [`crate::calibration::step`]'s, on the identification engine; here are the faces, the
+//! frame the step and tilt are measured in ([`StepFrame`]), the faces' goodness of fit
+//! against the scanner's noise ([`faces_fit`]) and the step the exact chain predicts
+//! ([`predicted_step`]).
 //!
-//! **Invariant:** identification reads a cloud and the program's moves; it never runs the
+//! **Invariant:** reads a cloud and the program's moves; it never runs the
 //! sweep or the scanner (it must work on clouds twinmill did not make).
 
-use crate::calibration::goodness::{FitCheck, REFUSE_P, RankMargin, ScanNoise, face_rms_check};
+use crate::calibration::goodness::{FitCheck, REFUSE_P, ScanNoise, face_rms_check};
 use crate::cutting::stock::TriDexel;
 use crate::cutting::tool::Tool;
-use crate::machine::chain::{AxisKind, Chain, Component, DeviationId};
+use crate::machine::chain::{AxisKind, Chain};
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
 use crate::metrology::fit::{FitError, Plane, PlaneFit, RobustRule, fit_plane_robust};
 use crate::metrology::segment::{PlaneSegmentOptions, select_box, select_region_from_seed};
 use crate::nc::{Move, MoveKind};
-use levenberg_marquardt::{LeastSquaresProblem, LevenbergMarquardt};
-use nalgebra::{Matrix2, Owned, U2, Vector2};
+use nalgebra::{Matrix2, Vector2};
 
 /// Errors of face extraction and identification.
 #[derive(Debug, PartialEq, thiserror::Error)]
@@ -103,6 +96,10 @@ pub enum IdentifyError {
     /// The experiment needs exactly two faces cut 180° apart about one rotary axis.
     #[error("the 0/180 experiment needs two faces cut 180° apart about one rotary axis: {0}")]
     NotAStepPair(String),
+    /// The identification engine refused the step's problem (an uncertainty not finite,
+    /// the model unable to predict the faces), in its words.
+    #[error("the step's identification: {0}")]
+    Solve(String),
 }
 
 /// Options for face extraction.
@@ -742,6 +739,15 @@ pub struct StepFrame {
 }
 
 impl StepFrame {
+    /// Where a plane lies in the frame: its offset along `n` on the line through `at` (mm)
+    /// and its normal's component along `u` (rad, to first order its turn about the tool
+    /// axis); `None` for a plane parallel to `n`. [`StepFrame::measure`] is the second
+    /// plane's less the first's.
+    pub fn place(&self, plane: &Plane) -> Option<(Real, Real)> {
+        let p = plane.intersect_line(&self.at, &self.n)?;
+        Some(((p - self.at).dot(&self.n), plane.normal.dot(&self.u)))
+    }
+
     /// Step (mm) and tilt (rad) between two planes.
     pub fn measure(&self, first: &Plane, second: &Plane) -> Option<(Real, Real)> {
         let a = first.intersect_line(&self.at, &self.n)?;
@@ -751,107 +757,6 @@ impl StepFrame {
         Some((step, tilt))
     }
 }
-
-/// Outcome of the identification.
-#[derive(Clone, Debug, PartialEq)]
-pub struct StepIdentification {
-    /// The measurement frame.
-    pub frame: StepFrame,
-    /// Measured step (mm): second face minus first, along the first face's normal.
-    pub step_mm: Real,
-    /// Its standard uncertainty from the fits (mm).
-    pub step_sigma_mm: Real,
-    /// Measured tilt (rad).
-    pub tilt_rad: Real,
-    /// Its standard uncertainty (rad).
-    pub tilt_sigma_rad: Real,
-    /// Name and value of the offset parameter (e.g. `dy_AY`, mm), if identifiable.
-    pub offset: Option<(String, Real, Real)>,
-    /// Name and value of the angle sum (e.g. `gamma_AY+gamma_YX`, rad), if identifiable.
-    pub angle_sum: Option<(String, Real, Real)>,
-    /// Name of the offset parameter solved for (e.g. `dy_AY`).
-    pub offset_name: String,
-    /// Name of the angle combination solved for (e.g. `gamma_AY+gamma_YX`).
-    pub angle_name: String,
-    /// Singular values of the 2×2 Jacobian (step, tilt) w.r.t. (offset, angle).
-    pub singular_values: [Real; 2],
-    /// How clearly the pair's rank was decided (cut: [`IDENTIFIABLE_RATIO`] of the larger
-    /// singular value).
-    pub margin: RankMargin,
-    /// Levenberg–Marquardt evaluations and final residual norm.
-    pub solver: (usize, Real),
-    /// Deviation names this experiment does not identify (alone or separably): held at
-    /// their known values (0 unless the scene gives them), never given a value.
-    pub not_identified: Vec<String>,
-    /// Why the offset or the angle combination was not identified, one sentence each
-    /// (empty when both were).
-    pub why_not: Vec<String>,
-}
-
-/// The two parameters solved for, on a model chain.
-struct StepProblem<'a> {
-    model: Chain,
-    ids: [DeviationId; 2],
-    base: [Real; 2],
-    cuts: [&'a Move; 2],
-    /// The faces' model normals: which flank of each cut is its face, on any chain.
-    toward: [UnitVector3; 2],
-    tool: &'a Tool,
-    frame: StepFrame,
-    measured: Vector2<Real>,
-    x: Vector2<Real>,
-}
-
-impl StepProblem<'_> {
-    fn predict(&self, x: &Vector2<Real>) -> Option<Vector2<Real>> {
-        let mut chain = self.model.clone();
-        for k in 0..2 {
-            chain.set_deviation(self.ids[k], self.base[k] + x[k]);
-        }
-        let f0 = flank_towards(&chain, self.tool, self.cuts[0], &self.toward[0])?;
-        let f1 = flank_towards(&chain, self.tool, self.cuts[1], &self.toward[1])?;
-        let (s, t) = self.frame.measure(&f0.plane, &f1.plane)?;
-        Some(Vector2::new(s, t))
-    }
-
-    fn jacobian_at(&self, x: &Vector2<Real>) -> Option<Matrix2<Real>> {
-        // Central differences; the model is smooth and nearly linear in these parameters.
-        // Steps: 0.1 µm and 1 µrad, small against the deviations, large against rounding.
-        let h = [1e-4, 1e-6];
-        let mut j = Matrix2::zeros();
-        for k in 0..2 {
-            let mut a = *x;
-            let mut b = *x;
-            a[k] += h[k];
-            b[k] -= h[k];
-            let col = (self.predict(&a)? - self.predict(&b)?) / (2.0 * h[k]);
-            j.set_column(k, &col);
-        }
-        Some(j)
-    }
-}
-
-impl LeastSquaresProblem<Real, U2, U2> for StepProblem<'_> {
-    type ResidualStorage = Owned<Real, U2>;
-    type JacobianStorage = Owned<Real, U2, U2>;
-    type ParameterStorage = Owned<Real, U2>;
-
-    fn set_params(&mut self, x: &Vector2<Real>) {
-        self.x = *x;
-    }
-    fn params(&self) -> Vector2<Real> {
-        self.x
-    }
-    fn residuals(&self) -> Option<Vector2<Real>> {
-        Some(self.predict(&self.x)? - self.measured)
-    }
-    fn jacobian(&self) -> Option<Matrix2<Real>> {
-        self.jacobian_at(&self.x)
-    }
-}
-
-/// Relative singular value below which a parameter combination counts as not identifiable.
-pub const IDENTIFIABLE_RATIO: Real = 1e-8;
 
 /// The faces' goodness of fit: each face's points against the scanner's noise
 /// ([`face_rms_check`]). The step and tilt are matched exactly by the two unknowns, so the
@@ -879,245 +784,6 @@ pub fn faces_fit(faces: &[Face], scan: &ScanNoise) -> FitCheck {
         parts,
     )
 }
-
-/// Identifies the rotary axis's offset and the angle sum from two faces cut 180° apart.
-pub fn identify_step(
-    faces: &[Face; 2],
-    model: &Chain,
-    tool: &Tool,
-) -> Result<StepIdentification, IdentifyError> {
-    let [f0, f1] = faces;
-    // The rotary axis whose position differs by 180° between the cuts.
-    let rotaries: Vec<(usize, char)> = model
-        .axes()
-        .iter()
-        .enumerate()
-        .filter(|(_, a)| a.kind == AxisKind::Rotary)
-        .map(|(j, a)| (j, a.letter.as_char()))
-        .collect();
-    let mut turned = Vec::new();
-    for (k, &(joint, letter)) in rotaries.iter().enumerate() {
-        let diff = (f1.rotary_deg[k] - f0.rotary_deg[k]).rem_euclid(360.0);
-        if (diff - 180.0).abs() < tol::ANGLE_DEG {
-            turned.push((joint, letter));
-        } else if diff.abs() > tol::ANGLE_DEG && (diff - 360.0).abs() > tol::ANGLE_DEG {
-            return Err(IdentifyError::NotAStepPair(format!(
-                "axis {letter} differs by {diff}° between '{}' and '{}'",
-                f0.name, f1.name
-            )));
-        }
-    }
-    let [(joint, _)] = turned[..] else {
-        return Err(IdentifyError::NotAStepPair(format!(
-            "{} rotary axes differ by 180° between '{}' and '{}'",
-            turned.len(),
-            f0.name,
-            f1.name
-        )));
-    };
-    let frame = StepFrame {
-        at: Point3::from((f0.fit.centroid.coords + f1.fit.centroid.coords) / 2.0),
-        n: f0.flank.plane.normal,
-        u: f0.flank.u,
-    };
-    let (step, tilt) = frame.measure(&f0.fit.plane, &f1.fit.plane).ok_or_else(|| {
-        IdentifyError::NotAStepPair("the fitted faces are perpendicular to each other".into())
-    })?;
-    // Uncertainties at the point of measurement, not at each face's centroid: the faces'
-    // tilts act over the lever arm from their centroids to `at`.
-    let step_sigma = f0
-        .design
-        .offset_sigma_at(&f0.fit.centroid, &frame.at)
-        .hypot(f1.design.offset_sigma_at(&f1.fit.centroid, &frame.at));
-    let tilt_sigma = f0
-        .design
-        .slope_sigma_along_cut()
-        .hypot(f1.design.slope_sigma_along_cut());
-    let cuts = [&f0.cut, &f1.cut];
-    let toward = [f0.flank.plane.normal, f1.flank.plane.normal];
-    // The parameters: of the rotary axis's joint, the offset the step sees most (its line's
-    // offset along the faces' normal: dy_AY for seed 002) and the angle the faces' relative
-    // tilt about the tool axis sees most (gamma_AY), by central differences on the model.
-    let slope = |component: Component| -> Option<Vector2<Real>> {
-        let id = DeviationId { joint, component };
-        let h = if component.is_angle() { 1e-6 } else { 1e-4 };
-        let at = |d: Real| {
-            let mut chain = model.clone();
-            chain.set_deviation(id, model.deviation(id) + d);
-            let [a, b] = [0, 1].map(|k| flank_towards(&chain, tool, cuts[k], &toward[k]));
-            frame.measure(&a?.plane, &b?.plane)
-        };
-        let (p, m) = (at(h)?, at(-h)?);
-        Some(Vector2::new(p.0 - m.0, p.1 - m.1) / (2.0 * h))
-    };
-    let degenerate = || IdentifyError::NotAStepPair("the model faces are degenerate".into());
-    let pick = |components: [Component; 3], k: usize| {
-        let mut best = (components[0], Vector2::<Real>::zeros());
-        for c in components {
-            let j = slope(c).ok_or_else(degenerate)?;
-            if j[k].abs() > best.1[k].abs() {
-                best = (c, j);
-            }
-        }
-        Ok::<_, IdentifyError>(best)
-    };
-    let (offset_c, j_offset) = pick([Component::Dx, Component::Dy, Component::Dz], 0)?;
-    let (angle_c, j_angle) = pick([Component::Alpha, Component::Beta, Component::Gamma], 1)?;
-    let ids = [
-        DeviationId {
-            joint,
-            component: offset_c,
-        },
-        DeviationId {
-            joint,
-            component: angle_c,
-        },
-    ];
-    let problem = StepProblem {
-        model: model.clone(),
-        ids,
-        base: [model.deviation(ids[0]), model.deviation(ids[1])],
-        cuts,
-        toward,
-        tool,
-        frame,
-        measured: Vector2::new(step, tilt),
-        x: Vector2::zeros(),
-    };
-    let j0 = problem
-        .jacobian_at(&Vector2::zeros())
-        .ok_or_else(degenerate)?;
-    let sv = j0.svd(false, false).singular_values;
-    let (smax, smin) = (sv.max(), sv.min());
-    let identifiable = smax > 0.0 && smin / smax > IDENTIFIABLE_RATIO;
-    // No angle of the joint turns the faces apart about the tool axis (the rotary axis is
-    // parallel to it: a C table under a vertical spindle): the tilt carries no information
-    // on the joint, and the offset is found from the step alone.
-    let no_angle = j_angle[1].abs() <= IDENTIFIABLE_RATIO * j_offset[0].abs();
-    let joint_next = model.joint_name(joint + 1).to_string();
-    let offset_name = model.deviation_name(ids[0]);
-    let angle_name = if joint + 1 < model.axes().len() {
-        format!(
-            "{}+{}_{joint_next}",
-            model.deviation_name(ids[1]),
-            angle_c.prefix()
-        )
-    } else {
-        model.deviation_name(ids[1])
-    };
-    let mut observed = vec![offset_name.clone()];
-    if !no_angle {
-        observed.push(model.deviation_name(ids[1]));
-        if joint + 1 < model.axes().len() {
-            observed.push(format!("{}_{joint_next}", angle_c.prefix()));
-        }
-    }
-    let not_identified = model
-        .deviation_names()
-        .into_iter()
-        .filter(|n| !observed.contains(n))
-        .collect();
-    let axis = model.axes()[joint].letter.as_char();
-    let mut why_not = Vec::new();
-    let (offset, angle_sum, solver) = if identifiable && !no_angle {
-        let (solved, rep) = LevenbergMarquardt::new().minimize(problem);
-        let x = solved.x;
-        let res = solved
-            .residuals()
-            .map(|r| r.norm())
-            .unwrap_or(Real::INFINITY);
-        // Propagate the measurement uncertainties through the inverse Jacobian.
-        let jinv = solved
-            .jacobian_at(&x)
-            .and_then(|j| j.try_inverse())
-            .unwrap_or_else(|| Matrix2::from_element(Real::NAN));
-        let sig = |k: usize| {
-            ((jinv[(k, 0)] * step_sigma).powi(2) + (jinv[(k, 1)] * tilt_sigma).powi(2)).sqrt()
-        };
-        let angle_next = if joint + 1 < model.axes().len() {
-            model.deviation(DeviationId {
-                joint: joint + 1,
-                component: angle_c,
-            })
-        } else {
-            0.0
-        };
-        (
-            Some((offset_name.clone(), solved.base[0] + x[0], sig(0))),
-            Some((
-                angle_name.clone(),
-                solved.base[1] + x[1] + angle_next,
-                sig(1),
-            )),
-            (rep.number_of_evaluations, res),
-        )
-    } else if no_angle && j_offset[0].abs() > 0.0 {
-        why_not.push(format!(
-            "no angle of joint {} turns the faces apart about the tool axis (the {axis} axis is parallel to it, so a rotation about it turns both faces alike): their relative tilt determines none, and {offset_name} is found from the step alone, every angle held at its known value",
-            model.joint_name(joint)
-        ));
-        let (value, evaluations, residual) = solve_offset(&problem, step, j_offset[0]);
-        (
-            Some((
-                offset_name.clone(),
-                problem.base[0] + value,
-                step_sigma / j_offset[0].abs(),
-            )),
-            None,
-            (evaluations, residual),
-        )
-    } else {
-        why_not.push(format!(
-            "the step and the faces' relative tilt depend on {offset_name} and {angle_name} only together (singular values {smax:.3e}, {smin:.3e}): neither is determined"
-        ));
-        (None, None, (0, Real::NAN))
-    };
-    Ok(StepIdentification {
-        frame,
-        step_mm: step,
-        step_sigma_mm: step_sigma,
-        tilt_rad: tilt,
-        tilt_sigma_rad: tilt_sigma,
-        offset,
-        angle_sum,
-        offset_name,
-        angle_name,
-        singular_values: [smax, smin],
-        margin: RankMargin::new(
-            &[smax, smin],
-            if identifiable { 2 } else { 1 },
-            smax * IDENTIFIABLE_RATIO,
-        ),
-        solver,
-        not_identified,
-        why_not,
-    })
-}
-
-/// The offset (mm, from its model value) at which the model's step equals `measured`: Newton
-/// on the step alone, from the slope `slope` at the model (the step is nearly linear in the
-/// offset); (value, evaluations, |step residual|).
-fn solve_offset(problem: &StepProblem<'_>, measured: Real, slope: Real) -> (Real, usize, Real) {
-    let step_at = |x: Real| problem.predict(&Vector2::new(x, 0.0)).map(|p| p[0]);
-    let (mut x, mut evaluations) = (0.0, 0);
-    let mut residual = Real::INFINITY;
-    for _ in 0..OFFSET_ITERATIONS {
-        evaluations += 1;
-        let Some(s) = step_at(x) else {
-            return (Real::NAN, evaluations, Real::NAN);
-        };
-        residual = s - measured;
-        if residual.abs() <= tol::LENGTH_EPS {
-            break;
-        }
-        x -= residual / slope;
-    }
-    (x, evaluations, residual.abs())
-}
-
-/// Newton steps on the offset alone; the step is linear in it to a part in 1e6, so two or
-/// three reach rounding.
-const OFFSET_ITERATIONS: usize = 20;
 
 /// The step and tilt the exact chain predicts for two cuts, measured in `frame`: on each
 /// cut the flank on the side `toward` points to — the side of its face's model flank, the

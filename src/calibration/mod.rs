@@ -3,8 +3,9 @@
 //! ([`goodness`]), the 0°/180° step experiment ([`identify`]), what a whitened Jacobian
 //! determines, the one report every identification gives ([`determined`]), one engine for
 //! any forward model ([`engine`]), and on it general identification of any set of
-//! deviations from planes and balls ([`calibrate`]), test-cut design ([`design`]) and
-//! NC-program correction with its verification ([`correct`]); on the engine too a hexapod's kinematic parameters from
+//! deviations from planes and balls ([`calibrate`]), test-cut design ([`design`]),
+//! NC-program correction with its verification ([`correct`]), the step experiment's
+//! identification ([`step`]), a hexapod's kinematic parameters from
 //! double-ball-bar lengths ([`hexapod_calibrate`], its circles by design in
 //! [`hexapod_design`]), a serial machine from laser readings and ball-bar circles together
 //! ([`instruments`]), a hexapod calibrated in rounds from touch-probe readings of
@@ -23,6 +24,7 @@ pub mod engine;
 pub mod calibrate;
 pub mod design;
 pub mod correct;
+pub mod step;
 pub mod hexapod_calibrate;
 pub mod hexapod_design;
 pub mod instruments;

@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use twinmill::metrology::cloud::read_cloud_file;
 use twinmill::pipeline::dbb::{calibrate_measured, calibrate_scene, load_plan};
+use twinmill::pipeline::hexapod_probe::joint_page;
 use twinmill::pipeline::instrument_pages::{calibrate_page, measured_calibrate_page};
 use twinmill::pipeline::measurements::{
     IdentifyRequest, MeasurementKind, ROTARY_APART, identify_measurements,
@@ -284,7 +285,8 @@ pub struct CalibrateOptions {
     readings: Vec<PathBuf>,
     /// With --readings: also the touch probe's readings of positioning and pivot accuracy
     /// (the file `hexapod probe-calibrate --readings-out` writes), identified together with
-    /// the bar's in one identification of all 42 parameters.
+    /// the bar's in one identification of all 42 parameters (--html and --corrected write
+    /// its page and its controller and genhexkins files).
     #[arg(long, value_name = "FILE")]
     probe: Option<PathBuf>,
     /// Write the calibrated controller (a `[controller]` file: the identified parameters as
@@ -384,11 +386,6 @@ fn calibrate(
             files.push((p.clone(), text));
         }
         if let Some(probe) = &a.probe {
-            if a.html.is_some() {
-                return Err(
-                    "--html is not written for --probe (the summary and --json are)".into(),
-                );
-            }
             let text = twinmill::scene::read_text(probe).map_err(|e| e.to_string())?;
             let o = twinmill::pipeline::hexapod_probe::identify_dbb_and_probe(
                 &s,
@@ -398,11 +395,9 @@ fn calibrate(
                 &(probe.clone(), text),
             )
             .map_err(|e| e.to_string())?;
-            let mut wrote = String::new();
-            if let Some(out) = &a.corrected {
-                write(out, o.fragment.as_bytes())?;
-                wrote = format!("  wrote         {} (controller)\n", out.display());
-            }
+            let page = a.html.as_ref().map(|h| (h, joint_page(&o)));
+            let wrote =
+                write_calibration_files(a.corrected.as_deref(), &o.fragment, &o.genhexkins, page)?;
             return Ok(print_out(
                 || o.summary.clone() + &wrote,
                 json.then(|| serde_json::to_string_pretty(&o)),
@@ -430,7 +425,9 @@ fn calibrate(
 }
 
 /// Writes the controller file (and the genhexkins file beside it: the same name with
-/// `.hal`) and the page; returns the summary's lines naming them.
+/// `.hal`) and the page, all of them or none ([`twinmill::output::write_paths`]: two of them
+/// naming one file, or one that cannot be written, leaves nothing written); returns the
+/// summary's lines naming them.
 fn write_calibration_files(
     corrected: Option<&Path>,
     fragment: &str,
@@ -438,6 +435,7 @@ fn write_calibration_files(
     page: Option<(&PathBuf, String)>,
 ) -> Result<String, String> {
     let mut wrote = String::new();
+    let mut files: Vec<(PathBuf, &[u8])> = Vec::new();
     if let Some(out) = corrected {
         let hal = out.with_extension("hal");
         if hal == out {
@@ -446,18 +444,20 @@ fn write_calibration_files(
                 out.display()
             ));
         }
-        write(out, fragment.as_bytes())?;
-        write(&hal, genhexkins.as_bytes())?;
         wrote += &format!(
             "  wrote         {} (controller), {} (LinuxCNC genhexkins)\n",
             out.display(),
             hal.display()
         );
+        files.push((out.to_path_buf(), fragment.as_bytes()));
+        files.push((hal, genhexkins.as_bytes()));
     }
-    if let Some((path, html)) = page {
-        write(path, html.as_bytes())?;
+    if let Some((path, html)) = &page {
         wrote += &format!("  wrote         {}\n", path.display());
+        files.push((path.to_path_buf(), html.as_bytes()));
     }
+    let files: Vec<(&Path, &[u8])> = files.iter().map(|(p, b)| (p.as_path(), *b)).collect();
+    twinmill::output::write_paths(&files).map_err(|e| e.to_string())?;
     Ok(wrote)
 }
 

@@ -16,7 +16,7 @@ use crate::calibration::hexapod_probe::{
 use crate::machine::hexapod::{PARAMETERS, ParameterId};
 use crate::math::Real;
 use crate::pipeline::dbb::{
-    CALIBRATION_NOISE_MM, calibration_workspace, measured_circles, procedure_plan,
+    CALIBRATION_NOISE_MM, calibration_workspace, genhexkins_hal, measured_circles, procedure_plan,
 };
 use crate::pipeline::hexapod::HexapodCommandError;
 use crate::scene::HexapodScene;
@@ -448,6 +448,12 @@ pub struct JointOutcome {
     /// comments).
     #[serde(skip)]
     pub fragment: String,
+    /// The same controller as LinuxCNC genhexkins' HAL pins ([`genhexkins_hal`]).
+    #[serde(skip)]
+    pub genhexkins: String,
+    /// The bar's and the probe's readings and σ (mm), for the page.
+    #[serde(skip)]
+    pub instruments: [(usize, Real); 2],
     /// The summary text.
     #[serde(skip)]
     pub summary: String,
@@ -509,15 +515,23 @@ pub fn identify_dbb_and_probe(
     )
     .map_err(|e| error(e.to_string()))?;
     let pn = scene.nominal.parameters();
+    let title = format!(
+        "The calibrated controller of {} identified by `twinmill identify --readings … --probe {probe_file}`",
+        scene.name
+    );
     let mut fragment = format!(
-        "# The calibrated controller of {} identified by `twinmill identify --readings … --probe {probe_file}`\n\
+        "# {title}\n\
          # ({} circles, {}, and the touch probe's readings) as deviations from nominal (mm), for\n\
          # --controller; σ along what the readings determine. Directions they do not determine keep\n\
          # the controller's values.\n[controller]\n",
-        scene.name,
         plan.circles.len(),
         plan.procedure.name()
     );
+    let identified = scene
+        .controller
+        .with_parameters(&id.parameters)
+        .map_err(|e| error(format!("the identified controller: {e}")))?;
+    let genhexkins = genhexkins_hal(&identified, &[title]);
     for k in ParameterId::all() {
         let i = k.index();
         let _ = writeln!(
@@ -576,6 +590,123 @@ pub fn identify_dbb_and_probe(
         probe_file,
         identification: id,
         fragment,
+        genhexkins,
+        instruments: [
+            (plan.readings(), CALIBRATION_NOISE_MM),
+            (probe_plan.readings(), probed.sigma_mm),
+        ],
         summary,
     })
+}
+
+/// `identify --readings … --probe FILE`'s page: the readings of both instruments with their
+/// files and σ, the identifiability (rank of the 42 parameters, the singular values of the
+/// scaled, whitened Jacobian, what is not determined, borderline), the goodness of fit file
+/// by file, and the controller's parameters with σ.
+pub fn joint_page(o: &JointOutcome) -> String {
+    use crate::report::html::{Section, render_page};
+    use crate::report::pages as page;
+    let id = &o.identification;
+    let [(bar_n, bar_s), (probe_n, probe_s)] = o.instruments;
+    let mut files: Vec<Vec<String>> = o
+        .dbb_files
+        .iter()
+        .enumerate()
+        .map(|(k, f)| vec![format!("double ball bar, circle {}", k + 1), f.clone()])
+        .collect();
+    files.push(vec!["touch probe".into(), o.probe_file.clone()]);
+    let threshold = 1.0 / crate::calibration::calibrate::DETERMINED_FRACTION;
+    let mut sections = vec![
+        Section {
+            heading: "Readings".into(),
+            intro: "Both instruments' readings, identified together in one problem: each reading weighed by its instrument's standard uncertainty σ.".into(),
+            columns: ["instrument", "readings", "σ (µm)"].map(String::from).to_vec(),
+            rows: vec![
+                vec!["double ball bar".into(), bar_n.to_string(), format!("{:.4}", bar_s * 1e3)],
+                vec!["touch probe".into(), probe_n.to_string(), format!("{:.4}", probe_s * 1e3)],
+            ],
+        },
+        Section {
+            heading: "Files read".into(),
+            intro: "One bar trace per circle of the plan, in its order, and the probe's readings.".into(),
+            columns: vec!["instrument".into(), "file".into()],
+            rows: files,
+        },
+    ];
+    let mut sv = page::singular_value_rows(&id.singular_values, threshold);
+    sv.push(vec![
+        "rank".into(),
+        format!("{} of {PARAMETERS}", id.rank),
+        format!(
+            "{} parameters on their own, {} determined combinations",
+            id.identified.len(),
+            id.combinations.len()
+        ),
+    ]);
+    sections.push(Section {
+        heading: "Identifiability".into(),
+        intro: format!("Singular values of the Jacobian of both instruments' readings, each parameter scaled by its realistic magnitude and each reading whitened by its σ, the jig-free table balls projected out; a direction is determined from {threshold} (σ below a tenth of its magnitude)."),
+        columns: vec!["#".into(), "singular value".into(), "".into()],
+        rows: sv,
+    });
+    sections.extend(page::list_section(
+        "Not determined",
+        "Directions neither instrument determines, held at the controller's values.",
+        &id.not_determined,
+    ));
+    sections.extend(page::list_section(
+        "Borderline",
+        "Directions near the threshold of determination: other readings may decide them the other way.",
+        &id.borderline,
+    ));
+    sections.push(page::fit_section(&id.fit));
+    let estimate_rows = |es: &[crate::calibration::hexapod_probe::ProbeEstimate]| {
+        es.iter()
+            .map(|e| {
+                vec![
+                    e.name.clone(),
+                    format!("{:+.6}", e.value_mm),
+                    format!("{:.4}", e.sigma_mm * 1e3),
+                ]
+            })
+            .collect::<Vec<_>>()
+    };
+    let cols = ["parameter", "from the controller (mm)", "σ (µm)"]
+        .map(String::from)
+        .to_vec();
+    sections.push(Section {
+        heading: "Identified parameters".into(),
+        intro: "Each parameter identified on its own: its deviation from the controller that took the readings, with its standard uncertainty σ.".into(),
+        columns: cols.clone(),
+        rows: estimate_rows(&id.identified),
+    });
+    if !id.combinations.is_empty() {
+        sections.push(Section {
+            heading: "Determined combinations".into(),
+            intro:
+                "Combinations the readings determine though their members are not determined alone."
+                    .into(),
+            columns: cols,
+            rows: estimate_rows(&id.combinations),
+        });
+    }
+    let plots = page::spectrum_plot(
+        &id.singular_values,
+        Some(threshold),
+        "Singular values of the identification's Jacobian (both instruments): dark bars are determined directions; the platform's rotations about the tool point lie below the line.",
+    )
+    .into_iter()
+    .collect();
+    render_page(&page::instrument_page(
+        format!(
+            "twinmill identify --readings … --probe {}: {} ({})",
+            o.probe_file,
+            o.scene,
+            o.procedure.name()
+        ),
+        o.summary.clone(),
+        sections,
+        plots,
+        page::json(o),
+    ))
 }

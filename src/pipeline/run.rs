@@ -6,6 +6,7 @@
 
 use super::{PipelineError, machine_part, scan_noise};
 use crate::calibration::identify::{self, Face};
+use crate::calibration::step;
 use crate::cutting::stock::TriDexel;
 use crate::math::{Point3, Real};
 use crate::metrology::cloud::PointCloud;
@@ -150,7 +151,16 @@ pub fn run(
         source,
     };
     let cuts = [&faces[0].cut, &faces[1].cut];
-    let ident = identify::identify_step(&faces, scene.model(), &scene.tool).map_err(id_err)?;
+    let mut ident = step::identify_step(&faces, scene.model(), &scene.tool).map_err(id_err)?;
+    // What the solved deviations leave of the faces' offsets and tilts (with the offset
+    // alone: their relative tilt) refuses the run too, naming the face.
+    ident
+        .fit
+        .enforce("run", scene.accept_misfit)
+        .map_err(|source| PipelineError::Misfit {
+            path: spath.clone(),
+            source,
+        })?;
     let (predicted_step, predicted_tilt) = identify::predicted_step(
         scene.chain(),
         &scene.tool,
@@ -251,7 +261,7 @@ pub fn run(
         not_identified.extend(names);
     }
     let report = Report {
-        warning: fit.accepted_line(),
+        warning: fit.accepted_line().or_else(|| ident.fit.accepted_line()),
         scene: scene.name.clone(),
         machine: scene.machine_name().to_string(),
         chain: scene.chain().to_string(),
@@ -272,9 +282,9 @@ pub fn run(
         fit,
         solver: SolverReport {
             method: if ident.offset.is_some() && ident.angle_sum.is_none() {
-                "Newton on the exact chain (the step alone: the tilt sees no angle of the joint)"
+                "the identification engine on the exact chain (the step alone: the tilt sees no angle of the joint)"
             } else {
-                "Levenberg-Marquardt on the exact chain (step, tilt), seed 002 eq. (6)(7) to first order"
+                "the identification engine on the exact chain (the faces' offsets and tilts; step and tilt, seed 002 eq. (6)(7) to first order)"
             }
             .into(),
             singular_values: ident.singular_values,
@@ -390,8 +400,7 @@ pub fn scanner_study(
                 &scanned.cloud.points,
                 first.then_some(stock),
             )?;
-            let ident =
-                identify::identify_step(&faces, scene.model(), &scene.tool).map_err(id_err)?;
+            let ident = step::identify_step(&faces, scene.model(), &scene.tool).map_err(id_err)?;
             if let Some((n, v, s)) = &ident.offset {
                 name.clone_from(n);
                 values.push(*v);

@@ -66,6 +66,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
             "calibrate",
             "design",
             "correct",
+            "step",
             "hexapod_calibrate",
             "hexapod_design",
             "instruments",

@@ -33,20 +33,25 @@ use twinmill::math::Real;
 use twinmill::progress::NoProgress;
 use twinmill::scene::Scene;
 
-/// A scanner for the scenes that have none (EinScan-class pitch relaxed to 0.3 mm for CI,
-/// range noise 0.01 mm); `design` places its own views around the block and keeps these
-/// settings.
-const SCANNER: &str = "
-[scanner]
-position = [0.0, -330.0, 80.0]
-target = [0.0, 0.0, 20.0]
-up = [0.0, 0.0, 1.0]
-baseline_mm = 100.0
-fov_mm = [200.0, 150.0]
-pitch_mm = 0.3
-noise_sigma_mm = 0.01
-seed = 2002
-";
+/// A `[scanner]` section aimed at the block's centre (0, 0, 20) from `position`, with a
+/// field of view `fov` and the EinScan-class settings every scanner here shares (pitch
+/// relaxed to 0.3 mm for CI, range noise 0.01 mm, seed 2002), then the lines `extra`.
+macro_rules! scanner {
+    ($position:literal, $fov:literal, $extra:literal) => {
+        concat!(
+            "\n[scanner]\nposition = ",
+            $position,
+            "\ntarget = [0.0, 0.0, 20.0]\nup = [0.0, 0.0, 1.0]\nbaseline_mm = 100.0\nfov_mm = ",
+            $fov,
+            "\npitch_mm = 0.3\nnoise_sigma_mm = 0.01\nseed = 2002\n",
+            $extra
+        )
+    };
+}
+
+/// A scanner for the scenes that have none; `design` places its own views around the
+/// block and keeps these settings.
+const SCANNER: &str = scanner!("[0.0, -330.0, 80.0]", "[200.0, 150.0]", "");
 
 /// The built-in scene `stem` (with a scanner appended when it has none), written with its
 /// program into a directory of its own; its text is returned for the truth.
@@ -387,20 +392,14 @@ fn ball_sensor_and_the_designed_part_identify_the_trunnion_together() {
 
 /// A scanner that sees the trunnion's four shoulders: the block turned on a turntable to
 /// four views (the views `design` places).
-const TURNTABLE_SCANNER: &str = "
-[scanner]
-position = [0.0, -315.4, 240.8]
-target = [0.0, 0.0, 20.0]
-up = [0.0, 0.0, 1.0]
-baseline_mm = 100.0
-fov_mm = [80.0, 80.0]
-pitch_mm = 0.3
-noise_sigma_mm = 0.01
-working_range_mm = [290.0, 480.0]
+const TURNTABLE_SCANNER: &str = scanner!(
+    "[0.0, -315.4, 240.8]",
+    "[80.0, 80.0]",
+    "working_range_mm = [290.0, 480.0]
 grazing_limit_deg = 80.0
-seed = 2002
 turntable = { axis_point = [0.0, 0.0, 20.0], axis = [0.0, 0.0, 1.0], angles_deg = [45.0, 135.0, 225.0, 315.0] }
-";
+"
+);
 
 /// The flanks of the four shoulders trunnion-ac.ngc cuts at C = 0, 90, 180, 270 (its feed
 /// lines 10, 15, 20, 25).

@@ -879,6 +879,26 @@ fn cli_design_writes_the_plan_identify_reads_on_a_hexapod() {
     }
 }
 
+/// `identify SCENE --procedure ball-plate --readings LIST` and `extra`, run in `sb`: the
+/// hexapod identified from ball-plate trace files.
+pub(crate) fn identify_ball_plate(
+    sb: &Sandbox,
+    scene: &str,
+    list: &str,
+    extra: &[&str],
+) -> (i32, String, String) {
+    let mut args = vec![
+        "identify",
+        scene,
+        "--procedure",
+        "ball-plate",
+        "--readings",
+        list,
+    ];
+    args.extend(extra);
+    sb.run(&args)
+}
+
 /// The default ball-plate circles measured on `actual` driven by `controller` (σ 0.5 µm,
 /// `seed`, one stream a circle) and written as `<stem>N.csv` under `header`: the files'
 /// names, in the plan's order.
@@ -928,17 +948,12 @@ fn calibrate_reads_measured_dbb_files_and_writes_the_corrected_parameters() {
     let names = ball_plate_readings(&sb, &s.nominal, &s.actual, &ws, 11, "circle", "# measured");
     let list = names.join(",");
     let scene = path.to_str().expect("utf-8");
-    let (code, out, err) = sb.run(&[
-        "identify",
+    let (code, out, err) = identify_ball_plate(
+        &sb,
         scene,
-        "--procedure",
-        "ball-plate",
-        "--readings",
         &list,
-        "--corrected",
-        "corrected.toml",
-        "--json",
-    ]);
+        &["--corrected", "corrected.toml", "--json"],
+    );
     assert_eq!(code, 0, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).expect("json");
     // The truth: the scene file's own [deviations] (absent names: 0).
@@ -1008,16 +1023,7 @@ fn calibrate_reads_measured_dbb_files_and_writes_the_corrected_parameters() {
         (with_first("absent.csv"), "absent.csv"),
         (names[..6].join(","), "6 file(s) for a plan of 7"),
     ] {
-        let (code, _, err) = sb.run(&[
-            "identify",
-            scene,
-            "--procedure",
-            "ball-plate",
-            "--readings",
-            &files,
-            "--corrected",
-            "bad.toml",
-        ]);
+        let (code, _, err) = identify_ball_plate(&sb, scene, &files, &["--corrected", "bad.toml"]);
         assert_ne!(code, 0, "{files}");
         assert_eq!(err.trim().lines().count(), 1, "{files}: {err}");
         assert!(err.contains(expect), "{files}: {err}");

@@ -4,7 +4,9 @@
 //! it leaves worked out by this test's own kinematics and compared with what `identify`
 //! promised, for both procedures — the genhexkins pins it writes beside it, and bad input.
 
-use super::hexapod_calibration::{Geometry, ball_plate_readings, own_pose_errors};
+use super::hexapod_calibration::{
+    Geometry, ball_plate_readings, identify_ball_plate, own_pose_errors,
+};
 use super::{HEXAPOD_CENTRE, Sandbox, hexapod_centre as centre};
 use std::path::Path;
 use twinmill::machine::hexapod::{Hexapod, ParameterId};
@@ -12,7 +14,7 @@ use twinmill::math::{Real, Vector3};
 
 /// The controller a controller file describes, as this test reads it: the nominal
 /// machine's parameters plus the `[controller]` values, by name.
-fn controller_of(nominal: &Hexapod, fragment: &str) -> Hexapod {
+pub(super) fn controller_of(nominal: &Hexapod, fragment: &str) -> Hexapod {
     let t: toml::Table = fragment.parse().expect("the controller file is TOML");
     let mut h = nominal.clone();
     for (k, v) in t["controller"].as_table().expect("[controller]") {
@@ -133,19 +135,12 @@ fn readings_calibrate_the_controller_and_write_its_page_and_genhexkins_pins() {
     let s = centre();
     let ws = s.workspace.expect("workspace");
     let list = ball_plate_readings(&sb, &s.controller, &s.actual, &ws, 5, "c", "").join(",");
-    let (code, out, err) = sb.run(&[
-        "identify",
+    let (code, out, err) = identify_ball_plate(
+        &sb,
         HEXAPOD_CENTRE,
-        "--procedure",
-        "ball-plate",
-        "--readings",
         &list,
-        "--corrected",
-        "cal.toml",
-        "--html",
-        "cal.html",
-        "--json",
-    ]);
+        &["--corrected", "cal.toml", "--html", "cal.html", "--json"],
+    );
     assert_eq!(code, 0, "{err}");
     let v = json(&out);
     assert!(num(&v["predicted_correction"]["position_mm"]) > 0.05);

@@ -198,11 +198,13 @@ fn a_file_with_a_planted_bias_is_refused_by_name() {
 /// `identify --readings … --probe FILE` identifies them with the bar's ball-plate traces
 /// — rank 39 (the three platform rotations about the tool point named), every parameter of
 /// the controller file within 3σ of the scene file's `[deviations]` once those rotations
-/// are taken out — and a bad probe file is one line naming file and line, nothing written.
+/// are taken out — and writes the page (both instruments' files, the identifiability) and
+/// the genhexkins pins of the controller file's machine beside it; outputs that cannot all
+/// be written and a bad probe file are one line (naming file and line), nothing written.
 #[test]
 fn cli_identify_reads_bar_traces_and_a_probe_file_together() {
     use super::Sandbox;
-    use super::hexapod_calibration::ball_plate_readings;
+    use super::hexapod_calibration::{ball_plate_readings, identify_ball_plate};
     let sb = Sandbox::new("hexapod-dbb-probe");
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("scenes/hexapod-machining-centre.toml");
@@ -221,22 +223,33 @@ fn cli_identify_reads_bar_traces_and_a_probe_file_together() {
     assert_eq!(code, 0, "{err}");
     let names = ball_plate_readings(&sb, &s.nominal, &s.actual, &ws, 3, "plate", "");
     let list = names.join(",");
-    let (code, out, err) = sb.run(&[
-        "identify",
-        scene,
-        "--procedure",
-        "ball-plate",
-        "--readings",
-        &list,
-        "--probe",
+    // The bar's traces and a probe file identified together, and `extra`.
+    let with_probe = |probe: &str, extra: &[&str]| {
+        let mut args = vec!["--probe", probe];
+        args.extend(extra);
+        identify_ball_plate(&sb, scene, &list, &args)
+    };
+    let (code, out, err) = with_probe(
         "probe.csv",
-        "--corrected",
-        "both.toml",
-        "--json",
-    ]);
+        &["--corrected", "both.toml", "--html", "both.html", "--json"],
+    );
     assert_eq!(code, 0, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).expect("json");
     assert_eq!(v["identification"]["rank"], PARAMETERS - 3);
+    // The page names both instruments' files and gives the identifiability and the σ.
+    let page = std::fs::read_to_string(sb.dir.join("both.html")).expect("page written");
+    for want in [
+        names[0].as_str(),
+        names[names.len() - 1].as_str(),
+        "probe.csv",
+        "Identifiability",
+        "touch probe",
+        "double ball bar",
+        "σ (µm)",
+        "l0_6",
+    ] {
+        assert!(page.contains(want), "the page lacks {want}");
+    }
     // The controller file against the scene file's own [deviations] (absent names: 0).
     let file: toml::Table = std::fs::read_to_string(&path)
         .expect("reads")
@@ -279,6 +292,63 @@ fn cli_identify_reads_bar_traces_and_a_probe_file_together() {
         .filter(|&k| seen[k].abs() <= 3.0 * sigma[k])
         .count();
     assert!(inside >= 40, "{inside} of 42 within 3σ");
+    // The genhexkins pins beside the controller file are that file's controller, read back
+    // here: `base.N` the base joints b_i, `platform.N` the platform joints about the tool
+    // point a_i − o (N = i − 1), each joint's home offset its reference length; both files
+    // written to 1e-7 mm.
+    let controller = super::hexapod_controller::controller_of(&s.nominal, &text);
+    let hal = std::fs::read_to_string(sb.dir.join("both.hal")).expect("genhexkins file");
+    let mut pins = std::collections::BTreeMap::new();
+    for l in hal.lines().filter(|l| !l.starts_with('#')) {
+        let w: Vec<&str> = l.split_whitespace().collect();
+        assert_eq!((w.len(), w[0]), (3, "setp"), "{l}");
+        pins.insert(w[1].to_string(), w[2].parse::<Real>().expect("a number"));
+    }
+    assert_eq!(pins.len(), 36);
+    let o = controller.tool_offset();
+    for i in 0..6 {
+        for (k, c) in ["x", "y", "z"].iter().enumerate() {
+            let base = pins[&format!("genhexkins.base.{i}.{c}")];
+            let platform = pins[&format!("genhexkins.platform.{i}.{c}")];
+            let (b, a) = (
+                controller.base_joints()[i][k],
+                controller.platform_joints()[i][k] - o[k],
+            );
+            assert!((base - b).abs() < 1.5e-7, "base {i} {c}: {base} vs {b}");
+            assert!(
+                (platform - a).abs() < 1.5e-7,
+                "platform {i} {c}: {platform} vs {a}"
+            );
+        }
+        let line = format!("# [JOINT_{i}] HOME_OFFSET = ");
+        let l0: Real = hal
+            .lines()
+            .find_map(|l| l.strip_prefix(line.as_str()))
+            .expect("home offset")
+            .parse()
+            .expect("number");
+        let want = controller.reference_lengths()[i];
+        assert!((l0 - want).abs() < 1.5e-7, "joint {i}: {l0} vs {want}");
+    }
+    // Outputs that cannot all be written: refused before anything is — the page named as
+    // the genhexkins file, a page in a folder that does not exist.
+    for (corrected, page, named) in [
+        ("clash.toml", "clash.hal", "clash.hal"),
+        ("lost.toml", "missing/page.html", "missing/page.html"),
+    ] {
+        let (code, out, err) = with_probe("probe.csv", &["--corrected", corrected, "--html", page]);
+        assert_ne!(code, 0, "{out}");
+        assert_eq!(err.trim().lines().count(), 1, "{err}");
+        assert!(err.contains(named), "{err}");
+        let hal = std::path::Path::new(corrected).with_extension("hal");
+        for f in [
+            std::path::Path::new(corrected),
+            hal.as_path(),
+            std::path::Path::new(page),
+        ] {
+            assert!(!sb.dir.join(f).exists(), "{} written", f.display());
+        }
+    }
     // Bad probe files: one line naming file and line; nothing written.
     let good = std::fs::read_to_string(sb.dir.join("probe.csv")).expect("written");
     let header_line = good
@@ -304,21 +374,15 @@ fn cli_identify_reads_bar_traces_and_a_probe_file_together() {
         (truncated, header_line + 3),
     ] {
         sb.write("bad.csv", bad.as_bytes());
-        let (code, out, err) = sb.run(&[
-            "identify",
-            scene,
-            "--procedure",
-            "ball-plate",
-            "--readings",
-            &list,
-            "--probe",
+        let (code, out, err) = with_probe(
             "bad.csv",
-            "--corrected",
-            "bad.toml",
-        ]);
+            &["--corrected", "bad.toml", "--html", "bad.html"],
+        );
         assert_ne!(code, 0, "{out}");
         assert_eq!(err.trim().lines().count(), 1, "{err}");
         assert!(err.contains(&format!("bad.csv:{line}")), "{err}");
-        assert!(!sb.dir.join("bad.toml").exists());
+        for f in ["bad.toml", "bad.hal", "bad.html"] {
+            assert!(!sb.dir.join(f).exists(), "{f} written");
+        }
     }
 }

@@ -550,3 +550,74 @@ fn a_c_table_step_identifies_the_table_offset_from_the_step_alone() {
         );
     }
 }
+
+/// On the C table only the offset is solved, so the faces' relative tilt about the tool axis
+/// is left to the identification's goodness of fit: one degree of freedom, χ² = (tilt /
+/// σ_tilt)². The second face's fitted plane turned about the tool axis through its centroid
+/// by 12 of the tilt's σ gives χ² ≥ (12 − |t₀/σ|)² — over 100 for the scan's own tilt t₀
+/// within 2σ — beyond χ²(1)'s limit at p = 1e-6 (23.9): refused, naming a face and its NC
+/// line. Turned by 1σ, χ² ≤ 9: it fits, and the offset does not move.
+#[test]
+fn a_c_table_step_whose_faces_turn_apart_is_refused_naming_the_faces() {
+    use twinmill::calibration::step::identify_step;
+    use twinmill::math::UnitVector3;
+    use twinmill::metrology::fit::Plane;
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/c-table-step.toml");
+    let s = Scene::load(&path).expect("scene");
+    let program = s.load_program().expect("program");
+    let out = run(&s, &program, &NoProgress).expect("runs");
+    let faces =
+        twinmill::pipeline::extract_faces(&s, &program, &out.cloud.points, None).expect("faces");
+    let given = identify_step(&faces, s.model(), &s.tool).expect("identifies");
+    assert!(given.fit.fits, "{}", given.fit.describe());
+    assert!(
+        given.tilt_rad.abs() < 2.0 * given.tilt_sigma_rad,
+        "{} ± {}",
+        given.tilt_rad,
+        given.tilt_sigma_rad
+    );
+    let turned = |k: Real| {
+        let mut f = faces.clone();
+        let theta = k * given.tilt_sigma_rad;
+        let (n, c) = (f[1].fit.plane.normal, f[1].fit.centroid);
+        let m = Vector3::new(
+            n.x * theta.cos() - n.y * theta.sin(),
+            n.x * theta.sin() + n.y * theta.cos(),
+            n.z,
+        );
+        f[1].fit.plane = Plane::through(&c, UnitVector3::new_normalize(m));
+        identify_step(&f, s.model(), &s.tool).expect("identifies")
+    };
+    let far = turned(12.0);
+    assert!(!far.fit.fits, "{}", far.fit.describe());
+    let chi2 = far.fit.chi2.expect("a χ²");
+    assert!(chi2 > 100.0, "χ² {chi2}");
+    assert!(
+        (far.tilt_rad - given.tilt_rad).abs() > 11.0 * given.tilt_sigma_rad,
+        "the turn shows in the tilt: {} against {}",
+        far.tilt_rad,
+        given.tilt_rad
+    );
+    // The turn is of one face against the other: either face alone, left out, explains it.
+    let why = far.fit.describe();
+    assert!(
+        why.contains("out of line")
+            && (why.contains("face 'C180' (NC line 14)") || why.contains("face 'C0' (NC line 9)")),
+        "{why}"
+    );
+    let near = turned(1.0);
+    assert!(near.fit.fits, "{}", near.fit.describe());
+    assert!(near.fit.chi2.expect("a χ²") < 9.0);
+    let offset = |i: &twinmill::calibration::step::StepIdentification| {
+        i.offset.as_ref().map(|o| o.1).expect("dy_CX")
+    };
+    // Turned by θ about its centroid c, the face moves at the measuring point P by the lever
+    // arm (c − P)·u times θ: the step by that, dy_CX (= −step/2) by half of it.
+    let lever = (faces[1].fit.centroid - given.frame.at).dot(&given.frame.u);
+    let moved = lever.abs() * given.tilt_sigma_rad / 2.0;
+    let shift = (offset(&near) - offset(&given)).abs();
+    assert!(
+        (shift - moved).abs() < 0.05 * moved,
+        "dy_CX moved {shift} mm, the lever arm {lever} mm makes it {moved}"
+    );
+}

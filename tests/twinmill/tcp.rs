@@ -66,6 +66,25 @@ const TRUNNION: Kinematics = Kinematics {
     rotary: &[(3, 'A'), (5, 'C')],
 };
 
+/// The distance (mm) of `p` from the polyline through the tips (X Y Z) of `path`.
+fn off_path(path: &[Q], p: &Vector3<Real>) -> Real {
+    path.windows(2)
+        .map(|w| {
+            let (a, e) = (
+                Vector3::new(w[0][0], w[0][1], w[0][2]),
+                Vector3::new(w[1][0], w[1][1], w[1][2]),
+            );
+            let d = e - a;
+            let t = if d.norm() > 0.0 {
+                ((p - a).dot(&d) / d.norm_squared()).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            (a + d * t - p).norm()
+        })
+        .fold(Real::INFINITY, Real::min)
+}
+
 /// One block: rapid or feed, and the TCP target (tip X Y Z in the workpiece frame, A B C).
 type Block = (bool, Q);
 
@@ -392,22 +411,7 @@ fn corrected_in_tcp(blocks: &[Block], z_min: Real) {
             b.end.get(AxisLetter::Y),
             b.end.get(AxisLetter::Z),
         );
-        let off = path
-            .windows(2)
-            .map(|w| {
-                let (a, e) = (
-                    Vector3::new(w[0][0], w[0][1], w[0][2]),
-                    Vector3::new(w[1][0], w[1][1], w[1][2]),
-                );
-                let d = e - a;
-                let t = if d.norm() > 0.0 {
-                    ((p - a).dot(&d) / d.norm_squared()).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                (a + d * t - p).norm()
-            })
-            .fold(Real::INFINITY, Real::min);
+        let off = off_path(&path, &p);
         assert!(off < 0.1, "block end {p:?} is {off} mm off the TCP path");
     }
 }
@@ -520,22 +524,7 @@ fn correct_of_the_tcp_scene_writes_a_tcp_program_within_a_micrometre() {
     assert!(ends.len() > targets.len(), "{} blocks", ends.len());
     for q in &ends {
         let p = Vector3::new(q[0], q[1], q[2]);
-        let off = targets
-            .windows(2)
-            .map(|w| {
-                let (a, e) = (
-                    Vector3::new(w[0][0], w[0][1], w[0][2]),
-                    Vector3::new(w[1][0], w[1][1], w[1][2]),
-                );
-                let d = e - a;
-                let t = if d.norm() > 0.0 {
-                    ((p - a).dot(&d) / d.norm_squared()).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                (a + d * t - p).norm()
-            })
-            .fold(Real::INFINITY, Real::min);
+        let off = off_path(&targets, &p);
         assert!(off < 0.1, "block end {q:?} is {off} mm off the TCP path");
     }
     let program = s.load_program().expect("parses");
