@@ -91,7 +91,7 @@ use probe::{
     Face, Hit, Probe, Ray, Shape, ball_sphere, frame_box, line_segment_distance, tool_interval,
     tool_normal,
 };
-pub use sampled::SampledPath;
+pub use sampled::{SAMPLED_BOUND_FACTOR, SampledPath};
 
 /// Bound (mm) on the distance of the envelope's interval ends from the true swept surface
 /// along a ray: 0.1 µm, the µm-metrology budget with a factor ten to spare; the solver

@@ -29,8 +29,13 @@
 //! bit for bit.
 
 use super::path::Sample;
-use crate::cutting::sweep::SAMPLED_BOUND_FACTOR;
 use crate::math::{Isometry3, Matrix3, Point3, Real, Vector3};
+
+/// Safety factor on the rates a pose source's samples show (the largest angular speed and
+/// path curvature between samples may exceed those at the samples): on the sub-steps of a
+/// pose source ([`crate::cutting::sweep::SampledBound`]) and on the speed of its curve
+/// ([`SampledPath::speed_bound`]).
+pub const SAMPLED_BOUND_FACTOR: Real = 2.0;
 
 /// A smooth curve through the pilot poses of a move (see the module docs).
 #[derive(Clone, Debug)]

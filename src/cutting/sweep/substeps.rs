@@ -6,9 +6,7 @@
 //! **Invariant:** bounds, poses and translations only; never touches the stock.
 
 use super::*;
-/// Safety factor on the rates a pose source's samples show (the largest angular speed and
-/// path curvature between samples may exceed those at the samples).
-pub const SAMPLED_BOUND_FACTOR: Real = 2.0;
+pub use crate::cutting::envelope::SAMPLED_BOUND_FACTOR;
 
 /// The sub-step bound of a move read pose by pose, from its pilot samples `P_j` at
 /// `λ = j/M`: with the tool's mid-height point `c` and orientation `R`, the largest angular
