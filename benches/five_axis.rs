@@ -14,7 +14,7 @@
 //! - **Hexapod side cut**: the hexapod machining centre (`benches/data/hexapod-side-cut.toml`,
 //!   the machine of `scenes/hexapod-machining-centre.toml` with a flat Ø6 × 25 mm end mill)
 //!   circling a Ø40 mm cylinder, its tool tilted ±8° three times a turn: a quarter turn
-//!   (180 moves), every move's poses sampled and cut in bounded sub-steps.
+//!   (180 moves), every move sampled at 65 poses and cut by the envelope of the curve through them.
 //!
 //! The programs are those of `benches/support/five_axis.rs`, which also writes them as the NC
 //! of the scenes in `benches/data/` for timing the whole `twinmill simulate` command.
