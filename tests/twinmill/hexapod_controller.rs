@@ -213,13 +213,7 @@ fn readings_calibrate_the_controller_and_write_its_page_and_genhexkins_pins() {
     }
     // The reference lengths as each joint's home offset.
     for i in 0..6 {
-        let line = format!("# [JOINT_{i}] HOME_OFFSET = ");
-        let v: Real = hal
-            .lines()
-            .find_map(|l| l.strip_prefix(line.as_str()))
-            .expect("home offset")
-            .parse()
-            .expect("number");
+        let v = home_offset(&hal, i);
         let l0 = controller.reference_lengths()[i];
         assert!((v - l0).abs() < 1e-6, "joint {i}: {v} vs {l0}");
     }
@@ -528,4 +522,15 @@ fn the_probe_calibration_writes_a_controller_file_the_machine_runs_on() {
         before < 0.015,
         "starts from the file's controller: {before}"
     );
+}
+
+/// Joint `i`'s home offset as the genhexkins file `hal` states it (its
+/// `# [JOINT_i] HOME_OFFSET = …` line).
+pub fn home_offset(hal: &str, i: usize) -> Real {
+    let line = format!("# [JOINT_{i}] HOME_OFFSET = ");
+    hal.lines()
+        .find_map(|l| l.strip_prefix(line.as_str()))
+        .expect("home offset")
+        .parse()
+        .expect("number")
 }

@@ -320,13 +320,7 @@ fn cli_identify_reads_bar_traces_and_a_probe_file_together() {
                 "platform {i} {c}: {platform} vs {a}"
             );
         }
-        let line = format!("# [JOINT_{i}] HOME_OFFSET = ");
-        let l0: Real = hal
-            .lines()
-            .find_map(|l| l.strip_prefix(line.as_str()))
-            .expect("home offset")
-            .parse()
-            .expect("number");
+        let l0 = super::hexapod_controller::home_offset(&hal, i);
         let want = controller.reference_lengths()[i];
         assert!((l0 - want).abs() < 1.5e-7, "joint {i}: {l0} vs {want}");
     }
