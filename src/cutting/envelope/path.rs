@@ -140,11 +140,11 @@ impl MovePath {
         Self { factors }
     }
 
-    /// The path of a move read pose by pose: the curve through its pilot poses `pilot`
-    /// (at least three, evenly spaced in λ; see [`SampledPath`]).
-    pub fn sampled(pilot: &[Isometry3]) -> Self {
+    /// The path of a move read pose by pose: the curve through its pilot poses (see
+    /// [`SampledPath`]).
+    pub fn sampled(curve: SampledPath) -> Self {
         Self {
-            factors: vec![Factor::Sampled(Box::new(SampledPath::new(pilot)))],
+            factors: vec![Factor::Sampled(Box::new(curve))],
         }
     }
 

@@ -77,7 +77,7 @@ impl RotaryEnvelope {
         Self::of_path(
             shape,
             (r, l),
-            MovePath::sampled(pilot),
+            MovePath::sampled(curve),
             speed,
             (part_z, part_speed),
         )
