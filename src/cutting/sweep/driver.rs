@@ -117,7 +117,37 @@ struct Batch<'m> {
     moves: Vec<(RotaryEnvelope, usize, &'m Move, Piece)>,
 }
 
-impl Batch<'_> {
+impl<'m> Batch<'m> {
+    /// Cuts move `k` by its envelope `env`, shown to the observer as `piece`: kept to be
+    /// cut with the next ones when the observer does not look (the batch cut once full),
+    /// else cut now after the waiting ones, a rapid shown to the observer before it cuts.
+    fn cut(
+        &mut self,
+        env: RotaryEnvelope,
+        (k, mv): (usize, &'m Move),
+        piece: Piece,
+        stock: &mut TriDexel,
+        report: &mut SweepReport,
+        observer: &mut dyn SweepObserver,
+    ) -> Result<(), SweepError> {
+        report.sweeps += 1;
+        if !observer.looks() {
+            self.moves.push((env, k, mv, piece));
+            if self.moves.len() >= BATCH {
+                self.flush(stock, report, observer)?;
+            }
+            return Ok(());
+        }
+        self.flush(stock, report, observer)?;
+        if mv.kind == MoveKind::Rapid {
+            observer.before_rapid(stock, k, mv, &piece)?;
+        }
+        if stock.remove(&env, mv.line as u32) {
+            report.cutting_moves += 1;
+        }
+        observer.after_move(stock, k, mv, &piece)
+    }
+
     /// Cuts the waiting moves, each in turn for each ray, counting those that removed
     /// material, and shows each to the observer.
     fn flush(
@@ -446,19 +476,7 @@ fn sweep_sampled<'m>(
         .then(|| RotaryEnvelope::sampled(tool, pilot).ok())
         .flatten();
     if let Some(env) = envelope {
-        report.sweeps += 1;
-        if observer.looks() {
-            batch.flush(stock, report, observer)?;
-            if stock.remove(&env, mv.line as u32) {
-                report.cutting_moves += 1;
-            }
-            observer.after_move(stock, k, mv, &Piece::Sampled)?;
-        } else {
-            batch.moves.push((env, k, mv, Piece::Sampled));
-            if batch.moves.len() >= BATCH {
-                batch.flush(stock, report, observer)?;
-            }
-        }
+        batch.cut(env, (k, mv), Piece::Sampled, stock, report, observer)?;
         return Ok(curve_error);
     }
     batch.flush(stock, report, observer)?;
@@ -537,44 +555,20 @@ fn sweep_rotary<'m>(
     report: &mut SweepReport,
     (observer, batch): (&mut dyn SweepObserver, &mut Batch<'m>),
 ) -> Result<Real, SweepError> {
-    let line = mv.line as u32;
-    let rapid = mv.kind == MoveKind::Rapid;
     // Flat and ball end mills: the exact per-ray envelope, unless a bound tighter than its
     // tolerance is asked for.
     let envelope = (bound >= ENVELOPE_TOL)
         .then(|| RotaryEnvelope::with_state(chain, tool, &mv.start, &mv.end, state).ok())
         .flatten();
-    let envelope = match envelope {
-        Some(env) if !observer.looks() => {
-            report.sweeps += 1;
-            let piece = Piece::Rotary {
-                envelope: true,
-                state: *state,
-            };
-            batch.moves.push((env, k, mv, piece));
-            if batch.moves.len() >= BATCH {
-                batch.flush(stock, report, observer)?;
-            }
-            return Ok(ENVELOPE_TOL);
-        }
-        e => e,
-    };
-    batch.flush(stock, report, observer)?;
     if let Some(env) = envelope {
         let piece = Piece::Rotary {
             envelope: true,
             state: *state,
         };
-        if rapid {
-            observer.before_rapid(stock, k, mv, &piece)?;
-        }
-        report.sweeps += 1;
-        if stock.remove(&env, line) {
-            report.cutting_moves += 1;
-        }
-        observer.after_move(stock, k, mv, &piece)?;
+        batch.cut(env, (k, mv), piece, stock, report, observer)?;
         return Ok(ENVELOPE_TOL);
     }
+    batch.flush(stock, report, observer)?;
     let rb = RotaryBound::of_state(chain, tool, mv, state);
     let n = rb.steps_for(bound, mv.line)?;
     let poses = Poses::of(chain, mv, state);
