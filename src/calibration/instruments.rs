@@ -1,6 +1,7 @@
 //! A serial machine identified from its instruments' readings through [`super::engine`]:
 //! the machine's named parameters, laser interferometer readings (ISO 230-2, with the
-//! Abbe offset) and ball-bar radius samples (ISO 230-4) as observations, and the
+//! Abbe offset), ball-bar radius samples (ISO 230-4), ball-sensor or probe traces (ISO
+//! 10791-6) and cut parts' faces as observations, in any combination, and the
 //! identified machine written back as the scene's `[deviations]`, `[error_motions]` and
 //! `[reversal]` sections.
 //!
@@ -23,14 +24,22 @@
 //! centre ball's position across the plane estimated per file (2 nuisance unknowns: where
 //! the ball was mounted is never known to the µm; along the plane's normal it moves the
 //! radius only to second order and is left out). Each value's σ is the noise the file
-//! records, with [`READING_FLOOR_MM`] under it.
+//! records, with [`READING_FLOOR_MM`] under it. A feature set ([`Measurement::Features`]:
+//! a ball-sensor or probe trace's ball centres, a cut part's faces) is modelled by
+//! [`super::calibrate`]'s features on the chain with the parameters set — its pose carries
+//! the chain's error motions, so location terms and error motions are solved together —
+//! each trace's fixed point and each part's scan registration nuisance unknowns; its
+//! observations are the features' whitened residuals.
 //!
 //! **Invariant:** never touches files (the caller reads them); the identified machine is
 //! written only from what [`super::engine`] returns, a parameter the measurements do not
 //! determine said to be so beside its (prior) value.
 
-use crate::calibration::calibrate::component_magnitude;
+use crate::calibration::calibrate::{
+    ANGLE_MAGNITUDE_RAD, Feature, Model, OFFSET_MAGNITUDE_MM, Registration, component_magnitude,
+};
 use crate::calibration::engine::{self, Block, Forward, Outcome, Problem, Unknown};
+use crate::cutting::tool::Tool;
 use crate::machine::Component;
 use crate::machine::chain::{Chain, DeviationId};
 use crate::machine::error_motion::{self, AxisErrorMotions, Term};
@@ -40,6 +49,7 @@ use crate::metrology::circular::Sample;
 use crate::metrology::interferometer::{self, LaserSetup};
 use crate::metrology::positioning::Reading;
 use crate::nc::AxisLetter;
+use nalgebra::DVector;
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
@@ -282,7 +292,7 @@ pub fn chain_with(
     }
     for (p, v) in params.iter().zip(values) {
         if p.target == Target::Iso && *v != p.start {
-            c.apply_iso_term(&p.name, v - p.start)
+            c.apply_identified_term(&p.name, v - p.start)
                 .map_err(|e| format!("{}: {e}", p.name))?;
         }
     }
@@ -407,13 +417,26 @@ pub enum Measurement {
         /// The samples.
         samples: Vec<Sample>,
     },
+    /// Features of [`super::calibrate`]: the ball centres of a rotary-axis trace (ISO
+    /// 10791-6 ball sensor, probed sphere; their fixed points estimated) or the faces of a
+    /// cut part's scan (in the scan's own registration, estimated).
+    Features {
+        /// The file (or the part's source).
+        name: String,
+        /// The features, their fixed points numbered from 0 within this measurement.
+        features: Vec<Feature>,
+        /// The tool that cut the faces (unused by ball centres).
+        tool: Tool,
+    },
 }
 
 impl Measurement {
     /// The file's name.
     pub fn name(&self) -> &str {
         match self {
-            Measurement::Laser { name, .. } | Measurement::BallBar { name, .. } => name,
+            Measurement::Laser { name, .. }
+            | Measurement::BallBar { name, .. }
+            | Measurement::Features { name, .. } => name,
         }
     }
 }
@@ -535,6 +558,22 @@ impl MachineModel {
                     };
                     ((0..samples.len()).collect(), Some([dir(a1), dir(a2)]))
                 }
+                Measurement::Features {
+                    name,
+                    features,
+                    tool,
+                } => {
+                    if features.is_empty() {
+                        return Err(format!("{name}: no feature to identify from"));
+                    }
+                    let m = feature_model(base, features, tool);
+                    if m.residuals(&m.start()).is_none() {
+                        return Err(format!(
+                            "{name}: a feature's prediction is degenerate on the scene's machine"
+                        ));
+                    }
+                    (Vec::new(), None)
+                }
             };
             files.push(Modelled {
                 measurement: m,
@@ -549,30 +588,56 @@ impl MachineModel {
         })
     }
 
-    /// The nuisance unknowns: each ball-bar file's centre across its plane.
+    /// The nuisance unknowns: each ball-bar file's centre across its plane; each feature
+    /// set's scan registration (when it has faces) and fixed points, at [`Model::start`]
+    /// on the scene's machine, offsets at [`OFFSET_MAGNITUDE_MM`] and turns at
+    /// [`ANGLE_MAGNITUDE_RAD`] as [`super::calibrate::FeatureForward`] takes them.
     pub fn nuisance(&self) -> Vec<Unknown> {
-        self.files
-            .iter()
-            .filter(|f| f.plane_dirs.is_some())
-            .flat_map(|f| {
-                let Measurement::BallBar { name, setup, .. } = &f.measurement else {
-                    unreachable!("a plane's directions belong to a ball bar")
-                };
-                let (a1, a2) = setup.plane.axes();
-                [a1, a2].map(|a| Unknown {
-                    name: format!("{name}: centre ball along {}", a.as_char()),
-                    start: 0.0,
-                    magnitude: MOTION_OFFSET_MM,
-                })
-            })
-            .collect()
+        let mut out = Vec::new();
+        for f in &self.files {
+            match &f.measurement {
+                Measurement::Laser { .. } => {}
+                Measurement::BallBar { name, setup, .. } => {
+                    let (a1, a2) = setup.plane.axes();
+                    out.extend([a1, a2].map(|a| Unknown {
+                        name: format!("{name}: centre ball along {}", a.as_char()),
+                        start: 0.0,
+                        magnitude: MOTION_OFFSET_MM,
+                    }));
+                }
+                Measurement::Features {
+                    name,
+                    features,
+                    tool,
+                } => {
+                    let m = feature_model(&self.base, features, tool);
+                    let x0 = m.start();
+                    out.extend(
+                        m.nuisance_names()
+                            .into_iter()
+                            .enumerate()
+                            .map(|(k, n)| Unknown {
+                                name: format!("{name}: {n}"),
+                                start: x0[k],
+                                magnitude: if k < m.reg_cols() && k >= 3 {
+                                    ANGLE_MAGNITUDE_RAD
+                                } else {
+                                    OFFSET_MAGNITUDE_MM
+                                },
+                            }),
+                    );
+                }
+            }
+        }
+        out
     }
 
-    /// The observations, one block a file, σ from the noise each records.
+    /// The observations, one block a file, σ from the noise each records; a feature set's
+    /// features one block each (`FILE: FEATURE`), their whitened residuals observed 0 at σ 1.
     pub fn blocks(&self) -> Vec<Block> {
         self.files
             .iter()
-            .map(|f| {
+            .flat_map(|f| {
                 let (name, values, noise_um): (&str, Vec<Real>, Real) = match &f.measurement {
                     Measurement::Laser {
                         name,
@@ -592,13 +657,23 @@ impl MachineModel {
                         samples.iter().map(|s| s.deviation_mm).collect(),
                         setup.noise_um,
                     ),
+                    Measurement::Features { name, features, .. } => {
+                        return features
+                            .iter()
+                            .map(|x| Block {
+                                name: format!("{name}: {}", x.name()),
+                                values: vec![0.0; x.residual_count()],
+                                sigma: vec![1.0; x.residual_count()],
+                            })
+                            .collect();
+                    }
                 };
                 let sigma = (noise_um * 1e-3).hypot(READING_FLOOR_MM);
-                Block {
+                vec![Block {
                     name: name.to_string(),
                     sigma: vec![sigma; values.len()],
                     values,
-                }
+                }]
             })
             .collect()
     }
@@ -622,6 +697,17 @@ impl MachineModel {
                     for a in [a1, a2] {
                         let i = a.index();
                         t[i] = Real::max(t[i], setup.centre.get(a).abs() + setup.radius_mm);
+                    }
+                }
+                Measurement::Features { features, .. } => {
+                    for q in features.iter().flat_map(|x| match x {
+                        Feature::Ball(b) => vec![b.q],
+                        Feature::Plane(p) => vec![p.cut.start, p.cut.end],
+                    }) {
+                        for a in self.base.axes() {
+                            let i = a.letter.index();
+                            t[i] = Real::max(t[i], q.get(a.letter).abs());
+                        }
                     }
                 }
             }
@@ -657,7 +743,15 @@ impl MachineModel {
             nuisance: self.nuisance(),
             blocks: self.blocks(),
             forward: self,
-            statistic: "laser readings and ball-bar samples at their stated σ".into(),
+            statistic: if self
+                .files
+                .iter()
+                .any(|f| matches!(f.measurement, Measurement::Features { .. }))
+            {
+                "readings, samples, ball centres and faces at their stated σ".into()
+            } else {
+                "laser readings and ball-bar samples at their stated σ".into()
+            },
         }
     }
 }
@@ -686,9 +780,36 @@ impl Forward for MachineModel {
                             .map_err(|e| format!("{name}: {e}"))?;
                     out.extend(f.order.iter().map(|&k| sim.samples[k].deviation_mm));
                 }
+                Measurement::Features {
+                    name,
+                    features,
+                    tool,
+                } => {
+                    let m = feature_model(&chain, features, tool);
+                    let at: Vec<Real> = nuisance.by_ref().take(m.cols()).copied().collect();
+                    let r = m.residuals(&DVector::from_vec(at)).ok_or_else(|| {
+                        format!(
+                            "{name}: a feature's prediction is degenerate at the solve's unknowns"
+                        )
+                    })?;
+                    out.extend(r.iter());
+                }
             }
         }
         Ok(out)
+    }
+}
+
+/// The features' model on `chain`: no parameter of its own (they are set on the chain),
+/// the scan's registration estimated when there are faces, the fixed points always.
+fn feature_model<'a>(chain: &'a Chain, features: &'a [Feature], tool: &'a Tool) -> Model<'a> {
+    Model {
+        chain,
+        ids: &[],
+        iso_terms: &[],
+        tool,
+        features,
+        registration: Registration::Estimate,
     }
 }
 
@@ -737,7 +858,13 @@ pub fn fragment(
         .collect();
     let mut dev = deviations.clone();
     for (p, v) in params.iter().zip(&outcome.solution) {
-        if matches!(p.target, Target::Deviation(_) | Target::Iso) {
+        // A rotary table's offset along its own line and the zero of its angle are not
+        // location terms a scene takes: named in the report when not identified, not
+        // written.
+        let own = p.target == Target::Iso
+            && model.base.clone().apply_iso_term(&p.name, 0.0).is_err()
+            && !outcome.parameters.iter().any(|e| e.name == p.name);
+        if matches!(p.target, Target::Deviation(_) | Target::Iso) && !own {
             dev.insert(p.name.clone(), *v);
         }
     }

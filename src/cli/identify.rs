@@ -11,16 +11,17 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use twinmill::metrology::cloud::read_cloud_file;
+use twinmill::nc::Program;
 use twinmill::pipeline::dbb::{calibrate_measured, calibrate_scene, load_plan};
 use twinmill::pipeline::hexapod_probe::joint_page;
 use twinmill::pipeline::instrument_pages::{calibrate_page, measured_calibrate_page};
 use twinmill::pipeline::measurements::{
-    IdentifyRequest, MeasurementKind, ROTARY_APART, identify_measurements,
+    IdentifyRequest, MeasurementKind, PartFaces, identify_measurements,
 };
 use twinmill::pipeline::pages::identify_page;
 use twinmill::pipeline::{identify_location_files, identify_scene, part_faces};
 use twinmill::scene::HexapodScene;
-use twinmill::scene::Need;
+use twinmill::scene::{MemoryBudget, Need, Scene, SceneError};
 
 /// Identify the deviations: from cut faces, or a hexapod's DBB traces.
 ///
@@ -29,10 +30,11 @@ use twinmill::scene::Need;
 /// values, what is and is not determined), values with uncertainties, the model-correction
 /// loop; write identify.json and cloud.ply.
 ///
-/// Serial machine, with --measurement: identify its deviations, error motions and
-/// reversals from laser readings and ball-bar traces (values with σ, what is not
-/// determined), refusing data the stated noise cannot explain; --deviations-out writes the
-/// identified machine for --deviations.
+/// Serial machine, with --measurement: identify its deviations, location terms, error
+/// motions and reversals from laser readings, ball-bar traces, ball-sensor or probe traces
+/// and cut parts, in one solve (values with σ, what is not determined), refusing data the
+/// stated noise cannot explain; --deviations-out writes the identified machine for
+/// --deviations.
 ///
 /// Hexapod: seed 000's double-ball-bar calibration — measure the procedure's (or the plan's)
 /// circles on the twin, identify with what is not determined, pose errors before and after;
@@ -59,18 +61,18 @@ pub struct IdentifyArgs {
 #[derive(clap::Args)]
 #[command(next_help_heading = "Serial machine from laser and ball-bar files")]
 pub struct InstrumentOptions {
-    /// Identify the machine's deviations, error motions and reversals from this laser
-    /// readings or ball-bar trace file (as `measure --instrument laser|ballbar` writes it),
-    /// or its rotary axes' location terms from ball-sensor or probe traces (`measure
-    /// --instrument ball-sensor|probe`), repeatable: [KIND:]FILE with KIND laser[:AXIS],
-    /// ballbar[:PLANE], ball-sensor or probe; without a kind, the file's set-up record says
-    /// what it is.
+    /// Identify the machine's deviations, location terms, error motions and reversals from
+    /// this laser readings, ball-bar, ball-sensor or probe trace file (as `measure
+    /// --instrument …` writes it), repeatable, all in one solve: [KIND:]FILE with KIND
+    /// laser[:AXIS], ballbar[:PLANE], ball-sensor or probe (without a kind, the file's
+    /// set-up record says what it is); or part:SCENE[:CLOUD], the faces of the part SCENE's
+    /// program cuts on this machine, in CLOUD, else in SCENE's simulated scan.
     #[arg(long, value_name = "[KIND:]FILE")]
     measurement: Vec<String>,
     /// With --measurement: the parameters to identify, by the scene's names
-    /// (EXX.polynomial[1], EYX.periodic[0], EBX.table[1], EC(0X)Y, dy_AY, reversal.X;
-    /// default: every one the scene models); with ball-sensor or probe traces, the rotary
-    /// axes' location terms (EX0C, EB0A, …; default: all of them).
+    /// (EXX.polynomial[1], EYX.periodic[0], EBX.table[1], EC(0X)Y, EX0C, dy_AY,
+    /// reversal.X; default: every one the scene models, and with traces or parts every
+    /// rotary axis's location terms).
     #[arg(long, value_name = "NAME,…", value_delimiter = ',')]
     parameters: Vec<String>,
     /// With --measurement: write the identified machine (the scene's [deviations],
@@ -78,9 +80,9 @@ pub struct InstrumentOptions {
     /// [identified.sigma]) into this file, which --deviations reads.
     #[arg(long, value_name = "FILE")]
     deviations_out: Option<PathBuf>,
-    /// With ball-sensor or probe traces: identify from them and the faces of the part the
-    /// scene's program cuts, in one solve — the part's cloud from --cloud, else the
-    /// scene's simulated scan.
+    /// With --measurement: identify from the files and the faces of the part the scene's
+    /// program cuts, in one solve — the part's cloud from --cloud, else the scene's
+    /// simulated scan.
     #[arg(long)]
     part: bool,
 }
@@ -89,7 +91,26 @@ pub struct InstrumentOptions {
 /// its rotary axes' location terms from ball-sensor and probe traces (and a cut part).
 fn identify_instruments(a: &IdentifyArgs) -> ExitCode {
     let mut measurements = Vec::with_capacity(a.instruments.measurement.len());
+    let mut parts: Vec<PartFaces> = Vec::new();
+    let mut part_scenes: Vec<(String, PathBuf, Option<PathBuf>)> = Vec::new();
     for spec in &a.instruments.measurement {
+        if let Some(rest) = spec
+            .get(..5)
+            .filter(|k| k.eq_ignore_ascii_case("part:"))
+            .map(|_| &spec[5..])
+        {
+            let (scene, cloud) = match rest.split_once(':') {
+                Some((s, c)) if !c.is_empty() => (s, Some(PathBuf::from(c))),
+                _ => (rest, None),
+            };
+            if scene.is_empty() {
+                return fail(format!(
+                    "--measurement '{spec}': expected part:SCENE.toml[:CLOUD]"
+                ));
+            }
+            part_scenes.push((spec.clone(), PathBuf::from(scene), cloud));
+            continue;
+        }
         let (kind, path) = match MeasurementKind::parse_spec(spec) {
             Ok(k) => k,
             Err(e) => return fail(e),
@@ -107,37 +128,59 @@ fn identify_instruments(a: &IdentifyArgs) -> ExitCode {
         .iter()
         .filter(|(k, _)| *k == MeasurementKind::Rotary)
         .count();
-    if rotary == measurements.len() {
+    if rotary == measurements.len() && part_scenes.is_empty() {
         return identify_traces(a, &measurements);
     }
-    if rotary > 0 {
-        return fail(ROTARY_APART);
-    }
-    let serial = [
-        ("--cloud", a.cloud.is_some()),
-        ("--monte-carlo", a.monte_carlo.is_some()),
-        ("--part", a.instruments.part),
-    ];
-    let given = serial.iter().find_map(|(o, given)| given.then_some(*o));
-    if let Some(option) = given.or_else(|| a.hexapod.first_given()) {
+    if let Some(option) = [("--monte-carlo", a.monte_carlo.is_some())]
+        .iter()
+        .find_map(|(o, given)| given.then_some(*o))
+        .or_else(|| a.hexapod.first_given())
+    {
         return fail(format!(
             "{option} cannot go with laser and ball-bar files (a serial machine's error \
              motions identified from its instruments)"
         ));
     }
-    let scene = match load_machine(
-        &a.args,
-        "identify --measurement",
-        "a hexapod is identified from its double-ball-bar traces (--readings)",
-    ) {
-        Ok(s) => s,
-        Err(code) => return code,
+    let with_part = a.instruments.part || a.cloud.is_some();
+    let why = "a hexapod is identified from its double-ball-bar traces (--readings)";
+    let scene = if with_part {
+        let needs: &[Need] = if a.cloud.is_some() {
+            &[]
+        } else {
+            &[Need::Scanner]
+        };
+        match load(&a.args, "identify --measurement", needs) {
+            Ok(Loaded::Serial(scene, program)) => {
+                match part_of(&scene, &program, a.cloud.as_deref(), a.args.json) {
+                    Ok(p) => parts.insert(0, p),
+                    Err(e) => return fail(e),
+                }
+                *scene
+            }
+            Ok(Loaded::Hexapod(path)) => {
+                return fail(format!("{}: {why}", path.display()));
+            }
+            Err(code) => return code,
+        }
+    } else {
+        match load_machine(&a.args, "identify --measurement", why) {
+            Ok(s) => s,
+            Err(code) => return code,
+        }
     };
+    for (spec, path, cloud) in &part_scenes {
+        match other_part(&scene, spec, path, cloud.as_deref(), a.args.json) {
+            Ok(p) => parts.push(p),
+            Err(e) => return fail(e),
+        }
+    }
     let parameters = &a.instruments.parameters;
+    let faces: usize = parts.iter().map(|p| p.features.len()).sum();
     let request = IdentifyRequest {
         measurements,
         parameters: (!parameters.is_empty()).then(|| parameters.clone()),
         accept_misfit: accept_misfit(),
+        parts,
     };
     let o = match identify_measurements(&scene, &request) {
         Ok(o) => o,
@@ -146,9 +189,90 @@ fn identify_instruments(a: &IdentifyArgs) -> ExitCode {
     print_identified(
         a,
         &o.file,
-        || o.report.summary(),
+        || {
+            let mut s = o.report.summary();
+            if faces > 0 {
+                s.push_str(&format!("  part faces    {faces}\n"));
+            }
+            s
+        },
         || serde_json::to_string_pretty(&o.report),
     )
+}
+
+/// The faces of the part `scene`'s program cuts: in `cloud` (a scan of the real part),
+/// else in the scene's simulated scan of its cut.
+fn part_of(
+    scene: &Scene,
+    program: &Program,
+    cloud: Option<&Path>,
+    json: bool,
+) -> Result<PartFaces, String> {
+    let given = match cloud {
+        Some(path) => Some((
+            read_cloud_file(path).map_err(|e| e.to_string())?,
+            path.display().to_string(),
+        )),
+        None => None,
+    };
+    let (features, source) = part_faces(
+        scene,
+        program,
+        given.as_ref().map(|(c, s)| (c, s.as_str())),
+        &bars(json),
+    )
+    .map_err(|e| e.to_string())?;
+    // A simulated scan is named by the scene whose part it scans.
+    let source = match cloud {
+        Some(_) => source,
+        None => format!("{} ({source})", scene.path.display()),
+    };
+    Ok(PartFaces {
+        source,
+        features,
+        tool: scene.tool.clone(),
+    })
+}
+
+/// A second part (`--measurement part:SCENE[:CLOUD]`): the part `SCENE`'s program cuts,
+/// with its tool, stock and `[identify] faces`, on the machine of the identification's
+/// scene (refused when `SCENE` describes another); in `CLOUD`, else in `SCENE`'s simulated
+/// scan.
+fn other_part(
+    machine: &Scene,
+    spec: &str,
+    path: &Path,
+    cloud: Option<&Path>,
+    json: bool,
+) -> Result<PartFaces, String> {
+    let scene = match Scene::load_with(path, &MemoryBudget::installed()) {
+        Err(SceneError::Hexapod { path }) => {
+            return Err(format!(
+                "{}: --measurement '{spec}': a part is cut by a serial machine; this is a \
+                 hexapod scene",
+                path.display()
+            ));
+        }
+        r => r.map_err(|e| e.to_string())?,
+    };
+    let bare = |s: &Scene| s.chain().nominal();
+    if bare(&scene) != bare(machine) {
+        return Err(format!(
+            "{}: --measurement '{spec}': its machine is not the one identified ({})",
+            path.display(),
+            machine.path.display()
+        ));
+    }
+    let needs: &[Need] = if cloud.is_some() {
+        &[]
+    } else {
+        &[Need::Scanner]
+    };
+    scene
+        .require("identify --measurement part:", needs)
+        .map_err(|e| e.to_string())?;
+    let program = scene.load_program().map_err(|e| e.to_string())?;
+    part_of(&scene, &program, cloud, json)
 }
 
 /// Writes the identified machine to `--deviations-out` (if given), then prints `summary`

@@ -1,6 +1,6 @@
 //! Identification of a serial machine from several instruments' files at once: laser
-//! interferometer readings and ball-bar traces, each with the set-up its file records,
-//! identified together ([`crate::calibration::instruments`] on
+//! interferometer readings, ball-bar traces and rotary-axis traces (ball sensor, probe),
+//! each with the set-up its file records, and cut parts' faces, identified together ([`crate::calibration::instruments`] on
 //! [`crate::calibration::engine`]), checked against the noise the files state, and written
 //! back as the scene's deviation sections.
 //!
@@ -8,10 +8,12 @@
 //! writes nothing; a misfit is refused naming the file it is blamed on unless the request
 //! accepts it.
 
+use crate::calibration::calibrate::{Feature, ball_features};
 use crate::calibration::engine::Outcome;
 use crate::calibration::instruments::{
     self, IdentifiedRecord, MachineParameter, Measurement, Slot, Target, identified_file,
 };
+use crate::cutting::tool::{Tool, ToolKind};
 use crate::machine::chain::Chain;
 use crate::math::Real;
 use crate::metrology::ballbar::{BallBarSetup, Plane};
@@ -149,6 +151,19 @@ pub struct IdentifyRequest {
     pub parameters: Option<Vec<String>>,
     /// Take a misfit anyway (the fit check then says so).
     pub accept_misfit: bool,
+    /// Cut parts' faces, identified with the files (each in its scan's registration).
+    pub parts: Vec<PartFaces>,
+}
+
+/// The faces of one cut part, as its scan gives them.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PartFaces {
+    /// Where they come from (the cloud's file, or the simulated scan of a scene).
+    pub source: String,
+    /// The plane features.
+    pub features: Vec<Feature>,
+    /// The tool that cut them.
+    pub tool: Tool,
 }
 
 /// What the identification gives.
@@ -308,10 +323,11 @@ fn file_error(path: &Path, line: Option<usize>, message: String) -> Measurements
     }
 }
 
-/// Reads one file as `kind`.
+/// Reads one file as `kind` (a rotary-axis trace names the axes of `chain`).
 pub fn read_measurement(
     kind: MeasurementKind,
     path: &Path,
+    chain: &Chain,
 ) -> Result<Measurement, MeasurementsError> {
     let text = scene::read_text(path)?;
     let name = path.display().to_string();
@@ -356,37 +372,76 @@ pub fn read_measurement(
                 samples,
             })
         }
-        MeasurementKind::Rotary => Err(file_error(path, None, ROTARY_APART.into())),
+        MeasurementKind::Rotary => {
+            // The reader's errors name the line and column themselves.
+            let t =
+                crate::metrology::rotary_test::parse_trace(&text, path, chain).map_err(|e| {
+                    MeasurementsError::File {
+                        path: e.path.clone(),
+                        line: Some(e.line),
+                        message: format!("column {}: {}", e.column, e.message),
+                    }
+                })?;
+            Ok(Measurement::Features {
+                features: ball_features(&t.samples, t.setup.tool_offset, 0),
+                name,
+                // Ball centres do not use the tool.
+                tool: Tool::try_new(ToolKind::Ball, 1.0, 1.0)
+                    .map_err(|e| file_error(path, None, e.to_string()))?,
+            })
+        }
     }
 }
-
-/// Why a rotary-axis trace does not go with laser and ball-bar files.
-pub const ROTARY_APART: &str = "a ball-sensor or probe trace identifies the rotary axes' \
-     location terms (with a cut part's faces, --part), laser readings and ball-bar traces the \
-     error motions: give them to separate `identify --measurement` runs";
 
 /// Identifies the scene's machine from the request's files (see the module documentation).
 pub fn identify_measurements(
     scene: &Scene,
     request: &IdentifyRequest,
 ) -> Result<MeasurementsOutcome, MeasurementsError> {
-    if request.measurements.is_empty() {
+    if request.measurements.is_empty() && request.parts.is_empty() {
         return Err(MeasurementsError::Identify(
             "no measurement file given".into(),
         ));
     }
-    let measurements = request
+    let chain = scene.chain();
+    let mut measurements = request
         .measurements
         .iter()
-        .map(|(k, p)| read_measurement(*k, p))
+        .map(|(k, p)| read_measurement(*k, p, chain))
         .collect::<Result<Vec<_>, _>>()?;
-    let chain = scene.chain();
+    measurements.extend(request.parts.iter().map(|p| Measurement::Features {
+        name: p.source.clone(),
+        features: p.features.clone(),
+        tool: p.tool.clone(),
+    }));
+    // Ball centres and faces see the rotary axes' location: their terms join the scene's
+    // own parameters unless the request names them.
+    let located = request
+        .measurements
+        .iter()
+        .any(|(k, _)| *k == MeasurementKind::Rotary)
+        || !request.parts.is_empty();
     let params: Vec<MachineParameter> = match &request.parameters {
         Some(names) => names
             .iter()
             .map(|n| MachineParameter::parse(chain, scene.injected(), n))
             .collect::<Result<_, _>>(),
-        None => instruments::scene_parameters(chain, scene.injected()),
+        None => instruments::scene_parameters(chain, scene.injected()).and_then(|mut ps| {
+            if located {
+                for n in scene.model().rotary_location_terms() {
+                    let p = MachineParameter::parse(chain, scene.injected(), &n)?;
+                    let same = |q: &MachineParameter| {
+                        q.name == n
+                            || q.target == Target::Iso
+                                && chain.iso_term_id(&q.name).ok() == chain.iso_term_id(&n).ok()
+                    };
+                    if !ps.iter().any(same) {
+                        ps.push(p);
+                    }
+                }
+            }
+            Ok(ps)
+        }),
     }
     .map_err(|message| MeasurementsError::Parameter {
         path: scene.path.clone(),
@@ -403,6 +458,7 @@ pub fn identify_measurements(
         .measurements
         .iter()
         .map(|(_, p)| p.display().to_string())
+        .chain(request.parts.iter().map(|p| p.source.clone()))
         .collect();
     let fragment = instruments::fragment(&model, scene.injected(), &outcome, &sources)
         .map_err(MeasurementsError::Identify)?;
@@ -626,6 +682,7 @@ mod tests {
                 .to_vec(),
             ),
             accept_misfit: false,
+            parts: Vec::new(),
         };
         let o = identify_measurements(&start, &request).expect("identifies");
         // The fragment in the scene: the same measurements again, noise free, differ from the
@@ -635,7 +692,7 @@ mod tests {
         let sigma = NOISE_UM * 1e-3;
         let (mut chi2, mut n) = (0.0, 0usize);
         for (kind, p) in &measured {
-            let m = read_measurement(*kind, p).expect("reads");
+            let m = read_measurement(*kind, p, refit.chain()).expect("reads");
             let (sim, got): (Vec<f64>, Vec<f64>) = match m {
                 Measurement::Laser {
                     setup, readings, ..
@@ -662,6 +719,7 @@ mod tests {
                         samples.iter().map(|x| x.deviation_mm).collect(),
                     )
                 }
+                other => panic!("{}: not a laser or ball-bar file", other.name()),
             };
             for (a, b) in sim.iter().zip(&got) {
                 assert!((a - b).abs() < 5.0 * sigma, "{}: {a} vs {b}", p.display());
@@ -685,12 +743,14 @@ mod tests {
         std::fs::create_dir_all(&dir).expect("temp dir");
         let measured = files(scene.chain(), &dir);
         let laser = measured[0].1.clone();
-        let e = read_measurement(MeasurementKind::Ballbar(None), &laser).expect_err("refused");
+        let e = read_measurement(MeasurementKind::Ballbar(None), &laser, scene.chain())
+            .expect_err("refused");
         assert!(e.to_string().contains("laser-X.csv"), "{e}");
         let request = IdentifyRequest {
             measurements: measured,
             parameters: Some(vec!["EAA.polynomial[1]".into()]),
             accept_misfit: false,
+            parts: Vec::new(),
         };
         let e = identify_measurements(&scene, &request).expect_err("refused");
         assert!(e.to_string().contains("axis A"), "{e}");

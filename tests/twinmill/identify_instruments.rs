@@ -145,6 +145,7 @@ fn a_hundred_measured_sets_identify_the_scene_within_their_sigma() {
                 measurements: files,
                 parameters: None,
                 accept_misfit: false,
+                parts: Vec::new(),
             },
         )
         .unwrap_or_else(|e| panic!("trial {trial}: {e}"));

@@ -34,6 +34,7 @@ mod axis_comp;
 mod iso_names;
 mod tcp;
 mod design_rotary;
+mod identify_combined;
 
 use nalgebra::{Matrix4, Vector4};
 use std::path::{Path, PathBuf};

@@ -44,6 +44,11 @@ pub struct PlaneFeature {
     pub rms_mm: Real,
     /// The fit's variance inflation for correlated residuals (≥ 1; [`FaceDesign`]).
     pub correlation_inflation: Real,
+    /// The standard deviation of the fitted points' coordinate along the cut (mm). With
+    /// error motions the face of a straight move is not a plane: its least-squares plane is
+    /// predicted through the path at the centroid ± this (exact for a path bent
+    /// quadratically, Gauss's two points). `None`: through the move's ends.
+    pub cut_spread_mm: Option<Real>,
 }
 
 /// A measured ball centre: the tool-side point at axis values `q`, relative to a point
@@ -161,6 +166,7 @@ impl PlaneFeature {
             points: 0,
             rms_mm: 0.0,
             correlation_inflation: 1.0,
+            cut_spread_mm: None,
         }
     }
 
@@ -194,6 +200,8 @@ impl PlaneFeature {
             points: design.n,
             rms_mm: fit.rms_mm,
             correlation_inflation: design.correlation_inflation,
+            cut_spread_mm: (design.n > 0)
+                .then(|| (design.scatter[(0, 0)] / design.n as Real).sqrt()),
         }
     }
 }
@@ -255,8 +263,21 @@ fn predict_plane<T: Scalar>(
     tool: &Tool,
     f: &PlaneFeature,
 ) -> Option<(V3<T>, T)> {
-    let p0 = pose(chain, x, &f.cut.start);
-    let p1 = pose(chain, x, &f.cut.end);
+    let mut p0 = pose(chain, x, &f.cut.start);
+    let mut p1 = pose(chain, x, &f.cut.end);
+    if let Some(spread) = f.cut_spread_mm.filter(|_| chain.has_error_motions()) {
+        // The path bends with the error motions: through its points at the centroid ±
+        // the points' spread along the cut (where along the move is taken from values:
+        // moving it changes the plane only to second order).
+        let d = values(vsub(p1.t, p0.t));
+        let len2 = d.norm_squared();
+        if len2 > tol::LENGTH_EPS * tol::LENGTH_EPS {
+            let at = (f.centroid.coords - values(p0.t)).dot(&d) / len2;
+            let h = spread / len2.sqrt();
+            let q = |s: Real| f.cut.point_at(s.clamp(0.0, 1.0));
+            (p0, p1) = (pose(chain, x, &q(at - h)), pose(chain, x, &q(at + h)));
+        }
+    }
     let tip = p0.t;
     let d = vsub(p1.t, tip);
     let v = [p0.r[0][2], p0.r[1][2], p0.r[2][2]];
@@ -518,6 +539,7 @@ pub fn synthetic_plane_feature(
             }
         };
     f.centroid = plane.project(&mid);
+    f.cut_spread_mm = Some((su.1.min(fl.length) - su.0.max(0.0)).max(0.0) / 12.0_f64.sqrt());
     f.plane = plane;
     Some(f)
 }

@@ -8,8 +8,12 @@
 //! an exact plane) or, for flat end mills, its *floor*; and [`BallFeature`], a ball centre: the
 //! tool-side point (a probe's stylus ball, a master ball in the spindle) at known axis values,
 //! measured relative to a point fixed on the table (a calibration sphere a probe touched, a
-//! ball sensor's origin). Ball-bar lengths and interferometer readings are further variants:
-//! each only needs a prediction from the chain written with the generic scalar below.
+//! ball sensor's origin). Ball-bar lengths and interferometer readings are modelled in
+//! [`crate::calibration::instruments`], which also takes these features into one solve with
+//! them (the chain's error-motion coefficients then solved with the location terms).
+//!
+//! **Error motions.** A chain's ISO 230-1 error motions (known values, every axis as last
+//! moved in +) are in every pose, composed as [`Chain::w_from_t`] composes them.
 //!
 //! **Parameters.** The unknowns are joint deviations (`dy_AY`) and, on top of the chain's
 //! current values, ISO 230-7 location and squareness terms ([`IsoTerm`]: `EX0C`, `EB0A`,
@@ -74,6 +78,7 @@ use crate::calibration::identify::{
 };
 use crate::cutting::tool::{Tool, ToolKind};
 use crate::machine::chain::{Chain, DeviationId};
+use crate::machine::error_motion::Direction;
 use crate::math::{Aabb, Point3, Real, UnitVector3, Vector3, tol};
 use crate::metrology::fit::Plane;
 use crate::nc::{AxisValues, Move};

@@ -170,7 +170,7 @@ impl Model<'_> {
     }
 
     /// Names of the nuisance unknowns after the parameters: registration, fixed points.
-    pub(super) fn nuisance_names(&self) -> Vec<String> {
+    pub fn nuisance_names(&self) -> Vec<String> {
         let reg = ["dx", "dy", "dz", "alpha", "beta", "gamma"];
         reg.iter()
             .take(self.reg_cols())

@@ -242,9 +242,10 @@ pub(super) struct Params<'a, T> {
 }
 
 /// `w_from_t(q)` of `chain` with the deviations `ids` replaced by `p` and the ISO terms
-/// applied (generic scalars): an axis with terms moves as `L·M·L⁻¹` (`M·L⁻¹` for the first
-/// axis, whose `L` next to the workpiece frame only moves that frame), exactly as
-/// [`Chain::apply_iso_term`] composes them onto the joints.
+/// applied (generic scalars): an axis with terms moves as `L·M·Err·L⁻¹` (`M·Err·L⁻¹` for
+/// the first axis, whose `L` next to the workpiece frame only moves that frame), exactly as
+/// [`Chain::apply_iso_term`] composes them onto the joints; `Err` is the axis's error
+/// motions at `q` (as [`Chain::w_from_t`]: every axis last moved in +), known values.
 pub(super) fn pose<T: Scalar>(chain: &Chain, x: &Params<T>, q: &AxisValues) -> Rigid<T> {
     let mut out = Rigid::from_isometry(&crate::math::Isometry3::identity());
     for (j, (axis, dev)) in chain.axes().iter().zip(chain.deviations()).enumerate() {
@@ -254,7 +255,14 @@ pub(super) fn pose<T: Scalar>(chain: &Chain, x: &Params<T>, q: &AxisValues) -> R
                 d[id.component as usize] = *v;
             }
         }
-        let m = Rigid::from_isometry(&axis.motion(q.get(axis.letter)));
+        // The axis's error motions (known values, every axis as last moved in +) ride on
+        // its motion, inside the line's location `L` as the chain composes them.
+        let qj = q.get(axis.letter);
+        let motion = match chain.error_transform(j, qj, Direction::Positive) {
+            Some(err) => axis.motion(qj) * err,
+            None => axis.motion(qj),
+        };
+        let m = Rigid::from_isometry(&motion);
         let m = if x.iso.iter().any(|t| t.axis == j) {
             let mut v: [T; 6] = std::array::from_fn(|_| T::c(0.0));
             for (term, val) in x.iso.iter().zip(x.t) {

@@ -265,3 +265,75 @@ fn parameters_nothing_depends_on_are_an_error() {
         Err(CalibrateError::NoData("dx_ZS".into()))
     );
 }
+
+/// The generic pose of a chain with error motions on a linear and a rotary axis and ISO
+/// location terms on top equals the chain's own pose after [`Chain::apply_iso_term`]: the
+/// two compose `M·Err` inside the line's `L` independently (the chain moves the joints, the
+/// generic pose wraps the motion); a term on the first axis and one on a later axis, at
+/// tilted A and moved X, Y, Z.
+#[test]
+fn the_pose_carries_the_error_motions_inside_the_location_terms_as_the_chain_does() {
+    use crate::machine::Component;
+    use crate::machine::error_motion::{AxisErrorMotions, Term};
+    let mut chain = mdx50();
+    let mut ex = AxisErrorMotions::for_axis(AxisLetter::X);
+    ex.functions[Component::Dx as usize].terms = vec![Term::Polynomial(vec![0.0, 4e-4])];
+    ex.functions[Component::Dy as usize].terms = vec![Term::Periodic {
+        amplitude: 0.02,
+        period: 7.0,
+        phase_deg: 30.0,
+    }];
+    ex.functions[Component::Beta as usize].terms = vec![Term::Polynomial(vec![1e-4, 3e-6])];
+    chain.set_error_motions(AxisLetter::X, ex).expect("X");
+    let mut ea = AxisErrorMotions::for_axis(AxisLetter::A);
+    ea.functions[Component::Dz as usize].terms = vec![Term::Polynomial(vec![0.0, 2e-4])];
+    ea.functions[Component::Gamma as usize].terms = vec![Term::Polynomial(vec![5e-5, 1e-6])];
+    chain.set_error_motions(AxisLetter::A, ea).expect("A");
+    let names = ["EY0A", "EB0A", "EC(0X)Y"];
+    let values = [0.03, 4e-4, -3e-4];
+    let terms: Vec<IsoTerm> = names
+        .iter()
+        .map(|n| IsoTerm::parse(&chain, n).expect("a term of the chain"))
+        .collect();
+    let mut moved = chain.clone();
+    for (n, v) in names.iter().zip(values) {
+        moved.apply_iso_term(n, v).expect("applies");
+    }
+    let params = Params {
+        ids: &[],
+        p: &[],
+        iso: &terms,
+        t: &values,
+    };
+    for (a, x, y, z) in [
+        (0.0, 0.0, 0.0, 0.0),
+        (35.0, 12.0, -7.0, 3.0),
+        (-80.0, -25.0, 14.0, -9.0),
+    ] {
+        let q = AxisValues::default()
+            .with(AxisLetter::A, a)
+            .with(AxisLetter::X, x)
+            .with(AxisLetter::Y, y)
+            .with(AxisLetter::Z, z);
+        let g = pose::<Real>(&chain, &params, &q);
+        let c = moved.w_from_t(&q);
+        let m = c.rotation.to_rotation_matrix();
+        for i in 0..3 {
+            assert!(
+                (g.t[i] - c.translation.vector[i]).abs() < 1e-12,
+                "A {a}: t[{i}] {} against {}",
+                g.t[i],
+                c.translation.vector[i]
+            );
+            for k in 0..3 {
+                assert!((g.r[i][k] - m[(i, k)]).abs() < 1e-14, "A {a}: r[{i}][{k}]");
+            }
+        }
+        // The error motions are there: without them the tip moves by their size.
+        let bare = pose::<Real>(&chain.without_error_motions(), &params, &q);
+        let d = (0..3)
+            .map(|i| (bare.t[i] - g.t[i]).abs())
+            .fold(0.0, Real::max);
+        assert!(d > 1e-4, "A {a}: {d}");
+    }
+}
