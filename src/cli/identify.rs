@@ -48,7 +48,9 @@ pub struct IdentifyArgs {
     #[arg(long)]
     cloud: Option<PathBuf>,
     /// Monte-Carlo trials over scanner noise (simulated scans only; default: the
-    /// scene's [identify] monte_carlo.trials).
+    /// scene's [identify] monte_carlo.trials); with --measurement, trials at the solution
+    /// over the files' stated noise (default: none), each identified value's spread beside
+    /// its σ.
     #[arg(long, value_name = "N")]
     monte_carlo: Option<usize>,
     #[command(flatten)]
@@ -128,17 +130,13 @@ fn identify_instruments(a: &IdentifyArgs) -> ExitCode {
         .iter()
         .filter(|(k, _)| *k == MeasurementKind::Rotary)
         .count();
-    if rotary == measurements.len() && part_scenes.is_empty() {
+    if rotary == measurements.len() && part_scenes.is_empty() && a.monte_carlo.is_none() {
         return identify_traces(a, &measurements);
     }
-    if let Some(option) = [("--monte-carlo", a.monte_carlo.is_some())]
-        .iter()
-        .find_map(|(o, given)| given.then_some(*o))
-        .or_else(|| a.hexapod.first_given())
-    {
+    if let Some(option) = a.hexapod.first_given() {
         return fail(format!(
-            "{option} cannot go with laser and ball-bar files (a serial machine's error \
-             motions identified from its instruments)"
+            "{option} cannot go with a serial machine's measurement files (laser, ball bar, \
+             ball sensor, probe, parts)"
         ));
     }
     let with_part = a.instruments.part || a.cloud.is_some();
@@ -181,6 +179,7 @@ fn identify_instruments(a: &IdentifyArgs) -> ExitCode {
         parameters: (!parameters.is_empty()).then(|| parameters.clone()),
         accept_misfit: accept_misfit(),
         parts,
+        monte_carlo: a.monte_carlo,
     };
     let o = match identify_measurements(&scene, &request) {
         Ok(o) => o,
@@ -305,11 +304,7 @@ fn print_identified(
 /// the traces, with the cut part's faces when `--part` (or `--cloud`) is given.
 fn identify_traces(a: &IdentifyArgs, files: &[(MeasurementKind, PathBuf)]) -> ExitCode {
     let with_part = a.instruments.part || a.cloud.is_some();
-    if let Some(option) = [("--monte-carlo", a.monte_carlo.is_some())]
-        .iter()
-        .find_map(|(o, given)| given.then_some(*o))
-        .or_else(|| a.hexapod.first_given())
-    {
+    if let Some(option) = a.hexapod.first_given() {
         return fail(format!(
             "{option} cannot go with ball-sensor or probe traces (a serial machine's rotary \
              axes identified from them and a cut part)"

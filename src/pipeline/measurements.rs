@@ -9,7 +9,7 @@
 //! accepts it.
 
 use crate::calibration::calibrate::{Feature, ball_features};
-use crate::calibration::engine::Outcome;
+use crate::calibration::engine::{self, MonteCarlo, Outcome};
 use crate::calibration::instruments::{
     self, IdentifiedRecord, MachineParameter, Measurement, Slot, Target, identified_file,
 };
@@ -153,6 +153,9 @@ pub struct IdentifyRequest {
     pub accept_misfit: bool,
     /// Cut parts' faces, identified with the files (each in its scan's registration).
     pub parts: Vec<PartFaces>,
+    /// Monte-Carlo trials at the solution over the stated noise (none: no trials), with
+    /// the scene's `[identify] monte_carlo` seed.
+    pub monte_carlo: Option<usize>,
 }
 
 /// The faces of one cut part, as its scan gives them.
@@ -197,6 +200,8 @@ pub struct ParameterReport {
     /// The value the scene gives it (injected into the twin that the measurements were
     /// simulated on, when they were); none for a combination.
     pub injected: Option<f64>,
+    /// Its spread over the Monte-Carlo trials, when they ran (`--monte-carlo`).
+    pub monte_carlo_spread: Option<f64>,
 }
 
 /// What `identify --measurement` reports.
@@ -226,6 +231,8 @@ pub struct MeasurementsReport {
     pub singular_values: Vec<f64>,
     /// Its condition number.
     pub condition_number: f64,
+    /// Monte-Carlo trials run at the solution over the stated noise (0: none).
+    pub monte_carlo_trials: usize,
 }
 
 impl MeasurementsReport {
@@ -252,6 +259,9 @@ impl MeasurementsReport {
             if let Some(i) = e.injected {
                 let _ = write!(t, " [injected {i:+.6e}]");
             }
+            if let Some(m) = e.monte_carlo_spread {
+                let _ = write!(t, " (Monte Carlo ±{m:.2e})");
+            }
             t
         };
         for e in &self.identified {
@@ -269,6 +279,13 @@ impl MeasurementsReport {
             let _ = writeln!(s, "  not determined {n} ({why})");
         }
         let _ = writeln!(s, "  fit           {}", self.fit);
+        if self.monte_carlo_trials > 0 {
+            let _ = writeln!(
+                s,
+                "  monte carlo   {} trials at the solution over the files' stated noise",
+                self.monte_carlo_trials
+            );
+        }
         let _ = writeln!(
             s,
             "  jacobian      condition {:.3e}; singular values {}",
@@ -462,7 +479,20 @@ pub fn identify_measurements(
         .collect();
     let fragment = instruments::fragment(&model, scene.injected(), &outcome, &sources)
         .map_err(MeasurementsError::Identify)?;
-    let report = report_of(scene, model.parameters(), &outcome, &sources);
+    let monte_carlo = match request.monte_carlo {
+        Some(trials) if trials > 0 => Some(
+            engine::monte_carlo(&model.problem(), &outcome, trials, scene.monte_carlo_seed)
+                .map_err(|e| MeasurementsError::Identify(e.to_string()))?,
+        ),
+        _ => None,
+    };
+    let report = report_of(
+        scene,
+        model.parameters(),
+        &outcome,
+        &sources,
+        monte_carlo.as_ref(),
+    );
     let file = deviations_file(&fragment, &report, &outcome);
     Ok(MeasurementsOutcome {
         outcome,
@@ -498,6 +528,7 @@ fn report_of(
     params: &[MachineParameter],
     outcome: &Outcome,
     sources: &[String],
+    monte_carlo: Option<&MonteCarlo>,
 ) -> MeasurementsReport {
     let chain = scene.chain();
     let identified: Vec<ParameterReport> = outcome
@@ -511,6 +542,8 @@ fn report_of(
                 sigma: e.sigma,
                 unit: p.map_or_else(String::new, |p| unit_of(chain, p)),
                 injected: p.map(|p| p.start),
+                monte_carlo_spread: monte_carlo
+                    .and_then(|m| m.spread.iter().find(|(n, _)| *n == e.name).map(|(_, v)| *v)),
             }
         })
         .collect();
@@ -523,6 +556,7 @@ fn report_of(
             sigma: e.sigma,
             unit: String::new(),
             injected: None,
+            monte_carlo_spread: None,
         })
         .collect();
     let not_determined: Vec<String> = params
@@ -552,6 +586,7 @@ fn report_of(
         fit: outcome.fit.describe(),
         singular_values: outcome.identifiability.singular_values.clone(),
         condition_number: outcome.identifiability.condition_number,
+        monte_carlo_trials: monte_carlo.map_or(0, |m| m.trials),
     }
 }
 
@@ -683,6 +718,7 @@ mod tests {
             ),
             accept_misfit: false,
             parts: Vec::new(),
+            monte_carlo: None,
         };
         let o = identify_measurements(&start, &request).expect("identifies");
         // The fragment in the scene: the same measurements again, noise free, differ from the
@@ -751,6 +787,7 @@ mod tests {
             parameters: Some(vec!["EAA.polynomial[1]".into()]),
             accept_misfit: false,
             parts: Vec::new(),
+            monte_carlo: None,
         };
         let e = identify_measurements(&scene, &request).expect_err("refused");
         assert!(e.to_string().contains("axis A"), "{e}");

@@ -445,8 +445,8 @@ fn json_terms(v: &serde_json::Value) -> Vec<(String, Real, Real)> {
 /// - `--deviations-out` writes each identified value, not the undetermined two, and
 ///   `measure --deviations` runs on the identified machine;
 /// - a second trace whose one sweep is bent by 10 µm is refused, naming that file; a
-///   malformed trace, a trace given as a laser file and --monte-carlo are refused in
-///   one line; nothing is written.
+///   malformed trace, a trace given as a laser file and a hexapod's --readings are
+///   refused in one line; nothing is written.
 #[test]
 fn ball_sensor_traces_and_the_cut_part_identify_through_the_binary() {
     let sb = crate::Sandbox::new("traces-and-part");
@@ -611,9 +611,9 @@ fn ball_sensor_traces_and_the_cut_part_identify_through_the_binary() {
             "ts.toml",
             "--measurement",
             "bs.csv",
-            "--monte-carlo",
-            "3",
+            "--readings",
+            "bs.csv",
         ]),
-        &["--monte-carlo"],
+        &["--readings"],
     );
 }

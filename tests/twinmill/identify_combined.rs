@@ -202,6 +202,7 @@ fn laser_ball_bar_and_ball_sensor_identify_error_motions_and_location_terms_in_o
                     parameters: Some(location.collect()),
                     accept_misfit: false,
                     parts: Vec::new(),
+                    monte_carlo: None,
                 },
             ) {
                 Ok(o) => panic!("the trace alone explained: {}", o.report.fit),
@@ -219,6 +220,7 @@ fn laser_ball_bar_and_ball_sensor_identify_error_motions_and_location_terms_in_o
                 parameters: Some(parameters()),
                 accept_misfit: false,
                 parts: Vec::new(),
+                monte_carlo: None,
             },
         )
         .unwrap_or_else(|e| panic!("trial {trial}: {e}"));
@@ -284,7 +286,8 @@ fn terms(v: &serde_json::Value) -> Vec<(String, f64, f64)> {
         .collect()
 }
 
-/// Through the binary: the five files and two cut parts (`--measurement part:SCENE`, each
+/// Through the binary: the five files with 40 Monte-Carlo trials (each spread beside its
+/// σ), then with two cut parts (`--measurement part:SCENE`, each
 /// cut and scanned on the scene's machine, each in its own registration) in one solve from
 /// the twin without deviations — every term within 3σ of the scene's value, no σ larger
 /// than without the parts, the blind two not written into `--deviations-out`, which
@@ -322,7 +325,21 @@ fn two_cut_parts_join_the_instruments_in_one_solve_through_the_binary() {
         assert_eq!(code, 0, "{args:?}: {err}");
         serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}"))
     };
-    let alone = run_json(&[]);
+    let alone = run_json(&["--monte-carlo", "40"]);
+    // 40 trials at the solution over the files' stated noise: each spread within
+    // 0.7–1.4 of its σ (the ratio's standard deviation is about 0.11).
+    assert_eq!(alone["monte_carlo_trials"], 40);
+    for t in alone["identified"].as_array().expect("identified") {
+        let (s, m) = (
+            t["sigma"].as_f64().expect("σ"),
+            t["monte_carlo_spread"].as_f64().expect("a spread"),
+        );
+        assert!(
+            (0.7..1.4).contains(&(m / s)),
+            "{}: spread {m} against σ {s}",
+            t["name"]
+        );
+    }
     let both = run_json(&[
         "--measurement",
         "part:truth.toml",

@@ -146,6 +146,7 @@ fn a_hundred_measured_sets_identify_the_scene_within_their_sigma() {
                 parameters: None,
                 accept_misfit: false,
                 parts: Vec::new(),
+                monte_carlo: None,
             },
         )
         .unwrap_or_else(|e| panic!("trial {trial}: {e}"));
