@@ -416,7 +416,7 @@ registration = \"estimate\"
 ";
 
 /// A report's terms as (name, value, σ), read from its JSON.
-fn json_terms(v: &serde_json::Value) -> Vec<(String, Real, Real)> {
+pub(crate) fn json_terms(v: &serde_json::Value) -> Vec<(String, Real, Real)> {
     v["identified"]
         .as_array()
         .expect("identified")

@@ -6,19 +6,14 @@
 //! file, not from the program — and its σ against the spread over seeded trials; the trace
 //! alone, whose X, Y, Z moves the error motions bend, is refused on that twin.
 
+use crate::design_rotary::json_terms;
 use crate::{Sandbox, builtin};
 use std::path::{Path, PathBuf};
-use twinmill::pipeline::measure::{
-    BallbarOptions, LaserOptions, MeasureInstrument, MeasureRequest, RotaryOptions, measure,
-};
+use twinmill::pipeline::measure::{BallbarOptions, LaserOptions, MeasureInstrument};
 use twinmill::pipeline::measurements::{IdentifyRequest, MeasurementKind, identify_measurements};
 use twinmill::scene::Scene;
 
 const SCENE: &str = "trunnion-error-motions.toml";
-
-/// Noise σ of every laser reading and ball-bar sample (µm); the ball sensor keeps its own
-/// (seed 003's micrometers, ±0.5 µm).
-const NOISE_UM: f64 = 0.5;
 
 /// The scene's values, read off scenes/trunnion-error-motions.toml by hand.
 const TRUTH: &[(&str, f64)] = &[
@@ -124,45 +119,11 @@ fn tests() -> Vec<(String, MeasureInstrument, LaserOptions, BallbarOptions)> {
 
 /// The five files of trial `seed` measured on `scene`, written into `dir` in process.
 fn measure_all(scene: &Path, dir: &Path, seed: u64) -> Vec<(MeasurementKind, PathBuf)> {
-    tests()
-        .into_iter()
-        .enumerate()
-        .map(|(k, (name, instrument, laser, ballbar))| {
-            let file = dir.join(&name);
-            let sensor = instrument == MeasureInstrument::BallSensor;
-            let m = measure(&MeasureRequest {
-                scene: scene.to_path_buf(),
-                instrument,
-                out: Some(file.clone()),
-                png: None,
-                html: None,
-                seed: seed * 8 + k as u64,
-                noise_um: (!sensor).then_some(NOISE_UM),
-                overshoot: None,
-                laser,
-                ballbar,
-                rotary: RotaryOptions {
-                    no_identify: true,
-                    ..RotaryOptions::default()
-                },
-                accept_misfit: false,
-                deviations: None,
-                controller: None,
-            })
-            .unwrap_or_else(|e| panic!("{name}: {e}"));
-            std::fs::write(&file, m.text).expect("writes");
-            let kind = MeasurementKind::of_file(&file).expect("the set-up record says");
-            (kind, file)
-        })
-        .collect()
+    crate::identify_instruments::measure_into(scene, dir, seed, tests())
 }
 
 fn truth(name: &str) -> f64 {
-    TRUTH
-        .iter()
-        .find(|(n, _)| *n == name)
-        .unwrap_or_else(|| panic!("{name} is one of the scene's terms"))
-        .1
+    crate::identify_instruments::value_in(TRUTH, name)
 }
 
 /// 50 seeded campaigns identified from the twin without deviations: every term the scene
@@ -270,22 +231,6 @@ fn second_part(truth: &str, program: &str) -> (String, String) {
     (scene, program)
 }
 
-/// A report's identified terms as (name, value, σ).
-fn terms(v: &serde_json::Value) -> Vec<(String, f64, f64)> {
-    v["identified"]
-        .as_array()
-        .expect("identified")
-        .iter()
-        .map(|t| {
-            (
-                t["name"].as_str().expect("name").to_string(),
-                t["value"].as_f64().expect("value"),
-                t["sigma"].as_f64().expect("sigma"),
-            )
-        })
-        .collect()
-}
-
 /// Through the binary: the five files with 40 Monte-Carlo trials (each spread beside its
 /// σ), then with two cut parts (`--measurement part:SCENE`, each
 /// cut and scanned on the scene's machine, each in its own registration) in one solve from
@@ -355,7 +300,7 @@ fn two_cut_parts_join_the_instruments_in_one_solve_through_the_binary() {
         .map(|s| s.as_str().expect("a name"))
         .collect();
     assert_eq!(sources.len(), 7, "{sources:?}");
-    let (a, b) = (terms(&alone), terms(&both));
+    let (a, b) = (json_terms(&alone), json_terms(&both));
     assert_eq!(b.len(), TRUTH.len(), "{b:?}");
     for (name, v, s) in &b {
         assert!(

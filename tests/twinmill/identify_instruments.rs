@@ -18,7 +18,7 @@ use twinmill::scene::Scene;
 const SCENE: &str = "xyz-error-motions.toml";
 
 /// Noise σ of every reading and sample (µm).
-const NOISE_UM: f64 = 0.5;
+pub(crate) const NOISE_UM: f64 = 0.5;
 
 /// The scene's values (scenes/xyz-error-motions.toml, read off the file by hand): the
 /// squareness, the scale of X, Y's wave along X, X's pitch table, Z's bow along Y, the lost
@@ -90,28 +90,47 @@ fn tests() -> Vec<(String, MeasureInstrument, LaserOptions, BallbarOptions)> {
 
 /// The six files of trial `seed`, written into `dir` by `measure` in process.
 fn measure_all(dir: &Path, seed: u64) -> Vec<(MeasurementKind, PathBuf)> {
-    tests()
+    measure_into(&scene_path(), dir, seed, tests())
+}
+
+/// The files of `tests` (name, instrument, laser, ball bar) measured on `scene` in process
+/// into `dir`, trial `seed`: laser readings and ball-bar samples with [`NOISE_UM`], a
+/// rotary-axis test with its instrument's own noise (and no identification of its own).
+pub(crate) fn measure_into(
+    scene: &Path,
+    dir: &Path,
+    seed: u64,
+    tests: Vec<(String, MeasureInstrument, LaserOptions, BallbarOptions)>,
+) -> Vec<(MeasurementKind, PathBuf)> {
+    tests
         .into_iter()
         .enumerate()
         .map(|(k, (name, instrument, laser, ballbar))| {
             let file = dir.join(&name);
+            let rotary = matches!(
+                instrument,
+                MeasureInstrument::BallSensor | MeasureInstrument::Probe
+            );
             let m = measure(&MeasureRequest {
-                scene: scene_path(),
+                scene: scene.to_path_buf(),
                 instrument,
                 out: Some(file.clone()),
                 png: None,
                 html: None,
                 seed: seed * 8 + k as u64,
-                noise_um: Some(NOISE_UM),
+                noise_um: (!rotary).then_some(NOISE_UM),
                 overshoot: None,
                 laser,
                 ballbar,
-                rotary: RotaryOptions::default(),
+                rotary: RotaryOptions {
+                    no_identify: true,
+                    ..RotaryOptions::default()
+                },
                 accept_misfit: false,
                 deviations: None,
                 controller: None,
             })
-            .expect("measures");
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
             std::fs::write(&file, m.text).expect("writes");
             let kind = MeasurementKind::of_file(&file).expect("the set-up record says");
             (kind, file)
@@ -120,7 +139,12 @@ fn measure_all(dir: &Path, seed: u64) -> Vec<(MeasurementKind, PathBuf)> {
 }
 
 fn truth(name: &str) -> f64 {
-    TRUTH
+    value_in(TRUTH, name)
+}
+
+/// The value of `name` in a test's table of a scene's values.
+pub(crate) fn value_in(table: &[(&str, f64)], name: &str) -> f64 {
+    table
         .iter()
         .find(|(n, _)| *n == name)
         .unwrap_or_else(|| panic!("{name} is one of the scene's terms"))
