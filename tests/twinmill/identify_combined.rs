@@ -199,17 +199,7 @@ fn laser_ball_bar_and_ball_sensor_identify_error_motions_and_location_terms_in_o
     }
     let _ = std::fs::remove_dir_all(&dir);
     for ((name, _), z) in TRUTH.iter().zip(&z) {
-        assert_eq!(z.len(), TRIALS, "{name}: identified in some trials only");
-        let hits = z.iter().filter(|x| x.abs() <= 3.0).count();
-        let rms = (z.iter().map(|x| x * x).sum::<f64>() / z.len() as f64).sqrt();
-        assert!(
-            hits * 100 >= 95 * TRIALS,
-            "{name}: within 3σ in {hits} of {TRIALS} trials"
-        );
-        assert!(
-            (0.75..=1.3).contains(&rms),
-            "{name}: RMS of (value − truth)/σ {rms:.3} over {TRIALS} trials"
-        );
+        crate::identify_instruments::assert_covered(name, z, TRIALS, 0.75..=1.3);
     }
 }
 

@@ -142,6 +142,28 @@ fn truth(name: &str) -> f64 {
     value_in(TRUTH, name)
 }
 
+/// The z-scores `z` ((value − truth)/σ) of parameter `name` over `trials` seeded trials:
+/// one per trial, within 3σ in ≥ 95 % of them, their RMS in `rms` (σ neither overstated
+/// nor understated).
+pub(crate) fn assert_covered(
+    name: &str,
+    z: &[f64],
+    trials: usize,
+    rms: std::ops::RangeInclusive<f64>,
+) {
+    assert_eq!(z.len(), trials, "{name}: determined in some trials only");
+    let hits = z.iter().filter(|x| x.abs() <= 3.0).count();
+    let r = (z.iter().map(|x| x * x).sum::<f64>() / z.len() as f64).sqrt();
+    assert!(
+        hits * 100 >= 95 * trials,
+        "{name}: within 3σ in {hits} of {trials} trials"
+    );
+    assert!(
+        rms.contains(&r),
+        "{name}: RMS of (value − truth)/σ {r:.3} over {trials} trials"
+    );
+}
+
 /// The value of `name` in a test's table of a scene's values.
 pub(crate) fn value_in(table: &[(&str, f64)], name: &str) -> f64 {
     table
@@ -210,17 +232,7 @@ fn a_hundred_measured_sets_identify_the_scene_within_their_sigma() {
             continue;
         }
         valued += 1;
-        assert_eq!(z.len(), TRIALS, "{name}: determined in some trials only");
-        let hits = z.iter().filter(|x| x.abs() <= 3.0).count();
-        let rms = (z.iter().map(|x| x * x).sum::<f64>() / z.len() as f64).sqrt();
-        assert!(
-            hits * 100 >= 95 * TRIALS,
-            "{name}: within 3σ in {hits} of {TRIALS} trials"
-        );
-        assert!(
-            (0.8..=1.25).contains(&rms),
-            "{name}: RMS of (value − truth)/σ {rms:.3} over {TRIALS} trials"
-        );
+        assert_covered(name, z, TRIALS, 0.8..=1.25);
     }
     // The squareness, the scale, the wave, the bow and both lost motions at least.
     assert!(valued >= 6, "{valued} terms determined");
