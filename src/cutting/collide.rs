@@ -995,6 +995,12 @@ impl SweepObserver for Checks<'_> {
         }
         Ok(())
     }
+
+    /// Only a holder or fixtures are checked after a move ([`SweepObserver::after_move`]
+    /// logs nothing else); rapids are checked before they cut either way.
+    fn looks(&self) -> bool {
+        self.scene.holder.is_some() || !self.scene.fixtures.is_empty()
+    }
 }
 
 /// Runs `moves` through the sweep driver (removing material from `stock` exactly as

@@ -170,6 +170,8 @@ pub fn mesh_stock_adaptive(
             g.grow(&mut nodes, 0, o, ROOT);
             let resid = g.resid;
             let empty = matches!(nodes[0], Node::Leaf(Kind::Empty));
+            // The tree is kept while every tree is meshed: no spare capacity.
+            nodes.shrink_to_fit();
             (
                 (!empty).then_some(Tree {
                     root: r,
@@ -277,10 +279,13 @@ pub fn mesh_stock_adaptive(
             }
         }
     }
+    // The trees are no longer needed: freed before the outputs are joined (the peak).
+    drop(forest);
     let outs: Vec<Out> = outs.into_iter().flatten().collect();
     // Number the vertices in key order and join the triangles in tree order.
-    let mut verts: Vec<(Key, Point3)> = Vec::new();
-    let mut tris: Vec<[Key; 3]> = Vec::new();
+    let mut verts: Vec<(Key, Point3)> =
+        Vec::with_capacity(outs.iter().map(|o| o.verts.len()).sum());
+    let mut tris: Vec<[Key; 3]> = Vec::with_capacity(outs.iter().map(|o| o.tris.len()).sum());
     for o in outs {
         verts.extend(o.verts);
         tris.extend(o.tris);

@@ -320,6 +320,10 @@ impl Forest<'_> {
         // carry equal positions), so the trees' outputs stay near the mesh's size.
         out.verts.sort_unstable_by_key(|v| v.0);
         out.verts.dedup_by_key(|v| v.0);
+        // Kept until every tree is meshed: hold no spare capacity (the duplicates just
+        // removed were most of the vertices).
+        out.verts.shrink_to_fit();
+        out.tris.shrink_to_fit();
         out
     }
 }

@@ -483,3 +483,76 @@ proptest! {
         prop_assert!(crossing_bits(&together) == crossing_bits(&in_turn));
     }
 }
+
+/// The cull never skips a ray the tool meets: material along the whole of every ray of a
+/// fine grid (x, y and z rays at 0.05 mm across the move's box) on moves of several cells
+/// (A turning 12° and 30° with X, Y and Z), each ray the cull skips is met by no pose of
+/// the move sampled every 1/4096 of it (the tool's interval at each pose, no growth). Many
+/// rays are skipped only after the middle pose of their cell, grown to hold the cell, met
+/// them: the kept poses decided.
+#[test]
+fn culled_rays_meet_no_pose_of_the_move() {
+    use crate::cutting::stock::{Crossing, Segment};
+    let c = deviated();
+    let end = |t: Real| Crossing {
+        t,
+        normal: [0.0, 0.0, 1.0],
+        line: 0,
+    };
+    let material = [Segment {
+        lo: end(-1e3),
+        hi: end(1e3),
+    }];
+    for (kind, a1, dx, dz) in [
+        (ToolKind::Flat, 12.0, 0.4, -0.2),
+        (ToolKind::Ball, 30.0, -0.6, 0.3),
+    ] {
+        let tool = Tool::try_new(kind, 4.0, 10.0).expect("valid");
+        let env = RotaryEnvelope::new(
+            &c,
+            &tool,
+            &q(-1.0, 0.5, 3.0, 0.0),
+            &q(-1.0 + dx, 0.3, 3.0 + dz, a1),
+        )
+        .expect("supported");
+        assert!(env.cells() >= 2, "{} cells", env.cells());
+        let poses: Vec<Sample> = (0..=4096)
+            .map(|k| env.path.sample(k as Real / 4096.0))
+            .collect();
+        let b = env.bounds();
+        let (mut skipped, mut decided_by_kept) = (0, 0);
+        for axis in 0..3 {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            let n = |k: usize| ((b.max[k] - b.min[k]) / 0.05) as usize;
+            let mut e = Vector3::zeros();
+            e[axis] = 1.0;
+            for i in 0..=n(u) {
+                for j in 0..=n(v) {
+                    let mut o = Point3::origin();
+                    o[u] = b.min[u] + 0.05 * i as Real;
+                    o[v] = b.min[v] + 0.05 * j as Real;
+                    if env.may_cut(&o, &e, &material) {
+                        continue;
+                    }
+                    skipped += 1;
+                    let meets_at = |s: &Sample, g: Real| {
+                        let p = s.rot.tr_mul(&(o - s.tip));
+                        let w = s.rot.tr_mul(&e);
+                        tool_interval(env.shape, env.r, env.l, &p, &w, g).is_some()
+                    };
+                    if (0..env.cells()).any(|k| meets_at(&env.samples[2 * k + 1], env.delta)) {
+                        decided_by_kept += 1;
+                    }
+                    assert!(
+                        !poses.iter().any(|s| meets_at(s, 0.0)),
+                        "{kind:?}: the ray through {o:?} along axis {axis} was skipped but the tool meets it"
+                    );
+                }
+            }
+        }
+        assert!(
+            decided_by_kept > 1000,
+            "{kind:?}: {decided_by_kept} of {skipped}"
+        );
+    }
+}

@@ -88,10 +88,12 @@ pub trait SweepObserver {
         Ok(())
     }
 
-    /// Whether the observer looks at the stock at all. One that does not lets the driver
-    /// cut consecutive envelope moves together ([`TriDexel::remove_each`], the same stock
-    /// bit for bit), calling [`SweepObserver::after_move`] for them once they are all
-    /// removed. The default: it looks.
+    /// Whether the observer looks at the stock after a move. One that does not lets the
+    /// driver cut consecutive envelope moves together ([`TriDexel::remove_each`], the same
+    /// stock bit for bit), calling [`SweepObserver::after_move`] for them once they are all
+    /// removed; the moves before a rapid are always removed before
+    /// [`SweepObserver::before_rapid`] is shown the stock, so the observer is called in the
+    /// same order, with the same stock before each rapid, either way. The default: it looks.
     fn looks(&self) -> bool {
         true
     }
@@ -118,9 +120,10 @@ struct Batch<'m> {
 }
 
 impl<'m> Batch<'m> {
-    /// Cuts move `k` by its envelope `env`, shown to the observer as `piece`: kept to be
-    /// cut with the next ones when the observer does not look (the batch cut once full),
-    /// else cut now after the waiting ones, a rapid shown to the observer before it cuts.
+    /// Cuts move `k` by its envelope `env`, shown to the observer as `piece`: a rapid shown
+    /// to the observer first, after the waiting moves are cut; then kept to be cut with the
+    /// next ones when the observer does not look after moves (the batch cut once full),
+    /// else cut now after the waiting ones.
     fn cut(
         &mut self,
         env: RotaryEnvelope,
@@ -131,6 +134,10 @@ impl<'m> Batch<'m> {
         observer: &mut dyn SweepObserver,
     ) -> Result<(), SweepError> {
         report.sweeps += 1;
+        if mv.kind == MoveKind::Rapid {
+            self.flush(stock, report, observer)?;
+            observer.before_rapid(stock, k, mv, &piece)?;
+        }
         if !observer.looks() {
             self.moves.push((env, k, mv, piece));
             if self.moves.len() >= BATCH {
@@ -139,9 +146,6 @@ impl<'m> Batch<'m> {
             return Ok(());
         }
         self.flush(stock, report, observer)?;
-        if mv.kind == MoveKind::Rapid {
-            observer.before_rapid(stock, k, mv, &piece)?;
-        }
         if stock.remove(&env, mv.line as u32) {
             report.cutting_moves += 1;
         }

@@ -470,6 +470,119 @@ fn envelope_moves_cut_together_match_moves_cut_one_by_one() {
     assert_eq!(crossings(&together), crossings(&one_by_one));
 }
 
+/// Records the calls it gets in order — whether before a rapid, the move's index — and the
+/// crossings of the stock each rapid meets; looks after moves or not as asked.
+struct Recording {
+    looks: bool,
+    calls: Vec<(bool, usize)>,
+    met: Vec<Vec<(Point3, Crossing)>>,
+}
+
+impl SweepObserver for Recording {
+    fn before_rapid(
+        &mut self,
+        stock: &TriDexel,
+        k: usize,
+        _: &Move,
+        _: &Piece,
+    ) -> Result<(), SweepError> {
+        self.calls.push((true, k));
+        self.met.push(crossings(stock));
+        Ok(())
+    }
+
+    fn after_move(
+        &mut self,
+        _: &TriDexel,
+        k: usize,
+        _: &Move,
+        _: &Piece,
+    ) -> Result<(), SweepError> {
+        self.calls.push((false, k));
+        Ok(())
+    }
+
+    fn looks(&self) -> bool {
+        self.looks
+    }
+}
+
+/// An observer that checks only rapids (the collision checks without a holder or fixtures)
+/// has the envelope moves between rapids cut together, but each rapid still meets the stock
+/// every move before it left: 20 small A turns, a rapid turning A back through the
+/// material, 20 more turns and a second rapid. The calls come in the same order, each rapid
+/// sees the same crossings as with an observer that looks after every move (and more
+/// material gone than at the start: the turns before it cut), and the part is the same bit
+/// for bit.
+#[test]
+fn rapids_meet_the_stock_every_earlier_move_left_when_moves_are_cut_together() {
+    let chain = crate::machine::chain::mdx50_for_tests();
+    let tool = Tool::try_new(ToolKind::Flat, 3.0, 10.0).expect("valid");
+    let at = |k: usize, a: Real| {
+        let k = k as Real;
+        AxisValues::from_array([-4.0 + 0.2 * k, -1.0, 1.5 - 0.02 * k, a, 0.0, 0.0])
+    };
+    let mut moves = Vec::new();
+    for k in 0..20 {
+        moves.push(linear(at(k, k as Real), at(k + 1, k as Real + 1.0), k + 1));
+    }
+    let mut rapid = linear(at(20, 20.0), at(21, 5.0), 21);
+    rapid.kind = MoveKind::Rapid;
+    moves.push(rapid);
+    for k in 21..41 {
+        let a = 5.0 + (k - 21) as Real;
+        moves.push(linear(at(k, a), at(k + 1, a + 1.0), k + 1));
+    }
+    let mut back = linear(at(41, 25.0), at(42, 0.0), 42);
+    back.kind = MoveKind::Rapid;
+    moves.push(back);
+    let bounds = Aabb {
+        min: Point3::new(-8.0, -8.0, -4.0),
+        max: Point3::new(8.0, 8.0, 4.0),
+    };
+    let stock = TriDexel::new_box(bounds, 0.1, 1e9).expect("fits");
+    let fresh = crossings(&stock);
+    let run = |looks: bool| {
+        let mut part = stock.clone();
+        let mut seen = Recording {
+            looks,
+            calls: Vec::new(),
+            met: Vec::new(),
+        };
+        let report = sweep_observed(
+            &mut part,
+            &chain,
+            &tool,
+            &moves,
+            &opts(),
+            &NoProgress,
+            &mut seen,
+        )
+        .expect("sweeps");
+        (report, crossings(&part), seen)
+    };
+    let (r_all, part_all, all) = run(true);
+    let (r_rapids, part_rapids, rapids) = run(false);
+    let expected: Vec<(bool, usize)> = (0..moves.len())
+        .flat_map(|k| {
+            let rapid = moves[k].kind == MoveKind::Rapid;
+            [(true, k), (false, k)]
+                .into_iter()
+                .filter(move |c| rapid || !c.0)
+        })
+        .collect();
+    assert_eq!(all.calls, expected);
+    assert_eq!(rapids.calls, expected);
+    assert_eq!(all.met.len(), 2);
+    for (a, b) in all.met.iter().zip(&rapids.met) {
+        assert_ne!(*a, fresh, "the turns before a rapid cut");
+        assert!(a == b, "a rapid met another stock");
+    }
+    assert_eq!(r_all, r_rapids);
+    assert_eq!(r_all.rotary_moves, 42);
+    assert!(part_all == part_rapids, "another part");
+}
+
 /// A chain read pose by pose, as a hexapod is: the sweep sees only its poses.
 struct ChainPoses(Chain);
 
