@@ -1,7 +1,8 @@
 //! A digest of every dexel crossing (coordinate, normal and NC line, bit for bit) after the
 //! sweep of benchmarks P1-flat, P1-ball (0.05 mm), P3 and P4 (docs/benchmarks.md), the rotary
-//! move of the brute-force test and the programs of the scenes in `scenes/` (the hexapod
-//! scenes that cut among them): changes to the
+//! move of the brute-force test, the programs of the scenes in `scenes/` (the hexapod
+//! scenes that cut among them) and the simultaneous 5-axis benchmarks' trunnion blade and
+//! hexapod side cut (`benches/data`): changes to the
 //! sweep engine that must not change its results are checked by comparing the digests
 //! before and after.
 //!
@@ -180,11 +181,26 @@ fn main() {
         })
         .collect();
     names.sort();
-    for path in names {
-        let label = format!(
-            "scene {}",
-            path.file_name().unwrap_or_default().to_string_lossy()
-        );
+    let mut labelled: Vec<(String, std::path::PathBuf)> = names
+        .into_iter()
+        .map(|p| ("scene", p))
+        .chain(
+            // Simultaneous 5-axis benchmark programs (docs/benchmarks.md): the trunnion's
+            // blade-like finishing path and the hexapod's side cut.
+            ["trunnion-blade.toml", "hexapod-side-cut.toml"]
+                .map(|f| ("bench", Path::new(dir).join("../benches/data").join(f))),
+        )
+        .map(|(kind, p)| {
+            let file = p
+                .file_name()
+                .unwrap_or_default()
+                .to_string_lossy()
+                .into_owned();
+            (format!("{kind} {file}"), p)
+        })
+        .collect();
+    labelled.sort_by(|a, b| a.0.cmp(&b.0));
+    for (label, path) in labelled {
         cases.push((
             label,
             Box::new(move || {
