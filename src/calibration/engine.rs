@@ -496,6 +496,10 @@ pub struct MonteCarlo {
     /// Per identified parameter: the mean of (trial value − identified value), the
     /// estimator's bias at the solution.
     pub bias: Vec<(String, Real)>,
+    /// Each trial's solution: every parameter (undetermined directions at the start), then
+    /// the nuisance unknowns — for a caller that reports the parameters transformed (a
+    /// gauge) to take the same transform's spread.
+    pub solutions: Vec<Vec<Real>>,
 }
 
 /// Monte Carlo over the stated noise, the same for every forward model (a parametric
@@ -527,7 +531,7 @@ pub fn monte_carlo(
         });
     }
     let rng = CounterRng::new(seed);
-    let values: Vec<Vec<Real>> = (0..trials)
+    let runs: Vec<(Vec<Real>, Vec<Real>)> = (0..trials)
         .into_par_iter()
         .map(|k| {
             let mut i = 0usize;
@@ -560,7 +564,7 @@ pub fn monte_carlo(
             };
             let o = solve(&trial)
                 .map_err(|e| EngineError::Model(format!("Monte-Carlo trial {}: {e}", k + 1)))?;
-            outcome
+            let values = outcome
                 .parameters
                 .iter()
                 .map(|e| {
@@ -576,9 +580,11 @@ pub fn monte_carlo(
                             ))
                         })
                 })
-                .collect()
+                .collect::<Result<Vec<_>, _>>()?;
+            Ok((values, o.solution.into_iter().chain(o.nuisance).collect()))
         })
         .collect::<Result<_, _>>()?;
+    let (values, solutions): (Vec<Vec<Real>>, Vec<Vec<Real>>) = runs.into_iter().unzip();
     let t = trials.max(1) as Real;
     let (mut spread, mut bias) = (Vec::new(), Vec::new());
     for (j, e) in outcome.parameters.iter().enumerate() {
@@ -593,6 +599,7 @@ pub fn monte_carlo(
         seed,
         spread,
         bias,
+        solutions,
     })
 }
 

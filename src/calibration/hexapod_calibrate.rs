@@ -73,6 +73,9 @@ pub const BALL_MAGNITUDE_MM: Real = 0.5;
 /// Jacobian (FK to 1e-9 mm on 1e3 mm struts; a direct SVD puts the gauge near 1e-16), far
 /// below any direction a circle sees (the weakest about 1e-4 of the largest).
 pub const RANK_TOLERANCE: Real = 1e-7;
+
+/// The noise seed of [`calibrate_commanded_with`]'s Monte-Carlo trials.
+pub const MONTE_CARLO_SEED: u64 = 1;
 /// The 24 solved parameters: base joints (0–17) and reference lengths (36–41).
 pub fn solved_parameters() -> Vec<ParameterId> {
     (0..18)
@@ -277,6 +280,10 @@ pub struct ParameterEstimate {
     pub value_mm: Real,
     /// Its standard uncertainty (mm).
     pub sigma_mm: Real,
+    /// Its spread over Monte-Carlo trials at the solution (mm; [`engine::monte_carlo`] at
+    /// the residuals' σ, each trial in the same gauge), when they ran.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub monte_carlo_spread_mm: Option<Real>,
 }
 
 /// What the readings determine.
@@ -594,6 +601,22 @@ pub fn calibrate_commanded(
     readings: &[CircleReadings],
     sigma_mm: Real,
 ) -> Result<HexapodCalibration, HexapodCalibrationError> {
+    calibrate_commanded_with(controller, nominal, known, plan, readings, sigma_mm, 0)
+}
+
+/// [`calibrate_commanded`] with `trials` Monte-Carlo trials at the solution
+/// ([`engine::monte_carlo`], seed [`MONTE_CARLO_SEED`]; none for 0): each estimate's
+/// spread, every trial's machine taken through the same gauge as the estimates, scaled from
+/// the stated σ to the residuals' as the estimates' σ are.
+pub fn calibrate_commanded_with(
+    controller: &Hexapod,
+    nominal: &Hexapod,
+    known: &Hexapod,
+    plan: &Plan,
+    readings: &[CircleReadings],
+    sigma_mm: Real,
+    trials: usize,
+) -> Result<HexapodCalibration, HexapodCalibrationError> {
     let input = |m: String| Err(HexapodCalibrationError::Input(m));
     if readings.len() != plan.circles.len() {
         return input(format!(
@@ -725,6 +748,34 @@ pub fn calibrate_commanded(
     } else {
         parameters
     };
+    let spread = if trials > 0 {
+        let mc = engine::monte_carlo(&problem, &o, trials, MONTE_CARLO_SEED)
+            .map_err(|e| HexapodCalibrationError::Identification(e.to_string()))?;
+        let mut shown_k = Vec::with_capacity(trials);
+        for x in &mc.solutions {
+            let p = model
+                .at(x)
+                .map_err(HexapodCalibrationError::Identification)?
+                .0
+                .parameters();
+            shown_k.push(if nb > 0 {
+                aligned_base(&p, &base_of(nominal))
+            } else {
+                p
+            });
+        }
+        let t = trials.max(2) as Real;
+        ids.iter()
+            .map(|id| {
+                let v: Vec<Real> = shown_k.iter().map(|p| p[id.index()]).collect();
+                let mean = v.iter().sum::<Real>() / t;
+                let var = v.iter().map(|x| (x - mean).powi(2)).sum::<Real>() / (t - 1.0);
+                Some(var.sqrt() * inflate)
+            })
+            .collect()
+    } else {
+        vec![None; ids.len()]
+    };
     let estimates = ids
         .iter()
         .enumerate()
@@ -732,6 +783,7 @@ pub fn calibrate_commanded(
             name: id.name(),
             value_mm: shown[id.index()] - pn[id.index()],
             sigma_mm: o.solution_sigma[c] * inflate,
+            monte_carlo_spread_mm: spread[c],
         })
         .collect();
     // What removing the centre offsets costs: the same circles with the centres known (the

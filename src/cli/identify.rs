@@ -48,9 +48,9 @@ pub struct IdentifyArgs {
     #[arg(long)]
     cloud: Option<PathBuf>,
     /// Monte-Carlo trials over scanner noise (simulated scans only; default: the
-    /// scene's [identify] monte_carlo.trials); with --measurement, trials at the solution
-    /// over the files' stated noise (default: none), each identified value's spread beside
-    /// its σ.
+    /// scene's [identify] monte_carlo.trials); with --measurement (or a hexapod's
+    /// --readings), trials at the solution over the files' stated noise (default: none),
+    /// each identified value's spread beside its σ.
     #[arg(long, value_name = "N")]
     monte_carlo: Option<usize>,
     #[command(flatten)]
@@ -446,7 +446,7 @@ pub struct CalibrateArgs {
 
 /// `twinmill calibrate` (hidden): the hexapod's calibration as before.
 pub fn exec_calibrate(a: CalibrateArgs) -> ExitCode {
-    calibrate(&a.scene, &a.options, None, a.json).unwrap_or_else(fail)
+    calibrate(&a.scene, &a.options, None, None, a.json).unwrap_or_else(fail)
 }
 
 /// `identify` on a hexapod scene: refuses the options of a serial machine's, then
@@ -454,7 +454,10 @@ pub fn exec_calibrate(a: CalibrateArgs) -> ExitCode {
 fn calibrate_hexapod(path: &Path, a: &IdentifyArgs) -> ExitCode {
     let serial = [
         ("--cloud", a.cloud.is_some()),
-        ("--monte-carlo", a.monte_carlo.is_some()),
+        (
+            "--monte-carlo",
+            a.monte_carlo.is_some() && a.hexapod.readings.is_empty(),
+        ),
     ];
     if let Some((option, _)) = serial.iter().find(|(_, given)| *given) {
         return fail(format!(
@@ -463,7 +466,14 @@ fn calibrate_hexapod(path: &Path, a: &IdentifyArgs) -> ExitCode {
             path.display()
         ));
     }
-    calibrate(path, &a.hexapod, a.args.controller.as_deref(), a.args.json).unwrap_or_else(fail)
+    calibrate(
+        path,
+        &a.hexapod,
+        a.args.controller.as_deref(),
+        a.monte_carlo,
+        a.args.json,
+    )
+    .unwrap_or_else(fail)
 }
 
 /// The hexapod's double-ball-bar calibration: on the twin, or from measured traces; the
@@ -472,6 +482,7 @@ fn calibrate(
     scene: &Path,
     a: &CalibrateOptions,
     controller: Option<&Path>,
+    monte_carlo: Option<usize>,
     json: bool,
 ) -> Result<ExitCode, String> {
     let procedure = procedure_arg(a.procedure.as_deref())?;
@@ -499,6 +510,13 @@ fn calibrate(
         if a.trials > 0 {
             return Err("--trials runs on the twin; it cannot go with --readings".into());
         }
+        if a.probe.is_some() && monte_carlo.is_some() {
+            return Err(
+                "--monte-carlo goes with --readings alone: the joint identification with \
+                 --probe has no trials"
+                    .into(),
+            );
+        }
         let mut files = Vec::with_capacity(a.readings.len());
         for p in &a.readings {
             let text = twinmill::scene::read_text(p).map_err(|e| e.to_string())?;
@@ -522,7 +540,8 @@ fn calibrate(
                 json.then(|| serde_json::to_string_pretty(&o)),
             ));
         }
-        let o = calibrate_measured(&s, procedure, plan, &files).map_err(|e| e.to_string())?;
+        let o = calibrate_measured(&s, procedure, plan, &files, monte_carlo)
+            .map_err(|e| e.to_string())?;
         let page = a
             .html
             .as_ref()

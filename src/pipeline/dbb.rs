@@ -6,8 +6,8 @@
 use super::hexapod::HexapodCommandError;
 use crate::calibration::hexapod_calibrate::{
     CircleReadings, DEFAULT_POINTS, HexapodCalibration, Plan, PoseErrors, Procedure,
-    TableCalibration, WORK, WorkTime, calibrate_commanded, calibrated_model, default_plan,
-    measured_model, pose_errors, true_deviations, work_time,
+    TableCalibration, WORK, WorkTime, calibrate_commanded, calibrate_commanded_with,
+    calibrated_model, default_plan, measured_model, pose_errors, true_deviations, work_time,
 };
 use crate::calibration::hexapod_design::{CircleDesign, design};
 use crate::machine::hexapod::{Hexapod, ParameterId};
@@ -1093,19 +1093,21 @@ pub fn calibrate_measured(
     procedure: Procedure,
     plan: Option<Plan>,
     files: &[(std::path::PathBuf, String)],
+    monte_carlo: Option<usize>,
 ) -> Result<MeasuredCalibrationOutcome, HexapodCommandError> {
     use std::fmt::Write as _;
     let ws = calibration_workspace(scene)?;
     let plan = &procedure_plan(scene, procedure, plan, &ws)?;
     let readings = measured_circles(scene, plan, files)?;
     // The platform joints (the CMM's) are the scene's; nothing else of its machine is used.
-    let mut cal = calibrate_commanded(
+    let mut cal = calibrate_commanded_with(
         &scene.controller,
         &scene.nominal,
         &scene.actual,
         plan,
         &readings,
         CALIBRATION_NOISE_MM,
+        monte_carlo.unwrap_or(0),
     )
     .map_err(|e| error(scene, e.to_string()))?;
     cal.fit.rename_parts(|name| {
@@ -1175,12 +1177,21 @@ pub fn calibrate_measured(
     );
     let _ = writeln!(summary, "  fit           {}", cal.fit.describe());
     for e in &cal.estimates {
+        let mc = e.monte_carlo_spread_mm.map_or(String::new(), |m| {
+            format!(" (Monte Carlo ±{:.4} µm)", m * 1e3)
+        });
         let _ = writeln!(
             summary,
-            "  {:<12}  {:+.4} µm ± {:.4} µm",
+            "  {:<12}  {:+.4} µm ± {:.4} µm{mc}",
             e.name,
             e.value_mm * 1e3,
             e.sigma_mm * 1e3
+        );
+    }
+    if let Some(n) = monte_carlo.filter(|n| *n > 0) {
+        let _ = writeln!(
+            summary,
+            "  monte carlo   {n} trials at the solution over the residuals' σ"
         );
     }
     let _ = writeln!(

@@ -992,6 +992,29 @@ fn calibrate_reads_measured_dbb_files_and_writes_the_corrected_parameters() {
         .expect("position");
     assert!(position > 0.05, "position correction {position}");
 
+    // The engine's Monte Carlo: 25 trials at the solution, each estimate's spread (in the
+    // estimates' gauge) within 0.6–1.6 of its σ (the ratio's standard deviation is about
+    // 0.14); the values are those without the trials.
+    let (code, out, err) =
+        identify_ball_plate(&sb, scene, &list, &["--monte-carlo", "25", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let mc: serde_json::Value = serde_json::from_str(&out).expect("json");
+    let with = mc["calibration"]["estimates"]
+        .as_array()
+        .expect("estimates");
+    for (a, b) in with.iter().zip(estimates) {
+        let (s, m) = (
+            a["sigma_mm"].as_f64().expect("σ"),
+            a["monte_carlo_spread_mm"].as_f64().expect("a spread"),
+        );
+        assert!(
+            (0.6..1.6).contains(&(m / s)),
+            "{}: spread {m} against σ {s}",
+            a["name"]
+        );
+        assert_eq!(a["value_mm"], b["value_mm"]);
+    }
+
     // Bad files: a non-finite reading, a missing value, too few samples, the wrong count.
     let good = std::fs::read_to_string(sb.dir.join("circle1.csv")).expect("reads");
     let mut lines: Vec<String> = good.lines().map(String::from).collect();
