@@ -27,7 +27,7 @@
 //! **Invariant:** plain functions of the hexapods, plans and readings given; never touches
 //! files; a direction the readings do not determine is named, never valued.
 
-use crate::calibration::engine::{Block, Forward, Problem, Unknown, solve};
+use crate::calibration::engine::{Block, Forward, Problem, Unknown, monte_carlo, solve};
 use crate::calibration::hexapod_calibrate::{
     CircleReadings, DbbLengths, Plan, ball_unknowns, magnitude,
 };
@@ -196,6 +196,21 @@ pub fn identify(
     probe: Option<ProbeData>,
     accept_misfit: bool,
 ) -> Result<ProbeIdentification, ProbeError> {
+    identify_with(controller, dbb, probe, accept_misfit, 0)
+}
+
+/// The noise seed of [`identify_with`]'s Monte-Carlo trials.
+pub const MONTE_CARLO_SEED: u64 = 1;
+
+/// [`identify`] with `trials` Monte-Carlo trials at the solution ([`monte_carlo`], seed
+/// [`MONTE_CARLO_SEED`]; none for 0): every parameter's spread and each identified one's.
+pub fn identify_with(
+    controller: &Hexapod,
+    dbb: Option<DbbData>,
+    probe: Option<ProbeData>,
+    accept_misfit: bool,
+    trials: usize,
+) -> Result<ProbeIdentification, ProbeError> {
     let input = |m: String| Err(ProbeError::Input(m));
     if dbb.is_none() && probe.is_none() {
         return input("no readings: a bar's, a probe's or both are needed".into());
@@ -315,5 +330,29 @@ pub fn identify(
         .enforce("identify", accept_misfit)
         .map_err(|m| ProbeError::Misfit(m.to_string()))?;
     let readings = problem.blocks.iter().map(|b| b.values.len()).sum();
-    Ok(identification_of(o, &start, readings))
+    let mc = (trials > 0)
+        .then(|| monte_carlo(&problem, &o, trials, MONTE_CARLO_SEED))
+        .transpose()
+        .map_err(|e| ProbeError::Identification(e.to_string()))?;
+    let mut id = identification_of(o, &start, readings);
+    if let Some(mc) = mc {
+        let t = trials.max(2) as Real;
+        id.parameter_spread = Some(std::array::from_fn(|i| {
+            let mean = mc.solutions.iter().map(|x| x[i]).sum::<Real>() / t;
+            let var = mc
+                .solutions
+                .iter()
+                .map(|x| (x[i] - mean).powi(2))
+                .sum::<Real>();
+            (var / (t - 1.0)).sqrt()
+        }));
+        for e in &mut id.identified {
+            e.monte_carlo_spread_mm = mc
+                .spread
+                .iter()
+                .find(|(n, _)| *n == e.name)
+                .map(|(_, v)| *v);
+        }
+    }
+    Ok(id)
 }

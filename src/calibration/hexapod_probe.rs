@@ -319,6 +319,9 @@ pub struct ProbeEstimate {
     pub value_mm: Real,
     /// Its standard uncertainty (mm).
     pub sigma_mm: Real,
+    /// Its spread over Monte-Carlo trials at the solution (mm), when they ran.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub monte_carlo_spread_mm: Option<Real>,
 }
 
 /// What one identification found.
@@ -352,6 +355,9 @@ pub struct ProbeIdentification {
     /// Their σ along the determined subspace (mm).
     #[serde(skip)]
     pub parameter_sigma: [Real; PARAMETERS],
+    /// Their spread over Monte-Carlo trials at the solution (mm), when they ran.
+    #[serde(skip)]
+    pub parameter_spread: Option<[Real; PARAMETERS]>,
 }
 
 fn engine_outcome(
@@ -463,6 +469,7 @@ pub fn identification_of(
                 name: e.name.clone(),
                 value_mm: combination_value(e),
                 sigma_mm: e.sigma,
+                monte_carlo_spread_mm: None,
             })
             .collect(),
         combinations: o
@@ -472,6 +479,7 @@ pub fn identification_of(
                 name: e.name.clone(),
                 value_mm: combination_value(e),
                 sigma_mm: e.sigma,
+                monte_carlo_spread_mm: None,
             })
             .collect(),
         not_determined: ident
@@ -490,6 +498,7 @@ pub fn identification_of(
         fit: o.fit,
         parameters,
         parameter_sigma,
+        parameter_spread: None,
     }
 }
 

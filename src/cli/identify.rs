@@ -510,13 +510,6 @@ fn calibrate(
         if a.trials > 0 {
             return Err("--trials runs on the twin; it cannot go with --readings".into());
         }
-        if a.probe.is_some() && monte_carlo.is_some() {
-            return Err(
-                "--monte-carlo goes with --readings alone: the joint identification with \
-                 --probe has no trials"
-                    .into(),
-            );
-        }
         let mut files = Vec::with_capacity(a.readings.len());
         for p in &a.readings {
             let text = twinmill::scene::read_text(p).map_err(|e| e.to_string())?;
@@ -530,6 +523,7 @@ fn calibrate(
                 plan,
                 &files,
                 &(probe.clone(), text),
+                monte_carlo,
             )
             .map_err(|e| e.to_string())?;
             let page = a.html.as_ref().map(|h| (h, joint_page(&o)));

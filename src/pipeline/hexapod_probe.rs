@@ -8,7 +8,7 @@
 //! noise from a counter-based generator of the given seed).
 
 use crate::calibration::hexapod_calibrate::{Plan, Procedure};
-use crate::calibration::hexapod_dbb_probe::{DbbData, ProbeData, identify};
+use crate::calibration::hexapod_dbb_probe::{DbbData, ProbeData, identify_with};
 use crate::calibration::hexapod_probe::{
     ProbeCalibration, ProbeIdentification, ProbeOptions, ProbePlan, ProbeReadings, calibrate,
     default_plan,
@@ -470,6 +470,7 @@ pub fn identify_dbb_and_probe(
     plan: Option<Plan>,
     dbb: &[(std::path::PathBuf, String)],
     probe: &(std::path::PathBuf, String),
+    monte_carlo: Option<usize>,
 ) -> Result<JointOutcome, HexapodCommandError> {
     let error = |message: String| HexapodCommandError {
         path: scene.path.display().to_string(),
@@ -498,7 +499,7 @@ pub fn identify_dbb_and_probe(
     })?;
     let files: Vec<String> = dbb.iter().map(|(p, _)| p.display().to_string()).collect();
     let probe_file = probe.0.display().to_string();
-    let id = identify(
+    let id = identify_with(
         &scene.controller,
         Some(DbbData {
             plan: &plan,
@@ -512,6 +513,7 @@ pub fn identify_dbb_and_probe(
             file: &probe_file,
         }),
         scene.accept_misfit,
+        monte_carlo.unwrap_or(0),
     )
     .map_err(|e| error(e.to_string()))?;
     let pn = scene.nominal.parameters();
@@ -572,15 +574,29 @@ pub fn identify_dbb_and_probe(
         let _ = writeln!(summary, "  borderline      {n}");
     }
     let _ = writeln!(summary, "  fit           {}", id.fit.describe());
-    let _ = writeln!(summary, "  parameter     controller (mm)   σ (µm)");
+    let mc = id.parameter_spread.is_some();
+    let _ = writeln!(
+        summary,
+        "  parameter     controller (mm)   σ (µm){}",
+        if mc { "   Monte Carlo (µm)" } else { "" }
+    );
     for k in ParameterId::all() {
         let i = k.index();
+        let spread = id
+            .parameter_spread
+            .map_or(String::new(), |s| format!("   {:8.3}", s[i] * 1e3));
         let _ = writeln!(
             summary,
-            "  {:<12} {:+12.5}    {:8.3}",
+            "  {:<12} {:+12.5}    {:8.3}{spread}",
             k.name(),
             id.parameters[i] - pn[i],
             id.parameter_sigma[i] * 1e3
+        );
+    }
+    if let Some(n) = monte_carlo.filter(|_| mc) {
+        let _ = writeln!(
+            summary,
+            "  monte carlo   {n} trials at the solution over the stated σ of both instruments"
         );
     }
     Ok(JointOutcome {

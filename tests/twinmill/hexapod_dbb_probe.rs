@@ -236,6 +236,33 @@ fn cli_identify_reads_bar_traces_and_a_probe_file_together() {
     assert_eq!(code, 0, "{err}");
     let v: serde_json::Value = serde_json::from_str(&out).expect("json");
     assert_eq!(v["identification"]["rank"], PARAMETERS - 3);
+    // The engine's Monte Carlo over both instruments' stated σ: 20 trials, each identified
+    // parameter's spread within 0.6–1.6 of its σ (the ratio's standard deviation is about
+    // 0.16), the values those without the trials.
+    let (code, out, err) = with_probe("probe.csv", &["--monte-carlo", "20", "--json"]);
+    assert_eq!(code, 0, "{err}");
+    let mc: serde_json::Value = serde_json::from_str(&out).expect("json");
+    let (with, without) = (
+        mc["identification"]["identified"]
+            .as_array()
+            .expect("identified"),
+        v["identification"]["identified"]
+            .as_array()
+            .expect("identified"),
+    );
+    assert!(!with.is_empty());
+    for (a, b) in with.iter().zip(without) {
+        let (s, m) = (
+            a["sigma_mm"].as_f64().expect("σ"),
+            a["monte_carlo_spread_mm"].as_f64().expect("a spread"),
+        );
+        assert!(
+            (0.6..1.6).contains(&(m / s)),
+            "{}: spread {m} against σ {s}",
+            a["name"]
+        );
+        assert_eq!(a["value_mm"], b["value_mm"]);
+    }
     // The page names both instruments' files and gives the identifiability and the σ.
     let page = std::fs::read_to_string(sb.dir.join("both.html")).expect("page written");
     for want in [
