@@ -483,6 +483,18 @@ pub fn solve(problem: &Problem) -> Result<Outcome, EngineError> {
     })
 }
 
+/// The mean of `values` and their sample standard deviation (over n − 1; 0 for fewer than
+/// two): a Monte-Carlo spread, whatever the values are (a parameter, a gauge-fixed one).
+pub fn mean_and_spread(values: &[Real]) -> (Real, Real) {
+    let n = values.len();
+    if n == 0 {
+        return (0.0, 0.0);
+    }
+    let mean = values.iter().sum::<Real>() / n as Real;
+    let var = values.iter().map(|x| (x - mean).powi(2)).sum::<Real>() / (n.max(2) - 1) as Real;
+    (mean, var.sqrt())
+}
+
 /// Monte-Carlo trials of an identification ([`monte_carlo`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct MonteCarlo {
@@ -585,13 +597,10 @@ pub fn monte_carlo(
         })
         .collect::<Result<_, _>>()?;
     let (values, solutions): (Vec<Vec<Real>>, Vec<Vec<Real>>) = runs.into_iter().unzip();
-    let t = trials.max(1) as Real;
     let (mut spread, mut bias) = (Vec::new(), Vec::new());
     for (j, e) in outcome.parameters.iter().enumerate() {
-        let mean = values.iter().map(|v| v[j]).sum::<Real>() / t;
-        let var = values.iter().map(|v| (v[j] - mean).powi(2)).sum::<Real>()
-            / (trials.max(2) - 1) as Real;
-        spread.push((e.name.clone(), var.sqrt()));
+        let (mean, sd) = mean_and_spread(&values.iter().map(|v| v[j]).collect::<Vec<_>>());
+        spread.push((e.name.clone(), sd));
         bias.push((e.name.clone(), mean - e.value));
     }
     Ok(MonteCarlo {

@@ -764,13 +764,10 @@ pub fn calibrate_commanded_with(
                 p
             });
         }
-        let t = trials.max(2) as Real;
         ids.iter()
             .map(|id| {
                 let v: Vec<Real> = shown_k.iter().map(|p| p[id.index()]).collect();
-                let mean = v.iter().sum::<Real>() / t;
-                let var = v.iter().map(|x| (x - mean).powi(2)).sum::<Real>() / (t - 1.0);
-                Some(var.sqrt() * inflate)
+                Some(engine::mean_and_spread(&v).1 * inflate)
             })
             .collect()
     } else {

@@ -27,7 +27,9 @@
 //! **Invariant:** plain functions of the hexapods, plans and readings given; never touches
 //! files; a direction the readings do not determine is named, never valued.
 
-use crate::calibration::engine::{Block, Forward, Problem, Unknown, monte_carlo, solve};
+use crate::calibration::engine::{
+    Block, Forward, Problem, Unknown, mean_and_spread, monte_carlo, solve,
+};
 use crate::calibration::hexapod_calibrate::{
     CircleReadings, DbbLengths, Plan, ball_unknowns, magnitude,
 };
@@ -336,15 +338,8 @@ pub fn identify_with(
         .map_err(|e| ProbeError::Identification(e.to_string()))?;
     let mut id = identification_of(o, &start, readings);
     if let Some(mc) = mc {
-        let t = trials.max(2) as Real;
         id.parameter_spread = Some(std::array::from_fn(|i| {
-            let mean = mc.solutions.iter().map(|x| x[i]).sum::<Real>() / t;
-            let var = mc
-                .solutions
-                .iter()
-                .map(|x| (x[i] - mean).powi(2))
-                .sum::<Real>();
-            (var / (t - 1.0)).sqrt()
+            mean_and_spread(&mc.solutions.iter().map(|x| x[i]).collect::<Vec<_>>()).1
         }));
         for e in &mut id.identified {
             e.monte_carlo_spread_mm = mc

@@ -264,17 +264,12 @@ fn two_cut_parts_join_the_instruments_in_one_solve_through_the_binary() {
     // 40 trials at the solution over the files' stated noise: each spread within
     // 0.7–1.4 of its σ (the ratio's standard deviation is about 0.11).
     assert_eq!(alone["monte_carlo_trials"], 40);
-    for t in alone["identified"].as_array().expect("identified") {
-        let (s, m) = (
-            t["sigma"].as_f64().expect("σ"),
-            t["monte_carlo_spread"].as_f64().expect("a spread"),
-        );
-        assert!(
-            (0.7..1.4).contains(&(m / s)),
-            "{}: spread {m} against σ {s}",
-            t["name"]
-        );
-    }
+    crate::hexapod_calibration::spreads_within(
+        alone["identified"].as_array().expect("identified"),
+        "sigma",
+        "monte_carlo_spread",
+        0.7..1.4,
+    );
     let both = run_json(&[
         "--measurement",
         "part:truth.toml",
