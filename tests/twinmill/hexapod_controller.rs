@@ -169,13 +169,7 @@ fn readings_calibrate_the_controller_and_write_its_page_and_genhexkins_pins() {
     // genhexkins: `setp genhexkins.base.N.x v` … and `platform.N.x` (platform joints about
     // the tool point), N = 0…5; its inverse kinematics L_i = |t + R·a_i − b_i|.
     let hal = std::fs::read_to_string(sb.dir.join("cal.hal")).expect("genhexkins file");
-    let mut pins = std::collections::BTreeMap::new();
-    for l in hal.lines().filter(|l| !l.starts_with('#')) {
-        let w: Vec<&str> = l.split_whitespace().collect();
-        assert_eq!((w.len(), w[0]), (3, "setp"), "{l}");
-        pins.insert(w[1].to_string(), w[2].parse::<Real>().expect("a number"));
-    }
-    assert_eq!(pins.len(), 36);
+    let pins = hal_pins(&hal);
     let pin = |kind: &str, i: usize| {
         Vector3::from_fn(|k, _| pins[&format!("genhexkins.{kind}.{i}.{}", ["x", "y", "z"][k])])
     };
@@ -522,6 +516,19 @@ fn the_probe_calibration_writes_a_controller_file_the_machine_runs_on() {
         before < 0.015,
         "starts from the file's controller: {before}"
     );
+}
+
+/// The genhexkins pins of a `.hal` file (every line not a comment is `setp PIN VALUE`):
+/// the 36 base and platform joint coordinates, by pin name.
+pub fn hal_pins(hal: &str) -> std::collections::BTreeMap<String, Real> {
+    let mut pins = std::collections::BTreeMap::new();
+    for l in hal.lines().filter(|l| !l.starts_with('#')) {
+        let w: Vec<&str> = l.split_whitespace().collect();
+        assert_eq!((w.len(), w[0]), (3, "setp"), "{l}");
+        pins.insert(w[1].to_string(), w[2].parse::<Real>().expect("a number"));
+    }
+    assert_eq!(pins.len(), 36);
+    pins
 }
 
 /// Joint `i`'s home offset as the genhexkins file `hal` states it (its

@@ -316,13 +316,7 @@ fn cli_identify_reads_bar_traces_and_a_probe_file_together() {
     // written to 1e-7 mm.
     let controller = super::hexapod_controller::controller_of(&s.nominal, &text);
     let hal = std::fs::read_to_string(sb.dir.join("both.hal")).expect("genhexkins file");
-    let mut pins = std::collections::BTreeMap::new();
-    for l in hal.lines().filter(|l| !l.starts_with('#')) {
-        let w: Vec<&str> = l.split_whitespace().collect();
-        assert_eq!((w.len(), w[0]), (3, "setp"), "{l}");
-        pins.insert(w[1].to_string(), w[2].parse::<Real>().expect("a number"));
-    }
-    assert_eq!(pins.len(), 36);
+    let pins = super::hexapod_controller::hal_pins(&hal);
     let o = controller.tool_offset();
     for i in 0..6 {
         for (k, c) in ["x", "y", "z"].iter().enumerate() {
