@@ -16,6 +16,18 @@
 //! naming each case whose digest or count differs or that the file lacks (CI runs it);
 //! `--record` writes the file anew from the cases run (all of them: no FILTER), for a change
 //! that is meant to change the crossings — say so, and why, in its commit.
+//!
+//! ```text
+//! cargo run --release --example dexel_digest [FILTER] --save DIR
+//! cargo run --release --example dexel_digest [FILTER] --against DIR
+//! ```
+//!
+//! For a change meant to move the crossings within a bound (the envelope's, say): `--save`
+//! keeps each case's stock in `DIR` (one `.dexel` file a case), and a later build's
+//! `--against` compares its stocks with those, ray by ray: the rays whose segment counts
+//! differ, and over the rest the largest distance between corresponding crossings and
+//! the largest angle between their normals. `--scene FILE` (repeatable) adds the program
+//! of another scene file as a case (not recorded).
 
 #![allow(
     clippy::print_stdout,
@@ -29,7 +41,7 @@ use twinmill::cutting::stock::TriDexel;
 use twinmill::cutting::sweep::{SweepOptions, sweep_program};
 use twinmill::cutting::tool::{Tool, ToolKind};
 use twinmill::machine::chain::Chain;
-use twinmill::math::{Aabb, Point3};
+use twinmill::math::{Aabb, Point3, Real};
 use twinmill::nc::{AxisLetter, AxisValues, Move, MoveKind};
 use twinmill::progress::NoProgress;
 use twinmill::scene::Scene;
@@ -74,14 +86,59 @@ fn recorded() -> std::collections::BTreeMap<String, (String, usize)> {
         .collect()
 }
 
+/// How `after` differs from `before` (the same grids): rays whose segment counts differ,
+/// and over the others the largest distance (mm) between corresponding crossings and the
+/// largest angle (rad) between their normals.
+fn compare(before: &TriDexel, after: &TriDexel) -> String {
+    let (mut rays, mut counts, mut moved, mut turned, mut crossings) = (0usize, 0usize, 0.0, 0.0, 0);
+    for (g0, g1) in before.grids().iter().zip(after.grids()) {
+        assert_eq!(g0.dims(), g1.dims(), "the saved stock has other grids");
+        let (nu, nv) = g0.dims();
+        for iv in 0..nv {
+            for iu in 0..nu {
+                let (a, b) = (g0.ray(iu, iv), g1.ray(iu, iv));
+                rays += 1;
+                if a.len() != b.len() {
+                    counts += 1;
+                    continue;
+                }
+                for (x, y) in a.iter().zip(b).flat_map(|(x, y)| [(&x.lo, &y.lo), (&x.hi, &y.hi)]) {
+                    crossings += 1;
+                    moved = Real::max(moved, (x.t - y.t).abs());
+                    let dot: Real = (0..3).map(|k| (x.normal[k] * y.normal[k]) as Real).sum();
+                    turned = Real::max(turned, dot.clamp(-1.0, 1.0).acos());
+                }
+            }
+        }
+    }
+    format!(
+        "against the saved stock: {counts} of {rays} rays with other segment counts; over \
+         {crossings} crossings the largest move {moved:.3e} mm, the largest normal turn \
+         {turned:.3e} rad"
+    )
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let check = args.iter().any(|a| a == "--check");
     let record = args.iter().any(|a| a == "--record");
+    let value_of = |flag: &str| {
+        args.iter()
+            .position(|a| a == flag)
+            .map(|i| match args.get(i + 1) {
+                Some(v) if !v.starts_with("--") => std::path::PathBuf::from(v),
+                _ => panic!("{flag} needs a folder"),
+            })
+    };
+    let (save, against) = (value_of("--save"), value_of("--against"));
     let filter = args
         .iter()
-        .find(|a| !a.starts_with("--"))
-        .cloned()
+        .enumerate()
+        .find(|(i, a)| {
+            !a.starts_with("--")
+                && !(*i > 0 && ["--save", "--against", "--scene"].contains(&args[i - 1].as_str()))
+        })
+        .map(|(_, a)| a.clone())
         .unwrap_or_default();
     assert!(
         !(record && (check || !filter.is_empty())),
@@ -200,6 +257,12 @@ fn main() {
         })
         .collect();
     labelled.sort_by(|a, b| a.0.cmp(&b.0));
+    for (i, a) in args.iter().enumerate() {
+        if a == "--scene" {
+            let p = std::path::PathBuf::from(args.get(i + 1).expect("--scene needs a file"));
+            labelled.push((format!("file {}", p.display()), p));
+        }
+    }
     for (label, path) in labelled {
         cases.push((
             label,
@@ -243,6 +306,19 @@ fn main() {
             }
         };
         println!("{h}  {n:>9} crossings  {dt:7.3} s  {name}{verdict}");
+        let file = |dir: &Path| dir.join(format!("{}.dexel", name.replace([' ', '/'], "_")));
+        if let Some(dir) = &save {
+            std::fs::create_dir_all(dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display()));
+            std::fs::write(file(dir), s.to_bytes())
+                .unwrap_or_else(|e| panic!("{}: {e}", file(dir).display()));
+        }
+        if let Some(dir) = &against {
+            let f = file(dir);
+            let bytes = std::fs::read(&f).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+            let before = TriDexel::from_bytes(&bytes)
+                .unwrap_or_else(|| panic!("{}: not a saved stock", f.display()));
+            println!("{:>44}{}", "", compare(&before, &s));
+        }
         lines.push(format!("{h}  {n:>9}  {name}"));
     }
     if check && filter.is_empty() {
