@@ -88,9 +88,11 @@ fn recorded() -> std::collections::BTreeMap<String, (String, usize)> {
 
 /// How `after` differs from `before` (the same grids): rays whose segment counts differ,
 /// and over the others the largest distance (mm) between corresponding crossings and the
-/// largest angle (rad) between their normals.
+/// largest angle (rad) between their normals, and how many turned by more than 1 mrad (an
+/// interval end at an edge of the tool may take either face's normal).
 fn compare(before: &TriDexel, after: &TriDexel) -> String {
-    let (mut rays, mut counts, mut moved, mut turned, mut crossings) = (0usize, 0usize, 0.0, 0.0, 0);
+    let (mut rays, mut counts, mut crossings, mut faces) = (0usize, 0usize, 0usize, 0usize);
+    let (mut moved, mut turned): (Real, Real) = (0.0, 0.0);
     for (g0, g1) in before.grids().iter().zip(after.grids()) {
         assert_eq!(g0.dims(), g1.dims(), "the saved stock has other grids");
         let (nu, nv) = g0.dims();
@@ -102,11 +104,22 @@ fn compare(before: &TriDexel, after: &TriDexel) -> String {
                     counts += 1;
                     continue;
                 }
-                for (x, y) in a.iter().zip(b).flat_map(|(x, y)| [(&x.lo, &y.lo), (&x.hi, &y.hi)]) {
+                for (x, y) in a
+                    .iter()
+                    .zip(b)
+                    .flat_map(|(x, y)| [(&x.lo, &y.lo), (&x.hi, &y.hi)])
+                {
                     crossings += 1;
                     moved = Real::max(moved, (x.t - y.t).abs());
-                    let dot: Real = (0..3).map(|k| (x.normal[k] * y.normal[k]) as Real).sum();
-                    turned = Real::max(turned, dot.clamp(-1.0, 1.0).acos());
+                    let angle = x
+                        .normal()
+                        .cross(&y.normal())
+                        .norm()
+                        .atan2(x.normal().dot(&y.normal()));
+                    turned = Real::max(turned, angle);
+                    if angle > 1e-3 {
+                        faces += 1;
+                    }
                 }
             }
         }
@@ -114,7 +127,7 @@ fn compare(before: &TriDexel, after: &TriDexel) -> String {
     format!(
         "against the saved stock: {counts} of {rays} rays with other segment counts; over \
          {crossings} crossings the largest move {moved:.3e} mm, the largest normal turn \
-         {turned:.3e} rad"
+         {turned:.3e} rad ({faces} turned by more than 1 mrad)"
     )
 }
 
@@ -131,13 +144,12 @@ fn main() {
             })
     };
     let (save, against) = (value_of("--save"), value_of("--against"));
+    let takes_value =
+        |i: usize| i > 0 && ["--save", "--against", "--scene"].contains(&args[i - 1].as_str());
     let filter = args
         .iter()
         .enumerate()
-        .find(|(i, a)| {
-            !a.starts_with("--")
-                && !(*i > 0 && ["--save", "--against", "--scene"].contains(&args[i - 1].as_str()))
-        })
+        .find(|(i, a)| !a.starts_with("--") && !takes_value(*i))
         .map(|(_, a)| a.clone())
         .unwrap_or_default();
     assert!(

@@ -21,10 +21,11 @@
 //! rate of both ends and, for every edge, `φ = ρ − R`, the radius at which the ray crosses
 //! the edge's plane; an edge crossing is a sign change of `φ`.
 //!
-//! **Cells.** No tool point moves faster than `M = ω·ρ + v` per unit `λ` (`ω` the total
-//! rotation in rad, `ρ` a bound on the distance of any tool point from the rotary axes during
-//! the move, `v` the linear travel; with several rotary axes `ρ` is widened like the sub-step
-//! bound of [`crate::cutting::sweep`]). The move is split into `N` cells of width `h` with
+//! **Cells.** No tool point moves faster than `M = Σ_k ω_k·ρ_k + v` per unit `λ` (`ω_k` the
+//! turn of rotary axis `k` in rad, `ρ_k` a bound on the distance of any tool point from its
+//! line during the move, grown by what the axes after it in the chain can move the point;
+//! `v` the linear travel), nor faster than the total turn times the largest such distance
+//! (see `path::speed_bound`). The move is split into `N` cells of width `h` with
 //! `δ = M·h/2 ≤ R/8`: the tool anywhere in a cell lies inside the tool at the cell's middle
 //! grown by `δ`. A ray that misses the grown tool misses the cell. The ray is evaluated
 //! exactly at the ends and middle of every cell it may meet; in each half-cell (the tool

@@ -250,12 +250,20 @@ pub fn rotation_and_travel(chain: &Chain, a: &AxisValues, b: &AxisValues) -> (Re
 }
 
 /// A bound on the speed (mm per unit λ) of any point within `reach` of the tool-axis point at
-/// height `mid` on the move: the rotation `ω` (rad) times the largest distance `ρ` of such a
-/// point from a rotary axis, plus the linear travel. `ρ` is taken at both ends (distance of
-/// the axis point from each rotary axis line, plus `reach`) and grown by the travel, which is
-/// the most it can change while the rotation turns points about the axis; several rotary
-/// axes widen it by `(1 + ω)` as the sub-step bound does. Error motions add their own
-/// speed ([`error_motion_speed`]).
+/// height `mid` on the move, the lesser of two bounds that both hold (error motions add
+/// their own speed, [`error_motion_speed`]):
+///
+/// - **Per axis.** A point `x` of the tool moves at `Σ_k ω_k ê_k × (x − p_k) + Σ_j v_j ê_j`
+///   (`ω_k` the turn of rotary axis `k` about its current line `p_k + s·ê_k`, `v_j` the
+///   travel of linear axis `j`), so its speed is at most `Σ_k ω_k·ρ_k` plus the travel,
+///   `ρ_k` a bound on its distance from line `k` during the move. The axes before `k` in
+///   the chain carry line `k` and the tool together, so only those after it change that
+///   distance: `ρ_k` is the axis point's distance at either end (the larger), plus `reach`,
+///   plus the travel, plus `Σ_{j after k} ω_j·ρ_j` (worked out from the tool end of the
+///   chain).
+/// - **Whole.** The total rotation `ω` times the largest distance `ρ` from any rotary line
+///   (at both ends, plus `reach` and the travel, widened by `(1 + ω)` when several rotary
+///   axes turn), plus the travel.
 pub(super) fn speed_bound(
     chain: &Chain,
     mid: Real,
@@ -265,25 +273,33 @@ pub(super) fn speed_bound(
     state: &[Real; 6],
 ) -> Real {
     let (omega, travel) = rotation_and_travel(chain, start, end);
-    let rotaries = chain
+    let turns: Vec<Real> = chain
         .axes()
         .iter()
         .filter(|a| a.kind == AxisKind::Rotary)
-        .count();
+        .map(|a| (end.get(a.letter) - start.get(a.letter)).abs().to_radians())
+        .collect();
     let mid = Point3::new(0.0, 0.0, mid);
-    let mut rho: Real = 0.0;
+    // Each rotary line's largest distance from the axis point at the two ends.
+    let mut dist = vec![0.0 as Real; turns.len()];
     for q in [start, end] {
         let c = chain.w_from_t(q) * mid;
-        for (p, d) in chain.rotary_lines_in_w(q) {
+        for (k, (p, d)) in chain.rotary_lines_in_w(q).into_iter().enumerate() {
             let r = c - p;
-            rho = rho.max((r - d * r.dot(&d)).norm());
+            dist[k] = dist[k].max((r - d * r.dot(&d)).norm());
         }
     }
-    rho += reach + travel;
-    if rotaries > 1 {
+    let mut rho = dist.iter().fold(0.0 as Real, |a, &b| a.max(b)) + reach + travel;
+    if turns.len() > 1 {
         rho *= 1.0 + omega;
     }
-    let base = omega * rho + travel;
+    let whole = omega * rho + travel;
+    // From the tool end: `after` is Σ ω_j·ρ_j over the rotary axes after axis k.
+    let mut after: Real = 0.0;
+    for (w, d) in turns.iter().zip(&dist).rev() {
+        after += w * (d + reach + travel + after);
+    }
+    let base = whole.min(after + travel);
     if chain.has_error_motions() {
         base + error_motion_speed(chain, &mid, reach, start, end, state).0
     } else {

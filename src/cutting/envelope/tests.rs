@@ -131,13 +131,148 @@ fn exact_at(
     Some((out.first()?.t_in, out.last()?.t_out))
 }
 
+/// The envelope of `tool` on the move `a → b` of `c` against a brute-force search over
+/// 4,000 poses, on the axis ray through the tool's middle at λ = ½ shifted by `(ou, ov)`
+/// (×4 mm): no pose reaches further than the envelope (to 0.1 µm), the sampled poses
+/// come within the sampling error of each end, between intervals no pose touches the ray,
+/// and within the span `(f0, f1)` of the sampled hull the answer is the same.
+#[allow(clippy::too_many_arguments)]
+fn check_against_brute_force(
+    c: &Chain,
+    tool: &Tool,
+    (a, b): (AxisValues, AxisValues),
+    axis: usize,
+    (ou, ov): (Real, Real),
+    (f0, f1): (Real, Real),
+) -> Result<(), TestCaseError> {
+    let (c, tool) = (c.clone(), tool.clone());
+    let env = RotaryEnvelope::new(&c, &tool, &a, &b).expect("supported");
+    // A ray through the region the tool sweeps: aimed near the tool's middle at λ = ½.
+    let mid = MovePath::new(&c, &a, &b).w_from_t(0.5) * Point3::new(0.0, 0.0, 3.0);
+    let mut o = mid;
+    o[(axis + 1) % 3] += 4.0 * ou;
+    o[(axis + 2) % 3] += 4.0 * ov;
+    let mut e = Vector3::zeros();
+    e[axis] = 1.0;
+    let mut cuts = Vec::new();
+    env.intervals(&o, &e, &mut cuts);
+    for w in cuts.windows(2) {
+        prop_assert!(w[0].t_out < w[1].t_in, "not sorted/disjoint: {cuts:?}");
+    }
+    let n = 4000;
+    let mut lo = Real::INFINITY;
+    let mut hi = Real::NEG_INFINITY;
+    let mut hits = Vec::new();
+    for k in 0..=n {
+        let l = k as Real / n as Real;
+        if let Some((t0, t1)) = exact_at(&c, &tool, &a, &b, l, &o, &e) {
+            lo = lo.min(t0);
+            hi = hi.max(t1);
+            hits.push((t0, t1));
+        }
+    }
+    // Around the poses reaching furthest either way, 4,000 poses more within ±1/n.
+    let mut far = [(Real::INFINITY, 0.0), (Real::NEG_INFINITY, 0.0)];
+    for k in 0..=n {
+        let l = k as Real / n as Real;
+        if let Some((t0, t1)) = exact_at(&c, &tool, &a, &b, l, &o, &e) {
+            if t0 < far[0].0 {
+                far[0] = (t0, l);
+            }
+            if t1 > far[1].0 {
+                far[1] = (t1, l);
+            }
+        }
+    }
+    for &(_, l0) in &far {
+        for k in 0..=n {
+            let l = (l0 + (2.0 * k as Real / n as Real - 1.0) / n as Real).clamp(0.0, 1.0);
+            if let Some(h) = exact_at(&c, &tool, &a, &b, l, &o, &e) {
+                hits.push(h);
+            }
+        }
+    }
+    // Sampling error, worked out here and not from the envelope's own speed bound:
+    // between consecutive sampled poses no tool point moves further than
+    // M = max_k |Δc_k| + 2·sin(θ_k/2)·ρ (c the tool's mid point on its axis, θ_k
+    // the rotation between the poses, ρ = √(R² + (L/2)²) the farthest a tool point
+    // lies from c); an interval end moves along the ray by up to a few times that
+    // where the ray meets the surface at a slant: 4·M, and 1 nm for rounding.
+    let mid = Point3::new(0.0, 0.0, tool.length() / 2.0);
+    let rho = tool.radius().hypot(tool.length() / 2.0);
+    let pose = |l: Real| {
+        let mut qq = a;
+        for axis in c.axes() {
+            let (u, w) = (a.get(axis.letter), b.get(axis.letter));
+            qq.set(axis.letter, u + (w - u) * l);
+        }
+        c.w_from_t(&qq)
+    };
+    let mut step_max: Real = 0.0;
+    let mut prev = pose(0.0);
+    for k in 1..=n {
+        let next = pose(k as Real / n as Real);
+        let moved = ((next * mid) - (prev * mid)).norm()
+            + 2.0 * (next.rotation.angle_to(&prev.rotation) / 2.0).sin() * rho;
+        step_max = step_max.max(moved);
+        prev = next;
+    }
+    let samp = 4.0 * step_max + 1e-6;
+    for &(t0, t1) in &hits {
+        // Every pose's interval lies inside one of the envelope's intervals.
+        let inside = cuts
+            .iter()
+            .any(|c| c.t_in <= t0 + ENVELOPE_TOL && t1 <= c.t_out + ENVELOPE_TOL);
+        prop_assert!(
+            inside || t1 - t0 < 1e-6,
+            "pose interval [{t0}, {t1}] not inside {cuts:?}"
+        );
+    }
+    for cut in &cuts {
+        // Each end is reached by some pose, within the sampling error.
+        let near_in = hits.iter().any(|h| (h.0 - cut.t_in).abs() <= samp);
+        let near_out = hits.iter().any(|h| (h.1 - cut.t_out).abs() <= samp);
+        prop_assert!(
+            near_in && near_out,
+            "{cut:?} not reached; sampled [{lo}, {hi}]"
+        );
+    }
+    if hits.is_empty() {
+        prop_assert!(
+            cuts.iter().all(|c| c.t_out - c.t_in < samp),
+            "{cuts:?} but no pose hits"
+        );
+    }
+    // Within a span (the material's extent) the answer is the same.
+    let span = (lo + f0 * (hi - lo), lo + f1 * (hi - lo));
+    if span.0 < span.1 {
+        let clip = |cs: &[RayCut]| -> Vec<(Real, Real)> {
+            cs.iter()
+                .map(|c| (c.t_in.max(span.0), c.t_out.min(span.1)))
+                .filter(|(a, b)| b - a > 1e-6)
+                .collect()
+        };
+        let mut part = Vec::new();
+        env.intervals_in(&o, &e, span, &mut part);
+        let (full, part) = (clip(&cuts), clip(&part));
+        prop_assert_eq!(full.len(), part.len(), "{:?} vs {:?}", full, part);
+        for (x, y) in full.iter().zip(&part) {
+            prop_assert!(
+                (x.0 - y.0).abs() <= 2.0 * ENVELOPE_TOL && (x.1 - y.1).abs() <= 2.0 * ENVELOPE_TOL,
+                "{:?} vs {:?}",
+                full,
+                part
+            );
+        }
+    }
+    Ok(())
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 64, failure_persistence: None, rng_seed: proptest::test_runner::RngSeed::Fixed(0x5eed), ..ProptestConfig::default() })]
 
     /// On random rotary moves (A turning with X, Z), every interval end agrees with a
-    /// brute-force search over 4,000 poses: no pose reaches further than the envelope
-    /// (to 0.1 µm), and the sampled poses come within the sampling error of each end;
-    /// between intervals no pose touches the ray.
+    /// brute-force search over 4,000 poses ([`check_against_brute_force`]).
     #[test]
     fn envelope_agrees_with_brute_force(
         ball in any::<bool>(), a0 in -40.0..40.0f64, da in -30.0..30.0f64,
@@ -145,108 +280,173 @@ proptest! {
         y in -2.0..2.0f64, axis in 0usize..3, ou in -1.0..1.0f64, ov in -1.0..1.0f64,
         f0 in -0.2..0.6f64, f1 in 0.4..1.2f64,
     ) {
-        let c = deviated();
         let kind = if ball { ToolKind::Ball } else { ToolKind::Flat };
         let tool = Tool::try_new(kind, 6.0, 12.0).expect("valid");
         let (a, b) = (q(x0, y, z0, a0), q(x0 + dx, y, z0 + dz, a0 + da));
-        let env = RotaryEnvelope::new(&c, &tool, &a, &b).expect("supported");
-        // A ray through the region the tool sweeps: aimed near the tool's middle at λ = ½.
-        let mid = MovePath::new(&c, &a, &b).w_from_t(0.5) * Point3::new(0.0, 0.0, 3.0);
-        let mut o = mid;
-        o[(axis + 1) % 3] += 4.0 * ou;
-        o[(axis + 2) % 3] += 4.0 * ov;
-        let mut e = Vector3::zeros();
-        e[axis] = 1.0;
-        let mut cuts = Vec::new();
-        env.intervals(&o, &e, &mut cuts);
-        for w in cuts.windows(2) {
-            prop_assert!(w[0].t_out < w[1].t_in, "not sorted/disjoint: {cuts:?}");
-        }
-        let n = 4000;
-        let mut lo = Real::INFINITY;
-        let mut hi = Real::NEG_INFINITY;
-        let mut hits = Vec::new();
-        for k in 0..=n {
-            let l = k as Real / n as Real;
-            if let Some((t0, t1)) = exact_at(&c, &tool, &a, &b, l, &o, &e) {
-                lo = lo.min(t0);
-                hi = hi.max(t1);
-                hits.push((t0, t1));
-            }
-        }
-        // Around the poses reaching furthest either way, 4,000 poses more within ±1/n.
-        let mut far = [(Real::INFINITY, 0.0), (Real::NEG_INFINITY, 0.0)];
-        for k in 0..=n {
-            let l = k as Real / n as Real;
-            if let Some((t0, t1)) = exact_at(&c, &tool, &a, &b, l, &o, &e) {
-                if t0 < far[0].0 { far[0] = (t0, l); }
-                if t1 > far[1].0 { far[1] = (t1, l); }
-            }
-        }
-        for &(_, l0) in &far {
-            for k in 0..=n {
-                let l = (l0 + (2.0 * k as Real / n as Real - 1.0) / n as Real).clamp(0.0, 1.0);
-                if let Some(h) = exact_at(&c, &tool, &a, &b, l, &o, &e) {
-                    hits.push(h);
-                }
-            }
-        }
-        // Sampling error, worked out here and not from the envelope's own speed bound:
-        // between consecutive sampled poses no tool point moves further than
-        // M = max_k |Δc_k| + 2·sin(θ_k/2)·ρ (c the tool's mid point on its axis, θ_k
-        // the rotation between the poses, ρ = √(R² + (L/2)²) the farthest a tool point
-        // lies from c); an interval end moves along the ray by up to a few times that
-        // where the ray meets the surface at a slant: 4·M, and 1 nm for rounding.
-        let mid = Point3::new(0.0, 0.0, tool.length() / 2.0);
-        let rho = tool.radius().hypot(tool.length() / 2.0);
-        let pose = |l: Real| {
-            let mut qq = a;
-            for axis in c.axes() {
-                let (u, w) = (a.get(axis.letter), b.get(axis.letter));
-                qq.set(axis.letter, u + (w - u) * l);
-            }
-            c.w_from_t(&qq)
+        check_against_brute_force(&deviated(), &tool, (a, b), axis, (ou, ov), (f0, f1))?;
+    }
+
+    /// The same on the trunnion A/C, C and A turning together while the tool moves: the
+    /// speed bound that sizes the cells takes each rotary axis with its own distance.
+    #[test]
+    fn envelope_agrees_with_brute_force_on_two_turning_axes(
+        ball in any::<bool>(), c0 in -180.0..180.0f64, dc in -40.0..40.0f64,
+        a0 in -20.0..20.0f64, da in -15.0..15.0f64, x0 in -5.0..5.0f64, dx in -2.0..2.0f64,
+        y0 in -20.0..-10.0f64, z0 in 10.0..30.0f64, dz in -2.0..2.0f64,
+        axis in 0usize..3, ou in -1.0..1.0f64, ov in -1.0..1.0f64,
+        f0 in -0.2..0.6f64, f1 in 0.4..1.2f64,
+    ) {
+        let kind = if ball { ToolKind::Ball } else { ToolKind::Flat };
+        let tool = Tool::try_new(kind, 6.0, 12.0).expect("valid");
+        let at = |x: Real, z: Real, a: Real, cc: Real| {
+            q(x, y0, z, a).with(AxisLetter::C, cc)
         };
-        let mut step_max: Real = 0.0;
-        let mut prev = pose(0.0);
-        for k in 1..=n {
-            let next = pose(k as Real / n as Real);
-            let moved = ((next * mid) - (prev * mid)).norm()
-                + 2.0 * (next.rotation.angle_to(&prev.rotation) / 2.0).sin() * rho;
-            step_max = step_max.max(moved);
+        let (a, b) = (at(x0, z0, a0, c0), at(x0 + dx, z0 + dz, a0 + da, c0 + dc));
+        check_against_brute_force(&trunnion(), &tool, (a, b), axis, (ou, ov), (f0, f1))?;
+    }
+}
+
+/// The trunnion A/C of `scenes/trunnion-ac.toml` (C's line through the table centre, A's
+/// line 50 mm below the table) with its location errors.
+fn trunnion() -> Chain {
+    use crate::machine::chain::{Axis, AxisKind};
+    let ax = |letter, kind, d: Vector3, o: Point3| Axis {
+        letter,
+        kind,
+        direction: crate::math::UnitVector3::new_normalize(d),
+        origin: o,
+    };
+    let o = Point3::origin();
+    let mut c = Chain::new(
+        vec![
+            ax(AxisLetter::C, AxisKind::Rotary, Vector3::z(), o),
+            ax(
+                AxisLetter::A,
+                AxisKind::Rotary,
+                Vector3::x(),
+                Point3::new(0.0, 0.0, -50.0),
+            ),
+            ax(AxisLetter::Y, AxisKind::Linear, Vector3::y(), o),
+            ax(AxisLetter::X, AxisKind::Linear, Vector3::x(), o),
+            ax(AxisLetter::Z, AxisKind::Linear, Vector3::z(), o),
+        ],
+        "S",
+    )
+    .expect("valid chain");
+    for (n, v) in [
+        ("dx_CA", 0.020),
+        ("dy_CA", -0.015),
+        ("alpha_CA", 40e-6),
+        ("beta_CA", -30e-6),
+        ("dy_AY", 0.030),
+        ("dz_AY", -0.025),
+        ("beta_AY", 60e-6),
+        ("gamma_AY", 25e-6),
+    ] {
+        c.set_deviation(c.deviation_id(n).expect("known"), v);
+    }
+    c
+}
+
+/// The speed bound that sizes the envelope's cells holds: on moves of the trunnion A/C
+/// turning both axes (and the linear axes), no point of the tool, nor any within its reach
+/// of the axis' middle, moves faster per unit λ than the bound, measured here by finite
+/// differences of the chain's own poses over 2,000 steps at points on the tool's surface
+/// and axis and on the sphere of that reach; and on the side cut's moves
+/// (C 0.5°, A up to 0.21°, the tool 19 mm from C's line and 70-110 mm from A's) the bound
+/// taking each axis with its own distance is well below the total turn times the largest
+/// distance.
+#[test]
+fn the_speed_bound_holds_on_two_turning_axes() {
+    let c = trunnion();
+    let (r, l) = (3.0, 25.0);
+    let tool = Tool::try_new(ToolKind::Flat, 2.0 * r, l).expect("valid");
+    let points: Vec<Point3> = (0..=5)
+        .flat_map(|h| {
+            let z = l * h as Real / 5.0;
+            (0..8)
+                .map(move |k| {
+                    let phi = k as Real * std::f64::consts::FRAC_PI_4;
+                    Point3::new(r * phi.cos(), r * phi.sin(), z)
+                })
+                .chain([Point3::new(0.0, 0.0, z)])
+        })
+        // The bound holds for every point within the reach of the axis' middle: the sphere
+        // of that radius, along the axes and the diagonals.
+        .chain((0..27).filter(|&k| k != 13).map(|k| {
+            let d = Vector3::new(
+                (k % 3) as Real - 1.0,
+                ((k / 3) % 3) as Real - 1.0,
+                (k / 9) as Real - 1.0,
+            );
+            Point3::new(0.0, 0.0, l / 2.0) + d.normalize() * tool.reach_from(l / 2.0)
+        }))
+        .collect();
+    let pose = |a: &AxisValues, b: &AxisValues, lam: Real| {
+        let mut qq = *a;
+        for axis in c.axes() {
+            let (u, w) = (a.get(axis.letter), b.get(axis.letter));
+            qq.set(axis.letter, u + (w - u) * lam);
+        }
+        c.w_from_t(&qq)
+    };
+    let at = |x: Real, y: Real, z: Real, a: Real, cc: Real| q(x, y, z, a).with(AxisLetter::C, cc);
+    let moves = [
+        (
+            at(0.0, -19.0, 40.0, 0.0, 0.0),
+            at(0.0, -19.0, 39.995, 0.21, 0.5),
+        ),
+        (
+            at(0.0, -19.0, 4.0, 7.9, 250.0),
+            at(0.0, -19.0, 3.995, 8.0, 250.5),
+        ),
+        (
+            at(3.0, -10.0, 20.0, -20.0, 30.0),
+            at(-2.0, -14.0, 25.0, 15.0, 80.0),
+        ),
+        (
+            at(0.0, 5.0, 60.0, 30.0, -90.0),
+            at(1.0, 5.0, 58.0, -30.0, 90.0),
+        ),
+    ];
+    let state = [0.0; 6];
+    let n = 2000;
+    for (k, (a, b)) in moves.iter().enumerate() {
+        let bound = speed_bound(&c, l / 2.0, tool.reach_from(l / 2.0), a, b, &state);
+        let mut fastest: Real = 0.0;
+        let mut prev = pose(a, b, 0.0);
+        for s in 1..=n {
+            let next = pose(a, b, s as Real / n as Real);
+            for p in &points {
+                fastest = fastest.max((next * p - prev * p).norm() * n as Real);
+            }
             prev = next;
         }
-        let samp = 4.0 * step_max + 1e-6;
-        for &(t0, t1) in &hits {
-            // Every pose's interval lies inside one of the envelope's intervals.
-            let inside = cuts.iter().any(|c| c.t_in <= t0 + ENVELOPE_TOL && t1 <= c.t_out + ENVELOPE_TOL);
-            prop_assert!(inside || t1 - t0 < 1e-6, "pose interval [{t0}, {t1}] not inside {cuts:?}");
-        }
-        for cut in &cuts {
-            // Each end is reached by some pose, within the sampling error.
-            let near_in = hits.iter().any(|h| (h.0 - cut.t_in).abs() <= samp);
-            let near_out = hits.iter().any(|h| (h.1 - cut.t_out).abs() <= samp);
-            prop_assert!(near_in && near_out, "{cut:?} not reached; sampled [{lo}, {hi}]");
-        }
-        if hits.is_empty() {
-            prop_assert!(cuts.iter().all(|c| c.t_out - c.t_in < samp), "{cuts:?} but no pose hits");
-        }
-        // Within a span (the material's extent) the answer is the same.
-        let span = (lo + f0 * (hi - lo), lo + f1 * (hi - lo));
-        if span.0 < span.1 {
-            let clip = |cs: &[RayCut]| -> Vec<(Real, Real)> {
-                cs.iter()
-                    .map(|c| (c.t_in.max(span.0), c.t_out.min(span.1)))
-                    .filter(|(a, b)| b - a > 1e-6)
-                    .collect()
-            };
-            let mut part = Vec::new();
-            env.intervals_in(&o, &e, span, &mut part);
-            let (full, part) = (clip(&cuts), clip(&part));
-            prop_assert_eq!(full.len(), part.len(), "{:?} vs {:?}", full, part);
-            for (x, y) in full.iter().zip(&part) {
-                prop_assert!((x.0 - y.0).abs() <= 2.0 * ENVELOPE_TOL && (x.1 - y.1).abs() <= 2.0 * ENVELOPE_TOL, "{:?} vs {:?}", full, part);
+        assert!(
+            fastest <= bound,
+            "move {k}: a tool point moves at {fastest} > bound {bound}"
+        );
+        // The whole bound: the total turn times the largest distance (widened by 1 + ω).
+        let (omega, travel) = rotation_and_travel(&c, a, b);
+        let mid = Point3::new(0.0, 0.0, l / 2.0);
+        let mut rho: Real = 0.0;
+        for qq in [a, b] {
+            let m = c.w_from_t(qq) * mid;
+            for (p, d) in c.rotary_lines_in_w(qq) {
+                let w = m - p;
+                rho = rho.max((w - d * w.dot(&d)).norm());
             }
+        }
+        let whole = omega * (rho + tool.reach_from(l / 2.0) + travel) * (1.0 + omega) + travel;
+        assert!(
+            bound <= whole,
+            "move {k}: {bound} above the whole bound {whole}"
+        );
+        if k < 2 {
+            assert!(
+                bound < 0.7 * whole && fastest > 0.5 * bound,
+                "move {k}: the per-axis bound {bound}, the whole {whole}, measured {fastest}"
+            );
         }
     }
 }
