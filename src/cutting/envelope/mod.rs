@@ -49,7 +49,7 @@
 //! the true extreme on a convex stretch; an edge crossing until `w` times the larger rate at
 //! the bracket ends is below it. A touch between two missing poses is ignored only when it
 //! reaches less than [`ENVELOPE_TOL`] into the ray (measured normal to the tool's surface).
-//! The documented bound is [`ENVELOPE_TOL`] = 0.1 µm.
+//! The documented bound is [`ENVELOPE_TOL`] = 1e-7 mm (0.1 nm).
 //!
 //! **Known limit.** Within one half-cell each rate and each `φ` is taken to change sign at
 //! most once, and a ray inside the tool at both ends of a half-cell to be inside in between.
@@ -95,7 +95,7 @@ use probe::{
 pub use sampled::{SAMPLED_BOUND_FACTOR, SampledPath};
 
 /// Bound (mm) on the distance of the envelope's interval ends from the true swept surface
-/// along a ray: 0.1 µm, the µm-metrology budget with a factor ten to spare; the solver
+/// along a ray: 1e-7 mm (0.1 nm), far below the µm-metrology budget; the solver
 /// reaches [`SOLVE_TOL`] (see the module docs).
 pub const ENVELOPE_TOL: Real = 1e-7;
 

@@ -133,7 +133,7 @@ fn exact_at(
 
 /// The envelope of `tool` on the move `a → b` of `c` against a brute-force search over
 /// 4,000 poses, on the axis ray through the tool's middle at λ = ½ shifted by `(ou, ov)`
-/// (×4 mm): no pose reaches further than the envelope (to 0.1 µm), the sampled poses
+/// (×4 mm): no pose reaches further than the envelope (to 1e-7 mm), the sampled poses
 /// come within the sampling error of each end, between intervals no pose touches the ray,
 /// and within the span `(f0, f1)` of the sampled hull the answer is the same.
 #[allow(clippy::too_many_arguments)]

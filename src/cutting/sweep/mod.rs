@@ -13,7 +13,7 @@
 //!
 //! **Moves that turn a rotary axis** with a flat or ball end mill are cut by the exact
 //! per-ray envelope of [`crate::cutting::envelope`] (interval ends within
-//! [`crate::cutting::envelope::ENVELOPE_TOL`] = 0.1 µm of the true swept surface, the bound
+//! [`crate::cutting::envelope::ENVELOPE_TOL`] = 1e-7 mm (0.1 nm) of the true swept surface, the bound
 //! reported). Other tools, or a bound asked tighter than that, fall back to sub-steps:
 //!
 //! such a move is split into `N` sub-steps, each swept as a
