@@ -350,6 +350,54 @@ fn output_folders_follow_links_and_refuse_files() {
     assert!(leftovers.is_empty(), "{leftovers:?}");
 }
 
+/// A folder of streamed outputs (how `simulate` writes its mesh) whose second file fails
+/// half-way: the error names that file, the folder keeps what it held before, whole, and no
+/// staging folder is left beside it.
+#[test]
+fn a_streamed_output_folder_failing_half_way_leaves_the_old_one_whole() {
+    use twinmill::output::{StreamedFile, write_files, write_files_streamed};
+    let sb = Sandbox::new("streamed-folder");
+    let out = sb.dir.join("out");
+    write_files(
+        &out,
+        &[("a.txt", b"old a".to_vec()), ("b.txt", b"old b".to_vec())],
+    )
+    .expect("the first outputs");
+    let files: Vec<StreamedFile<'_>> = vec![
+        ("a.txt".into(), Box::new(|w| w.write_all(b"new a"))),
+        (
+            "b.txt".into(),
+            Box::new(|w| {
+                w.write_all(&[7u8; 100_000])?;
+                Err(std::io::Error::other("the mesh failed half-way"))
+            }),
+        ),
+    ];
+    let e = write_files_streamed(&out, files).expect_err("the second file fails");
+    assert!(
+        e.to_string().contains("b.txt") && e.to_string().contains("half-way"),
+        "{e}"
+    );
+    assert_eq!(std::fs::read(out.join("a.txt")).expect("a"), b"old a");
+    assert_eq!(std::fs::read(out.join("b.txt")).expect("b"), b"old b");
+    let left: Vec<_> = crate::files_in(&sb.dir)
+        .into_iter()
+        .filter(|p| p.to_string_lossy().contains("partial"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
+    let files: Vec<StreamedFile<'_>> = vec![
+        ("a.txt".into(), Box::new(|w| w.write_all(b"new a"))),
+        ("c.txt".into(), Box::new(|w| w.write_all(&[7u8; 100_000]))),
+    ];
+    write_files_streamed(&out, files).expect("written");
+    assert_eq!(std::fs::read(out.join("a.txt")).expect("a"), b"new a");
+    assert_eq!(std::fs::read(out.join("c.txt")).expect("c").len(), 100_000);
+    assert!(
+        !out.join("b.txt").exists(),
+        "the folder is replaced as a whole"
+    );
+}
+
 // ---------------------------------------------------------------------------------------
 // Machines no one can build
 
