@@ -706,6 +706,54 @@ pub(crate) fn mdx50_for_tests() -> Chain {
     .expect("valid chain")
 }
 
+/// The location errors of `scenes/trunnion-ac.toml` in the chain's names.
+#[cfg(test)]
+pub(crate) const TRUNNION_DEVIATIONS: [(&str, Real); 8] = [
+    ("dx_CA", 0.020),
+    ("dy_CA", -0.015),
+    ("alpha_CA", 40e-6),
+    ("beta_CA", -30e-6),
+    ("dy_AY", 0.030),
+    ("dz_AY", -0.025),
+    ("beta_AY", 60e-6),
+    ("gamma_AY", 25e-6),
+];
+
+/// The trunnion of `scenes/trunnion-ac.toml`: C table on the A cradle (A's line 50 mm below
+/// the table), spindle on Y, X, Z; C's line offset and tilted (`*_CA`), A's line offset and
+/// tilted (`*_AY`) by [`TRUNNION_DEVIATIONS`]: the chain the unit tests of simultaneous
+/// 5-axis moves build on.
+#[cfg(test)]
+pub(crate) fn trunnion_for_tests() -> Chain {
+    let ax = |letter, kind, d: Vector3, o: Point3| Axis {
+        letter,
+        kind,
+        direction: UnitVector3::new_normalize(d),
+        origin: o,
+    };
+    let o = Point3::origin();
+    let mut c = Chain::new(
+        vec![
+            ax(AxisLetter::C, AxisKind::Rotary, Vector3::z(), o),
+            ax(
+                AxisLetter::A,
+                AxisKind::Rotary,
+                Vector3::x(),
+                Point3::new(0.0, 0.0, -50.0),
+            ),
+            ax(AxisLetter::Y, AxisKind::Linear, Vector3::y(), o),
+            ax(AxisLetter::X, AxisKind::Linear, Vector3::x(), o),
+            ax(AxisLetter::Z, AxisKind::Linear, Vector3::z(), o),
+        ],
+        "S",
+    )
+    .expect("valid chain");
+    for (n, v) in TRUNNION_DEVIATIONS {
+        c.set_deviation(c.deviation_id(n).expect("known"), v);
+    }
+    c
+}
+
 /// A 3-axis mill, X, Y, Z from the workpiece (spindle S), nominal: the chain the
 /// instruments' unit tests build on.
 #[cfg(test)]

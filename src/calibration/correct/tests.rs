@@ -4,7 +4,7 @@ use super::*;
 use crate::cutting::tool::Tool;
 use crate::cutting::tool::ToolKind;
 use crate::machine::chain::Axis;
-use crate::machine::chain::{AxisKind, Chain};
+use crate::machine::chain::{AxisKind, Chain, TRUNNION_DEVIATIONS, trunnion_for_tests as trunnion};
 use crate::math::CounterRng;
 use crate::math::{Point3, Real, UnitVector3, Vector3};
 use crate::nc::{AxisLetter, AxisValues, Move, MoveKind, Program};
@@ -306,50 +306,6 @@ fn printed_values_read_back_exactly() {
     }
     assert_eq!(format_axis(AxisLetter::Y, -1e-9), "0.000000");
 }
-
-/// The trunnion of `scenes/trunnion-ac.toml`: C table on the A cradle (A's line 50 mm below
-/// the table), spindle on Y, X, Z; C's line offset and tilted (`*_CA`), A's line offset and
-/// tilted (`*_AY`).
-fn trunnion() -> Chain {
-    let ax = |letter, kind, d: Vector3, o: Point3| Axis {
-        letter,
-        kind,
-        direction: UnitVector3::new_normalize(d),
-        origin: o,
-    };
-    let o = Point3::origin();
-    let mut c = Chain::new(
-        vec![
-            ax(AxisLetter::C, AxisKind::Rotary, Vector3::z(), o),
-            ax(
-                AxisLetter::A,
-                AxisKind::Rotary,
-                Vector3::x(),
-                Point3::new(0.0, 0.0, -50.0),
-            ),
-            ax(AxisLetter::Y, AxisKind::Linear, Vector3::y(), o),
-            ax(AxisLetter::X, AxisKind::Linear, Vector3::x(), o),
-            ax(AxisLetter::Z, AxisKind::Linear, Vector3::z(), o),
-        ],
-        "S",
-    )
-    .expect("valid chain");
-    for (n, v) in TRUNNION_DEVIATIONS {
-        c.set_deviation(c.deviation_id(n).expect("known"), v);
-    }
-    c
-}
-
-const TRUNNION_DEVIATIONS: [(&str, Real); 8] = [
-    ("dx_CA", 0.020),
-    ("dy_CA", -0.015),
-    ("alpha_CA", 40e-6),
-    ("beta_CA", -30e-6),
-    ("dy_AY", 0.030),
-    ("dz_AY", -0.025),
-    ("beta_AY", 60e-6),
-    ("gamma_AY", 25e-6),
-];
 
 /// The trunnion's tool pose written out by hand, independently of `Chain`:
 /// `RotZ(c)·E_CA·[Trans(0,0,−50)·RotX(a)·Trans(0,0,50)]·E_AY·Trans(x, y, z)` with

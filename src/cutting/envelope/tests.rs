@@ -6,6 +6,7 @@
 
 use super::*;
 use crate::cutting::cutter::SweptTool;
+use crate::machine::chain::trunnion_for_tests as trunnion;
 use crate::nc::AxisLetter;
 use proptest::prelude::*;
 
@@ -304,48 +305,6 @@ proptest! {
         let (a, b) = (at(x0, z0, a0, c0), at(x0 + dx, z0 + dz, a0 + da, c0 + dc));
         check_against_brute_force(&trunnion(), &tool, (a, b), axis, (ou, ov), (f0, f1))?;
     }
-}
-
-/// The trunnion A/C of `scenes/trunnion-ac.toml` (C's line through the table centre, A's
-/// line 50 mm below the table) with its location errors.
-fn trunnion() -> Chain {
-    use crate::machine::chain::{Axis, AxisKind};
-    let ax = |letter, kind, d: Vector3, o: Point3| Axis {
-        letter,
-        kind,
-        direction: crate::math::UnitVector3::new_normalize(d),
-        origin: o,
-    };
-    let o = Point3::origin();
-    let mut c = Chain::new(
-        vec![
-            ax(AxisLetter::C, AxisKind::Rotary, Vector3::z(), o),
-            ax(
-                AxisLetter::A,
-                AxisKind::Rotary,
-                Vector3::x(),
-                Point3::new(0.0, 0.0, -50.0),
-            ),
-            ax(AxisLetter::Y, AxisKind::Linear, Vector3::y(), o),
-            ax(AxisLetter::X, AxisKind::Linear, Vector3::x(), o),
-            ax(AxisLetter::Z, AxisKind::Linear, Vector3::z(), o),
-        ],
-        "S",
-    )
-    .expect("valid chain");
-    for (n, v) in [
-        ("dx_CA", 0.020),
-        ("dy_CA", -0.015),
-        ("alpha_CA", 40e-6),
-        ("beta_CA", -30e-6),
-        ("dy_AY", 0.030),
-        ("dz_AY", -0.025),
-        ("beta_AY", 60e-6),
-        ("gamma_AY", 25e-6),
-    ] {
-        c.set_deviation(c.deviation_id(n).expect("known"), v);
-    }
-    c
 }
 
 /// The speed bound that sizes the envelope's cells holds: on moves of the trunnion A/C
