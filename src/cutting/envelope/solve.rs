@@ -312,9 +312,18 @@ impl RotaryEnvelope {
                     }
                 }
             }
-            cuts.clear();
-            cuts.extend(comps.drain(..).flatten());
-            self.merge_and_emit(cuts, out);
+            // One interval (the common case) is emitted as it is: nothing to sort or merge,
+            // and no copy of its ends.
+            let mut found = comps.iter().flatten();
+            match (found.next(), found.next()) {
+                (None, _) => {}
+                (Some(only), None) => emit(only, self.r, out),
+                _ => {
+                    cuts.clear();
+                    cuts.extend(comps.drain(..).flatten());
+                    self.merge_and_emit(cuts, out);
+                }
+            }
         });
     }
 
