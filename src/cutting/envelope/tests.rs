@@ -36,6 +36,17 @@ fn q(x: Real, y: Real, z: Real, a: Real) -> AxisValues {
         .with(AxisLetter::A, a)
 }
 
+/// The chain's own pose at `l` of the move `a → b`, every axis interpolated linearly (the
+/// tests' independent pose, never the envelope's `MovePath`).
+fn chain_pose(c: &Chain, a: &AxisValues, b: &AxisValues, l: Real) -> Isometry3 {
+    let mut qq = *a;
+    for axis in c.axes() {
+        let (u, w) = (a.get(axis.letter), b.get(axis.letter));
+        qq.set(axis.letter, u + (w - u) * l);
+    }
+    c.w_from_t(&qq)
+}
+
 #[test]
 fn move_path_is_the_chain_pose() {
     let c = deviated();
@@ -43,12 +54,7 @@ fn move_path_is_the_chain_pose() {
     let path = MovePath::new(&c, &a, &b);
     for k in 0..=10 {
         let l = k as Real / 10.0;
-        let mut qq = a;
-        for axis in c.axes() {
-            let (u, w) = (a.get(axis.letter), b.get(axis.letter));
-            qq.set(axis.letter, u + (w - u) * l);
-        }
-        let d = path.w_from_t(l).to_homogeneous() - c.w_from_t(&qq).to_homogeneous();
+        let d = path.w_from_t(l).to_homogeneous() - chain_pose(&c, &a, &b, l).to_homogeneous();
         assert!(d.abs().max() < 1e-12, "λ = {l}: {d}");
     }
 }
@@ -119,12 +125,7 @@ fn exact_at(
     o: &Point3,
     e: &Vector3,
 ) -> Option<(Real, Real)> {
-    let mut qq = *a;
-    for axis in c.axes() {
-        let (u, w) = (a.get(axis.letter), b.get(axis.letter));
-        qq.set(axis.letter, u + (w - u) * l);
-    }
-    let pose = c.w_from_t(&qq);
+    let pose = chain_pose(c, a, b, l);
     let v = nalgebra::Unit::new_normalize(pose.rotation * Vector3::z());
     let st = SweptTool::new(tool, pose * Point3::origin(), Vector3::zeros(), v);
     let mut out = Vec::new();
@@ -201,14 +202,7 @@ fn check_against_brute_force(
     // where the ray meets the surface at a slant: 4·M, and 1 nm for rounding.
     let mid = Point3::new(0.0, 0.0, tool.length() / 2.0);
     let rho = tool.radius().hypot(tool.length() / 2.0);
-    let pose = |l: Real| {
-        let mut qq = a;
-        for axis in c.axes() {
-            let (u, w) = (a.get(axis.letter), b.get(axis.letter));
-            qq.set(axis.letter, u + (w - u) * l);
-        }
-        c.w_from_t(&qq)
-    };
+    let pose = |l: Real| chain_pose(&c, &a, &b, l);
     let mut step_max: Real = 0.0;
     let mut prev = pose(0.0);
     for k in 1..=n {
@@ -341,14 +335,7 @@ fn the_speed_bound_holds_on_two_turning_axes() {
             Point3::new(0.0, 0.0, l / 2.0) + d.normalize() * tool.reach_from(l / 2.0)
         }))
         .collect();
-    let pose = |a: &AxisValues, b: &AxisValues, lam: Real| {
-        let mut qq = *a;
-        for axis in c.axes() {
-            let (u, w) = (a.get(axis.letter), b.get(axis.letter));
-            qq.set(axis.letter, u + (w - u) * lam);
-        }
-        c.w_from_t(&qq)
-    };
+    let pose = |a: &AxisValues, b: &AxisValues, lam: Real| chain_pose(&c, a, b, lam);
     let at = |x: Real, y: Real, z: Real, a: Real, cc: Real| q(x, y, z, a).with(AxisLetter::C, cc);
     let moves = [
         (
