@@ -154,9 +154,7 @@ pub fn write_files(dir: &Path, files: &[(&str, Vec<u8>)]) -> Result<PathBuf, Out
         dir,
         files
             .iter()
-            .map(|(name, bytes)| -> StreamedFile<'_> {
-                (name.to_string(), Box::new(move |w| w.write_all(bytes)))
-            })
+            .map(|(name, bytes)| borrowed(name, bytes))
             .collect(),
     )
 }
@@ -181,13 +179,7 @@ pub fn write_files_streamed(
         }
         io(dir, std::fs::create_dir(&staging))?;
         for (file, write) in files {
-            let p = staging.join(&file);
-            let named = dir.join(&file);
-            let f = io(&named, std::fs::File::create(&p))?;
-            let mut buf = std::io::BufWriter::new(f);
-            io(&named, write(&mut buf))?;
-            let f = io(&named, buf.into_inner().map_err(|e| e.into_error()))?;
-            io(&named, f.sync_all())?;
+            stream_to(&staging.join(&file), &dir.join(&file), write)?;
         }
         if target.exists() {
             io(dir, std::fs::remove_dir_all(&target))?;
@@ -373,6 +365,20 @@ pub fn write_simulation(
     write_files_streamed(dir, files)
 }
 
+/// Creates `file` and writes it through a buffer with `write`, synced to disk; errors name
+/// `named` (where the file goes), never the staging file.
+fn stream_to(
+    file: &Path,
+    named: &Path,
+    write: impl FnOnce(&mut dyn Write) -> std::io::Result<()>,
+) -> Result<(), OutputError> {
+    let f = io(named, std::fs::File::create(file))?;
+    let mut buf = std::io::BufWriter::new(f);
+    io(named, write(&mut buf))?;
+    let f = io(named, buf.into_inner().map_err(|e| e.into_error()))?;
+    io(named, f.sync_all())
+}
+
 /// A file of [`write_files_streamed`] whose bytes are already in memory.
 fn borrowed<'a>(name: &str, bytes: &'a [u8]) -> StreamedFile<'a> {
     (name.to_string(), Box::new(move |w| w.write_all(bytes)))
@@ -409,11 +415,7 @@ pub fn write_streamed(
                 std::process::id()
             ));
             staged.push((staging.clone(), target, path.clone()));
-            let file = io(&path, std::fs::File::create(&staging))?;
-            let mut buf = std::io::BufWriter::new(file);
-            io(&path, write(&mut buf))?;
-            let file = io(&path, buf.into_inner().map_err(|e| e.into_error()))?;
-            io(&path, file.sync_all())?;
+            stream_to(&staging, &path, write)?;
         }
         let mut done = Vec::new();
         for (staging, target, path) in &staged {
