@@ -3,8 +3,9 @@
 //! the tri-dexel stock with exact surface crossings ([`stock`]), the exact interval of a ray
 //! inside a tool swept along a segment ([`cutter`]) or turning with a rotary axis
 //! ([`envelope`]), the program driver ([`sweep`]), collision checks riding on it
-//! ([`collide`]), the cut part's surface mesh ([`mesh`]) and the 3-axis height-field fast
-//! path ([`zmap`]).
+//! ([`collide`]), the cut part's surface mesh ([`mesh`]), the 3-axis height-field fast
+//! path ([`zmap`]) and the part the nominal machine cuts, read near a cut part's surface
+//! ([`nominal`]).
 //!
 //! May use [`crate::math`], [`crate::progress`], [`crate::nc`] (moves) and
 //! [`crate::machine`] (tool poses). Knows nothing of scanners, fits, identification or
@@ -20,3 +21,4 @@ pub mod collide;
 pub mod mesh;
 pub mod adaptive;
 pub mod zmap;
+pub mod nominal;

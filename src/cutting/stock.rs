@@ -396,22 +396,36 @@ impl DexelGrid {
     /// The crossing nearest `p` among the rays within `w` indices of it, as
     /// (squared distance, crossing point, outward normal).
     fn nearest_crossing(&self, p: &Point3, w: usize) -> Option<(Real, Point3, Vector3)> {
-        let (us, vs) = self.window(p, w);
         let mut best: Option<(Real, Point3, Vector3)> = None;
+        self.for_each_crossing_near(p, w, |q, c| {
+            let d = (q - p).norm_squared();
+            if best.is_none_or(|b| d < b.0) {
+                best = Some((d, q, c.normal()));
+            }
+        });
+        best
+    }
+
+    /// Calls `f(point, crossing)` for every crossing on the rays within `w` indices of `p`
+    /// (the ray nearest `p` in each direction of the grid's plane, and `w` more on each
+    /// side), in a fixed order.
+    pub fn for_each_crossing_near(
+        &self,
+        p: &Point3,
+        w: usize,
+        mut f: impl FnMut(Point3, &Crossing),
+    ) {
+        let (us, vs) = self.window(p, w);
         for iv in vs {
             for iu in us.clone() {
                 let o = self.ray_origin(iu, iv);
                 for c in self.ray(iu, iv).iter().flat_map(|s| [&s.lo, &s.hi]) {
                     let mut q = o;
                     q[self.axis] = c.t;
-                    let d = (q - p).norm_squared();
-                    if best.is_none_or(|b| d < b.0) {
-                        best = Some((d, q, c.normal()));
-                    }
+                    f(q, c);
                 }
             }
         }
-        best
     }
 
     /// Material volume measured by this grid (mm³): summed lengths times the ray cell area.

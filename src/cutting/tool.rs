@@ -171,6 +171,39 @@ impl Element {
         }
     }
 
+    /// The point of the element nearest `p` = [r, h].
+    pub fn nearest(&self, p: [Real; 2]) -> [Real; 2] {
+        match *self {
+            Element::Line { a, b } => {
+                let (ex, ey) = (b[0] - a[0], b[1] - a[1]);
+                let len2 = ex * ex + ey * ey;
+                let s = if len2 > 0.0 {
+                    (((p[0] - a[0]) * ex + (p[1] - a[1]) * ey) / len2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                [a[0] + s * ex, a[1] + s * ey]
+            }
+            Element::Arc { c, rho, th0, th1 } => {
+                let (lo, hi) = (th0.min(th1), th0.max(th1));
+                let mut th = (p[1] - c[1]).atan2(p[0] - c[0]);
+                // Concave arcs lie in [π/2, 3π/2]: angles below −π/2 are taken one turn up.
+                if lo >= std::f64::consts::FRAC_PI_2 && th < -std::f64::consts::FRAC_PI_2 {
+                    th += std::f64::consts::TAU;
+                }
+                let (vr, vh) = (p[0] - c[0], p[1] - c[1]);
+                let len = (vr * vr + vh * vh).sqrt();
+                if (lo..=hi).contains(&th) && len > 0.0 {
+                    [c[0] + vr * rho / len, c[1] + vh * rho / len]
+                } else {
+                    let d = |q: [Real; 2]| (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
+                    let (s, e) = (self.start(), self.end());
+                    if d(s) <= d(e) { s } else { e }
+                }
+            }
+        }
+    }
+
     /// The largest distance of the element from the point (0, `hc`) on the axis.
     fn farthest_from(&self, hc: Real) -> Real {
         let d = |p: [Real; 2]| p[0].hypot(p[1] - hc);
@@ -387,6 +420,26 @@ impl Profile {
     /// Whether (r, h) is inside the solid.
     pub fn contains(&self, r: Real, h: Real) -> bool {
         self.radius_at(h).is_some_and(|rad| r <= rad)
+    }
+
+    /// The signed distance (mm; + outside, − inside) of the point [r, h] (r ≥ 0) from the
+    /// solid's surface, and the surface point nearest it: the nearest point of the elements
+    /// (a surface of revolution's nearest point lies in the point's own meridian plane),
+    /// negative where the solid holds the point.
+    pub fn signed_distance(&self, r: Real, h: Real) -> (Real, [Real; 2]) {
+        let (d, q) = self
+            .elements
+            .iter()
+            .map(|e| {
+                let q = e.nearest([r, h]);
+                ((r - q[0]).powi(2) + (h - q[1]).powi(2), q)
+            })
+            .fold(
+                (Real::INFINITY, [r, h]),
+                |a, b| if b.0 < a.0 { b } else { a },
+            );
+        let d = d.sqrt();
+        (if self.contains(r, h) { -d } else { d }, q)
     }
 
     /// The largest distance of a point of the solid from the axis point at height `hc`.
@@ -814,6 +867,30 @@ impl Tool {
         self.profile.farthest_from(h)
     }
 
+    /// The signed distance (mm; + outside, − inside) of the tool-frame point `p` (the tip
+    /// at the origin, the axis +z) from the tool's surface, and the tool's outward unit
+    /// normal there (the direction from the nearest surface point to `p`, reversed inside;
+    /// on the surface, or on the axis where every direction is nearest, the element's own
+    /// normal is not known and the direction from the axis is taken).
+    pub fn signed_distance(&self, p: &crate::math::Point3) -> (Real, crate::math::Vector3) {
+        use crate::math::Vector3;
+        let r = (p.x * p.x + p.y * p.y).sqrt();
+        let (d, q) = self.profile.signed_distance(r, p.z);
+        let radial = if r > 0.0 {
+            Vector3::new(p.x / r, p.y / r, 0.0)
+        } else {
+            Vector3::x()
+        };
+        let (dr, dh) = (r - q[0], p.z - q[1]);
+        let len = (dr * dr + dh * dh).sqrt();
+        let n = if len > 0.0 {
+            (radial * dr + Vector3::z() * dh) * (d.signum() / len)
+        } else {
+            radial
+        };
+        (d, n)
+    }
+
     /// Whether the tool-frame point (radial distance `r`, height `h` above the tip) is inside.
     pub fn contains(&self, r: Real, h: Real) -> bool {
         if h > self.length || r > self.radius {
@@ -958,6 +1035,103 @@ impl ToolAssembly {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_signed_distance_is_the_distance_to_the_sampled_surface_and_its_foot_lies_on_it() {
+        use crate::math::Point3;
+        // (tool, its meridian outline sampled from its catalogue sizes, whether (r, h) is
+        // inside): a flat and a ball end mill Ø6 × 20, a bull-nose Ø6 × 20 with a 1 mm corner.
+        let (r, l, c) = (3.0, 20.0, 1.0);
+        let steps = 4000;
+        let line = |a: [Real; 2], b: [Real; 2]| -> Vec<[Real; 2]> {
+            (0..=steps)
+                .map(|k| {
+                    let s = k as Real / steps as Real;
+                    [a[0] + (b[0] - a[0]) * s, a[1] + (b[1] - a[1]) * s]
+                })
+                .collect()
+        };
+        let arc = |ctr: [Real; 2], rho: Real, t0: Real, t1: Real| -> Vec<[Real; 2]> {
+            (0..=steps)
+                .map(|k| {
+                    let t = t0 + (t1 - t0) * k as Real / steps as Real;
+                    [ctr[0] + rho * t.cos(), ctr[1] + rho * t.sin()]
+                })
+                .collect()
+        };
+        let top = line([r, l], [0.0, l]);
+        let half = std::f64::consts::FRAC_PI_2;
+        type Inside = fn(Real, Real) -> bool;
+        let cases: [(Tool, Vec<[Real; 2]>, Inside); 3] = [
+            (
+                Tool::try_new(ToolKind::Flat, 2.0 * r, l).expect("valid"),
+                [
+                    line([0.0, 0.0], [r, 0.0]),
+                    line([r, 0.0], [r, l]),
+                    top.clone(),
+                ]
+                .concat(),
+                |x, h| (0.0..=20.0).contains(&h) && x <= 3.0,
+            ),
+            (
+                Tool::try_new(ToolKind::Ball, 2.0 * r, l).expect("valid"),
+                [
+                    arc([0.0, r], r, -half, 0.0),
+                    line([r, r], [r, l]),
+                    top.clone(),
+                ]
+                .concat(),
+                |x, h| (3.0..=20.0).contains(&h) && x <= 3.0 || x * x + (h - 3.0).powi(2) <= 9.0,
+            ),
+            (
+                Tool::try_bull_nose(2.0 * r, c, l).expect("valid"),
+                [
+                    line([0.0, 0.0], [r - c, 0.0]),
+                    arc([r - c, c], c, -half, 0.0),
+                    line([r, c], [r, l]),
+                    top,
+                ]
+                .concat(),
+                |x, h| {
+                    (0.0..=20.0).contains(&h)
+                        && x <= 3.0
+                        && (h >= 1.0 || x <= 2.0 || (x - 2.0).powi(2) + (h - 1.0).powi(2) <= 1.0)
+                },
+            ),
+        ];
+        let spacing = 2.0 * std::f64::consts::PI * r / steps as Real;
+        for (tool, outline, inside) in &cases {
+            let mut seed = 0x2545_f491_4f6c_dd1d_u64;
+            let mut rand = || {
+                seed ^= seed << 13;
+                seed ^= seed >> 7;
+                seed ^= seed << 17;
+                (seed >> 11) as Real / (1u64 << 53) as Real
+            };
+            for _ in 0..400 {
+                let p = Point3::new(
+                    10.0 * rand() - 5.0,
+                    10.0 * rand() - 5.0,
+                    26.0 * rand() - 3.0,
+                );
+                let (x, h) = ((p.x * p.x + p.y * p.y).sqrt(), p.z);
+                let (d, n) = tool.signed_distance(&p);
+                let want = outline
+                    .iter()
+                    .map(|q| (x - q[0]).hypot(h - q[1]))
+                    .fold(Real::INFINITY, Real::min);
+                // The sampled outline's distance is at least the true one, and above it by
+                // less than a sample spacing.
+                assert!(d.abs() <= want + 1e-12, "{p:?}: {d} vs {want}");
+                assert!(d.abs() >= want - spacing, "{p:?}: {d} vs {want}");
+                assert_eq!(d < 0.0, inside(x, h), "{p:?}: {d}");
+                // The outward normal is a unit vector and leads back to the surface.
+                assert!((n.norm() - 1.0).abs() < 1e-12);
+                let foot = p - n * d;
+                assert!(tool.signed_distance(&foot).0.abs() < 1e-9, "{p:?}");
+            }
+        }
+    }
 
     #[test]
     fn rejects_degenerate_tools() {

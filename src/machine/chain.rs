@@ -761,6 +761,31 @@ pub(crate) fn xyz_for_tests() -> Chain {
     Chain::cartesian([AxisLetter::X, AxisLetter::Y, AxisLetter::Z]).expect("valid chain")
 }
 
+/// A chain read pose by pose, as a hexapod is: the sweep sees only its poses.
+#[cfg(test)]
+pub(crate) struct ChainPoses(pub Chain);
+
+#[cfg(test)]
+impl crate::machine::PoseSource for ChainPoses {
+    fn has_axis(&self, axis: AxisLetter) -> bool {
+        self.0.has_axis(axis)
+    }
+
+    fn w_from_t(&self, q: &AxisValues) -> Result<Isometry3, crate::machine::PoseError> {
+        Ok(self.0.w_from_t(q))
+    }
+
+    fn commanded(&self, q: &AxisValues) -> Isometry3 {
+        self.0.w_from_t(q)
+    }
+
+    fn is_translation(&self, start: &AxisValues, end: &AxisValues) -> bool {
+        AxisLetter::ALL
+            .into_iter()
+            .all(|l| !l.is_rotary() || start.get(l) == end.get(l))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

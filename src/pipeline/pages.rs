@@ -11,6 +11,7 @@
 use super::{PipelineError, make_stock, sweep_failed};
 use crate::calibration::calibrate::Feature;
 use crate::cutting::mesh::TriMesh;
+use crate::cutting::nominal::{NominalMachine, NominalPath};
 use crate::cutting::stock::TriDexel;
 use crate::cutting::sweep::{Kinematics, sweep_program};
 use crate::machine::hexapod::{HexapodTwin, TableAxes};
@@ -36,9 +37,10 @@ pub struct Reference {
 }
 
 /// The part the deviations are measured from: the scene's design model if it has one; else,
-/// when the scene's machine has deviations or error motions, the same program cut on the
-/// nominal machine (swept like the part itself, kept as its tri-dexel); else none, since the
-/// part is then the nominal part (deviation 0 everywhere).
+/// when the scene's machine has deviations or error motions, the same program on the
+/// nominal machine (read as the nominal part's distance near the cut part,
+/// [`NominalPath`], not swept); else none, since the part is then the nominal part
+/// (deviation 0 everywhere).
 pub fn reference_part(scene: &Scene, moves: &[Move]) -> Result<Reference, PipelineError> {
     if let Some((path, design)) = &scene.design {
         let name = path.file_name().map_or_else(
@@ -52,35 +54,64 @@ pub fn reference_part(scene: &Scene, moves: &[Move]) -> Result<Reference, Pipeli
             what: format!("the design {name}"),
         });
     }
-    let nominal = scene.chain().nominal();
-    // A hexapod's nominal machine: the actual one with the nominal parameters.
-    let (nominal_twin, perfect) = match &scene.machine {
+    let machine = match &scene.machine {
         Machine::Hexapod(h) => {
-            let t = &h.twin;
-            let n = HexapodTwin {
-                actual: t.nominal.clone(),
-                controller: t.nominal.clone(),
-                table: t.table.as_ref().map(|a| TableAxes {
-                    nominal: a.nominal.clone(),
-                    actual: a.nominal.clone(),
-                }),
-                ..t.clone()
-            };
-            let perfect = *t == n;
-            (Some(n), perfect)
+            let n = nominal_hexapod(&h.twin);
+            (h.twin != n).then(|| NominalMachine::Poses(Box::new(n)))
         }
-        Machine::Serial(m) => (None, m.chain == nominal),
+        Machine::Serial(m) => {
+            let nominal = scene.chain().nominal();
+            (m.chain != nominal).then_some(NominalMachine::Chain(nominal))
+        }
     };
-    if perfect {
+    let Some(machine) = machine else {
         return Ok(Reference {
             model: None,
             what: "the machine has no deviations, so the part is the nominal part (deviation 0)"
                 .into(),
         });
+    };
+    Ok(Reference {
+        model: Some(ReferenceModel::Path(NominalPath::new(
+            &scene.tool,
+            machine,
+            moves,
+            scene.sweep.rotary_step_bound_mm,
+        ))),
+        what: "the nominal part".into(),
+    })
+}
+
+/// A hexapod's nominal machine: the actual one with the nominal parameters.
+fn nominal_hexapod(t: &HexapodTwin) -> HexapodTwin {
+    HexapodTwin {
+        actual: t.nominal.clone(),
+        controller: t.nominal.clone(),
+        table: t.table.as_ref().map(|a| TableAxes {
+            nominal: a.nominal.clone(),
+            actual: a.nominal.clone(),
+        }),
+        ..t.clone()
     }
-    let spath = scene.path.display().to_string();
+}
+
+/// The part the nominal machine cuts, swept like the part itself (a tri-dexel of the same
+/// stock and pitch): what [`reference_part`]'s distance stands for, kept to check it
+/// against; `None` when the scene has a design model or a perfect machine.
+pub fn nominal_part_swept(
+    scene: &Scene,
+    moves: &[Move],
+) -> Result<Option<TriDexel>, PipelineError> {
+    if scene.design.is_some() {
+        return Ok(None);
+    }
+    let hexapod = match &scene.machine {
+        Machine::Hexapod(h) => Some(nominal_hexapod(&h.twin)),
+        Machine::Serial(_) => None,
+    };
+    let nominal = scene.chain().nominal();
     let mut stock = make_stock(scene)?;
-    let machine = match &nominal_twin {
+    let machine = match &hexapod {
         Some(t) => Kinematics::Poses(t),
         None => Kinematics::Chain(&nominal),
     };
@@ -93,14 +124,10 @@ pub fn reference_part(scene: &Scene, moves: &[Move]) -> Result<Reference, Pipeli
         &NoProgress,
     )
     .map_err(|source| PipelineError::Sweep {
-        location: format!("{spath}: nominal part"),
+        location: format!("{}: nominal part", scene.path.display()),
         source,
     })?;
-    // Not meshed: the deviations are read from its crossings (display::part_deviations).
-    Ok(Reference {
-        model: Some(ReferenceModel::Part(stock)),
-        what: "the nominal part".into(),
-    })
+    Ok(Some(stock))
 }
 
 /// A cut part ready to show.
@@ -122,6 +149,7 @@ pub struct DisplayPart {
 pub fn display_part(
     scene: &Scene,
     mesh: &TriMesh,
+    cut: &TriDexel,
     reference: impl FnOnce() -> Result<Reference, PipelineError> + Send,
 ) -> Result<DisplayPart, PipelineError> {
     let (shown, reference) = rayon::join(
@@ -129,7 +157,7 @@ pub fn display_part(
         reference,
     );
     let reference = reference?;
-    let deviations = reference.model.as_ref().map(|m| m.deviations(&shown));
+    let deviations = reference.model.as_ref().map(|m| m.deviations(&shown, cut));
     let view = match scene.view {
         Some(eye) => (eye, display::view_up(&eye)),
         None => display::view_direction(&shown, &scene.stock_box),
@@ -207,7 +235,9 @@ pub fn run_page(
     outcome: &super::Outcome,
 ) -> Result<String, PipelineError> {
     let (mesh, _) = super::part_mesh(&outcome.stock, &scene.path.display().to_string())?;
-    let shown = display_part(scene, &mesh, || reference_part(scene, &program.moves))?;
+    let shown = display_part(scene, &mesh, &outcome.stock, || {
+        reference_part(scene, &program.moves)
+    })?;
     let mut v = view(
         scene,
         Some(&shown),
@@ -310,7 +340,7 @@ pub fn scan_page(
 ) -> Result<String, PipelineError> {
     let spath = scene.path.display().to_string();
     let (mesh, _) = super::part_mesh(stock, &spath)?;
-    let shown = display_part(scene, &mesh, || {
+    let shown = display_part(scene, &mesh, stock, || {
         Ok(Reference {
             model: None,
             what: "scan shows the cut part itself".into(),
@@ -360,7 +390,7 @@ pub fn correct_page(
     )
     .map_err(sweep_failed(program, &spath))?;
     let (mesh, _) = super::part_mesh(&stock, &spath)?;
-    let shown = display_part(scene, &mesh, || {
+    let shown = display_part(scene, &mesh, &stock, || {
         let mut r = reference_part(scene, &program.moves)?;
         if r.model.is_some() && scene.design.is_none() {
             r.what = "the nominal part (the program as given, on the nominal machine)".into();

@@ -26,93 +26,6 @@ use crate::scene::{Machine, Scene};
 use std::collections::BTreeMap;
 use std::time::Instant;
 
-/// The environment variable naming the directory where `simulate` keeps the parts cut on
-/// the nominal machine for the deviation colours (see [`cached_reference`]); unset: none
-/// kept.
-pub const CACHE_DIR_VAR: &str = "TWINMILL_CACHE_DIR";
-
-/// The reference part of [`reference_part`], kept between runs when [`CACHE_DIR_VAR`] names
-/// a directory and the machine is a serial chain: the part the nominal machine cuts depends
-/// only on the program's moves, the tool, the stock (box, shape, pitch), the sweep options
-/// and the nominal chain — not on the machine's deviations — so a user who changes the
-/// deviations and runs again reads it back instead of sweeping it a second time. The file
-/// `nominal-<key>.dexel` holds the key and the tri-dexel bit for bit
-/// ([`TriDexel::to_bytes`], with its checksum); the key is a 128-bit hash of all those
-/// inputs (their full `Debug` text) and of the running executable's size and time (a
-/// rebuilt twinmill never reads an older one's parts). An entry that is missing, damaged,
-/// of another key or unreadable is swept anew; one that cannot be written is not kept. The
-/// part read back is the part the sweep makes, crossing for crossing.
-pub fn cached_reference(
-    scene: &Scene,
-    moves: &[crate::nc::Move],
-) -> Result<super::pages::Reference, PipelineError> {
-    let dir = std::env::var_os(CACHE_DIR_VAR).filter(|d| !d.is_empty());
-    reference_kept_in(scene, moves, dir.as_deref().map(std::path::Path::new))
-}
-
-/// [`cached_reference`] with the directory given (`None`: none kept).
-pub fn reference_kept_in(
-    scene: &Scene,
-    moves: &[crate::nc::Move],
-    dir: Option<&std::path::Path>,
-) -> Result<super::pages::Reference, PipelineError> {
-    let (Some(dir), Machine::Serial(_), None) = (dir, &scene.machine, &scene.design) else {
-        return reference_part(scene, moves);
-    };
-    let key = reference_key(scene, moves);
-    let file = dir.join(format!("nominal-{key:032x}.dexel"));
-    let key_bytes = key.to_le_bytes();
-    if let Ok(bytes) = std::fs::read(&file)
-        && let Some(body) = bytes.strip_prefix(&key_bytes[..])
-        && let Some(part) = TriDexel::from_bytes(body)
-    {
-        return Ok(super::pages::Reference {
-            model: Some(crate::report::display::ReferenceModel::Part(part)),
-            what: "the nominal part".into(),
-        });
-    }
-    let reference = reference_part(scene, moves)?;
-    if let Some(crate::report::display::ReferenceModel::Part(part)) = &reference.model {
-        // Written whole under a temporary name, then renamed: a reader never sees half.
-        let mut bytes = key_bytes.to_vec();
-        bytes.extend(part.to_bytes());
-        let tmp = file.with_extension(format!("tmp{}", std::process::id()));
-        let _ = std::fs::create_dir_all(dir);
-        if std::fs::write(&tmp, &bytes).is_err() || std::fs::rename(&tmp, &file).is_err() {
-            let _ = std::fs::remove_file(&tmp);
-        }
-    }
-    Ok(reference)
-}
-
-/// The key of [`cached_reference`]: two FNV-1a 64 hashes (different offsets) of the inputs
-/// of the nominal part.
-fn reference_key(scene: &Scene, moves: &[crate::nc::Move]) -> u128 {
-    let exe = std::env::current_exe()
-        .and_then(std::fs::metadata)
-        .map(|m| (m.len(), m.modified().ok()))
-        .ok();
-    let text = format!(
-        "{}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}|{:?}",
-        env!("CARGO_PKG_VERSION"),
-        exe,
-        scene.chain().nominal(),
-        scene.tool,
-        scene.stock_box,
-        scene.stock_shape,
-        scene.pitch_mm,
-        scene.sweep,
-        moves,
-    );
-    let fnv = |mut h: u64| {
-        for b in text.bytes() {
-            h = (h ^ b as u64).wrapping_mul(0x0100_0000_01b3);
-        }
-        h
-    };
-    (fnv(0xcbf2_9ce4_8422_2325) as u128) << 64 | fnv(0x6c62_272e_07bb_0142) as u128
-}
-
 /// Everything `simulate` produces.
 #[derive(Clone, Debug)]
 pub struct Simulation {
@@ -163,28 +76,21 @@ pub fn simulate(
     let mut stock = make_stock(scene)?;
     let volume0 = stock.volume();
     timings.insert("stock".into(), clock.elapsed().as_secs_f64());
-    // The part the deviations are measured from (the program cut on the nominal machine,
-    // when there is no design model) is made beside the cut: the two sweeps are
-    // independent, and each alone leaves a core idle between the rays of a move.
-    let (cut, reference) = rayon::join(
-        || cut_part(scene, program, progress, &mut stock),
-        || {
-            let clock = Instant::now();
-            (cached_reference(scene, &program.moves), clock.elapsed())
-        },
-    );
-    let (checked, [sweep_time, mesh_time], mesh, mesh_report) = cut?;
+    let (checked, [sweep_time, mesh_time], mesh, mesh_report) =
+        cut_part(scene, program, progress, &mut stock)?;
     timings.insert("sweep".into(), sweep_time);
-
     timings.insert("mesh".into(), mesh_time);
-    let (reference, reference_time) = (reference.0?, reference.1);
-    timings.insert("reference".into(), reference_time.as_secs_f64());
+    // The part the deviations are measured from: the design model, or the program on the
+    // nominal machine, read near the cut part's surface (no second sweep).
+    let clock = Instant::now();
+    let reference = reference_part(scene, &program.moves)?;
+    timings.insert("reference".into(), clock.elapsed().as_secs_f64());
     let clock = Instant::now();
     let render_err = |source| PipelineError::Render {
         path: path.clone(),
         source,
     };
-    let shown = display_part(scene, &mesh, || Ok(reference))?;
+    let shown = display_part(scene, &mesh, &stock, || Ok(reference))?;
     let part_png = part_png(scene, &shown)?;
     timings.insert("render".into(), clock.elapsed().as_secs_f64());
     let mut plots = Vec::new();

@@ -35,7 +35,7 @@ const LAYOUT: &[(&str, &[&str])] = &[
         "cutting",
         &[
             "tool", "shape", "stock", "cutter", "envelope", "sweep", "collide", "mesh", "adaptive",
-            "zmap",
+            "zmap", "nominal",
         ],
     ),
     (

@@ -818,90 +818,28 @@ fn simulate_meshes_the_p1_pocket_adaptively_small_closed_and_within_its_bound() 
     assert!(mesh["planar_regions"].as_u64().expect("number") > 1000);
 }
 
-/// `simulate` in `sb` with `TWINMILL_CACHE_DIR` set to `cache`; returns the exit code, the
-/// report and stderr.
-fn simulate_cached(sb: &Sandbox, cache: &Path) -> (i32, serde_json::Value, String) {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_twinmill"))
-        .args(["simulate", "s.toml", "--json"])
-        .env("TWINMILL_CACHE_DIR", cache)
-        .current_dir(&sb.dir)
-        .output()
-        .expect("binary runs");
-    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-    (
-        out.status.code().unwrap_or(-1),
-        serde_json::from_str(&stdout).unwrap_or(serde_json::Value::Null),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
-
-/// The one entry of the cache directory.
-fn cache_entry(cache: &Path) -> std::path::PathBuf {
-    let entries: Vec<_> = std::fs::read_dir(cache)
-        .expect("cache dir")
-        .map(|e| e.expect("entry").path())
-        .collect();
-    assert_eq!(entries.len(), 1, "{entries:?}");
-    entries[0].clone()
-}
-
 #[test]
-fn simulate_keeps_the_nominal_part_and_colours_alike_with_it() {
-    let sb = Sandbox::new("sim-nominal-cache");
-    let cache = sb.dir.join("cache");
+fn simulate_colours_the_slot_by_the_spindles_offset_without_sweeping_it_twice() {
+    // A slot cut with the spindle 20 µm (then 50 µm) low: its floor lies that far below the
+    // nominal part's, its walls and the stock's faces on it. The colours come from the
+    // program on the nominal machine read near the cut part (no second sweep).
+    let sb = Sandbox::new("sim-nominal-path");
     let stock = "min = [0.0, 0.0, 0.0]\nmax = [40.0, 30.0, 20.0]\npitch_mm = 0.25";
-    // The slot of the test above: floor z = 14 on the nominal machine, 14 + dz on this one.
     let program = "G21 G90\nG0 X-10 Y15 Z60\nG0 Z14\nG1 X50 F600\nG0 Z60\nM30\n";
-    let with = |dz: Real| xyz_scene(FLAT6, stock, &format!("[deviations]\ndz_ZS = {dz}"));
     sb.write("p.ngc", program.as_bytes());
-    sb.write("s.toml", with(-0.02).as_bytes());
-    let (code, plain, stderr) = sb.run(&["simulate", "s.toml", "--json"]);
-    assert_eq!(code, 0, "{stderr}");
-    let plain: serde_json::Value = serde_json::from_str(&plain).expect("report");
-    // The first run keeps the nominal part; the second reads it: the same colours.
-    let (code, first, stderr) = simulate_cached(&sb, &cache);
-    assert_eq!(code, 0, "{stderr}");
-    let entry = cache_entry(&cache);
-    let kept = std::fs::read(&entry).expect("entry");
-    let (code, second, stderr) = simulate_cached(&sb, &cache);
-    assert_eq!(code, 0, "{stderr}");
-    for r in [&first, &second] {
-        assert_eq!(r["deviation"], plain["deviation"], "{r}");
+    for dz in [-0.02, -0.05] {
+        let scene = xyz_scene(FLAT6, stock, &format!("[deviations]\ndz_ZS = {dz}"));
+        sb.write("s.toml", scene.as_bytes());
+        let (code, out, stderr) = sb.run(&["simulate", "s.toml", "--json"]);
+        assert_eq!(code, 0, "{stderr}");
+        let r: serde_json::Value = serde_json::from_str(&out).expect("report");
+        let d = &r["deviation"];
+        assert_eq!(d["from"], "nominal part", "{d}");
+        let (min, max) = (
+            d["min_mm"].as_f64().expect("min"),
+            d["max_mm"].as_f64().expect("max"),
+        );
+        assert!((min - dz).abs() < 1e-6, "{dz}: {d}");
+        assert!(max.abs() < 1e-6, "{dz}: {d}");
     }
-    assert!((plain["deviation"]["min_mm"].as_f64().expect("min") + 0.02).abs() < 1e-6);
-    // Other deviations, the same nominal machine: the same entry serves, and the colours
-    // are those of the new machine (floor 50 µm low).
-    sb.write("s.toml", with(-0.05).as_bytes());
-    let (code, other, stderr) = simulate_cached(&sb, &cache);
-    assert_eq!(code, 0, "{stderr}");
-    assert_eq!(cache_entry(&cache), entry);
-    let min = other["deviation"]["min_mm"].as_f64().expect("min");
-    assert!((min + 0.05).abs() < 1e-6, "{other}");
-    // A damaged entry (one byte flipped) is swept anew and rewritten as it was.
-    let mut bad = kept.clone();
-    let mid = bad.len() / 2;
-    bad[mid] ^= 0x40;
-    std::fs::write(&entry, &bad).expect("damage");
-    sb.write("s.toml", with(-0.02).as_bytes());
-    let (code, again, stderr) = simulate_cached(&sb, &cache);
-    assert_eq!(code, 0, "{stderr}");
-    assert_eq!(again["deviation"], plain["deviation"]);
-    assert!(std::fs::read(&entry).expect("entry") == kept);
-    // The entry is what the colours come from: a valid entry of another part under this
-    // key (the slot's floor 1 mm higher) moves every floor deviation by 1 mm.
-    let (code, _, stderr) = {
-        sb.write("p.ngc", program.replace("Z14", "Z15").as_bytes());
-        let other_cache = sb.dir.join("other");
-        simulate_cached(&sb, &other_cache)
-    };
-    assert_eq!(code, 0, "{stderr}");
-    let foreign = std::fs::read(cache_entry(&sb.dir.join("other"))).expect("entry");
-    let mut spliced = kept[..16].to_vec();
-    spliced.extend_from_slice(&foreign[16..]);
-    std::fs::write(&entry, &spliced).expect("splice");
-    sb.write("p.ngc", program.as_bytes());
-    let (code, read, stderr) = simulate_cached(&sb, &cache);
-    assert_eq!(code, 0, "{stderr}");
-    let min = read["deviation"]["min_mm"].as_f64().expect("min");
-    assert!((min - (-0.02 - 1.0)).abs() < 1e-6, "{read}");
 }

@@ -583,28 +583,7 @@ fn rapids_meet_the_stock_every_earlier_move_left_when_moves_are_cut_together() {
     assert!(part_all == part_rapids, "another part");
 }
 
-/// A chain read pose by pose, as a hexapod is: the sweep sees only its poses.
-struct ChainPoses(Chain);
-
-impl PoseSource for ChainPoses {
-    fn has_axis(&self, axis: AxisLetter) -> bool {
-        self.0.has_axis(axis)
-    }
-
-    fn w_from_t(&self, q: &AxisValues) -> Result<Isometry3, crate::machine::PoseError> {
-        Ok(self.0.w_from_t(q))
-    }
-
-    fn commanded(&self, q: &AxisValues) -> Isometry3 {
-        self.0.w_from_t(q)
-    }
-
-    fn is_translation(&self, start: &AxisValues, end: &AxisValues) -> bool {
-        AxisLetter::ALL
-            .into_iter()
-            .all(|l| !l.is_rotary() || start.get(l) == end.get(l))
-    }
-}
+use crate::machine::chain::ChainPoses;
 
 /// Moves of a machine read pose by pose are cut by the envelope of the curve through
 /// their pilot poses. The same chain cut as a chain (its own exact envelope, validated
