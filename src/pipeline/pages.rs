@@ -13,7 +13,7 @@ use crate::calibration::calibrate::Feature;
 use crate::cutting::mesh::TriMesh;
 use crate::cutting::nominal::{NominalMachine, NominalPath};
 use crate::cutting::stock::TriDexel;
-use crate::cutting::sweep::{Kinematics, sweep_program};
+use crate::cutting::sweep::sweep_program;
 use crate::machine::hexapod::{HexapodTwin, TableAxes};
 use crate::math::{Point3, Real, UnitVector3, Vector3};
 use crate::nc::Move;
@@ -93,41 +93,6 @@ fn nominal_hexapod(t: &HexapodTwin) -> HexapodTwin {
         }),
         ..t.clone()
     }
-}
-
-/// The part the nominal machine cuts, swept like the part itself (a tri-dexel of the same
-/// stock and pitch): what [`reference_part`]'s distance stands for, kept to check it
-/// against; `None` when the scene has a design model or a perfect machine.
-pub fn nominal_part_swept(
-    scene: &Scene,
-    moves: &[Move],
-) -> Result<Option<TriDexel>, PipelineError> {
-    if scene.design.is_some() {
-        return Ok(None);
-    }
-    let hexapod = match &scene.machine {
-        Machine::Hexapod(h) => Some(nominal_hexapod(&h.twin)),
-        Machine::Serial(_) => None,
-    };
-    let nominal = scene.chain().nominal();
-    let mut stock = make_stock(scene)?;
-    let machine = match &hexapod {
-        Some(t) => Kinematics::Poses(t),
-        None => Kinematics::Chain(&nominal),
-    };
-    sweep_program(
-        &mut stock,
-        machine,
-        &scene.tool,
-        moves,
-        &scene.sweep,
-        &NoProgress,
-    )
-    .map_err(|source| PipelineError::Sweep {
-        location: format!("{}: nominal part", scene.path.display()),
-        source,
-    })?;
-    Ok(Some(stock))
 }
 
 /// A cut part ready to show.
