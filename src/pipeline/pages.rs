@@ -15,8 +15,11 @@ use crate::cutting::nominal::{NominalMachine, NominalPath};
 use crate::cutting::stock::TriDexel;
 use crate::cutting::sweep::sweep_program;
 use crate::machine::hexapod::{HexapodTwin, TableAxes};
+use crate::machine::{PoseError, PoseSource};
+use crate::math::Isometry3;
 use crate::math::{Point3, Real, UnitVector3, Vector3};
 use crate::nc::Move;
+use crate::nc::{AxisLetter, AxisValues};
 use crate::progress::NoProgress;
 use crate::report::display::{self, DisplayMesh};
 use crate::report::display::{ReferenceModel, ReferenceSurface};
@@ -57,7 +60,7 @@ pub fn reference_part(scene: &Scene, moves: &[Move]) -> Result<Reference, Pipeli
     let machine = match &scene.machine {
         Machine::Hexapod(h) => {
             let n = nominal_hexapod(&h.twin);
-            (h.twin != n).then(|| NominalMachine::Poses(Box::new(n)))
+            (h.twin != n).then(|| NominalMachine::Poses(Box::new(Commanded(n))))
         }
         Machine::Serial(m) => {
             let nominal = scene.chain().nominal();
@@ -80,6 +83,29 @@ pub fn reference_part(scene: &Scene, moves: &[Move]) -> Result<Reference, Pipeli
         ))),
         what: "the nominal part".into(),
     })
+}
+
+/// A nominal hexapod read pose by pose: its controller and its build are the design, so the
+/// tool is where the controller commands it (`FK(IK(command))` is the command; the forward
+/// kinematics' iterations are skipped).
+struct Commanded(HexapodTwin);
+
+impl PoseSource for Commanded {
+    fn has_axis(&self, axis: AxisLetter) -> bool {
+        self.0.has_axis(axis)
+    }
+
+    fn w_from_t(&self, q: &AxisValues) -> Result<Isometry3, PoseError> {
+        Ok(self.0.commanded(q))
+    }
+
+    fn commanded(&self, q: &AxisValues) -> Isometry3 {
+        self.0.commanded(q)
+    }
+
+    fn is_translation(&self, start: &AxisValues, end: &AxisValues) -> bool {
+        self.0.is_translation(start, end)
+    }
 }
 
 /// A hexapod's nominal machine: the actual one with the nominal parameters.
