@@ -16,6 +16,10 @@
 //!   circling a Ø40 mm cylinder, its tool tilted ±8° three times a turn: a quarter turn
 //!   (180 moves), every move sampled at 65 poses and cut by the envelope of the curve through them.
 //!
+//! - **Deviation colours**: the flat side cut's first turn, its display mesh (about 100 k
+//!   triangles) coloured by the deviation from the nominal part, read near the cut part
+//!   from the program on the nominal machine (no second sweep); triangles per second.
+//!
 //! The programs are those of `benches/support/five_axis.rs`, which also writes them as the NC
 //! of the scenes in `benches/data/` for timing the whole `twinmill simulate` command.
 
@@ -108,6 +112,39 @@ fn benches(c: &mut Criterion) {
                 },
                 BatchSize::LargeInput,
             )
+        },
+    );
+
+    // The deviation colours of the flat side cut's first turn: the part cut and its display
+    // mesh made outside the timing; timed, the nominal part read at the display's corners
+    // (the program on the nominal machine, no second sweep).
+    let moves = polyline(&side_cut(720), FEED);
+    let mut part = twinmill::pipeline::make_stock(&scene).expect("stock");
+    sweep_program(
+        &mut part,
+        scene.chain(),
+        &scene.tool,
+        &moves,
+        &scene.sweep,
+        &NoProgress,
+    )
+    .expect("sweeps");
+    let (mesh, _) = twinmill::cutting::adaptive::mesh_stock_adaptive(&part, &Default::default())
+        .expect("meshes");
+    let shown =
+        twinmill::report::display::simplify(&mesh, twinmill::report::display::MAX_TRIANGLES);
+    g.throughput(Throughput::Elements(shown.triangles.len() as u64));
+    g.bench_function(
+        format!(
+            "trunnion side cut, flat, first turn: deviation colours of {} display triangles (triangles)",
+            shown.triangles.len()
+        ),
+        |b| {
+            b.iter(|| {
+                let reference = twinmill::pipeline::pages::reference_part(&scene, &moves)
+                    .expect("reference");
+                reference.model.expect("a deviated machine").deviations(&shown, &part)
+            })
         },
     );
 

@@ -291,6 +291,29 @@ impl ReferenceModel {
     }
 }
 
+/// A display triangle's corners, unit normal and centroid; `None` for a degenerate one.
+fn corners_of(mesh: &DisplayMesh, t: &[u32; 3]) -> Option<([Point3; 3], Vector3, Point3)> {
+    let p = t.map(|i| mesh.vertices[i as usize]);
+    let n = (p[1] - p[0]).cross(&(p[2] - p[0]));
+    if n.norm() == 0.0 || !n.norm().is_finite() {
+        return None;
+    }
+    let centre = Point3::from((p[0].coords + p[1].coords + p[2].coords) / 3.0);
+    Some((p, n.normalize(), centre))
+}
+
+/// A corner's deviation from its counterpart along the normal (`along`) and the centroid's
+/// closest distance (`nearest`): the counterpart when it lies within twice the closest
+/// distance (plus [`COUNTERPART_SLACK_MM`]), else the closest distance; NaN with neither.
+fn counterpart(along: Option<Real>, nearest: Option<Real>) -> Real {
+    match (along, nearest) {
+        (Some(d), Some(c)) if d.abs() <= 2.0 * c.abs() + COUNTERPART_SLACK_MM => d,
+        (_, Some(c)) => c,
+        (Some(d), None) => d,
+        (None, None) => Real::NAN,
+    }
+}
+
 /// The deviations of `mesh`'s triangle corners (the display mesh of the cut part `cut`) from
 /// the part `path` cuts on the nominal machine, as [`deviations`] measures them from a
 /// reference mesh, read from the nominal part's distance near the cut surface
@@ -320,13 +343,9 @@ pub fn path_deviations(mesh: &DisplayMesh, cut: &TriDexel, path: &NominalPath) -
         .par_chunks(CHUNK)
         .flat_map_iter(|c| {
             c.iter().map(|t| {
-                let p = t.map(|i| mesh.vertices[i as usize]);
-                let n = (p[1] - p[0]).cross(&(p[2] - p[0]));
-                if n.norm() == 0.0 || !n.norm().is_finite() {
+                let Some((p, n, centre)) = corners_of(mesh, t) else {
                     return [Real::NAN; 3];
-                }
-                let n = n.normalize();
-                let centre = Point3::from((p[0].coords + p[1].coords + p[2].coords) / 3.0);
+                };
                 // A corner's counterpart on the vertex's tangent plane, where it faces like
                 // the triangle.
                 let facing = |plane: Option<(Point3, Vector3)>, q: &Point3| {
@@ -354,12 +373,7 @@ pub fn path_deviations(mesh: &DisplayMesh, cut: &TriDexel, path: &NominalPath) -
                     }
                 }
                 let nearest = central.map(|(x, big_n)| (centre - x).dot(&big_n));
-                along.map(|along| match (along, nearest) {
-                    (Some(d), Some(c)) if d.abs() <= 2.0 * c.abs() + COUNTERPART_SLACK_MM => d,
-                    (_, Some(c)) => c,
-                    (Some(d), None) => d,
-                    (None, None) => Real::NAN,
-                })
+                along.map(|along| counterpart(along, nearest))
             })
         })
         .collect()
@@ -384,23 +398,13 @@ pub fn part_deviations(mesh: &DisplayMesh, part: &TriDexel) -> Vec<[Real; 3]> {
         .par_chunks(CHUNK)
         .flat_map_iter(|c| {
             c.iter().map(|t| {
-                let p = t.map(|i| mesh.vertices[i as usize]);
-                let n = (p[1] - p[0]).cross(&(p[2] - p[0]));
-                if n.norm() == 0.0 || !n.norm().is_finite() {
+                let Some((p, n, centre)) = corners_of(mesh, t) else {
                     return [Real::NAN; 3];
-                }
-                let n = n.normalize();
-                let centre = Point3::from((p[0].coords + p[1].coords + p[2].coords) / 3.0);
+                };
                 let nearest = part.nearest_offset(&centre, PART_REACH_MM);
                 p.map(|q| {
                     let pulled = q + (centre - q) * CORNER_PULL;
-                    let along = part.offset_along(&pulled, &n, PART_REACH_MM);
-                    match (along, nearest) {
-                        (Some(d), Some(c)) if d.abs() <= 2.0 * c.abs() + COUNTERPART_SLACK_MM => d,
-                        (_, Some(c)) => c,
-                        (Some(d), None) => d,
-                        (None, None) => Real::NAN,
-                    }
+                    counterpart(part.offset_along(&pulled, &n, PART_REACH_MM), nearest)
                 })
             })
         })
