@@ -27,8 +27,9 @@
 //!
 //! **Within a move.** Each move's poses at `λ = k/`[`KEPT`] are kept, with `D`, a bound on
 //! how far a tool point moves between consecutive kept poses (the tool's reach about its
-//! middle times the turn, plus the middle's travel, the largest over the move, doubled for
-//! the bow of the path between them). The tool's signed distance at `p` is evaluated at the
+//! middle times the turn, plus the middle's travel, the largest over the move — a bound on
+//! every point's chord — grown for the bow of the path: by a quarter where the kept poses
+//! turn by 45° or less, doubled beyond). The tool's signed distance at `p` is evaluated at the
 //! kept poses; each move's values between two kept poses are at least the mean of the two
 //! less `D/2` (the distance moves no more than the tool does), and the moves whose bound is
 //! below the best value so far are refined, least bound first, by Brent's method over the
@@ -36,13 +37,16 @@
 //! across the bracket.
 //!
 //! **Poses** are the nominal machine's own at the axis values the controller interpolates
-//! (linear in `λ`; arcs are cut as the sweep's chords). A pose the machine cannot take drops
+//! (linear in `λ`; arcs are cut as the sweep's chords): a chain's through the envelope's
+//! [`MovePath`] (the chain's fixed factors folded, one rotation a turning axis: the same
+//! poses to rounding), a pose source's from the source. A pose the machine cannot take drops
 //! its move from the candidates.
 //!
 //! **Invariant:** reads the cut part's crossings and the nominal machine's poses, never
 //! changes either; the same inputs give the same distance bit for bit, whatever the thread
 //! count.
 
+use crate::cutting::envelope::MovePath;
 use crate::cutting::stock::TriDexel;
 use crate::cutting::sweep::as_chords;
 use crate::cutting::tool::Tool;
@@ -76,11 +80,13 @@ impl std::fmt::Debug for NominalMachine {
 }
 
 impl NominalMachine {
-    /// The tool's pose at fraction `lambda` of `mv`, if the machine can take it.
-    fn pose(&self, mv: &Move, lambda: Real) -> Option<Isometry3> {
-        match self {
-            NominalMachine::Chain(c) => Some(c.w_from_t(&mv.point_at(lambda))),
-            NominalMachine::Poses(src) => src
+    /// The tool's pose at fraction `lambda` of `mv` (whose chain path is `path`, for a
+    /// chain), if the machine can take it.
+    fn pose(&self, mv: &Move, path: Option<&MovePath>, lambda: Real) -> Option<Isometry3> {
+        match (self, path) {
+            (NominalMachine::Chain(_), Some(path)) => Some(path.w_from_t(lambda)),
+            (NominalMachine::Chain(c), None) => Some(c.w_from_t(&mv.point_at(lambda))),
+            (NominalMachine::Poses(src), _) => src
                 .w_from_t(&src.interpolate(&mv.start, &mv.end, lambda))
                 .ok(),
         }
@@ -90,6 +96,9 @@ impl NominalMachine {
 /// A move's kept poses and the motion between them.
 #[derive(Clone, Debug)]
 struct Kept {
+    /// A chain's move as the envelope reads it: the chain with its fixed factors folded, one
+    /// rotation a turning axis (the same poses as the chain's, a fraction of the cost).
+    path: Option<MovePath>,
     poses: [Isometry3; KEPT + 1],
     /// Bound on how far a tool point moves between consecutive kept poses (mm).
     step: Real,
@@ -121,19 +130,34 @@ impl NominalPath {
         let kept = moves
             .par_iter()
             .map(|mv| {
+                let path = match &machine {
+                    NominalMachine::Chain(c) => Some(MovePath::new(c, &mv.start, &mv.end)),
+                    NominalMachine::Poses(_) => None,
+                };
                 let poses: Vec<Isometry3> = (0..=KEPT)
-                    .map(|k| machine.pose(mv, k as Real / KEPT as Real))
+                    .map(|k| machine.pose(mv, path.as_ref(), k as Real / KEPT as Real))
                     .collect::<Option<_>>()?;
-                let step = poses
+                let (chord, turn) = poses
                     .windows(2)
                     .map(|w| {
                         let turn = w[0].rotation.angle_to(&w[1].rotation);
-                        (w[1] * middle - w[0] * middle).norm() + turn * reach
+                        ((w[1] * middle - w[0] * middle).norm() + turn * reach, turn)
                     })
-                    .fold(0.0, Real::max);
+                    .fold((0.0, 0.0), |a: (Real, Real), b| {
+                        (a.0.max(b.0), a.1.max(b.1))
+                    });
+                // A point's path between kept poses is longer than its chord by the bow of
+                // its turn: an arc of 45° is 2.6 % longer than its chord, of 180° 57 %.
+                let bow = if turn <= std::f64::consts::FRAC_PI_4 {
+                    1.25
+                } else {
+                    2.0
+                };
+                let step = chord;
                 Some(Kept {
+                    path,
                     poses: poses.try_into().ok()?,
-                    step: 2.0 * step,
+                    step: bow * step,
                     lambda_tol: (DISTANCE_TOL / (KEPT as Real * step)).clamp(1e-12, 1e-4),
                 })
             })
@@ -249,12 +273,14 @@ impl NominalPath {
 
     /// The least signed distance of `p` from the tool on move `m` over the two intervals
     /// beside kept pose `k` (whose value is `fk`), by Brent's method (golden section with
-    /// parabolic steps, until the tool moves less than [`DISTANCE_TOL`] across the bracket), with the tool's normal there.
+    /// parabolic steps, until the tool moves less than [`DISTANCE_TOL`] across the bracket), with
+    /// the tool's normal there.
     fn refine(&self, m: usize, k: usize, fk: (Real, Vector3), p: &Point3) -> (Real, Vector3) {
         let mv = &self.moves[m];
+        let path = self.kept[m].as_ref().and_then(|k| k.path.as_ref());
         let at = |lambda: Real| {
             self.machine
-                .pose(mv, lambda)
+                .pose(mv, path, lambda)
                 .map_or((Real::INFINITY, Vector3::z()), |t| {
                     self.tool_distance(&t, p)
                 })

