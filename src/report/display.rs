@@ -237,33 +237,22 @@ pub fn distances(points: &[Point3], reference: &ReferenceSurface) -> Vec<Real> {
 /// The deviation at each corner of each display triangle from `reference` (mm; see the
 /// module docs); NaN for a degenerate triangle.
 pub fn deviations(mesh: &DisplayMesh, reference: &ReferenceSurface) -> Vec<[Real; 3]> {
-    mesh.triangles
-        .par_chunks(CHUNK)
-        .flat_map_iter(|c| {
-            c.iter().map(|t| {
-                let p = t.map(|i| mesh.vertices[i as usize]);
-                let n = (p[1] - p[0]).cross(&(p[2] - p[0]));
-                if n.norm() == 0.0 || !n.norm().is_finite() {
-                    return [Real::NAN; 3];
-                }
-                let n = UnitVector3::new_normalize(n);
-                let centre = Point3::from((p[0].coords + p[1].coords + p[2].coords) / 3.0);
-                let nearest = reference.signed_distance(&centre);
-                let side = if nearest.abs() <= COUNTERPART_SLACK_MM {
-                    0.0
-                } else {
-                    nearest
-                };
-                p.map(|q| {
-                    let pulled = q + (centre - q) * CORNER_PULL;
-                    match reference.deviation_along(&pulled, &n, side) {
-                        Some(d) if d.abs() <= 2.0 * nearest.abs() + COUNTERPART_SLACK_MM => d,
-                        _ => nearest,
-                    }
-                })
-            })
+    per_triangle(mesh, |_, p, n, centre| {
+        let n = UnitVector3::new_unchecked(n);
+        let nearest = reference.signed_distance(&centre);
+        let side = if nearest.abs() <= COUNTERPART_SLACK_MM {
+            0.0
+        } else {
+            nearest
+        };
+        p.map(|q| {
+            let pulled = q + (centre - q) * CORNER_PULL;
+            match reference.deviation_along(&pulled, &n, side) {
+                Some(d) if d.abs() <= 2.0 * nearest.abs() + COUNTERPART_SLACK_MM => d,
+                _ => nearest,
+            }
         })
-        .collect()
+    })
 }
 
 /// Reach (mm) of the search for a display corner's counterpart on a reference part's
@@ -289,6 +278,22 @@ impl ReferenceModel {
             ReferenceModel::Path(p) => path_deviations(mesh, cut, p),
         }
     }
+}
+
+/// `f(corner indices, corners, unit normal, centroid)` for every display triangle, in
+/// parallel chunks joined in order; NaN corners for a degenerate triangle.
+fn per_triangle(
+    mesh: &DisplayMesh,
+    f: impl Fn(&[u32; 3], [Point3; 3], Vector3, Point3) -> [Real; 3] + Sync + Send,
+) -> Vec<[Real; 3]> {
+    mesh.triangles
+        .par_chunks(CHUNK)
+        .flat_map_iter(|c| {
+            c.iter().map(|t| {
+                corners_of(mesh, t).map_or([Real::NAN; 3], |(p, n, centre)| f(t, p, n, centre))
+            })
+        })
+        .collect()
 }
 
 /// A display triangle's corners, unit normal and centroid; `None` for a degenerate one.
@@ -339,44 +344,35 @@ pub fn path_deviations(mesh: &DisplayMesh, cut: &TriDexel, path: &NominalPath) -
         .par_chunks(CHUNK)
         .flat_map_iter(|c| c.iter().map(plane_at))
         .collect();
-    mesh.triangles
-        .par_chunks(CHUNK)
-        .flat_map_iter(|c| {
-            c.iter().map(|t| {
-                let Some((p, n, centre)) = corners_of(mesh, t) else {
-                    return [Real::NAN; 3];
-                };
-                // A corner's counterpart on the vertex's tangent plane, where it faces like
-                // the triangle.
-                let facing = |plane: Option<(Point3, Vector3)>, q: &Point3| {
-                    plane.and_then(|(x, big_n): (Point3, Vector3)| {
-                        let facing = n.dot(&big_n);
-                        (facing >= SAME_FACE_COS)
-                            .then(|| (q - x).dot(&big_n) / facing)
-                            .filter(|d| within(*d))
-                    })
-                };
-                let pulled: [Point3; 3] =
-                    std::array::from_fn(|k| p[k] + (centre - p[k]) * CORNER_PULL);
-                let mut along: [Option<Real>; 3] =
-                    std::array::from_fn(|k| facing(at_vertex[t[k] as usize], &pulled[k]));
-                if along.iter().all(Option::is_some) {
-                    return along.map(|d| d.unwrap_or(Real::NAN));
-                }
-                // A vertex whose nearest point lies on another face of the nominal part (at
-                // an edge): the centroid's tangent plane instead, and its distance for the
-                // counterpart test.
-                let central = plane_at(&centre);
-                for k in 0..3 {
-                    if along[k].is_none() {
-                        along[k] = facing(central, &pulled[k]);
-                    }
-                }
-                let nearest = central.map(|(x, big_n)| (centre - x).dot(&big_n));
-                along.map(|along| counterpart(along, nearest))
+    per_triangle(mesh, |t, p, n, centre| {
+        // A corner's counterpart on the vertex's tangent plane, where it faces like
+        // the triangle.
+        let facing = |plane: Option<(Point3, Vector3)>, q: &Point3| {
+            plane.and_then(|(x, big_n): (Point3, Vector3)| {
+                let facing = n.dot(&big_n);
+                (facing >= SAME_FACE_COS)
+                    .then(|| (q - x).dot(&big_n) / facing)
+                    .filter(|d| within(*d))
             })
-        })
-        .collect()
+        };
+        let pulled: [Point3; 3] = std::array::from_fn(|k| p[k] + (centre - p[k]) * CORNER_PULL);
+        let mut along: [Option<Real>; 3] =
+            std::array::from_fn(|k| facing(at_vertex[t[k] as usize], &pulled[k]));
+        if along.iter().all(Option::is_some) {
+            return along.map(|d| d.unwrap_or(Real::NAN));
+        }
+        // A vertex whose nearest point lies on another face of the nominal part (at
+        // an edge): the centroid's tangent plane instead, and its distance for the
+        // counterpart test.
+        let central = plane_at(&centre);
+        for k in 0..3 {
+            if along[k].is_none() {
+                along[k] = facing(central, &pulled[k]);
+            }
+        }
+        let nearest = central.map(|(x, big_n)| (centre - x).dot(&big_n));
+        along.map(|along| counterpart(along, nearest))
+    })
 }
 
 /// Least cosine between a display triangle's normal and the nominal part's normal at a
@@ -394,21 +390,13 @@ pub const SAME_FACE_COS: Real = 0.94;
 /// the tangent plane of the nearest crossing ([`TriDexel::nearest_offset`]); the same
 /// counterpart test. A corner with neither within [`PART_REACH_MM`] is NaN (not coloured).
 pub fn part_deviations(mesh: &DisplayMesh, part: &TriDexel) -> Vec<[Real; 3]> {
-    mesh.triangles
-        .par_chunks(CHUNK)
-        .flat_map_iter(|c| {
-            c.iter().map(|t| {
-                let Some((p, n, centre)) = corners_of(mesh, t) else {
-                    return [Real::NAN; 3];
-                };
-                let nearest = part.nearest_offset(&centre, PART_REACH_MM);
-                p.map(|q| {
-                    let pulled = q + (centre - q) * CORNER_PULL;
-                    counterpart(part.offset_along(&pulled, &n, PART_REACH_MM), nearest)
-                })
-            })
+    per_triangle(mesh, |_, p, n, centre| {
+        let nearest = part.nearest_offset(&centre, PART_REACH_MM);
+        p.map(|q| {
+            let pulled = q + (centre - q) * CORNER_PULL;
+            counterpart(part.offset_along(&pulled, &n, PART_REACH_MM), nearest)
         })
-        .collect()
+    })
 }
 
 /// A symmetric colour range (mm) for `values`: the 99.5th percentile of |value| rounded up
