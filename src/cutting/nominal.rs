@@ -153,12 +153,11 @@ impl NominalPath {
                 } else {
                     2.0
                 };
-                let step = chord;
                 Some(Kept {
                     path,
                     poses: poses.try_into().ok()?,
-                    step: bow * step,
-                    lambda_tol: (DISTANCE_TOL / (KEPT as Real * step)).clamp(1e-12, 1e-4),
+                    step: bow * chord,
+                    lambda_tol: (DISTANCE_TOL / (KEPT as Real * chord)).clamp(1e-12, 1e-4),
                 })
             })
             .collect();
@@ -173,11 +172,6 @@ impl NominalPath {
             kept,
             by_line,
         }
-    }
-
-    /// The moves (arcs as chords).
-    pub fn moves(&self) -> &[Move] {
-        &self.moves
     }
 
     /// The signed distance (mm; + outside, − inside) of `p`, a point on or near the surface
