@@ -25,6 +25,7 @@ use rayon::prelude::*;
 const BLOCK: usize = 16;
 
 mod batch;
+pub use batch::{Group, GroupCull, Removed};
 
 /// Errors in creating a stock.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]

@@ -18,6 +18,15 @@
 //! the middle of each half-cell (`λ` within `1/(4N)` of it) grown by `M/(4N)` holds the tool
 //! over that half: where it misses the material, the half's inner kept poses need no test.
 //!
+//! **Consecutive moves** ([`GroupHull`]): each cell's tool lies in its middle pose's tool
+//! grown by `δ`, and that in the tool at one reference pose grown further by how far any
+//! tool point lies between the two poses: `|Δc| + ‖ΔR‖₂·ρ`, with `c` the middle of the tool's
+//! axis, `ρ = √(R² + (L/2)²)` the largest distance of a tool point from it, and `‖ΔR‖₂` the
+//! spectral norm of the rotations' difference (for two rotations `‖ΔR‖_F/√2`: its two
+//! non-zero singular values are equal). A ray whose material the reference tool grown by
+//! the largest of these misses is changed by none of the moves: the stock skips them all
+//! at once ([`crate::cutting::stock::GroupCull`]).
+//!
 //! **Invariant:** a ray is culled only when the exact envelope could not change it.
 
 use super::*;
@@ -81,5 +90,70 @@ impl RotaryEnvelope {
             meets(&self.samples[2 * j + 1], self.delta + CULL_MARGIN)
                 && (meets(&kept[0], g) || meets(&kept[CULL_STEPS], g) || inner(0) || inner(1))
         })
+    }
+}
+
+/// Relative allowance on a group hull's growth for the rounding of its poses' differences
+/// (far above it; the absolute allowance is [`CULL_MARGIN`]).
+const HULL_ROUNDING: Real = 1e-9;
+
+/// The tools of consecutive envelope moves held in one grown tool (see the module docs): a
+/// ray whose material it misses is changed by none of the moves.
+#[derive(Clone, Debug)]
+pub struct GroupHull {
+    shape: Shape,
+    r: Real,
+    l: Real,
+    /// The reference pose: the middle sample of the group's middle move.
+    rot: Matrix3,
+    tip: Point3,
+    /// The growth that holds every move's tool (mm).
+    grow: Real,
+}
+
+impl GroupHull {
+    /// The hull of the moves `group` (one tool; not empty).
+    pub fn of(group: &[&RotaryEnvelope]) -> Self {
+        let mid = group[group.len() / 2];
+        let reference = mid.samples[mid.samples.len() / 2];
+        let (r, l) = (mid.r, mid.l);
+        let axis_mid = Vector3::new(0.0, 0.0, l / 2.0);
+        let rho = (r * r + l * l / 4.0).sqrt();
+        let centre = reference.rot * axis_mid + reference.tip.coords;
+        let grow = group
+            .iter()
+            .flat_map(|env| {
+                (0..env.cells).map(|j| {
+                    let s = &env.samples[2 * j + 1];
+                    let moved = (s.rot * axis_mid + s.tip.coords - centre).norm();
+                    let turned = (s.rot - reference.rot).norm() / std::f64::consts::SQRT_2;
+                    env.delta + moved + turned * rho
+                })
+            })
+            .fold(0.0, Real::max);
+        Self {
+            shape: mid.shape,
+            r,
+            l,
+            rot: reference.rot,
+            tip: reference.tip,
+            grow: grow * (1.0 + HULL_ROUNDING) + CULL_MARGIN,
+        }
+    }
+
+    /// The growth of the reference tool that holds every move's tool (mm).
+    pub fn grow(&self) -> Real {
+        self.grow
+    }
+}
+
+impl crate::cutting::stock::GroupCull for GroupHull {
+    /// False only when the grown reference tool's interval along the ray misses every
+    /// material segment (open intervals, as the stock subtracts them).
+    fn may_cut(&self, o: &Point3, axis: usize, segs: &[Segment]) -> bool {
+        let p = self.rot.tr_mul(&(o - self.tip));
+        let u = self.rot.row(axis).transpose();
+        tool_interval(self.shape, self.r, self.l, &p, &u, self.grow)
+            .is_some_and(|(t0, _, t1, _)| segs.iter().any(|m| t0 < m.hi.t && t1 > m.lo.t))
     }
 }

@@ -86,6 +86,7 @@ mod probe;
 mod sampled;
 mod solve;
 
+pub use cull::GroupHull;
 pub use path::{MovePath, error_motion_speed, rotation_and_travel};
 use path::{Sample, speed_bound};
 use probe::{

@@ -622,11 +622,26 @@ proptest! {
             .enumerate()
             .map(|(k, env)| (env as &dyn Cutter, k as u32 + 1))
             .collect();
-        let removed = together.remove_each(&cutters);
+        let removed = together.remove_each(&cutters, &[]).by_cutter;
         prop_assert!(expected.iter().filter(|&&c| c).count() >= 2, "{expected:?}");
         prop_assert!(!expected[3]);
-        prop_assert_eq!(removed, expected);
+        prop_assert_eq!(&removed, &expected);
         prop_assert!(crossing_bits(&together) == crossing_bits(&in_turn));
+        // In groups of three, each tested at once by its hull: the same again.
+        let mut grouped = TriDexel::new_box(bounds, 0.2, 1e9).expect("fits");
+        let hulls: Vec<(std::ops::Range<usize>, GroupHull)> = (0..envs.len())
+            .step_by(3)
+            .map(|a| a..(a + 3).min(envs.len()))
+            .map(|g| (g.clone(), GroupHull::of(&envs[g].iter().collect::<Vec<_>>())))
+            .collect();
+        let groups: Vec<crate::cutting::stock::Group> = hulls
+            .iter()
+            .map(|(g, hull)| crate::cutting::stock::Group { cutters: g.clone(), cull: hull })
+            .collect();
+        let by_groups = grouped.remove_each(&cutters, &groups);
+        prop_assert!(by_groups.group_tests > 0 && by_groups.group_skips > 0, "{by_groups:?}");
+        prop_assert_eq!(&by_groups.by_cutter, &expected);
+        prop_assert!(crossing_bits(&grouped) == crossing_bits(&in_turn));
     }
 }
 
@@ -699,6 +714,84 @@ fn culled_rays_meet_no_pose_of_the_move() {
         assert!(
             decided_by_kept > 1000,
             "{kind:?}: {decided_by_kept} of {skipped}"
+        );
+    }
+}
+
+/// A group hull holds every pose of its moves: on four consecutive moves (A turning 1° a
+/// move with X, Y and Z, flat and ball end mills), every ray of a fine grid (x, y and z
+/// rays at 0.05 mm across the moves' box) that the hull clears, with material along the
+/// whole ray, is met by no pose of any of the moves sampled every 1/1024 of it (the tool's
+/// interval at each pose, no growth). Hundreds of the rays it clears pass within 0.5 mm of a
+/// pose, and its growth is at most a cell's own growth plus 2.5 moves' travel (the farthest
+/// cell middle is 1.5 moves from the reference pose).
+#[test]
+fn rays_a_group_hull_clears_meet_no_pose_of_its_moves() {
+    use crate::cutting::stock::{Crossing, GroupCull, Segment};
+    let c = deviated();
+    let end = |t: Real| Crossing {
+        t,
+        normal: [0.0, 0.0, 1.0],
+        line: 0,
+    };
+    let material = [Segment {
+        lo: end(-1e3),
+        hi: end(1e3),
+    }];
+    for kind in [ToolKind::Flat, ToolKind::Ball] {
+        let tool = Tool::try_new(kind, 4.0, 10.0).expect("valid");
+        let envs = move_chain(&c, &tool, [0.5, 3.0, -10.0], &[(1.0, 0.1, -0.05, -0.05); 4]);
+        let group: Vec<&RotaryEnvelope> = envs.iter().collect();
+        let hull = GroupHull::of(&group);
+        // Its growth: the cells' own plus at most two moves' travel from the reference.
+        let travel: Real = envs.iter().map(|e| e.speed).fold(0.0, Real::max);
+        assert!(
+            hull.grow() <= 2.5 * travel + envs[0].delta,
+            "{} vs {travel}",
+            hull.grow()
+        );
+        let poses: Vec<Sample> = envs
+            .iter()
+            .flat_map(|env| (0..=1024).map(|k| env.path.sample(k as Real / 1024.0)))
+            .collect();
+        let mut b = Aabb::empty();
+        for eb in envs.iter().map(|e| e.bounds()) {
+            b.grow(&eb.min);
+            b.grow(&eb.max);
+        }
+        let (mut cleared, mut near) = (0, 0);
+        for axis in 0..3 {
+            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+            let n = |k: usize| ((b.max[k] - b.min[k]) / 0.05) as usize;
+            let mut e = Vector3::zeros();
+            e[axis] = 1.0;
+            for i in 0..=n(u) {
+                for j in 0..=n(v) {
+                    let mut o = Point3::origin();
+                    o[u] = b.min[u] + 0.05 * i as Real;
+                    o[v] = b.min[v] + 0.05 * j as Real;
+                    if GroupCull::may_cut(&hull, &o, axis, &material) {
+                        continue;
+                    }
+                    cleared += 1;
+                    let meets = |s: &Sample, g: Real| {
+                        let p = s.rot.tr_mul(&(o - s.tip));
+                        let w = s.rot.tr_mul(&e);
+                        tool_interval(envs[0].shape, envs[0].r, envs[0].l, &p, &w, g).is_some()
+                    };
+                    assert!(
+                        !poses.iter().any(|s| meets(s, 0.0)),
+                        "{kind:?}: the hull cleared the ray through {o:?} along axis {axis}, which a pose meets"
+                    );
+                    if poses.iter().step_by(64).any(|s| meets(s, 0.5)) {
+                        near += 1;
+                    }
+                }
+            }
+        }
+        assert!(
+            near > 300,
+            "{kind:?}: {near} of {cleared} cleared rays within 0.5 mm of a pose"
         );
     }
 }

@@ -1,20 +1,61 @@
 //! Cutting the stock by several cutters at once ([`TriDexel::remove_each`]): each ray taken
 //! through every cutter in turn, each block rewritten once.
 //!
+//! **Groups.** Consecutive cutters may come with a [`GroupCull`]: one conservative test that
+//! none of them can change a ray's material. A ray it clears skips the whole group (each of
+//! its cutters would have left the ray as it was), so the stock is the same either way.
+//!
 //! **Invariant:** the stock comes out bit for bit as from [`TriDexel::remove`] of each cutter
 //! in turn: a ray's cut by one cutter depends only on the ray's material before it and the
 //! cutter, and [`cut_ray`] is the one per-ray step of both.
 
 use super::*;
 
+/// A conservative test over a group of consecutive cutters of [`TriDexel::remove_each`].
+pub trait GroupCull: Sync {
+    /// Whether any cutter of the group may change the ray `origin + t·e_axis` whose material
+    /// is `segs`: `false` only when each of them would leave it as it is (its
+    /// [`Cutter::may_cut`] could answer `false`), whatever the cutters before it in the
+    /// group removed (they only remove material).
+    fn may_cut(&self, origin: &Point3, axis: usize, segs: &[Segment]) -> bool;
+}
+
+/// Consecutive cutters `cutters` of [`TriDexel::remove_each`] and their [`GroupCull`].
+#[derive(Clone)]
+pub struct Group<'a> {
+    /// The cutters' indices (consecutive, ascending; groups in order and disjoint).
+    pub cutters: std::ops::Range<usize>,
+    /// The test that none of them can change a ray.
+    pub cull: &'a dyn GroupCull,
+}
+
+/// What [`TriDexel::remove_each`] did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Removed {
+    /// For each cutter, whether it removed material.
+    pub by_cutter: Vec<bool>,
+    /// Rays the groups' tests were asked about.
+    pub group_tests: u64,
+    /// Of those, the rays a group's test cleared (its cutters skipped).
+    pub group_skips: u64,
+}
+
 impl TriDexel {
     /// Removes what each of `cutters` occupies, one after another, cutter `k` tagging its
     /// new surfaces with the NC line `cutters[k].1`: the same stock, bit for bit, as
     /// [`TriDexel::remove`] of each in turn (a ray's cut by one cutter depends only on the
     /// ray's material before it and the cutter, so each ray is taken through all the
-    /// cutters in order, and the blocks are rewritten once). Returns for each cutter whether
-    /// it removed material.
-    pub fn remove_each(&mut self, cutters: &[(&dyn Cutter, u32)]) -> Vec<bool> {
+    /// cutters in order, and the blocks are rewritten once). A ray that a group's test
+    /// clears ([`GroupCull`]) skips the group's cutters, which would have left it as it was.
+    /// Returns for each cutter whether it removed material, and how often the groups' tests
+    /// cleared a ray.
+    pub fn remove_each(&mut self, cutters: &[(&dyn Cutter, u32)], groups: &[Group]) -> Removed {
+        debug_assert!(
+            groups
+                .windows(2)
+                .all(|w| w[0].cutters.end <= w[1].cutters.start)
+                && groups.iter().all(|g| g.cutters.end <= cutters.len())
+        );
         let boxes: Vec<Option<Aabb>> = cutters
             .iter()
             .map(|(c, _)| Some(c.bounds()).filter(|b| b.intersects(&self.bounds)))
@@ -42,22 +83,27 @@ impl TriDexel {
                 b.rows_of(k / nbu).map(move |iv| (t, iv))
             })
             .collect();
-        let rows: Vec<(RowsCut, Vec<bool>)> = jobs
+        let rows: Vec<(RowsCut, RowFlags)> = jobs
             .par_iter()
             .map(|&(t, iv)| {
                 let (g, k, nbu, block) = &tasks[t];
-                grids[*g].cut_row(k % nbu, block, iv)
+                grids[*g].cut_row(k % nbu, block, iv, groups)
             })
             .collect();
-        let mut removed = vec![false; cutters.len()];
+        let mut removed = Removed {
+            by_cutter: vec![false; cutters.len()],
+            ..Removed::default()
+        };
         let mut rows = jobs.iter().map(|&(t, _)| t).zip(rows).peekable();
         for (t, (g, k, nbu, block)) in tasks.into_iter().enumerate() {
             let mut cut = RowsCut::default();
             while let Some((_, (r, flags))) = rows.next_if(|(owner, _)| *owner == t) {
                 cut.append(r);
-                for (any, f) in removed.iter_mut().zip(flags) {
+                for (any, f) in removed.by_cutter.iter_mut().zip(flags.cut) {
                     *any |= f;
                 }
+                removed.group_tests += flags.group_tests;
+                removed.group_skips += flags.group_skips;
             }
             grids[g].ctx.apply(k % nbu, k / nbu, block, cut);
         }
@@ -126,11 +172,21 @@ impl BatchContext<'_> {
         self.ctx.rows_of(bv)
     }
 
-    /// Cuts the rays of row `iv` of block column `bu` by every cutter in turn, reading the
-    /// block only; also which cutters changed a ray.
-    fn cut_row(&self, bu: usize, block: &Block, iv: usize) -> (RowsCut, Vec<bool>) {
+    /// Cuts the rays of row `iv` of block column `bu` by every cutter in turn, a group's
+    /// cutters skipped where its test clears the ray, reading the block only; also which
+    /// cutters changed a ray.
+    fn cut_row(
+        &self,
+        bu: usize,
+        block: &Block,
+        iv: usize,
+        groups: &[Group],
+    ) -> (RowsCut, RowFlags) {
         let c = &self.ctx;
-        let mut flags = vec![false; self.cutters.len()];
+        let mut flags = RowFlags {
+            cut: vec![false; self.cutters.len()],
+            ..RowFlags::default()
+        };
         let mut used = Vec::new();
         let mut bufs = RayBuffers::default();
         let (mut new, mut changes) = (Vec::new(), Vec::new());
@@ -139,22 +195,38 @@ impl BatchContext<'_> {
             let local = (iv % BLOCK) * BLOCK + iu % BLOCK;
             let o = c.origin(iu, iv);
             let mut changed = false;
-            for (k, ((cutter, line), each)) in self.cutters.iter().zip(&self.each).enumerate() {
-                let Some((ru, rv, along)) = each else {
-                    continue;
-                };
-                if iu < ru.0 || iu > ru.1 || iv < rv.0 || iv > rv.1 {
-                    continue;
-                }
+            // Whether the ray lies in cutter k's index ranges, and those ranges' extent along it.
+            let reach = |k: usize| {
+                self.each[k]
+                    .filter(|(u, v, _)| (u.0..=u.1).contains(&iu) && (v.0..=v.1).contains(&iv))
+                    .map(|(_, _, along)| along)
+            };
+            let mut group = groups.iter().peekable();
+            let mut k = 0;
+            while k < self.cutters.len() {
                 let segs: &[Segment] = if changed {
                     &own
                 } else {
                     block.ray(local, &c.fill)
                 };
+                if let Some(g) = group.next_if(|g| g.cutters.start == k) {
+                    let asked = g.cutters.clone().any(|j| reach(j).is_some());
+                    flags.group_tests += u64::from(asked);
+                    if !asked || !g.cull.may_cut(&o, c.axis, segs) {
+                        flags.group_skips += u64::from(asked);
+                        k = g.cutters.end;
+                        continue;
+                    }
+                }
+                let (cutter, line) = self.cutters[k];
+                k += 1;
+                let Some(along) = reach(k - 1) else {
+                    continue;
+                };
                 next.clear();
-                let cutter = (*cutter, *line, *along);
+                let cutter = (cutter, line, along);
                 if cut_ray(cutter, &o, c.axis, segs, &mut bufs, &mut next, &mut used) {
-                    flags[k] = true;
+                    flags.cut[k - 1] = true;
                     changed = true;
                     std::mem::swap(&mut own, &mut next);
                 }
@@ -171,4 +243,13 @@ impl BatchContext<'_> {
         }
         (RowsCut { new, changes, used }, flags)
     }
+}
+
+/// What one row's cut says of the cutters: which changed a ray, and how often the groups'
+/// tests were asked and cleared a ray.
+#[derive(Default)]
+struct RowFlags {
+    cut: Vec<bool>,
+    group_tests: u64,
+    group_skips: u64,
 }

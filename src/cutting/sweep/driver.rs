@@ -113,10 +113,19 @@ impl SweepObserver for NoObserver {
 /// ([`SweepObserver::looks`]).
 const BATCH: usize = 16;
 
+/// Consecutive envelope moves of a batch tested together by one [`GroupHull`].
+const GROUP: usize = 4;
+
+/// The groups' tests are kept while they clear at least one in this many rays they are asked
+/// about; else they rest for this many batches and are tried again.
+const GROUP_TRIAL: u64 = 8;
+
 /// Envelope moves waiting to be cut together: each with its index, move and the piece it
 /// is shown to the observer as.
 struct Batch<'m> {
     moves: Vec<(RotaryEnvelope, usize, &'m Move, Piece)>,
+    /// Batches left before the groups' tests are tried again (0: they are used).
+    groups_rest: u64,
 }
 
 impl<'m> Batch<'m> {
@@ -168,9 +177,37 @@ impl<'m> Batch<'m> {
             .iter()
             .map(|(env, _, mv, _)| (env as &dyn Cutter, mv.line as u32))
             .collect();
-        let removed = stock.remove_each(&cutters);
-        drop(cutters);
-        for ((_, k, mv, piece), cut) in self.moves.drain(..).zip(removed) {
+        // Groups of consecutive moves, each tested at once by its hull: a ray whose material
+        // the hull misses skips the group's moves (the same stock; see `GroupHull`).
+        let tried = self.groups_rest == 0;
+        let hulls: Vec<(std::ops::Range<usize>, GroupHull)> = if tried {
+            let envs: Vec<&RotaryEnvelope> = self.moves.iter().map(|(env, ..)| env).collect();
+            (0..envs.len())
+                .step_by(GROUP)
+                .map(|a| a..(a + GROUP).min(envs.len()))
+                .filter(|g| g.len() > 1)
+                .map(|g| (g.clone(), GroupHull::of(&envs[g])))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        let groups: Vec<Group> = hulls
+            .iter()
+            .map(|(g, hull)| Group {
+                cutters: g.clone(),
+                cull: hull,
+            })
+            .collect();
+        let removed = stock.remove_each(&cutters, &groups);
+        drop((cutters, groups));
+        self.groups_rest = if !tried {
+            self.groups_rest - 1
+        } else if removed.group_skips * GROUP_TRIAL < removed.group_tests {
+            GROUP_TRIAL
+        } else {
+            0
+        };
+        for ((_, k, mv, piece), cut) in self.moves.drain(..).zip(removed.by_cutter) {
             if cut {
                 report.cutting_moves += 1;
             }
@@ -247,7 +284,10 @@ pub fn sweep_observed<'a>(
     progress.start("sweep", moves.len() as u64);
     let joinable = TranslatedTool::has_closed_form(tool);
     let mut run: Option<Run> = None;
-    let mut batch = Batch { moves: Vec::new() };
+    let mut batch = Batch {
+        moves: Vec::new(),
+        groups_rest: 0,
+    };
     // Before the first move every axis is taken as last moved in +.
     let (errors, mut state) = match machine {
         Kinematics::Chain(chain) => (

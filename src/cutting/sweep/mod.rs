@@ -46,9 +46,10 @@
 
 use crate::cutting::cutter::{Line, Quadric, SweptTool, t_extremes};
 use crate::cutting::envelope::{
-    ENVELOPE_TOL, MovePath, RotaryEnvelope, SampledPath, error_motion_speed, rotation_and_travel,
+    ENVELOPE_TOL, GroupHull, MovePath, RotaryEnvelope, SampledPath, error_motion_speed,
+    rotation_and_travel,
 };
-use crate::cutting::stock::{Cutter, RayCut, TriDexel};
+use crate::cutting::stock::{Cutter, Group, RayCut, TriDexel};
 use crate::cutting::tool::{Tool, ToolKind};
 use crate::machine::PoseSource;
 use crate::machine::chain::{AxisKind, Chain};
