@@ -43,6 +43,8 @@ pub(super) const CULL_MARGIN: Real = 1e-9;
 #[derive(Clone, Debug)]
 pub(super) struct CullPoses {
     pub(super) poses: Vec<Sample>,
+    /// Each kept pose's [`axis_dirs`].
+    dirs: Vec<[Vector3; 3]>,
     pub(super) grow: Real,
     /// The growth of a half-cell's middle pose that holds the tool over the half-cell.
     pub(super) half_grow: Real,
@@ -52,10 +54,11 @@ impl CullPoses {
     /// The kept poses of `path` for `cells` cells with speed bound `speed`.
     pub(super) fn new(path: &MovePath, cells: usize, speed: Real) -> Self {
         let n = CULL_STEPS * cells;
-        let poses = (0..=n)
+        let poses: Vec<Sample> = (0..=n)
             .map(|k| path.sample(k as Real / n as Real))
             .collect();
         Self {
+            dirs: poses.iter().map(axis_dirs).collect(),
             poses,
             grow: speed / (2 * n) as Real + CULL_MARGIN,
             half_grow: speed / (4 * cells) as Real + CULL_MARGIN,
@@ -63,32 +66,43 @@ impl CullPoses {
     }
 }
 
+/// The directions of the x, y and z axes in a pose's tool frame (`rot.tr_mul(e_a)`), kept so
+/// that the cull test of an axis ray need not transform its direction.
+pub(super) fn axis_dirs(s: &Sample) -> [Vector3; 3] {
+    std::array::from_fn(|a| s.rot.tr_mul(&Vector3::ith(a, 1.0)))
+}
+
 impl RotaryEnvelope {
-    /// Whether the move may change the material `segs` of the ray `o + t·e` (`e` unit):
+    /// Whether the move may change the material `segs` of the ray `o + t·e_axis`:
     /// false only when no grown kept pose meets any segment (see the module docs). Each
     /// cell is first tested whole, by its middle pose grown by `δ` (which holds the tool
     /// throughout the cell); its kept poses only when that meets the material, the cell's
     /// ends first (where a move that cuts the ray usually meets its material), then the
     /// inner ones of each half-cell whose middle pose, grown to hold the half, meets it.
-    pub fn may_cut(&self, o: &Point3, e: &Vector3, segs: &[Segment]) -> bool {
-        let meets = |s: &Sample, g: Real| {
+    pub fn may_cut(&self, o: &Point3, axis: usize, segs: &[Segment]) -> bool {
+        let meets = |s: &Sample, u: &[Vector3; 3], g: Real| {
             let p = s.rot.tr_mul(&(o - s.tip));
-            let u = s.rot.tr_mul(e);
-            tool_interval(self.shape, self.r, self.l, &p, &u, g)
+            tool_interval(self.shape, self.r, self.l, &p, &u[axis], g)
                 .is_some_and(|(t0, _, t1, _)| segs.iter().any(|m| t0 < m.hi.t && t1 > m.lo.t))
         };
         let (g, half) = (self.cull.grow, self.cull.half_grow);
         const H: usize = CULL_STEPS / 2;
         (0..self.cells).any(|j| {
-            let kept = &self.cull.poses[j * CULL_STEPS..=(j + 1) * CULL_STEPS];
+            let first = j * CULL_STEPS;
+            let at = |i: usize, g: Real| {
+                meets(&self.cull.poses[first + i], &self.cull.dirs[first + i], g)
+            };
             // Half 0 holds kept poses 0..=H (0 tested already), half 1 H..=2H (H and 2H
             // tested already).
             let inner = |h: usize| {
-                let range = if h == 0 { 1..=H } else { H + 1..=2 * H - 1 };
-                meets(&kept[h * H + H / 2], half) && kept[range].iter().any(|s| meets(s, g))
+                let mut range = if h == 0 { 1..=H } else { H + 1..=2 * H - 1 };
+                at(h * H + H / 2, half) && range.any(|i| at(i, g))
             };
-            meets(&self.samples[2 * j + 1], self.delta + CULL_MARGIN)
-                && (meets(&kept[0], g) || meets(&kept[CULL_STEPS], g) || inner(0) || inner(1))
+            meets(
+                &self.samples[2 * j + 1],
+                &self.sample_dirs[2 * j + 1],
+                self.delta + CULL_MARGIN,
+            ) && (at(0, g) || at(CULL_STEPS, g) || inner(0) || inner(1))
         })
     }
 }

@@ -150,6 +150,8 @@ pub struct RotaryEnvelope {
     part_speed: [Real; PARTS],
     /// Poses at λ = k/(2N), k = 0..=2N: cell ends at even k, middles at odd k.
     samples: Vec<Sample>,
+    /// Each sample's directions of the x, y and z axes in its tool frame (`cull::axis_dirs`).
+    sample_dirs: Vec<[Vector3; 3]>,
     /// Poses halfway between consecutive samples, with their λ: where every ray's first
     /// bisection and touch test look (computed once per move instead of once per ray; the
     /// same pose bit for bit, see [`RotaryEnvelope::sample_at`]).
@@ -184,9 +186,7 @@ impl Cutter for RotaryEnvelope {
     }
 
     fn may_cut(&self, origin: &Point3, axis: usize, segs: &[Segment]) -> bool {
-        let mut e = Vector3::zeros();
-        e[axis] = 1.0;
-        RotaryEnvelope::may_cut(self, origin, &e, segs)
+        RotaryEnvelope::may_cut(self, origin, axis, segs)
     }
 
     fn ray_cuts_in_span(

@@ -122,6 +122,7 @@ impl RotaryEnvelope {
             })
             .collect();
         let cull = cull::CullPoses::new(&path, cells, speed);
+        let sample_dirs = samples.iter().map(cull::axis_dirs).collect();
         Ok(Self {
             cull,
             shape,
@@ -134,6 +135,7 @@ impl RotaryEnvelope {
             part_z,
             part_speed,
             samples,
+            sample_dirs,
             quarters,
             cell_boxes,
             bounds,
@@ -157,8 +159,13 @@ impl RotaryEnvelope {
     /// Whether the ray meets the tool at a pose grown by `grow` (mm) within the ray's span.
     #[inline(always)]
     fn meets_grown(&self, s: &Sample, ray: &Ray, grow: Real) -> bool {
+        self.meets_grown_along(s, ray, &s.rot.tr_mul(ray.e), grow)
+    }
+
+    /// [`Self::meets_grown`] with the ray's direction in the pose's tool frame given.
+    #[inline(always)]
+    fn meets_grown_along(&self, s: &Sample, ray: &Ray, u: &Vector3, grow: Real) -> bool {
         let p = s.rot.tr_mul(&(ray.o - s.tip));
-        let u = s.rot.tr_mul(ray.e);
         let meets = |(t0, _, t1, _): (Real, Face, Real, Face)| t1 >= ray.span.0 && t0 <= ray.span.1;
         // A ball's interval holds its sphere's: when that meets the span so does the tool's
         // (the shank's cylinder, with its divisions, is then not needed for the answer)
@@ -171,8 +178,13 @@ impl RotaryEnvelope {
     /// The ray evaluated exactly at a pose.
     #[inline(always)]
     fn probe(&self, s: &Sample, lambda: Real, ray: &Ray) -> Probe {
+        self.probe_along(s, lambda, ray, s.rot.tr_mul(ray.e))
+    }
+
+    /// [`Self::probe`] with the ray's direction in the pose's tool frame given.
+    #[inline(always)]
+    fn probe_along(&self, s: &Sample, lambda: Real, ray: &Ray, u: Vector3) -> Probe {
         let p = s.rot.tr_mul(&(ray.o - s.tip));
-        let u = s.rot.tr_mul(ray.e);
         let hit =
             tool_interval(self.shape, self.r, self.l, &p, &u, 0.0).map(|(t0, f0, t1, f1)| Hit {
                 t_in: t0,
@@ -245,6 +257,11 @@ impl RotaryEnvelope {
         }
         let ray = Ray { o, e, span };
         let n = self.cells;
+        // The ray's direction in sample k's tool frame: kept for an axis ray.
+        let along = |k: usize| match axis {
+            Some(a) => self.sample_dirs[k][a],
+            None => self.samples[k].rot.tr_mul(e),
+        };
         SCRATCH.with_borrow_mut(|scratch| {
             let Scratch {
                 grown,
@@ -257,7 +274,12 @@ impl RotaryEnvelope {
             grown.clear();
             grown.extend((0..n).map(|j| {
                 box_meets(&self.cell_boxes[j]).is_some_and(|(t0, t1)| t1 >= span.0 && t0 <= span.1)
-                    && self.meets_grown(&self.samples[2 * j + 1], &ray, self.delta)
+                    && self.meets_grown_along(
+                        &self.samples[2 * j + 1],
+                        &ray,
+                        &along(2 * j + 1),
+                        self.delta,
+                    )
             }));
             if !grown.iter().any(|&g| g) {
                 return;
@@ -271,7 +293,12 @@ impl RotaryEnvelope {
                 for (k, at) in slot.iter_mut().enumerate().skip(2 * j).take(3) {
                     if *at == NO_PROBE {
                         *at = probes.len() as u32;
-                        probes.push(self.probe(&self.samples[k], self.lambda_of(k), &ray));
+                        probes.push(self.probe_along(
+                            &self.samples[k],
+                            self.lambda_of(k),
+                            &ray,
+                            along(k),
+                        ));
                     }
                 }
             }

@@ -692,7 +692,7 @@ fn culled_rays_meet_no_pose_of_the_move() {
                     let mut o = Point3::origin();
                     o[u] = b.min[u] + 0.05 * i as Real;
                     o[v] = b.min[v] + 0.05 * j as Real;
-                    if env.may_cut(&o, &e, &material) {
+                    if env.may_cut(&o, axis, &material) {
                         continue;
                     }
                     skipped += 1;

@@ -34,7 +34,9 @@
 //! [`SweepObserver`] trait) both use it, so they remove the same material bit for bit. When
 //! the observer does not look at the stock (the plain sweep), up to 16 consecutive envelope
 //! moves are cut together, each ray through all of them in turn
-//! ([`TriDexel::remove_each`]): the same stock, bit for bit, as move by move.
+//! ([`TriDexel::remove_each`]), and each run of four of them has one test for the lot
+//! ([`GroupHull`]: a ray whose material it misses skips the four): the same stock, bit for
+//! bit, as move by move.
 //!
 //! **Invariant:** the sweep reads moves and poses; it never parses text or touches files; an
 //! observer only reads the stock.
