@@ -156,6 +156,8 @@ pub struct RotaryEnvelope {
     /// bisection and touch test look (computed once per move instead of once per ray; the
     /// same pose bit for bit, see [`RotaryEnvelope::sample_at`]).
     quarters: Vec<(Real, Sample)>,
+    /// Each quarter pose's directions of the x, y and z axes in its tool frame.
+    quarter_dirs: Vec<[Vector3; 3]>,
     /// Box of each cell's grown tool.
     cell_boxes: Vec<Aabb>,
     bounds: Aabb,

@@ -133,6 +133,8 @@ pub(super) struct Ray<'a> {
     pub(super) o: &'a Point3,
     pub(super) e: &'a Vector3,
     pub(super) span: (Real, Real),
+    /// The axis `e` is, if it is one (its direction in a stored pose's tool frame is kept).
+    pub(super) axis: Option<usize>,
 }
 
 /// The tool's outward normal (tool frame) on `face` at the tool-frame point `q` (`r` the

@@ -115,7 +115,7 @@ impl RotaryEnvelope {
             .map(|j| frame_box(&samples[2 * j + 1], shape, r, l, delta))
             .collect();
         let lambda_of = |k: usize| k as Real / (2 * cells) as Real;
-        let quarters = (0..2 * cells)
+        let quarters: Vec<(Real, Sample)> = (0..2 * cells)
             .map(|k| {
                 let mid = 0.5 * (lambda_of(k) + lambda_of(k + 1));
                 (mid, path.sample(mid))
@@ -123,6 +123,7 @@ impl RotaryEnvelope {
             .collect();
         let cull = cull::CullPoses::new(&path, cells, speed);
         let sample_dirs = samples.iter().map(cull::axis_dirs).collect();
+        let quarter_dirs = quarters.iter().map(|(_, s)| cull::axis_dirs(s)).collect();
         Ok(Self {
             cull,
             shape,
@@ -137,6 +138,7 @@ impl RotaryEnvelope {
             samples,
             sample_dirs,
             quarters,
+            quarter_dirs,
             cell_boxes,
             bounds,
         })
@@ -156,15 +158,10 @@ impl RotaryEnvelope {
         k as Real / (2 * self.cells) as Real
     }
 
-    /// Whether the ray meets the tool at a pose grown by `grow` (mm) within the ray's span.
+    /// Whether the ray meets the tool at a pose grown by `grow` (mm) within the ray's span;
+    /// `u` the ray's direction in the pose's tool frame.
     #[inline(always)]
-    fn meets_grown(&self, s: &Sample, ray: &Ray, grow: Real) -> bool {
-        self.meets_grown_along(s, ray, &s.rot.tr_mul(ray.e), grow)
-    }
-
-    /// [`Self::meets_grown`] with the ray's direction in the pose's tool frame given.
-    #[inline(always)]
-    fn meets_grown_along(&self, s: &Sample, ray: &Ray, u: &Vector3, grow: Real) -> bool {
+    fn meets_grown(&self, s: &Sample, ray: &Ray, u: &Vector3, grow: Real) -> bool {
         let p = s.rot.tr_mul(&(ray.o - s.tip));
         let meets = |(t0, _, t1, _): (Real, Face, Real, Face)| t1 >= ray.span.0 && t0 <= ray.span.1;
         // A ball's interval holds its sphere's: when that meets the span so does the tool's
@@ -175,15 +172,9 @@ impl RotaryEnvelope {
         tool_interval(self.shape, self.r, self.l, &p, &u, grow).is_some_and(meets)
     }
 
-    /// The ray evaluated exactly at a pose.
+    /// The ray evaluated exactly at a pose; `u` its direction in the pose's tool frame.
     #[inline(always)]
-    fn probe(&self, s: &Sample, lambda: Real, ray: &Ray) -> Probe {
-        self.probe_along(s, lambda, ray, s.rot.tr_mul(ray.e))
-    }
-
-    /// [`Self::probe`] with the ray's direction in the pose's tool frame given.
-    #[inline(always)]
-    fn probe_along(&self, s: &Sample, lambda: Real, ray: &Ray, u: Vector3) -> Probe {
+    fn probe(&self, s: &Sample, lambda: Real, ray: &Ray, u: Vector3) -> Probe {
         let p = s.rot.tr_mul(&(ray.o - s.tip));
         let hit =
             tool_interval(self.shape, self.r, self.l, &p, &u, 0.0).map(|(t0, f0, t1, f1)| Hit {
@@ -219,21 +210,28 @@ impl RotaryEnvelope {
 
     #[inline(always)]
     fn probe_at(&self, lambda: Real, ray: &Ray) -> Probe {
-        self.probe(&self.sample_at(lambda), lambda, ray)
+        let (s, u) = self.sample_at(lambda, ray);
+        self.probe(&s, lambda, ray, u)
     }
 
-    /// The pose at `lambda`: the stored one when `lambda` is exactly a quarter point (the
-    /// midpoint of two consecutive samples as [`Self::refine`] computes it), else computed.
+    /// The pose at `lambda` and the ray's direction in its tool frame: the stored ones when
+    /// `lambda` is exactly a quarter point (the midpoint of two consecutive samples as
+    /// [`Self::refine`] computes it) and the ray an axis ray, else computed.
     #[inline(always)]
-    pub(super) fn sample_at(&self, lambda: Real) -> Sample {
+    fn sample_at(&self, lambda: Real, ray: &Ray) -> (Sample, Vector3) {
         let k = ((lambda * (4 * self.cells) as Real - 1.0) / 2.0).round();
         if k >= 0.0
             && let Some((at, s)) = self.quarters.get(k as usize)
             && *at == lambda
         {
-            return *s;
+            let u = match ray.axis {
+                Some(a) => self.quarter_dirs[k as usize][a],
+                None => s.rot.tr_mul(ray.e),
+            };
+            return (*s, u);
         }
-        self.path.sample(lambda)
+        let s = self.path.sample(lambda);
+        (s, s.rot.tr_mul(ray.e))
     }
 
     /// The sorted, disjoint intervals of the ray `o + t·e` (`e` unit) inside the swept volume,
@@ -255,7 +253,7 @@ impl RotaryEnvelope {
         if box_meets(&self.bounds).is_none() {
             return;
         }
-        let ray = Ray { o, e, span };
+        let ray = Ray { o, e, span, axis };
         let n = self.cells;
         // The ray's direction in sample k's tool frame: kept for an axis ray.
         let along = |k: usize| match axis {
@@ -274,7 +272,7 @@ impl RotaryEnvelope {
             grown.clear();
             grown.extend((0..n).map(|j| {
                 box_meets(&self.cell_boxes[j]).is_some_and(|(t0, t1)| t1 >= span.0 && t0 <= span.1)
-                    && self.meets_grown_along(
+                    && self.meets_grown(
                         &self.samples[2 * j + 1],
                         &ray,
                         &along(2 * j + 1),
@@ -293,7 +291,7 @@ impl RotaryEnvelope {
                 for (k, at) in slot.iter_mut().enumerate().skip(2 * j).take(3) {
                     if *at == NO_PROBE {
                         *at = probes.len() as u32;
-                        probes.push(self.probe_along(
+                        probes.push(self.probe(
                             &self.samples[k],
                             self.lambda_of(k),
                             &ray,
@@ -428,10 +426,10 @@ impl RotaryEnvelope {
             }
             // And the grown tool about the middle to meet it.
             let mid = 0.5 * (a.lambda + b.lambda);
-            let s = self.sample_at(mid);
+            let (s, u) = self.sample_at(mid, ray);
             let grow = self.speed * w / 2.0 - ENVELOPE_TOL;
-            if grow > 0.0 && self.meets_grown(&s, ray, grow) {
-                let m = self.probe(&s, mid, ray);
+            if grow > 0.0 && self.meets_grown(&s, ray, &u, grow) {
+                let m = self.probe(&s, mid, ray, u);
                 offer(acc, &m);
                 self.refine(ray, a, &m, acc, depth + 1);
                 self.refine(ray, &m, b, acc, depth + 1);
