@@ -645,6 +645,36 @@ proptest! {
     }
 }
 
+/// Material along the whole of a ray.
+fn whole_ray() -> [crate::cutting::stock::Segment; 1] {
+    use crate::cutting::stock::{Crossing, Segment};
+    let end = |t: Real| Crossing {
+        t,
+        normal: [0.0, 0.0, 1.0],
+        line: 0,
+    };
+    [Segment {
+        lo: end(-1e3),
+        hi: end(1e3),
+    }]
+}
+
+/// Every x, y and z ray of a 0.05 mm grid across `b`: `f(origin, axis, direction)`.
+fn grid_rays(b: &Aabb, mut f: impl FnMut(Point3, usize, Vector3)) {
+    for axis in 0..3 {
+        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+        let n = |k: usize| ((b.max[k] - b.min[k]) / 0.05) as usize;
+        for i in 0..=n(u) {
+            for j in 0..=n(v) {
+                let mut o = Point3::origin();
+                o[u] = b.min[u] + 0.05 * i as Real;
+                o[v] = b.min[v] + 0.05 * j as Real;
+                f(o, axis, Vector3::ith(axis, 1.0));
+            }
+        }
+    }
+}
+
 /// The cull never skips a ray the tool meets: material along the whole of every ray of a
 /// fine grid (x, y and z rays at 0.05 mm across the move's box) on moves of several cells
 /// (A turning 12° and 30° with X, Y and Z), each ray the cull skips is met by no pose of
@@ -653,17 +683,8 @@ proptest! {
 /// them: the kept poses decided.
 #[test]
 fn culled_rays_meet_no_pose_of_the_move() {
-    use crate::cutting::stock::{Crossing, Segment};
     let c = deviated();
-    let end = |t: Real| Crossing {
-        t,
-        normal: [0.0, 0.0, 1.0],
-        line: 0,
-    };
-    let material = [Segment {
-        lo: end(-1e3),
-        hi: end(1e3),
-    }];
+    let material = whole_ray();
     for (kind, a1, dx, dz) in [
         (ToolKind::Flat, 12.0, 0.4, -0.2),
         (ToolKind::Ball, 30.0, -0.6, 0.3),
@@ -682,35 +703,24 @@ fn culled_rays_meet_no_pose_of_the_move() {
             .collect();
         let b = env.bounds();
         let (mut skipped, mut decided_by_kept) = (0, 0);
-        for axis in 0..3 {
-            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-            let n = |k: usize| ((b.max[k] - b.min[k]) / 0.05) as usize;
-            let mut e = Vector3::zeros();
-            e[axis] = 1.0;
-            for i in 0..=n(u) {
-                for j in 0..=n(v) {
-                    let mut o = Point3::origin();
-                    o[u] = b.min[u] + 0.05 * i as Real;
-                    o[v] = b.min[v] + 0.05 * j as Real;
-                    if env.may_cut(&o, axis, &material) {
-                        continue;
-                    }
-                    skipped += 1;
-                    let meets_at = |s: &Sample, g: Real| {
-                        let p = s.rot.tr_mul(&(o - s.tip));
-                        let w = s.rot.tr_mul(&e);
-                        tool_interval(env.shape, env.r, env.l, &p, &w, g).is_some()
-                    };
-                    if (0..env.cells()).any(|k| meets_at(&env.samples[2 * k + 1], env.delta)) {
-                        decided_by_kept += 1;
-                    }
-                    assert!(
-                        !poses.iter().any(|s| meets_at(s, 0.0)),
-                        "{kind:?}: the ray through {o:?} along axis {axis} was skipped but the tool meets it"
-                    );
-                }
+        grid_rays(&b, |o, axis, e| {
+            if env.may_cut(&o, axis, &material) {
+                return;
             }
-        }
+            skipped += 1;
+            let meets_at = |s: &Sample, g: Real| {
+                let p = s.rot.tr_mul(&(o - s.tip));
+                let w = s.rot.tr_mul(&e);
+                tool_interval(env.shape, env.r, env.l, &p, &w, g).is_some()
+            };
+            if (0..env.cells()).any(|k| meets_at(&env.samples[2 * k + 1], env.delta)) {
+                decided_by_kept += 1;
+            }
+            assert!(
+                !poses.iter().any(|s| meets_at(s, 0.0)),
+                "{kind:?}: the ray through {o:?} along axis {axis} was skipped but the tool meets it"
+            );
+        });
         assert!(
             decided_by_kept > 1000,
             "{kind:?}: {decided_by_kept} of {skipped}"
@@ -727,17 +737,9 @@ fn culled_rays_meet_no_pose_of_the_move() {
 /// cell middle is 1.5 moves from the reference pose).
 #[test]
 fn rays_a_group_hull_clears_meet_no_pose_of_its_moves() {
-    use crate::cutting::stock::{Crossing, GroupCull, Segment};
+    use crate::cutting::stock::GroupCull;
     let c = deviated();
-    let end = |t: Real| Crossing {
-        t,
-        normal: [0.0, 0.0, 1.0],
-        line: 0,
-    };
-    let material = [Segment {
-        lo: end(-1e3),
-        hi: end(1e3),
-    }];
+    let material = whole_ray();
     for kind in [ToolKind::Flat, ToolKind::Ball] {
         let tool = Tool::try_new(kind, 4.0, 10.0).expect("valid");
         let envs = move_chain(&c, &tool, [0.5, 3.0, -10.0], &[(1.0, 0.1, -0.05, -0.05); 4]);
@@ -760,35 +762,24 @@ fn rays_a_group_hull_clears_meet_no_pose_of_its_moves() {
             b.grow(&eb.max);
         }
         let (mut cleared, mut near) = (0, 0);
-        for axis in 0..3 {
-            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-            let n = |k: usize| ((b.max[k] - b.min[k]) / 0.05) as usize;
-            let mut e = Vector3::zeros();
-            e[axis] = 1.0;
-            for i in 0..=n(u) {
-                for j in 0..=n(v) {
-                    let mut o = Point3::origin();
-                    o[u] = b.min[u] + 0.05 * i as Real;
-                    o[v] = b.min[v] + 0.05 * j as Real;
-                    if GroupCull::may_cut(&hull, &o, axis, &material) {
-                        continue;
-                    }
-                    cleared += 1;
-                    let meets = |s: &Sample, g: Real| {
-                        let p = s.rot.tr_mul(&(o - s.tip));
-                        let w = s.rot.tr_mul(&e);
-                        tool_interval(envs[0].shape, envs[0].r, envs[0].l, &p, &w, g).is_some()
-                    };
-                    assert!(
-                        !poses.iter().any(|s| meets(s, 0.0)),
-                        "{kind:?}: the hull cleared the ray through {o:?} along axis {axis}, which a pose meets"
-                    );
-                    if poses.iter().step_by(64).any(|s| meets(s, 0.5)) {
-                        near += 1;
-                    }
-                }
+        grid_rays(&b, |o, axis, e| {
+            if GroupCull::may_cut(&hull, &o, axis, &material) {
+                return;
             }
-        }
+            cleared += 1;
+            let meets = |s: &Sample, g: Real| {
+                let p = s.rot.tr_mul(&(o - s.tip));
+                let w = s.rot.tr_mul(&e);
+                tool_interval(envs[0].shape, envs[0].r, envs[0].l, &p, &w, g).is_some()
+            };
+            assert!(
+                !poses.iter().any(|s| meets(s, 0.0)),
+                "{kind:?}: the hull cleared the ray through {o:?} along axis {axis}, which a pose meets"
+            );
+            if poses.iter().step_by(64).any(|s| meets(s, 0.5)) {
+                near += 1;
+            }
+        });
         assert!(
             near > 300,
             "{kind:?}: {near} of {cleared} cleared rays within 0.5 mm of a pose"
