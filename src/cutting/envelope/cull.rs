@@ -72,6 +72,12 @@ pub(super) fn axis_dirs(s: &Sample) -> [Vector3; 3] {
     std::array::from_fn(|a| s.rot.tr_mul(&Vector3::ith(a, 1.0)))
 }
 
+/// Whether a (grown) tool's interval along a ray meets any of the ray's material `segs`
+/// (open intervals, as the stock subtracts them).
+fn meets_material(interval: Option<(Real, Face, Real, Face)>, segs: &[Segment]) -> bool {
+    interval.is_some_and(|(t0, _, t1, _)| segs.iter().any(|m| t0 < m.hi.t && t1 > m.lo.t))
+}
+
 impl RotaryEnvelope {
     /// Whether the move may change the material `segs` of the ray `o + t·e_axis`:
     /// false only when no grown kept pose meets any segment (see the module docs). Each
@@ -82,8 +88,10 @@ impl RotaryEnvelope {
     pub fn may_cut(&self, o: &Point3, axis: usize, segs: &[Segment]) -> bool {
         let meets = |s: &Sample, u: &[Vector3; 3], g: Real| {
             let p = s.rot.tr_mul(&(o - s.tip));
-            tool_interval(self.shape, self.r, self.l, &p, &u[axis], g)
-                .is_some_and(|(t0, _, t1, _)| segs.iter().any(|m| t0 < m.hi.t && t1 > m.lo.t))
+            meets_material(
+                tool_interval(self.shape, self.r, self.l, &p, &u[axis], g),
+                segs,
+            )
         };
         let (g, half) = (self.cull.grow, self.cull.half_grow);
         const H: usize = CULL_STEPS / 2;
@@ -118,9 +126,10 @@ pub struct GroupHull {
     shape: Shape,
     r: Real,
     l: Real,
-    /// The reference pose: the middle sample of the group's middle move.
-    rot: Matrix3,
-    tip: Point3,
+    /// The reference pose: the middle sample of the group's middle move, and its
+    /// [`axis_dirs`].
+    reference: Sample,
+    dirs: [Vector3; 3],
     /// The growth that holds every move's tool (mm).
     grow: Real,
 }
@@ -149,8 +158,8 @@ impl GroupHull {
             shape: mid.shape,
             r,
             l,
-            rot: reference.rot,
-            tip: reference.tip,
+            reference,
+            dirs: axis_dirs(&reference),
             grow: grow * (1.0 + HULL_ROUNDING) + CULL_MARGIN,
         }
     }
@@ -163,11 +172,10 @@ impl GroupHull {
 
 impl crate::cutting::stock::GroupCull for GroupHull {
     /// False only when the grown reference tool's interval along the ray misses every
-    /// material segment (open intervals, as the stock subtracts them).
+    /// material segment.
     fn may_cut(&self, o: &Point3, axis: usize, segs: &[Segment]) -> bool {
-        let p = self.rot.tr_mul(&(o - self.tip));
-        let u = self.rot.row(axis).transpose();
-        tool_interval(self.shape, self.r, self.l, &p, &u, self.grow)
-            .is_some_and(|(t0, _, t1, _)| segs.iter().any(|m| t0 < m.hi.t && t1 > m.lo.t))
+        let p = self.reference.rot.tr_mul(&(o - self.reference.tip));
+        let interval = tool_interval(self.shape, self.r, self.l, &p, &self.dirs[axis], self.grow);
+        meets_material(interval, segs)
     }
 }

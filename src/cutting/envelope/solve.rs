@@ -166,10 +166,10 @@ impl RotaryEnvelope {
         let meets = |(t0, _, t1, _): (Real, Face, Real, Face)| t1 >= ray.span.0 && t0 <= ray.span.1;
         // A ball's interval holds its sphere's: when that meets the span so does the tool's
         // (the shank's cylinder, with its divisions, is then not needed for the answer)
-        if self.shape == Shape::Ball && ball_sphere(self.r, &p, &u, grow).is_some_and(meets) {
+        if self.shape == Shape::Ball && ball_sphere(self.r, &p, u, grow).is_some_and(meets) {
             return true;
         }
-        tool_interval(self.shape, self.r, self.l, &p, &u, grow).is_some_and(meets)
+        tool_interval(self.shape, self.r, self.l, &p, u, grow).is_some_and(meets)
     }
 
     /// The ray evaluated exactly at a pose; `u` its direction in the pose's tool frame.
