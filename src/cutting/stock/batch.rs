@@ -204,15 +204,18 @@ impl BatchContext<'_> {
             let mut group = groups.iter().peekable();
             let mut k = 0;
             while k < self.cutters.len() {
-                let segs: &[Segment] = if changed {
-                    &own
-                } else {
-                    block.ray(local, &c.fill)
+                // The ray's material as the cutters before k left it.
+                let segs = |own| {
+                    if changed {
+                        own
+                    } else {
+                        block.ray(local, &c.fill)
+                    }
                 };
                 if let Some(g) = group.next_if(|g| g.cutters.start == k) {
                     let asked = g.cutters.clone().any(|j| reach(j).is_some());
                     flags.group_tests += u64::from(asked);
-                    if !asked || !g.cull.may_cut(&o, c.axis, segs) {
+                    if !asked || !g.cull.may_cut(&o, c.axis, segs(&own)) {
                         flags.group_skips += u64::from(asked);
                         k = g.cutters.end;
                         continue;
@@ -225,7 +228,15 @@ impl BatchContext<'_> {
                 };
                 next.clear();
                 let cutter = (cutter, line, along);
-                if cut_ray(cutter, &o, c.axis, segs, &mut bufs, &mut next, &mut used) {
+                if cut_ray(
+                    cutter,
+                    &o,
+                    c.axis,
+                    segs(&own),
+                    &mut bufs,
+                    &mut next,
+                    &mut used,
+                ) {
                     flags.cut[k - 1] = true;
                     changed = true;
                     std::mem::swap(&mut own, &mut next);
