@@ -282,18 +282,19 @@ pub fn mesh_stock_adaptive(
     // The trees are no longer needed: freed before the outputs are joined (the peak).
     drop(forest);
     let outs: Vec<Out> = outs.into_iter().flatten().collect();
-    // Number the vertices in key order and join the triangles in tree order.
-    let mut verts: Vec<(Key, Point3)> =
-        Vec::with_capacity(outs.iter().map(|o| o.verts.len()).sum());
-    let mut tris: Vec<[Key; 3]> = Vec::with_capacity(outs.iter().map(|o| o.tris.len()).sum());
-    for o in outs {
-        verts.extend(o.verts);
-        tris.extend(o.tris);
+    for o in &outs {
         report.planar_leaves += o.planar;
         report.edge_leaves += o.edge;
         report.fine_cells += o.fine;
         report.corner_points += o.corners;
         report.feature_vertices += o.features;
+    }
+    // Number the vertices in key order (every tree's, one per key) and join the triangles
+    // in tree order, each tree's renumbered through its vertices' keys.
+    let mut verts: Vec<(Key, Point3)> =
+        Vec::with_capacity(outs.iter().map(|o| o.verts.len()).sum());
+    for o in &outs {
+        verts.extend_from_slice(&o.verts);
     }
     verts.par_sort_unstable_by_key(|v| v.0);
     verts.dedup_by_key(|v| v.0);
@@ -305,7 +306,18 @@ pub fn mesh_stock_adaptive(
         });
     }
     let index = |k: &Key| verts.partition_point(|v| v.0 < *k) as u32;
-    let triangles: Vec<[u32; 3]> = tris.par_iter().map(|t| t.each_ref().map(index)).collect();
+    let triangles: Vec<[u32; 3]> = outs
+        .into_par_iter()
+        .map(|o| {
+            let global: Vec<u32> = o.verts.iter().map(|(k, _)| index(k)).collect();
+            drop(o.verts);
+            o.faces
+                .iter()
+                .map(|f| f.map(|i| global[i as usize]))
+                .collect::<Vec<[u32; 3]>>()
+        })
+        .flatten_iter()
+        .collect();
     Ok((
         TriMesh {
             vertices: verts.into_iter().map(|v| v.1).collect(),

@@ -12,8 +12,13 @@ use super::*;
 
 #[derive(Default)]
 pub(super) struct Out {
+    /// The triangles by their corners' keys, while the tree is meshed.
     pub(super) tris: Vec<[Key; 3]>,
+    /// The tree's vertices, one per key, in key order (once the tree is meshed).
     pub(super) verts: Vec<(Key, Point3)>,
+    /// The triangles as indices into `verts` (once the tree is meshed; `tris` is then
+    /// empty): a quarter of their keys' size while every tree's output waits to be joined.
+    pub(super) faces: Vec<[u32; 3]>,
     /// Leaves whose triangulation failed: node, origin, size.
     pub(super) failed: Vec<(usize, [isize; 3], usize)>,
     pub(super) planar: usize,
@@ -321,9 +326,17 @@ impl Forest<'_> {
         out.verts.sort_unstable_by_key(|v| v.0);
         out.verts.dedup_by_key(|v| v.0);
         // Kept until every tree is meshed: hold no spare capacity (the duplicates just
-        // removed were most of the vertices).
+        // removed were most of the vertices), and the triangles by index, not by key.
         out.verts.shrink_to_fit();
-        out.tris.shrink_to_fit();
+        let verts = &out.verts;
+        // Every corner's key is among the tree's vertices (each leaf adds those it uses).
+        let index = |k: &Key| {
+            let i = verts.partition_point(|v| v.0 < *k);
+            debug_assert_eq!(verts.get(i).map(|v| v.0), Some(*k));
+            i as u32
+        };
+        out.faces = out.tris.iter().map(|t| t.each_ref().map(index)).collect();
+        out.tris = Vec::new();
         out
     }
 }
