@@ -6,6 +6,7 @@
 //! observer only reads the stock, so the removal is bit-identical whatever the observer.
 
 use super::*;
+use rayon::prelude::*;
 /// The moves with every arc replaced by chords within `bound` (mm) of it: borrowed as they
 /// are when there is no arc.
 pub fn as_chords(moves: &[Move], bound: Real) -> std::borrow::Cow<'_, [Move]> {
@@ -288,6 +289,8 @@ pub fn sweep_observed<'a>(
         moves: Vec::new(),
         groups_rest: 0,
     };
+    // A pose source's next moves, prepared ahead ([`Prepared`]).
+    let mut ahead: std::collections::VecDeque<Prepared> = std::collections::VecDeque::new();
     // Before the first move every axis is taken as last moved in +.
     let (errors, mut state) = match machine {
         Kinematics::Chain(chain) => (
@@ -336,52 +339,69 @@ pub fn sweep_observed<'a>(
                 } else {
                     Step::Curved {
                         rotary: omega != 0.0,
-                        pilot: Vec::new(),
+                        chain,
                     }
                 }
             }
             Kinematics::Poses(src) => {
-                let pilot = match pilot_poses(src, mv, &mut report) {
-                    Ok(p) => p,
+                // Every move of a pose source passes here once, in order: the queue holds
+                // the next moves' preparations (made side by side when it runs dry).
+                if ahead.is_empty() {
+                    let end = (k + AHEAD).min(moves.len());
+                    let next: Vec<Prepared> = moves[k..end]
+                        .par_iter()
+                        .map(|m| Prepared::of(src, tool, bound, m))
+                        .collect();
+                    ahead.extend(next);
+                }
+                let Prepared { pilot, curve } = ahead
+                    .pop_front()
+                    .unwrap_or_else(|| Prepared::of(src, tool, bound, mv));
+                let pilot = match pilot {
+                    Ok(p) => record_pilot(p, mv, &mut report),
                     Err(e) => {
                         // What came before the move is cut, as without the batch.
                         batch.flush(stock, &mut report, observer)?;
                         return Err(e);
                     }
                 };
-                if src.is_translation(&mv.start, &mv.end) {
-                    Step::Straight((pilot[0], pilot[PILOT_STEPS]))
-                } else {
-                    let rotary = AxisLetter::ALL
-                        .into_iter()
-                        .any(|l| l.is_rotary() && mv.start.get(l) != mv.end.get(l));
-                    Step::Curved { rotary, pilot }
+                match curve {
+                    None => Step::Straight((pilot[0], pilot[PILOT_STEPS])),
+                    Some(curve) => {
+                        let rotary = AxisLetter::ALL
+                            .into_iter()
+                            .any(|l| l.is_rotary() && mv.start.get(l) != mv.end.get(l));
+                        Step::Sampled {
+                            rotary,
+                            src,
+                            pilot,
+                            curve,
+                        }
+                    }
                 }
             }
         };
-        if let Step::Straight((p0, p1)) = step {
-            batch.flush(stock, &mut report, observer)?;
-            let tip0 = p0 * Point3::origin();
-            let tip1 = p1 * Point3::origin();
-            if let Some(r) = &mut run
-                && joinable
-                && mv.kind != MoveKind::Rapid
-                && r.extend(k, mv, &tip1, &p0.rotation)
-            {
+        let (rotary, e) = match step {
+            Step::Straight((p0, p1)) => {
+                batch.flush(stock, &mut report, observer)?;
+                let tip0 = p0 * Point3::origin();
+                let tip1 = p1 * Point3::origin();
+                if let Some(r) = &mut run
+                    && joinable
+                    && mv.kind != MoveKind::Rapid
+                    && r.extend(k, mv, &tip1, &p0.rotation)
+                {
+                    progress.advance(1);
+                    continue;
+                }
+                flush(run.take(), stock, tool, moves, &mut report, observer)?;
+                run = Some(Run::new(k, mv, tip0, tip1, p0.rotation));
                 progress.advance(1);
                 continue;
             }
-            flush(run.take(), stock, tool, moves, &mut report, observer)?;
-            run = Some(Run::new(k, mv, tip0, tip1, p0.rotation));
-        } else if let Step::Curved { rotary, pilot } = step {
-            flush(run.take(), stock, tool, moves, &mut report, observer)?;
-            if rotary {
-                report.rotary_moves += 1;
-            } else {
-                report.curved_moves += 1;
-            }
-            let e = match machine {
-                Kinematics::Chain(chain) => sweep_rotary(
+            Step::Curved { rotary, chain } => {
+                flush(run.take(), stock, tool, moves, &mut report, observer)?;
+                let e = sweep_rotary(
                     stock,
                     chain,
                     tool,
@@ -390,22 +410,37 @@ pub fn sweep_observed<'a>(
                     bound,
                     &mut report,
                     (observer, &mut batch),
-                )?,
-                Kinematics::Poses(src) => sweep_sampled(
+                )?;
+                (rotary, e)
+            }
+            Step::Sampled {
+                rotary,
+                src,
+                pilot,
+                curve,
+            } => {
+                flush(run.take(), stock, tool, moves, &mut report, observer)?;
+                let e = sweep_sampled(
                     stock,
                     src,
                     tool,
                     (k, mv),
-                    &pilot,
+                    (&pilot, curve),
                     bound,
                     &mut report,
                     (observer, &mut batch),
-                )?,
-            };
-            report.rotary_error_bound_mm = report.rotary_error_bound_mm.max(e);
-            // A chord of an arc that also turns a rotary axis carries both errors.
-            report.error_bound_mm = report.error_bound_mm.max(e + sagitta);
+                )?;
+                (rotary, e)
+            }
+        };
+        if rotary {
+            report.rotary_moves += 1;
+        } else {
+            report.curved_moves += 1;
         }
+        report.rotary_error_bound_mm = report.rotary_error_bound_mm.max(e);
+        // A chord of an arc that also turns a rotary axis carries both errors.
+        report.error_bound_mm = report.error_bound_mm.max(e + sagitta);
         progress.advance(1);
     }
     batch.flush(stock, &mut report, observer)?;
@@ -415,20 +450,66 @@ pub fn sweep_observed<'a>(
 }
 
 /// How the driver cuts one move.
-enum Step {
+enum Step<'a> {
     /// A pure translation between two poses.
     Straight((Isometry3, Isometry3)),
-    /// A curved move; for a pose source with its pilot poses.
-    Curved { rotary: bool, pilot: Vec<Isometry3> },
+    /// A move of a chain that turns a rotary axis or moves an axis with error motions.
+    Curved { rotary: bool, chain: &'a Chain },
+    /// A move of a pose source that is not a pure translation: its pilot poses and its
+    /// prepared curve ([`Prepared::curve`]).
+    Sampled {
+        rotary: bool,
+        src: &'a dyn PoseSource,
+        pilot: Vec<Isometry3>,
+        curve: (Real, Option<Box<RotaryEnvelope>>),
+    },
 }
 
-/// The pilot poses of a move of a pose source (λ = j/[`PILOT_STEPS`]), its tip error and
-/// bow recorded in `report`; a pose the machine cannot take is the error of the move's line.
-fn pilot_poses(
-    src: &dyn PoseSource,
-    mv: &Move,
-    report: &mut SweepReport,
-) -> Result<Vec<Isometry3>, SweepError> {
+/// Moves of a pose source prepared ahead of the cut at a time, side by side
+/// ([`Prepared`]).
+const AHEAD: usize = 32;
+
+/// The pilot poses of a move of a pose source (λ = j/[`PILOT_STEPS`]) with the largest
+/// distance of their tips from the commanded ones and the path's bow from its chord.
+struct Pilot {
+    poses: Vec<Isometry3>,
+    tip_error: Real,
+    bow: Real,
+}
+
+/// What a move of a pose source needs before it is cut, worked out ahead of it: a pure
+/// function of the machine, the tool, the bound and the move, so the moves of a stretch are
+/// prepared side by side and the cut is the same in any order and for any thread count.
+struct Prepared {
+    /// The pilot poses, or the error of a pose the machine cannot take.
+    pilot: Result<Pilot, SweepError>,
+    /// For a move that is not a pure translation: the estimated error of the curve through
+    /// the pilot poses ([`SampledPath::error_estimate`] + [`ENVELOPE_TOL`]) and, when that
+    /// is within the bound, the curve's envelope (none when it cannot be built).
+    curve: Option<(Real, Option<Box<RotaryEnvelope>>)>,
+}
+
+impl Prepared {
+    fn of(src: &dyn PoseSource, tool: &Tool, bound: Real, mv: &Move) -> Self {
+        let pilot = pilot_of(src, mv);
+        let curve = match &pilot {
+            Ok(p) if !src.is_translation(&mv.start, &mv.end) => {
+                let error =
+                    SampledPath::error_estimate(&p.poses, tool.reach_from(0.0)) + ENVELOPE_TOL;
+                let envelope = (error <= bound)
+                    .then(|| RotaryEnvelope::sampled(tool, &p.poses).ok().map(Box::new))
+                    .flatten();
+                Some((error, envelope))
+            }
+            _ => None,
+        };
+        Self { pilot, curve }
+    }
+}
+
+/// The pilot poses of a move of a pose source; a pose the machine cannot take is the error
+/// of the move's line.
+fn pilot_of(src: &dyn PoseSource, mv: &Move) -> Result<Pilot, SweepError> {
     let mut pilot = Vec::with_capacity(PILOT_STEPS + 1);
     let mut tip_error: Real = 0.0;
     for j in 0..=PILOT_STEPS {
@@ -456,15 +537,24 @@ fn pilot_poses(
             }
         })
         .fold(0.0, Real::max);
-    report.tip_error_mm = Some(report.tip_error_mm.unwrap_or(0.0).max(tip_error));
+    Ok(Pilot {
+        poses: pilot,
+        tip_error,
+        bow,
+    })
+}
+
+/// Records a move's pilot tip error and bow in `report` and hands back its poses.
+fn record_pilot(pilot: Pilot, mv: &Move, report: &mut SweepReport) -> Vec<Isometry3> {
+    report.tip_error_mm = Some(report.tip_error_mm.unwrap_or(0.0).max(pilot.tip_error));
     // The bow of a straight move only: a move that turns an angle curves by design.
     let turns = AxisLetter::ALL
         .into_iter()
         .any(|l| l.is_rotary() && mv.start.get(l) != mv.end.get(l));
     if !turns {
-        report.path_bow_mm = Some(report.path_bow_mm.unwrap_or(0.0).max(bow));
+        report.path_bow_mm = Some(report.path_bow_mm.unwrap_or(0.0).max(pilot.bow));
     }
-    Ok(pilot)
+    pilot.poses
 }
 
 /// The pose of a pose source at `q`, `lambda` of the way along `mv`, or the error naming
@@ -509,18 +599,15 @@ fn sweep_sampled<'m>(
     src: &dyn PoseSource,
     tool: &Tool,
     (k, mv): (usize, &'m Move),
-    pilot: &[Isometry3],
+    (pilot, (curve_error, envelope)): (&[Isometry3], (Real, Option<Box<RotaryEnvelope>>)),
     bound: Real,
     report: &mut SweepReport,
     (observer, batch): (&mut dyn SweepObserver, &mut Batch<'m>),
 ) -> Result<Real, SweepError> {
     let rapid = mv.kind == MoveKind::Rapid;
-    let curve_error = SampledPath::error_estimate(pilot, tool.reach_from(0.0)) + ENVELOPE_TOL;
-    let envelope = (curve_error <= bound && !(rapid && observer.looks()))
-        .then(|| RotaryEnvelope::sampled(tool, pilot).ok())
-        .flatten();
+    let envelope = envelope.filter(|_| !(rapid && observer.looks()));
     if let Some(env) = envelope {
-        batch.cut(env, (k, mv), Piece::Sampled, stock, report, observer)?;
+        batch.cut(*env, (k, mv), Piece::Sampled, stock, report, observer)?;
         return Ok(curve_error);
     }
     batch.flush(stock, report, observer)?;

@@ -661,3 +661,112 @@ fn a_pose_source_cut_by_its_curve_envelope_matches_the_chain() {
         assert!(other_line * 100 < a.len(), "{other_line} of {}", a.len());
     }
 }
+
+/// A chain read pose by pose that refuses every pose whose X axis lies beyond `limit`.
+struct Reach {
+    poses: ChainPoses,
+    limit: Real,
+}
+
+impl crate::machine::PoseSource for Reach {
+    fn has_axis(&self, axis: AxisLetter) -> bool {
+        self.poses.has_axis(axis)
+    }
+    fn w_from_t(&self, q: &AxisValues) -> Result<Isometry3, crate::machine::PoseError> {
+        if q.get(AxisLetter::X) > self.limit {
+            return Err(crate::machine::PoseError("out of reach".into()));
+        }
+        self.poses.w_from_t(q)
+    }
+    fn commanded(&self, q: &AxisValues) -> Isometry3 {
+        self.poses.commanded(q)
+    }
+    fn is_translation(&self, start: &AxisValues, end: &AxisValues) -> bool {
+        self.poses.is_translation(start, end)
+    }
+}
+
+/// A pose source's moves are prepared ahead of the cut, several at a time: a move the
+/// machine cannot take, far past the first stretch prepared, still stops the sweep at its
+/// own line, with exactly the moves before it cut and nothing after it; and a program the
+/// machine can take comes out the same whether or not a refusal lies ahead of a move.
+#[test]
+fn a_pose_source_move_out_of_reach_stops_the_sweep_at_its_line() {
+    let chain = crate::machine::chain::mdx50_for_tests();
+    let tool = Tool::try_new(ToolKind::Flat, 3.0, 10.0).expect("valid");
+    // A turning 1° a move while X creeps 0.1 mm: X passes 3.0 on move 71 (line 71).
+    let at = |k: usize| {
+        let k = k as Real;
+        AxisValues::from_array([-4.0 + 0.1 * k, -1.0, 1.5 - 0.01 * k, -40.0 + k, 0.0, 0.0])
+    };
+    let moves: Vec<Move> = (0..90).map(|k| linear(at(k), at(k + 1), k + 1)).collect();
+    let bounds = Aabb {
+        min: Point3::new(-8.0, -8.0, -4.0),
+        max: Point3::new(8.0, 8.0, 4.0),
+    };
+    let stock = TriDexel::new_box(bounds, 0.1, 1e9).expect("fits");
+    let refusing = Reach {
+        poses: ChainPoses(chain.clone()),
+        limit: 3.0,
+    };
+    let first_out = moves
+        .iter()
+        .position(|m| m.end.get(AxisLetter::X) > 3.0)
+        .expect("a move leaves the reach");
+    assert!(first_out > 64, "past the first stretch prepared");
+    let mut cut = stock.clone();
+    let err = sweep_program(
+        &mut cut,
+        Kinematics::Poses(&refusing),
+        &tool,
+        &moves,
+        &opts(),
+        &NoProgress,
+    )
+    .expect_err("a move out of reach");
+    assert!(
+        matches!(err, SweepError::Pose { line, .. } if line == moves[first_out].line),
+        "{err}"
+    );
+    // The moves before it, on a machine that refuses nothing.
+    let open = Reach {
+        poses: ChainPoses(chain),
+        limit: Real::INFINITY,
+    };
+    let mut before = stock.clone();
+    sweep_program(
+        &mut before,
+        Kinematics::Poses(&open),
+        &tool,
+        &moves[..first_out],
+        &opts(),
+        &NoProgress,
+    )
+    .expect("sweeps");
+    assert!(crossings(&cut) == crossings(&before), "another part");
+    assert!(
+        crossings(&cut).iter().filter(|(_, c)| c.line != 0).count() > 1000,
+        "nothing was cut"
+    );
+    // On the one thread of a pool of one, the same part.
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("a pool");
+    let mut alone = stock;
+    pool.install(|| {
+        sweep_program(
+            &mut alone,
+            Kinematics::Poses(&open),
+            &tool,
+            &moves[..first_out],
+            &opts(),
+            &NoProgress,
+        )
+    })
+    .expect("sweeps");
+    assert!(
+        crossings(&alone) == crossings(&before),
+        "another part on one thread"
+    );
+}
