@@ -1,6 +1,8 @@
 //! Meshing the P1 pocket stock (docs/benchmarks.md: 100 × 100 × 20 box, Ø6 flat pocket
 //! 1.5 mm deep): the adaptive part mesh at 0.05 mm (what `twinmill simulate` writes) and
-//! the dexel-resolution contour at 0.1 mm, throughput in triangles/s.
+//! the dexel-resolution contour at 0.1 mm, throughput in triangles/s; and that contour
+//! simplified for display (`report::display::simplify`, in pieces above 200 k triangles),
+//! throughput in source triangles/s.
 //!
 //! `cargo bench --bench mesh`.
 
@@ -14,6 +16,7 @@ use twinmill::cutting::tool::{Tool, ToolKind};
 use twinmill::machine::chain::Chain;
 use twinmill::nc::AxisLetter;
 use twinmill::progress::NoProgress;
+use twinmill::report::display::{MAX_TRIANGLES, simplify};
 use twinmill::{math, nc};
 
 #[path = "support/p1.rs"]
@@ -64,6 +67,16 @@ fn benches(c: &mut Criterion) {
     g.throughput(Throughput::Elements(mesh.triangles.len() as u64));
     g.bench_function("P1 flat 0.1 mm (triangles)", |b| {
         b.iter(|| mesh_stock(black_box(&stock)))
+    });
+    let shown = simplify(&mesh, MAX_TRIANGLES);
+    println!(
+        "P1 flat at 0.1 mm for display: {} of {} triangles, error {:.4} mm",
+        shown.triangles.len(),
+        mesh.triangles.len(),
+        shown.error_mm
+    );
+    g.bench_function("P1 flat 0.1 mm display mesh (source triangles)", |b| {
+        b.iter(|| simplify(black_box(&mesh), MAX_TRIANGLES))
     });
     g.finish();
 }
