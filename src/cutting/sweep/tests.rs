@@ -733,16 +733,19 @@ fn a_pose_source_move_out_of_reach_stops_the_sweep_at_its_line() {
         poses: ChainPoses(chain),
         limit: Real::INFINITY,
     };
+    let cut_before = |part: &mut TriDexel| {
+        sweep_program(
+            part,
+            Kinematics::Poses(&open),
+            &tool,
+            &moves[..first_out],
+            &opts(),
+            &NoProgress,
+        )
+        .expect("sweeps")
+    };
     let mut before = stock.clone();
-    sweep_program(
-        &mut before,
-        Kinematics::Poses(&open),
-        &tool,
-        &moves[..first_out],
-        &opts(),
-        &NoProgress,
-    )
-    .expect("sweeps");
+    cut_before(&mut before);
     assert!(crossings(&cut) == crossings(&before), "another part");
     assert!(
         crossings(&cut).iter().filter(|(_, c)| c.line != 0).count() > 1000,
@@ -754,17 +757,7 @@ fn a_pose_source_move_out_of_reach_stops_the_sweep_at_its_line() {
         .build()
         .expect("a pool");
     let mut alone = stock;
-    pool.install(|| {
-        sweep_program(
-            &mut alone,
-            Kinematics::Poses(&open),
-            &tool,
-            &moves[..first_out],
-            &opts(),
-            &NoProgress,
-        )
-    })
-    .expect("sweeps");
+    pool.install(|| cut_before(&mut alone));
     assert!(
         crossings(&alone) == crossings(&before),
         "another part on one thread"
