@@ -6,6 +6,7 @@
 //! observer only reads the stock, so the removal is bit-identical whatever the observer.
 
 use super::*;
+use crate::cutting::envelope::EnvelopeError;
 use rayon::prelude::*;
 /// The moves with every arc replaced by chords within `bound` (mm) of it: borrowed as they
 /// are when there is no arc.
@@ -289,8 +290,11 @@ pub fn sweep_observed<'a>(
         moves: Vec::new(),
         groups_rest: 0,
     };
-    // A pose source's next moves, prepared ahead ([`Prepared`]).
+    // A pose source's next moves, prepared ahead ([`Prepared`]); a chain's next moves'
+    // envelopes ([`chain_envelopes`]).
     let mut ahead: std::collections::VecDeque<Prepared> = std::collections::VecDeque::new();
+    let mut envelopes: std::collections::VecDeque<Option<ChainEnvelope>> =
+        std::collections::VecDeque::new();
     // Before the first move every axis is taken as last moved in +.
     let (errors, mut state) = match machine {
         Kinematics::Chain(chain) => (
@@ -322,6 +326,13 @@ pub fn sweep_observed<'a>(
         let before = state;
         let step = match machine {
             Kinematics::Chain(chain) => {
+                // Every move of a chain passes here once, in order (see `ahead` below).
+                if envelopes.is_empty() {
+                    let end = (k + AHEAD).min(moves.len());
+                    let next = chain_envelopes(chain, tool, bound, &moves[k..end], errors, state);
+                    envelopes.extend(next);
+                }
+                let envelope = envelopes.pop_front().flatten();
                 let (omega, _) = rotation_and_travel(chain, &mv.start, &mv.end);
                 let curved = errors && moves_error_axis(chain, mv);
                 if errors {
@@ -340,6 +351,7 @@ pub fn sweep_observed<'a>(
                     Step::Curved {
                         rotary: omega != 0.0,
                         chain,
+                        envelope,
                     }
                 }
             }
@@ -399,11 +411,15 @@ pub fn sweep_observed<'a>(
                 progress.advance(1);
                 continue;
             }
-            Step::Curved { rotary, chain } => {
+            Step::Curved {
+                rotary,
+                chain,
+                envelope,
+            } => {
                 flush(run.take(), stock, tool, moves, &mut report, observer)?;
                 let e = sweep_rotary(
                     stock,
-                    chain,
+                    (chain, envelope),
                     tool,
                     (k, mv),
                     &before,
@@ -453,8 +469,13 @@ pub fn sweep_observed<'a>(
 enum Step<'a> {
     /// A pure translation between two poses.
     Straight((Isometry3, Isometry3)),
-    /// A move of a chain that turns a rotary axis or moves an axis with error motions.
-    Curved { rotary: bool, chain: &'a Chain },
+    /// A move of a chain that turns a rotary axis or moves an axis with error motions, and
+    /// its envelope if it was built ahead ([`chain_envelopes`]).
+    Curved {
+        rotary: bool,
+        chain: &'a Chain,
+        envelope: Option<ChainEnvelope>,
+    },
     /// A move of a pose source that is not a pure translation: its pilot poses and its
     /// prepared curve ([`Prepared::curve`]).
     Sampled {
@@ -463,6 +484,45 @@ enum Step<'a> {
         pilot: Vec<Isometry3>,
         curve: (Real, Option<Box<RotaryEnvelope>>),
     },
+}
+
+/// A chain's move's envelope built ahead of the cut, or why it has none.
+type ChainEnvelope = Result<Box<RotaryEnvelope>, EnvelopeError>;
+
+/// The envelopes of the curved ones among `moves` (a chain's next moves, the first starting
+/// from the reversal shares `state`), built side by side: each the pure function of the
+/// chain, the tool, the move and the shares it starts from, which are followed here move by
+/// move as the driver follows them (`errors`: the chain has error motions). `None` for a
+/// move the driver cuts straight, or when `bound` is tighter than the envelope's tolerance.
+fn chain_envelopes(
+    chain: &Chain,
+    tool: &Tool,
+    bound: Real,
+    moves: &[Move],
+    errors: bool,
+    mut state: [Real; 6],
+) -> Vec<Option<ChainEnvelope>> {
+    let starts: Vec<Option<[Real; 6]>> = moves
+        .iter()
+        .map(|mv| {
+            let before = state;
+            if errors {
+                state = chain.reversal_after_move(&state, &mv.start, &mv.end);
+            }
+            let (omega, _) = rotation_and_travel(chain, &mv.start, &mv.end);
+            let curved = omega != 0.0 || (errors && moves_error_axis(chain, mv));
+            (curved && bound >= ENVELOPE_TOL).then_some(before)
+        })
+        .collect();
+    moves
+        .par_iter()
+        .zip(starts)
+        .map(|(mv, start)| {
+            start.map(|st| {
+                RotaryEnvelope::with_state(chain, tool, &mv.start, &mv.end, &st).map(Box::new)
+            })
+        })
+        .collect()
 }
 
 /// Moves of a pose source prepared ahead of the cut at a time, side by side
@@ -678,7 +738,7 @@ fn cut_substeps(
 )]
 fn sweep_rotary<'m>(
     stock: &mut TriDexel,
-    chain: &Chain,
+    (chain, built): (&Chain, Option<ChainEnvelope>),
     tool: &Tool,
     (k, mv): (usize, &'m Move),
     state: &[Real; 6],
@@ -686,17 +746,24 @@ fn sweep_rotary<'m>(
     report: &mut SweepReport,
     (observer, batch): (&mut dyn SweepObserver, &mut Batch<'m>),
 ) -> Result<Real, SweepError> {
-    // Flat and ball end mills: the exact per-ray envelope, unless a bound tighter than its
-    // tolerance is asked for.
-    let envelope = (bound >= ENVELOPE_TOL)
-        .then(|| RotaryEnvelope::with_state(chain, tool, &mv.start, &mv.end, state).ok())
-        .flatten();
+    // Flat and ball end mills: the exact per-ray envelope (usually built ahead), unless a
+    // bound tighter than its tolerance is asked for.
+    let envelope = match built {
+        Some(built) => built.ok(),
+        None => (bound >= ENVELOPE_TOL)
+            .then(|| {
+                RotaryEnvelope::with_state(chain, tool, &mv.start, &mv.end, state)
+                    .ok()
+                    .map(Box::new)
+            })
+            .flatten(),
+    };
     if let Some(env) = envelope {
         let piece = Piece::Rotary {
             envelope: true,
             state: *state,
         };
-        batch.cut(env, (k, mv), piece, stock, report, observer)?;
+        batch.cut(*env, (k, mv), piece, stock, report, observer)?;
         return Ok(ENVELOPE_TOL);
     }
     batch.flush(stock, report, observer)?;

@@ -763,3 +763,67 @@ fn a_pose_source_move_out_of_reach_stops_the_sweep_at_its_line() {
         "another part on one thread"
     );
 }
+
+/// A chain's envelopes are built ahead of the cut, 32 moves at a time, each from the
+/// reversal shares its move starts from. On the 3-axis machine with error motions and lost
+/// motion, a zigzag of 70 moves (X reversing every move, Y swinging back and forth: every
+/// move curved by the error motions, its shares set by the ones before) cut by the driver
+/// equals, bit
+/// for bit, the test's own loop: the shares followed move by move, each move's envelope
+/// built from them and cut in turn.
+#[test]
+fn envelopes_built_ahead_follow_the_reversal_shares_move_by_move() {
+    let scene = crate::scene::Scene::load(
+        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/xyz-error-motions.toml"),
+    )
+    .expect("scene loads");
+    let chain = scene.chain();
+    assert!(chain.has_error_motions());
+    let at = |k: usize| {
+        let x = if k % 2 == 0 { 10.0 } else { 14.0 };
+        let y = 20.0 + 2.0 * (0.9 * k as Real).sin();
+        AxisValues::from_array([x, y, 19.0 - 0.02 * k as Real, 0.0, 0.0, 0.0])
+    };
+    let moves: Vec<Move> = (0..70).map(|k| linear(at(k), at(k + 1), k + 1)).collect();
+    let stock = TriDexel::new_box(
+        Aabb {
+            min: Point3::new(5.0, 15.0, 15.0),
+            max: Point3::new(19.0, 25.0, 20.0),
+        },
+        0.2,
+        1e9,
+    )
+    .expect("fits");
+    let mut driven = stock.clone();
+    let report = sweep_program(
+        &mut driven,
+        chain,
+        &scene.tool,
+        &moves,
+        &opts(),
+        &NoProgress,
+    )
+    .expect("sweeps");
+    assert_eq!(report.curved_moves, moves.len(), "{report:?}");
+    let mut own = stock;
+    let mut state = chain.reversal_state(&crate::machine::error_motion::Directions::default());
+    let mut shares = std::collections::BTreeSet::new();
+    for mv in &moves {
+        let before = state;
+        state = chain.reversal_after_move(&state, &mv.start, &mv.end);
+        shares.insert(before.map(Real::to_bits));
+        let env = RotaryEnvelope::with_state(chain, &scene.tool, &mv.start, &mv.end, &before)
+            .expect("an envelope");
+        own.remove(&env, mv.line as u32);
+    }
+    assert_eq!(
+        shares.len(),
+        4,
+        "X's and Y's directions in every combination"
+    );
+    assert!(crossings(&driven) == crossings(&own), "another part");
+    assert!(
+        crossings(&own).iter().filter(|(_, c)| c.line != 0).count() > 1000,
+        "nothing was cut"
+    );
+}
