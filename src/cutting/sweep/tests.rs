@@ -780,7 +780,7 @@ fn envelopes_built_ahead_follow_the_reversal_shares_move_by_move() {
     let chain = scene.chain();
     assert!(chain.has_error_motions());
     let at = |k: usize| {
-        let x = if k % 2 == 0 { 10.0 } else { 14.0 };
+        let x = if k.is_multiple_of(2) { 10.0 } else { 14.0 };
         let y = 20.0 + 2.0 * (0.9 * k as Real).sin();
         AxisValues::from_array([x, y, 19.0 - 0.02 * k as Real, 0.0, 0.0, 0.0])
     };
