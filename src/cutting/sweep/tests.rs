@@ -765,7 +765,7 @@ fn a_pose_source_move_out_of_reach_stops_the_sweep_at_its_line() {
 }
 
 /// A chain's envelopes are built ahead of the cut, 32 moves at a time, each from the
-/// reversal shares its move starts from. On the 3-axis machine with error motions and lost
+/// reversal shares its move starts from. On a 3-axis machine with error motions and lost
 /// motion, a zigzag of 70 moves (X reversing every move, Y swinging back and forth: every
 /// move curved by the error motions, its shares set by the ones before) cut by the driver
 /// equals, bit
@@ -773,12 +773,24 @@ fn a_pose_source_move_out_of_reach_stops_the_sweep_at_its_line() {
 /// built from them and cut in turn.
 #[test]
 fn envelopes_built_ahead_follow_the_reversal_shares_move_by_move() {
-    let scene = crate::scene::Scene::load(
-        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/xyz-error-motions.toml"),
-    )
-    .expect("scene loads");
-    let chain = scene.chain();
+    // X, Y, Z with error motions and lost motion on X and Y (as `scenes/xyz-error-motions.toml`
+    // has them: scale, a bow, the reversals).
+    use crate::machine::error_motion::{AxisErrorMotions, Term};
+    let mut chain = crate::machine::chain::xyz_for_tests();
+    for (axis, scale, bow, reversal) in [
+        (AxisLetter::X, 15e-6, 0.0, -0.003),
+        (AxisLetter::Y, -30e-6, 2e-6, -0.002),
+    ] {
+        let mut e = AxisErrorMotions::for_axis(axis);
+        let k = if axis == AxisLetter::X { 0 } else { 1 };
+        e.functions[k].terms = vec![Term::polynomial(vec![0.0, scale]).expect("valid")];
+        e.functions[2].terms = vec![Term::polynomial(vec![0.0, 0.0, bow]).expect("valid")];
+        e.reversal = reversal;
+        chain.set_error_motions(axis, e).expect("axis");
+    }
+    let chain = &chain;
     assert!(chain.has_error_motions());
+    let tool = Tool::try_new(ToolKind::Flat, 6.0, 20.0).expect("valid");
     let at = |k: usize| {
         let x = if k.is_multiple_of(2) { 10.0 } else { 14.0 };
         let y = 20.0 + 2.0 * (0.9 * k as Real).sin();
@@ -795,15 +807,8 @@ fn envelopes_built_ahead_follow_the_reversal_shares_move_by_move() {
     )
     .expect("fits");
     let mut driven = stock.clone();
-    let report = sweep_program(
-        &mut driven,
-        chain,
-        &scene.tool,
-        &moves,
-        &opts(),
-        &NoProgress,
-    )
-    .expect("sweeps");
+    let report =
+        sweep_program(&mut driven, chain, &tool, &moves, &opts(), &NoProgress).expect("sweeps");
     assert_eq!(report.curved_moves, moves.len(), "{report:?}");
     let mut own = stock;
     let mut state = chain.reversal_state(&crate::machine::error_motion::Directions::default());
@@ -812,7 +817,7 @@ fn envelopes_built_ahead_follow_the_reversal_shares_move_by_move() {
         let before = state;
         state = chain.reversal_after_move(&state, &mv.start, &mv.end);
         shares.insert(before.map(Real::to_bits));
-        let env = RotaryEnvelope::with_state(chain, &scene.tool, &mv.start, &mv.end, &before)
+        let env = RotaryEnvelope::with_state(chain, &tool, &mv.start, &mv.end, &before)
             .expect("an envelope");
         own.remove(&env, mv.line as u32);
     }
