@@ -326,19 +326,19 @@ pub fn sweep_observed<'a>(
         let before = state;
         let step = match machine {
             Kinematics::Chain(chain) => {
-                // Every move of a chain passes here once, in order (see `ahead` below).
+                // Every move of a chain passes here once, in order: the queue holds the next
+                // moves' envelopes (built side by side when it runs dry).
                 if envelopes.is_empty() {
                     let end = (k + AHEAD).min(moves.len());
                     let next = chain_envelopes(chain, tool, bound, &moves[k..end], errors, state);
                     envelopes.extend(next);
                 }
                 let envelope = envelopes.pop_front().flatten();
-                let (omega, _) = rotation_and_travel(chain, &mv.start, &mv.end);
-                let curved = errors && moves_error_axis(chain, mv);
+                let (curve, rotary) = chain_curve(chain, mv, errors);
                 if errors {
                     state = chain.reversal_after_move(&state, &mv.start, &mv.end);
                 }
-                if omega == 0.0 && !curved {
+                if !curve {
                     Step::Straight(if errors {
                         (
                             chain.w_from_t_state(&mv.start, &before),
@@ -349,7 +349,7 @@ pub fn sweep_observed<'a>(
                     })
                 } else {
                     Step::Curved {
-                        rotary: omega != 0.0,
+                        rotary,
                         chain,
                         envelope,
                     }
@@ -486,6 +486,15 @@ enum Step<'a> {
     },
 }
 
+/// Whether a chain's move is cut as a curve (it turns a rotary axis, or it moves an axis
+/// with error motions on a chain that has them: `errors`), and whether it turns a rotary
+/// axis. The driver and [`chain_envelopes`] decide by this alike.
+fn chain_curve(chain: &Chain, mv: &Move, errors: bool) -> (bool, bool) {
+    let (omega, _) = rotation_and_travel(chain, &mv.start, &mv.end);
+    let rotary = omega != 0.0;
+    (rotary || (errors && moves_error_axis(chain, mv)), rotary)
+}
+
 /// A chain's move's envelope built ahead of the cut, or why it has none.
 type ChainEnvelope = Result<Box<RotaryEnvelope>, EnvelopeError>;
 
@@ -509,9 +518,8 @@ fn chain_envelopes(
             if errors {
                 state = chain.reversal_after_move(&state, &mv.start, &mv.end);
             }
-            let (omega, _) = rotation_and_travel(chain, &mv.start, &mv.end);
-            let curved = omega != 0.0 || (errors && moves_error_axis(chain, mv));
-            (curved && bound >= ENVELOPE_TOL).then_some(before)
+            let (curve, _) = chain_curve(chain, mv, errors);
+            (curve && bound >= ENVELOPE_TOL).then_some(before)
         })
         .collect();
     moves
