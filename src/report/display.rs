@@ -6,7 +6,7 @@
 //! simplifier (`meshopt`), which keeps a subset of the original vertices — every display
 //! vertex is an exact vertex of the cut surface — and reports how far the simplified surface
 //! may lie from the original. First pass: only collapses that move the surface less than
-//! [`FIRST_PASS_ERROR_MM`] by meshoptimizer's (conservative) measure: flat faces shrink to a
+//! [`FIRST_PASS_ERROR_MM`] by meshoptimizer's measure: flat faces shrink to a
 //! few triangles, curved ones keep most of their dexel resolution; if that leaves more than
 //! the budget, a second pass collapses to the budget and the error it needed is added to the
 //! reported one ([`DisplayMesh::error_mm`]). meshoptimizer's measure is not a strict bound on
