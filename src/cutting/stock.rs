@@ -180,8 +180,9 @@ pub trait Cutter: Sync {
     }
     /// Whether the cutter may change the ray `origin + t·e_axis` whose material is `segs`:
     /// `false` only when every interval [`Cutter::ray_cuts_in_span`] would give misses
-    /// every segment (touching an end at most), so the ray would come out unchanged. The
-    /// default: yes.
+    /// every segment without touching an end (cut latest first,
+    /// [`TriDexel::remove_each`], an end a cut meets exactly may take its crossing), so the
+    /// ray would come out unchanged. The default: yes.
     fn may_cut(&self, origin: &Point3, axis: usize, segs: &[Segment]) -> bool {
         let _ = (origin, axis, segs);
         true
@@ -622,7 +623,15 @@ impl CutContext<'_> {
                 let o = self.origin(iu, iv);
                 let start = new.len();
                 let cutter = (self.cutter, self.line, self.along);
-                if cut_ray(cutter, &o, self.axis, segs, &mut bufs, &mut new, &mut used) {
+                if cut_ray(
+                    cutter,
+                    &o,
+                    self.axis,
+                    (segs, None),
+                    &mut bufs,
+                    &mut new,
+                    &mut used,
+                ) {
                     changes.push(RayChange {
                         local,
                         start,
@@ -657,19 +666,24 @@ struct RayBuffers {
 /// Cuts the ray `o + t·e_axis` whose material is `segs` by `cutter` (with its NC line and
 /// its bounds `along` the ray): appends the ray's new segments to `new` when it changed
 /// (returning true; nothing appended, or something to truncate, otherwise) and the lines
-/// used to `used`.
+/// used to `used`. `before`: see [`subtract`].
 fn cut_ray(
     (cutter, line, along): (&dyn Cutter, u32, (Real, Real)),
     o: &Point3,
     axis: usize,
-    segs: &[Segment],
+    (segs, before): (&[Segment], Option<&[Segment]>),
     bufs: &mut RayBuffers,
     new: &mut Vec<Segment>,
     used: &mut Vec<u32>,
 ) -> bool {
     let (lo_a, hi_a) = along;
-    // A ray with no material inside the cutter's extent along it cannot change.
-    let mut inside = segs.iter().filter(|s| s.hi.t > lo_a && s.lo.t < hi_a);
+    // A ray with no material inside the cutter's extent along it cannot change (nor, cut
+    // latest first, with none touching it: no end of the cut can meet an end of it).
+    let touching = before.is_some();
+    let mut inside = segs.iter().filter(|s| {
+        (s.hi.t > lo_a || (touching && s.hi.t == lo_a))
+            && (s.lo.t < hi_a || (touching && s.lo.t == hi_a))
+    });
     let Some(first) = inside.next() else {
         return false;
     };
@@ -688,7 +702,7 @@ fn cut_ray(
     cutter.ray_cuts_in_span(o, axis, span, line, cuts, lines);
     match cuts.as_slice() {
         [] => false,
-        [c] => subtract(segs, c, lines[0], new, used),
+        [c] => subtract((segs, before), c, lines[0], new, used),
         many => {
             // Subtract the cuts one after another through a scratch buffer.
             scratch.clear();
@@ -696,7 +710,7 @@ fn cut_ray(
             let mut changed = false;
             for (c, l) in many.iter().zip(lines.iter()) {
                 next.clear();
-                changed |= subtract(scratch, c, *l, next, used);
+                changed |= subtract((scratch, before), c, *l, next, used);
                 std::mem::swap(scratch, next);
             }
             new.extend_from_slice(scratch);
@@ -780,8 +794,11 @@ fn apply_changes(
 /// Appends `segs` minus the cut to `out`; returns whether anything changed. The new
 /// crossings carry `lines` (`[at t_in, at t_out]`); the lines of the cut's ends that left a
 /// crossing, or of both ends when a segment vanished whole, are appended to `used`.
+/// `before`: the ray's material before a batch cut latest first
+/// ([`TriDexel::remove_each`]), where an end the cut meets exactly that is not in it takes
+/// the cut's crossing (a change); `None` in program order.
 fn subtract(
-    segs: &[Segment],
+    (segs, before): (&[Segment], Option<&[Segment]>),
     c: &RayCut,
     lines: [u32; 2],
     out: &mut Vec<Segment>,
@@ -795,7 +812,23 @@ fn subtract(
     };
     for s in segs {
         if c.t_out <= s.lo.t || c.t_in >= s.hi.t {
-            out.push(*s);
+            let mut s = *s;
+            // Cutting a batch latest first: an end this cut meets exactly, made by a later
+            // cutter of the batch (not in `before`), is the one this cut would have made
+            // first in program order, where the later cut then changes nothing.
+            if let Some(before) = before {
+                if c.t_out == s.lo.t && !before.iter().any(|b| b.lo == s.lo) {
+                    s.lo = Crossing::new(c.t_out, &c.n_out, lines[1]);
+                    note(lines[1]);
+                    changed = true;
+                }
+                if c.t_in == s.hi.t && !before.iter().any(|b| b.hi == s.hi) {
+                    s.hi = Crossing::new(c.t_in, &c.n_in, lines[0]);
+                    note(lines[0]);
+                    changed = true;
+                }
+            }
+            out.push(s);
             continue;
         }
         changed = true;
@@ -1282,201 +1315,4 @@ impl ByteReader<'_> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// An axis-aligned box cutter, exact by construction.
-    struct BoxCutter(Aabb);
-
-    impl Cutter for BoxCutter {
-        fn bounds(&self) -> Aabb {
-            self.0
-        }
-        fn ray_cut(&self, origin: &Point3, axis: usize) -> Option<RayCut> {
-            let mut e = Vector3::zeros();
-            e[axis] = 1.0;
-            let (t0, t1) = self.0.ray_interval(origin, &e)?;
-            (t1 > t0).then_some(RayCut {
-                t_in: t0,
-                t_out: t1,
-                n_in: e,
-                n_out: -e,
-            })
-        }
-    }
-
-    fn unit_box(size: Real) -> Aabb {
-        Aabb {
-            min: Point3::origin(),
-            max: Point3::new(size, size, size),
-        }
-    }
-
-    #[test]
-    fn box_volume_is_exact() {
-        let s = TriDexel::new_box(unit_box(10.0), 0.5, 1e9).expect("fits");
-        assert!((s.volume() - 1000.0).abs() < 1e-9);
-    }
-
-    #[test]
-    fn removing_a_box_pocket_is_exact() {
-        let mut s = TriDexel::new_box(unit_box(10.0), 0.25, 1e9).expect("fits");
-        let pocket = Aabb {
-            min: Point3::new(2.0, 2.0, 5.0),
-            max: Point3::new(8.0, 8.0, 11.0),
-        };
-        assert!(s.remove(&BoxCutter(pocket), 7));
-        // Pocket faces fall on ray-cell boundaries here, so every grid measures exactly.
-        assert!((s.volume() - (1000.0 - 36.0 * 5.0)).abs() < 1e-9);
-        // A z ray in the pocket ends at z = 5 with the floor normal +z and line 7.
-        let g = &s.grids()[2];
-        let segs = g.ray(20, 20);
-        assert_eq!(segs.len(), 1);
-        assert_eq!(segs[0].hi.t, 5.0);
-        assert_eq!(segs[0].hi.normal, [0.0, 0.0, 1.0]);
-        assert_eq!(segs[0].hi.line, 7);
-    }
-
-    #[test]
-    fn refuses_a_pitch_beyond_the_budget() {
-        let err = TriDexel::new_box(unit_box(100.0), 1e-4, 24e9).expect_err("too big");
-        match err {
-            StockError::TooMuchMemory {
-                suggested_pitch, ..
-            } => {
-                // The suggested pitch must itself fit.
-                assert!(estimate_bytes(&unit_box(100.0), suggested_pitch) <= 24e9);
-            }
-            other => panic!("unexpected {other:?}"),
-        }
-    }
-
-    #[test]
-    fn a_budget_no_pitch_fits_says_so_instead_of_suggesting_inf() {
-        // Once ruled by 1/pitch², a zero budget suggested "a pitch of at least inf mm".
-        let b = unit_box(10.0);
-        for budget in [0.0, 1.0, BYTES_PER_RAY] {
-            match check_memory(&b, 0.1, budget) {
-                Err(e @ StockError::NoPitchFits { .. }) => {
-                    let text = e.to_string();
-                    assert!(text.contains("one ray per grid"), "{text}");
-                    assert!(!text.contains("inf"), "{text}");
-                }
-                other => panic!("budget {budget}: {other:?}"),
-            }
-        }
-        // Three rays fit exactly: the suggestion is the pitch from which each grid of the
-        // 10 mm cube holds one ray, round(10/p) = 1, i.e. p > 10/1.5 mm, to three digits.
-        match check_memory(&b, 0.1, 3.0 * BYTES_PER_RAY) {
-            Err(StockError::TooMuchMemory {
-                suggested_pitch, ..
-            }) => {
-                assert!((suggested_pitch - 6.67).abs() < 1e-9, "{suggested_pitch}");
-                assert!(check_memory(&b, suggested_pitch, 3.0 * BYTES_PER_RAY).is_ok());
-            }
-            other => panic!("{other:?}"),
-        }
-    }
-
-    proptest::proptest! {
-        #![proptest_config(proptest::prelude::ProptestConfig { cases: 2000, failure_persistence: None, rng_seed: proptest::test_runner::RngSeed::Fixed(0x5eed), ..Default::default() })]
-        /// Over any box, pitch and budget: the stock fits, or the suggested pitch is finite,
-        /// fits, and one unit less in its third significant digit does not; or no pitch fits
-        /// and the coarsest grid is indeed over the budget.
-        #[test]
-        fn the_suggested_pitch_is_finite_and_the_finest_that_fits(
-            ex in -3.0..4.0f64, ey in -3.0..4.0f64, ez in -3.0..4.0f64,
-            lp in -4.0..1.0f64, lb in -1.0..12.0f64, zero in proptest::bool::weighted(0.05),
-        ) {
-            let b = Aabb {
-                min: Point3::origin(),
-                max: Point3::new(10f64.powf(ex), 10f64.powf(ey), 10f64.powf(ez)),
-            };
-            let pitch = 10f64.powf(lp);
-            let budget = if zero { 0.0 } else { 10f64.powf(lb) };
-            match check_memory(&b, pitch, budget) {
-                Ok(()) => proptest::prop_assert!(estimate_bytes(&b, pitch) <= budget),
-                Err(StockError::TooMuchMemory { suggested_pitch: s, needed_mib, budget_mib, .. }) => {
-                    proptest::prop_assert!(s.is_finite() && s > pitch, "{s}");
-                    proptest::prop_assert!(needed_mib > budget_mib);
-                    proptest::prop_assert!(check_memory(&b, s, budget).is_ok(), "{s} does not fit");
-                    let unit = 10f64.powi(s.log10().floor() as i32 - 2);
-                    proptest::prop_assert!(
-                        estimate_bytes(&b, s - unit) > budget,
-                        "{} fits too: {s} is not the finest", s - unit
-                    );
-                    // The message prints the suggestion as it is.
-                    let text = check_memory(&b, pitch, budget).expect_err("over").to_string();
-                    proptest::prop_assert!(text.ends_with(&format!("at least {} mm", sig3(s))), "{text}");
-                    proptest::prop_assert!(!text.contains("inf") && !text.contains("NaN"), "{text}");
-                }
-                Err(StockError::NoPitchFits { least_mib, budget_mib }) => {
-                    proptest::prop_assert!(least_mib > budget_mib);
-                    proptest::prop_assert!(estimate_bytes(&b, 1e12) > budget);
-                }
-                Err(other) => proptest::prop_assert!(false, "{other:?}"),
-            }
-        }
-    }
-
-    #[test]
-    fn result_is_independent_of_thread_count() {
-        let run = |threads| {
-            crate::math::in_pool(threads, || {
-                let mut s = TriDexel::new_box(unit_box(10.0), 0.1, 1e9).expect("fits");
-                let pocket = Aabb {
-                    min: Point3::new(2.05, 1.33, 5.01),
-                    max: Point3::new(8.7, 8.2, 11.0),
-                };
-                s.remove(&BoxCutter(pocket), 1);
-                let mut all = Vec::new();
-                for g in s.grids() {
-                    g.for_each_crossing(|p, c| all.push((p, *c)));
-                }
-                all
-            })
-        };
-        assert_eq!(run(1), run(2));
-    }
-
-    /// Every crossing of `s` with its point, in grid order.
-    fn all_crossings(s: &TriDexel) -> Vec<(Point3, Crossing)> {
-        let mut all = Vec::new();
-        for g in s.grids() {
-            g.for_each_crossing(|p, c| all.push((p, *c)));
-        }
-        all
-    }
-
-    #[test]
-    fn bytes_read_back_to_the_same_stock_and_damage_is_refused() {
-        // A box with a pocket (blocks touched and untouched, rays with two segments).
-        let mut s = TriDexel::new_box(unit_box(10.0), 0.3, 1e9).expect("fits");
-        let pocket = Aabb {
-            min: Point3::new(2.05, -1.0, 5.01),
-            max: Point3::new(8.7, 8.2, 7.0),
-        };
-        s.remove(&BoxCutter(pocket), 7);
-        let bytes = s.to_bytes();
-        let back = TriDexel::from_bytes(&bytes).expect("reads back");
-        assert_eq!(all_crossings(&back), all_crossings(&s));
-        assert_eq!(back.bounds(), s.bounds());
-        assert_eq!(back.volume().to_bits(), s.volume().to_bits());
-        // The pocket's volume, independently: 6.65 × 8.2 (from y = 0) × 1.99 mm, within
-        // the rays' coverage of its sides (half a 0.3 mm pitch each way: under 15 %).
-        let removed = 1000.0 - back.volume();
-        let exact = 6.65 * 8.2 * 1.99;
-        assert!((removed - exact).abs() < 0.15 * exact, "{removed}");
-        // Any flipped bit, a cut short or a longer file: refused.
-        for at in [0, 9, bytes.len() / 3, bytes.len() / 2, bytes.len() - 1] {
-            let mut bad = bytes.clone();
-            bad[at] ^= 0x10;
-            assert!(TriDexel::from_bytes(&bad).is_none(), "flip at {at}");
-        }
-        assert!(TriDexel::from_bytes(&bytes[..bytes.len() - 9]).is_none());
-        assert!(TriDexel::from_bytes(&[]).is_none());
-        let mut long = bytes.clone();
-        long.push(0);
-        assert!(TriDexel::from_bytes(&long).is_none());
-    }
-}
+mod tests;

@@ -591,10 +591,11 @@ proptest! {
 proptest! {
     #![proptest_config(ProptestConfig { cases: 12, failure_persistence: None, rng_seed: proptest::test_runner::RngSeed::Fixed(0xba7c), ..ProptestConfig::default() })]
 
-    /// Cutting a chain of small rotary moves together (each ray taken through every move in
-    /// turn, [`TriDexel::remove_each`]) leaves the same crossings, bit for bit, as removing
-    /// them one after another, and says of each move whether it cut as its own removal does;
-    /// some moves of the chain cut and a far one does not.
+    /// Cutting a chain of small rotary moves together (each ray taken through every move,
+    /// the last first, [`TriDexel::remove_each`]) leaves the same crossings, bit for bit, as
+    /// removing them one after another, and says of each move whether it cut as removing
+    /// them one by one from the last does; some moves of the chain cut and a far one does
+    /// not.
     #[test]
     fn moves_cut_together_are_bit_identical_to_moves_cut_in_turn(
         ball in any::<bool>(), a0 in -30.0..30.0f64, y0 in -2.0..2.0f64, z0 in 3.0..4.5f64,
@@ -612,16 +613,24 @@ proptest! {
         // A move far above the stock, in the middle of the chain: it cuts nothing.
         let high = |z| q(0.0, 0.0, z, a0);
         envs.insert(3, RotaryEnvelope::new(&c, &tool, &high(40.0), &high(41.0)).expect("supported"));
-        let expected: Vec<bool> = envs
-            .iter()
-            .enumerate()
-            .map(|(k, env)| in_turn.remove(env, k as u32 + 1))
-            .collect();
+        for (k, env) in envs.iter().enumerate() {
+            in_turn.remove(env, k as u32 + 1);
+        }
         let cutters: Vec<(&dyn Cutter, u32)> = envs
             .iter()
             .enumerate()
             .map(|(k, env)| (env as &dyn Cutter, k as u32 + 1))
             .collect();
+        // Whether each move cut, the moves removed one by one from the last.
+        let mut from_last = TriDexel::new_box(bounds, 0.2, 1e9).expect("fits");
+        let mut latest_first: Vec<bool> = envs
+            .iter()
+            .enumerate()
+            .rev()
+            .map(|(k, env)| from_last.remove(env, k as u32 + 1))
+            .collect();
+        latest_first.reverse();
+        let expected = latest_first;
         let removed = together.remove_each(&cutters, &[]).by_cutter;
         prop_assert!(expected.iter().filter(|&&c| c).count() >= 2, "{expected:?}");
         prop_assert!(!expected[3]);

@@ -1,13 +1,29 @@
 //! Cutting the stock by several cutters at once ([`TriDexel::remove_each`]): each ray taken
-//! through every cutter in turn, each block rewritten once.
+//! through every cutter, each block rewritten once.
+//!
+//! **Latest first.** A ray is taken through the cutters from the last to the first. The
+//! material a set of cuts leaves does not depend on their order, and on consecutive moves
+//! of one path the later ones usually reach deepest: cut first, they leave the earlier
+//! moves less material to meet, so more of those are cleared by their cheap test
+//! ([`Cutter::may_cut`]) and fewer solved. Where two cuts end at exactly the same point the
+//! earlier cutter's crossing (its normal and NC line) is kept, as program order keeps it
+//! (the later cut meets that end and changes nothing): an end a cut meets exactly, made in
+//! this batch by a later cutter, takes the cut's own crossing.
 //!
 //! **Groups.** Consecutive cutters may come with a [`GroupCull`]: one conservative test that
 //! none of them can change a ray's material. A ray it clears skips the whole group (each of
 //! its cutters would have left the ray as it was), so the stock is the same either way.
 //!
-//! **Invariant:** the stock comes out bit for bit as from [`TriDexel::remove`] of each cutter
-//! in turn: a ray's cut by one cutter depends only on the ray's material before it and the
-//! cutter, and [`cut_ray`] is the one per-ray step of both.
+//! **Invariant:** the stock is that of [`TriDexel::remove`] of each cutter in turn (program
+//! order), [`cut_ray`] being the one per-ray step of both: bit for bit for a cutter whose
+//! intervals do not depend on the material they meet. The per-ray envelope refines only
+//! the interval ends inside the material, so where an end lies on a face that stays put
+//! through the move (the same point for many poses) the pose it is taken from, and the
+//! normal's last bits, may differ; every end stays within the envelope's bound. The 20
+//! recorded digests (`dexel_digest`) are those of program order, and the tests find the
+//! same points and NC lines. What depends on the order is whether a cutter "removed
+//! material": here, whether it changed a ray after the later cutters of the batch had cut
+//! it.
 
 use super::*;
 
@@ -15,8 +31,8 @@ use super::*;
 pub trait GroupCull: Sync {
     /// Whether any cutter of the group may change the ray `origin + t·e_axis` whose material
     /// is `segs`: `false` only when each of them would leave it as it is (its
-    /// [`Cutter::may_cut`] could answer `false`), whatever the cutters before it in the
-    /// group removed (they only remove material).
+    /// [`Cutter::may_cut`] could answer `false`), whatever the group's other cutters
+    /// removed (they only remove material).
     fn may_cut(&self, origin: &Point3, axis: usize, segs: &[Segment]) -> bool;
 }
 
@@ -41,14 +57,13 @@ pub struct Removed {
 }
 
 impl TriDexel {
-    /// Removes what each of `cutters` occupies, one after another, cutter `k` tagging its
-    /// new surfaces with the NC line `cutters[k].1`: the same stock, bit for bit, as
-    /// [`TriDexel::remove`] of each in turn (a ray's cut by one cutter depends only on the
-    /// ray's material before it and the cutter, so each ray is taken through all the
-    /// cutters in order, and the blocks are rewritten once). A ray that a group's test
-    /// clears ([`GroupCull`]) skips the group's cutters, which would have left it as it was.
-    /// Returns for each cutter whether it removed material, and how often the groups' tests
-    /// cleared a ray.
+    /// Removes what each of `cutters` occupies, cutter `k` tagging its new surfaces with the
+    /// NC line `cutters[k].1`: the crossings of [`TriDexel::remove`] of each in turn (see
+    /// the module docs), each ray taken through all the cutters, the last first, and the
+    /// blocks rewritten once. A ray that a group's test clears ([`GroupCull`]) skips the
+    /// group's cutters, which would have left it as it was. Returns for each cutter whether
+    /// it changed a ray after the later cutters had cut it (or made an end a later one
+    /// meets exactly), and how often the groups' tests cleared a ray.
     pub fn remove_each(&mut self, cutters: &[(&dyn Cutter, u32)], groups: &[Group]) -> Removed {
         debug_assert!(
             groups
@@ -180,9 +195,9 @@ impl BatchContext<'_> {
         self.ctx.rows_of(bv)
     }
 
-    /// Cuts the rays of row `iv` of block column `bu` by every cutter in turn, a group's
-    /// cutters skipped where its test clears the ray, reading the block only; also which
-    /// cutters changed a ray.
+    /// Cuts the rays of row `iv` of block column `bu` by every cutter, the last first, a
+    /// group's cutters skipped where its test clears the ray, reading the block only; also
+    /// which cutters changed a ray.
     fn cut_row(
         &self,
         bu: usize,
@@ -209,10 +224,10 @@ impl BatchContext<'_> {
                     .filter(|(u, v, _)| (u.0..=u.1).contains(&iu) && (v.0..=v.1).contains(&iv))
                     .map(|(_, _, along)| along)
             };
-            let mut group = groups.iter().peekable();
-            let mut k = 0;
-            while k < self.cutters.len() {
-                // The ray's material as the cutters before k left it.
+            let mut group = groups.iter().rev().peekable();
+            let mut k = self.cutters.len();
+            while k > 0 {
+                // The ray's material as the cutters after k left it.
                 let segs = |own| {
                     if changed {
                         own
@@ -220,18 +235,18 @@ impl BatchContext<'_> {
                         block.ray(local, &c.fill)
                     }
                 };
-                if let Some(g) = group.next_if(|g| g.cutters.start == k) {
+                if let Some(g) = group.next_if(|g| g.cutters.end == k) {
                     let asked = g.cutters.clone().any(|j| reach(j).is_some());
                     flags.group_tests += u64::from(asked);
                     if !asked || !g.cull.may_cut(&o, c.axis, segs(&own)) {
                         flags.group_skips += u64::from(asked);
-                        k = g.cutters.end;
+                        k = g.cutters.start;
                         continue;
                     }
                 }
+                k -= 1;
                 let (cutter, line) = self.cutters[k];
-                k += 1;
-                let Some(along) = reach(k - 1) else {
+                let Some(along) = reach(k) else {
                     continue;
                 };
                 next.clear();
@@ -240,12 +255,12 @@ impl BatchContext<'_> {
                     cutter,
                     &o,
                     c.axis,
-                    segs(&own),
+                    (segs(&own), Some(block.ray(local, &c.fill))),
                     &mut bufs,
                     &mut next,
                     &mut used,
                 ) {
-                    flags.cut[k - 1] = true;
+                    flags.cut[k] = true;
                     changed = true;
                     std::mem::swap(&mut own, &mut next);
                 }

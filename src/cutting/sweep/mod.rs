@@ -136,7 +136,10 @@ pub struct SweepReport {
     /// Moves processed.
     pub moves: usize,
     /// Moves that removed material. Moves swept as one joined run count when a cut of the
-    /// run that removed material names them at one of its ends.
+    /// run that removed material names them at one of its ends; envelope moves cut
+    /// together (up to 16 consecutive ones, each ray through the latest first, see
+    /// [`crate::cutting::stock::TriDexel::remove_each`]) when they removed material the
+    /// later moves of their batch left.
     pub cutting_moves: usize,
     /// Moves that turned a rotary axis.
     pub rotary_moves: usize,
