@@ -74,8 +74,70 @@ pub(super) fn axis_dirs(s: &Sample) -> [Vector3; 3] {
 
 /// Whether a (grown) tool's interval along a ray meets any of the ray's material `segs`
 /// (open intervals, as the stock subtracts them).
-fn meets_material(interval: Option<(Real, Face, Real, Face)>, segs: &[Segment]) -> bool {
+#[cfg(test)]
+pub(super) fn meets_material(interval: Option<(Real, Face, Real, Face)>, segs: &[Segment]) -> bool {
     interval.is_some_and(|(t0, _, t1, _)| segs.iter().any(|m| t0 < m.hi.t && t1 > m.lo.t))
+}
+
+/// Whether the tool of `shape` (radius `r`, length `l`) grown by `g` meets any of the
+/// material `segs` along the line `p + t·u` (tool frame, `u` unit): the same answer as
+/// [`tool_interval`] against the segments, but without the interval's roots. Within a
+/// segment and the grown end planes' slab, the line meets the grown cylinder `x² + y² ≤
+/// (r + g)²` where the quadratic `a·t² + 2b·t + c` is at most zero somewhere, so at the
+/// vertex `−b/a` clamped to that stretch (likewise the ball's sphere). A stretch touched at
+/// one end only may answer yes where the interval test says no: the test stays
+/// conservative, and the growth holds [`CULL_MARGIN`] for the rounding.
+#[inline(always)]
+pub(super) fn grown_meets(
+    shape: Shape,
+    (r, l): (Real, Real),
+    p: &Vector3,
+    u: &Vector3,
+    g: Real,
+    segs: &[Segment],
+) -> bool {
+    let h0 = match shape {
+        Shape::Flat => -g,
+        Shape::Ball => r - g,
+    };
+    let h1 = l + g;
+    let (s0, s1) = if u.z.abs() <= tol::RELATIVE_EPS {
+        if !(h0 <= p.z && p.z <= h1) {
+            (Real::INFINITY, Real::NEG_INFINITY)
+        } else {
+            (Real::NEG_INFINITY, Real::INFINITY)
+        }
+    } else {
+        let (a, b) = ((h0 - p.z) / u.z, (h1 - p.z) / u.z);
+        (a.min(b), a.max(b))
+    };
+    let rad2 = (r + g) * (r + g);
+    let a = u.x * u.x + u.y * u.y;
+    let b = p.x * u.x + p.y * u.y;
+    let c = p.x * p.x + p.y * p.y - rad2;
+    let vertex = if a <= tol::RELATIVE_EPS {
+        None
+    } else {
+        Some(-b / a)
+    };
+    // The ball's sphere about (0, 0, r): `t² + 2·bs·t + cs`.
+    let w = Vector3::new(p.x, p.y, p.z - r);
+    let (bs, cs) = (w.dot(u), w.dot(&w) - rad2);
+    segs.iter().any(|m| {
+        let (lo, hi) = (s0.max(m.lo.t), s1.min(m.hi.t));
+        let side = lo <= hi
+            && match vertex {
+                None => c <= 0.0,
+                Some(v) => {
+                    let t = v.clamp(lo, hi);
+                    (a * t + 2.0 * b) * t + c <= 0.0
+                }
+            };
+        side || (shape == Shape::Ball && {
+            let t = (-bs).clamp(m.lo.t, m.hi.t);
+            (t + 2.0 * bs) * t + cs <= 0.0
+        })
+    })
 }
 
 impl RotaryEnvelope {
@@ -88,10 +150,7 @@ impl RotaryEnvelope {
     pub fn may_cut(&self, o: &Point3, axis: usize, segs: &[Segment]) -> bool {
         let meets = |s: &Sample, u: &[Vector3; 3], g: Real| {
             let p = s.rot.tr_mul(&(o - s.tip));
-            meets_material(
-                tool_interval(self.shape, self.r, self.l, &p, &u[axis], g),
-                segs,
-            )
+            grown_meets(self.shape, (self.r, self.l), &p, &u[axis], g, segs)
         };
         let (g, half) = (self.cull.grow, self.cull.half_grow);
         const H: usize = CULL_STEPS / 2;
@@ -175,7 +234,13 @@ impl crate::cutting::stock::GroupCull for GroupHull {
     /// material segment.
     fn may_cut(&self, o: &Point3, axis: usize, segs: &[Segment]) -> bool {
         let p = self.reference.rot.tr_mul(&(o - self.reference.tip));
-        let interval = tool_interval(self.shape, self.r, self.l, &p, &self.dirs[axis], self.grow);
-        meets_material(interval, segs)
+        grown_meets(
+            self.shape,
+            (self.r, self.l),
+            &p,
+            &self.dirs[axis],
+            self.grow,
+            segs,
+        )
     }
 }

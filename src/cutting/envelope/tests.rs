@@ -654,6 +654,53 @@ proptest! {
     }
 }
 
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 4000, failure_persistence: None, rng_seed: proptest::test_runner::RngSeed::Fixed(0x9e0), ..ProptestConfig::default() })]
+
+    /// The cull's test without roots (`cull::grown_meets`) answers as the grown tool's
+    /// interval against the material does: whenever the interval meets a segment so does
+    /// it, and it says yes only where the tool grown by 1e-9 mm more meets one — for flat
+    /// and ball end mills, lines in any direction (along the tool's axis and across it
+    /// among them) and one to three segments of material.
+    #[test]
+    fn the_cull_test_without_roots_agrees_with_the_grown_interval(
+        ball in any::<bool>(), p in (-8.0..8.0f64, -8.0..8.0f64, -6.0..32.0f64),
+        dir in (-1.0..1.0f64, -1.0..1.0f64, -1.0..1.0f64), axial in 0..4usize,
+        g in 0.0..1.0f64,
+        cuts in proptest::collection::vec((-30.0..30.0f64, 0.01..12.0f64), 1..4),
+    ) {
+        use crate::cutting::stock::{Crossing, Segment};
+        let shape = if ball { Shape::Ball } else { Shape::Flat };
+        let (r, l) = (3.0, 25.0);
+        let p = Vector3::new(p.0, p.1, p.2);
+        let u = match axial {
+            0 => Vector3::z(),
+            1 => Vector3::new(dir.0, dir.1, 0.0),
+            _ => Vector3::new(dir.0, dir.1, dir.2),
+        };
+        let Some(u) = u.try_normalize(1e-6) else { return Ok(()) };
+        // Disjoint sorted segments from the drawn starts and lengths.
+        let mut starts: Vec<(Real, Real)> = cuts;
+        starts.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut segs: Vec<Segment> = Vec::new();
+        let end = |t: Real| Crossing { t, normal: [0.0, 0.0, 1.0], line: 0 };
+        for (t0, len) in starts {
+            let t0 = segs.last().map_or(t0, |s| t0.max(s.hi.t + 0.01));
+            segs.push(Segment { lo: end(t0), hi: end(t0 + len) });
+        }
+        let reference = |g: Real| {
+            cull::meets_material(tool_interval(shape, r, l, &p, &u, g), &segs)
+        };
+        let fast = cull::grown_meets(shape, (r, l), &p, &u, g, &segs);
+        if reference(g) {
+            prop_assert!(fast, "the interval meets the material, the test says no");
+        }
+        if fast {
+            prop_assert!(reference(g + 1e-9), "the test says yes, the interval grown by 1e-9 misses");
+        }
+    }
+}
+
 /// Material along the whole of a ray.
 fn whole_ray() -> [crate::cutting::stock::Segment; 1] {
     use crate::cutting::stock::{Crossing, Segment};
