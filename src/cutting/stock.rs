@@ -189,7 +189,9 @@ pub trait Cutter: Sync {
     }
     /// Like [`Cutter::ray_cuts_lined`] for a caller that only keeps what lies in `span`
     /// along the ray (the material's extent): an interval end outside `span` may be anywhere
-    /// outside it, and an interval wholly outside may be left out. The default is exact.
+    /// outside it, and an interval wholly outside, not even touching an end of it, may be
+    /// left out (cut latest first, [`TriDexel::remove_each`], a cut that only touches the
+    /// material's end may take that end's crossing). The default is exact.
     fn ray_cuts_in_span(
         &self,
         origin: &Point3,

@@ -352,7 +352,7 @@ impl TranslatedTool {
         };
         // Not `t_out - t_in <= …`: a NaN length is no cut either.
         let long = t_out - t_in > tol::LENGTH_EPS;
-        if !long || t_in >= span.1 || t_out <= span.0 {
+        if !long || t_in > span.1 || t_out < span.0 {
             return None;
         }
         let (s_in, n_in, s_out, n_out) = if sigma > 0.0 {
@@ -558,8 +558,9 @@ impl Cutter for TranslatedTool {
         }
     }
 
-    /// Exact, except that a cut along the tool axis that lies wholly outside `span` (so it
-    /// cannot change the ray) is left out without working out its normals and NC lines.
+    /// Exact, except that a cut along the tool axis that lies wholly outside `span`, not
+    /// touching it (so it cannot change the ray), is left out without working out its
+    /// normals and NC lines.
     fn ray_cuts_in_span(
         &self,
         origin: &Point3,
