@@ -166,31 +166,7 @@ impl MovePath {
         }
         let (mut r, mut t) = (Matrix3::identity(), Vector3::zeros());
         let (mut w, mut v) = (Vector3::zeros(), Vector3::zeros());
-        // A first rotary factor (the chain starts with a moving rotary axis) meets the
-        // identity: its products with `r` are skipped (they return their operand unchanged).
-        let mut factors = self.factors.iter();
-        if let Some(Factor::Rotary {
-            dir,
-            origin,
-            th0,
-            dth,
-            cross,
-            outer,
-        }) = self.factors.first()
-        {
-            factors.next();
-            let omega = dir * *dth;
-            w += omega;
-            v -= omega.cross(origin);
-            let (sin, cos) = (th0 + dth * lambda).sin_cos();
-            let mut rt = cross * sin + outer * (1.0 - cos);
-            for k in 0..3 {
-                rt[(k, k)] += cos;
-            }
-            t += origin - rt * origin;
-            r = rt;
-        }
-        for f in factors {
+        for f in &self.factors {
             match f {
                 Factor::Affine { rot, t0, t1 } => {
                     v += r * t1;
