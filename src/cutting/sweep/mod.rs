@@ -139,7 +139,9 @@ pub struct SweepReport {
     /// run that removed material names them at one of its ends; envelope moves cut
     /// together (up to 16 consecutive ones, each ray through the latest first, see
     /// [`crate::cutting::stock::TriDexel::remove_each`]) when they removed material the
-    /// later moves of their batch left.
+    /// later moves of their batch left: a move all of whose cut the next few moves re-cut
+    /// is not counted there, where cutting each move on its own (an observer that looks
+    /// after every move, a holder's checks) counts it.
     pub cutting_moves: usize,
     /// Moves that turned a rotary axis.
     pub rotary_moves: usize,
