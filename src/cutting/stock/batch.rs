@@ -217,6 +217,8 @@ impl BatchContext<'_> {
         for iu in c.iu.0.max(bu * BLOCK)..=c.iu.1.min(bu * BLOCK + BLOCK - 1) {
             let local = (iv % BLOCK) * BLOCK + iu % BLOCK;
             let o = c.origin(iu, iv);
+            // The ray's material before the batch.
+            let before = block.ray(local, &c.fill);
             let mut changed = false;
             // Whether the ray lies in cutter k's index ranges, and those ranges' extent along it.
             let reach = |k: usize| {
@@ -229,11 +231,7 @@ impl BatchContext<'_> {
             while k > 0 {
                 // The ray's material as the cutters after k left it.
                 let segs = |own| {
-                    if changed {
-                        own
-                    } else {
-                        block.ray(local, &c.fill)
-                    }
+                    if changed { own } else { before }
                 };
                 if let Some(g) = group.next_if(|g| g.cutters.end == k) {
                     let asked = g.cutters.clone().any(|j| reach(j).is_some());
@@ -255,7 +253,7 @@ impl BatchContext<'_> {
                     cutter,
                     &o,
                     c.axis,
-                    (segs(&own), Some(block.ray(local, &c.fill))),
+                    (segs(&own), Some(before)),
                     &mut bufs,
                     &mut next,
                     &mut used,
