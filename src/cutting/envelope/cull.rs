@@ -18,6 +18,31 @@
 //! the middle of each half-cell (`λ` within `1/(4N)` of it) grown by `M/(4N)` holds the tool
 //! over that half: where it misses the material, the half's inner kept poses need no test.
 //!
+//! **The swept cull** ([`SweptPoses`], used instead of the kept poses on a move whose axes
+//! all move at constant rates: no error motions, not read pose by pose). The tool is
+//! symmetric about its axis, so of the rigid motion from a pose `λm` to `λ` only the
+//! translation of the axis's middle `c` and the tilt of the axis matter. In the tool frame
+//! at `λm`, over `|λ − λm| ≤ s`:
+//!
+//! - `c` moves by `(λ − λm)·V + e`, `V = v_t + w_t × c` its velocity at `λm`, `|e| ≤ A·s²/2`
+//!   with `A` a bound on its acceleration;
+//! - the axis turns by `θ ≤ s·|w_⊥| + 0.75·Ω²·s²` (`w_⊥` the angular velocity's part across
+//!   the axis at `λm`, which changes by at most `1.5·Ω²` per unit `λ`, `Ω` the total turn:
+//!   `|ω'| ≤ Ω²/2` and the axis turns at `|ω|`), and the tool turned by `θ` about `c` lies
+//!   in the tool about `c` with radius `r + (l/2)·θ` and end planes `r·θ` further out.
+//!
+//! So the tool lies in the tool at `λm` translated along `τ·D`, `τ ∈ [−1, 1]`, `D = s·V`,
+//! and grown by `max(l/2, r)·θ + A·s²/2` (plus the margins): a cylinder swept along a
+//! segment, whose width across the motion is exact, where the kept poses' growth `M·s`
+//! covers the translation too. With every axis at a constant rate the spatial twist's rate
+//! is the sum of the brackets of the pairs of joint twists; the field of a bracket at a
+//! point is `ω_j × X_k − ω_k × X_j`, at most `ω_j·ω_k·(ρ_j + ρ_k)` for two rotary axes (`ρ`
+//! the point's distance from their lines) and `ω_j·v_k` for a rotary and a linear one, in
+//! all at most `Ω·P` with `P` the point's per-axis speed bound; `ω × ẋ` adds at most `Ω·P`:
+//! `A = 2·Ω·P`. Per cell the swept cell (about its middle sample, `s = h/2`) is tested,
+//! then its halves (about the quarter poses, `s = h/4`): a ray whose material misses the
+//! swept cell, or both swept halves, is not changed by the cell.
+//!
 //! **Consecutive moves** ([`GroupHull`]): each cell's tool lies in its middle pose's tool
 //! grown by `δ`, and that in the tool at one reference pose grown further by how far any
 //! tool point lies between the two poses: `|Δc| + ‖ΔR‖₂·ρ`, with `c` the middle of the tool's
@@ -140,6 +165,242 @@ pub(super) fn grown_meets(
     })
 }
 
+/// Below this `(uu·dd − ud²)/(uu·dd)` (the squared sine of the angle between the ray and
+/// the reach) [`least_distance2`] takes the least over the box's edges, less what the
+/// interior can lie below them (the closest pair of nearly parallel lines is ill
+/// conditioned).
+const PARALLEL: Real = 1e-8;
+
+/// A ray's direction `u` against one swept pose's reach `D`, for the least distance between
+/// the ray's stretches and the reach's segment ([`least_distance2`]): `ud = u·D`,
+/// `dd = D·D`, the reciprocals of `u·u` and `dd` (0 where not positive), that of
+/// `uu·dd − ud²` where the two are not nearly parallel (else 0), and then the slack
+/// `2·PARALLEL·uu` per squared length of the stretch.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct Pair {
+    u: Vector3,
+    d: Vector3,
+    ud: Real,
+    dd: Real,
+    inv_uu: Real,
+    inv_dd: Real,
+    inv_den: Real,
+    slack: Real,
+}
+
+impl Pair {
+    pub(super) fn new(u: Vector3, d: Vector3) -> Self {
+        let (uu, ud, dd) = (u.dot(&u), u.dot(&d), d.dot(&d));
+        let inv = |x: Real| if x > Real::MIN_POSITIVE { 1.0 / x } else { 0.0 };
+        let den = uu * dd - ud * ud;
+        let apart = den > PARALLEL * uu * dd;
+        Self {
+            u,
+            d,
+            ud,
+            dd,
+            inv_uu: inv(uu),
+            inv_dd: inv(dd),
+            inv_den: if apart { inv(den) } else { 0.0 },
+            slack: if apart { 0.0 } else { 2.0 * PARALLEL * uu },
+        }
+    }
+}
+
+/// A lower bound, exact where the two are not nearly parallel, on the squared distance
+/// between the stretch `p + t·u`, `t ∈ [lo, hi]`, and the segment `τ·D`, `τ ∈ [−1, 1]` (`u`,
+/// `D` and their products in `q`): the least of the convex quadratic `|p + t·u − τ·D|²`
+/// over the box.
+///
+/// - **Apart.** `t` from the lines' closest pair clamped to the stretch, `τ` nearest to
+///   that point clamped to the segment, and where `τ` was clamped `t` nearest to that end
+///   (the closest points of two segments, after Ericson, *Real-Time Collision Detection*,
+///   §5.1.9).
+/// - **Nearly parallel.** The least over the box's four edges (each a clamp in closed
+///   form), which is the least over the box unless the lines' closest pair lies inside it;
+///   then the quadratic along the valley `k·(t − t*)²`, `k = (uu·dd − ud²)/dd ≤ PARALLEL·uu`
+///   (rounding aside), meets an edge within the stretch's length of `t*`, so the edges
+///   exceed the least by at most `k·(hi − lo)²`: that is taken off, doubled.
+#[inline(always)]
+pub(super) fn least_distance2(p: &Vector3, q: &Pair, (lo, hi): (Real, Real)) -> Real {
+    let (pu, pd) = (p.dot(&q.u), p.dot(&q.d));
+    if q.inv_den > 0.0 {
+        let t = ((q.ud * pd - q.dd * pu) * q.inv_den).clamp(lo, hi);
+        let tau = (pd + q.ud * t) * q.inv_dd;
+        let (t, tau) = if tau < -1.0 {
+            (((-q.ud - pu) * q.inv_uu).clamp(lo, hi), -1.0)
+        } else if tau > 1.0 {
+            (((q.ud - pu) * q.inv_uu).clamp(lo, hi), 1.0)
+        } else {
+            (t, tau)
+        };
+        return (p + q.u * t - q.d * tau).norm_squared();
+    }
+    // The edges t = lo, hi (τ nearest) and τ = ±1 (t nearest).
+    let across = |t: Real| {
+        let tau = ((pd + q.ud * t) * q.inv_dd).clamp(-1.0, 1.0);
+        (p + q.u * t - q.d * tau).norm_squared()
+    };
+    let along = |tau: Real| {
+        let t = ((q.ud * tau - pu) * q.inv_uu).clamp(lo, hi);
+        (p + q.u * t - q.d * tau).norm_squared()
+    };
+    let least = across(lo).min(across(hi)).min(along(-1.0)).min(along(1.0));
+    (least - q.slack * (hi - lo) * (hi - lo)).max(0.0)
+}
+
+/// Entries of [`SweptPoses`] per cell: the cell and its two halves.
+const SWEPT_PER_CELL: usize = 3;
+
+/// One pose of the swept cull: the tool there, translated along `τ·reach` (`τ ∈ [−1, 1]`,
+/// tool frame) and grown by `grow`, holds the tool over a stretch of `λ` about it.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct SweptPose {
+    pub(super) rot: Matrix3,
+    pub(super) tip: Point3,
+    pub(super) reach: Vector3,
+    pub(super) grow: Real,
+    /// Per axis ray: its direction's reciprocal component along the tool axis (`None`:
+    /// parallel to the end planes) and its pairs with the reach across the axis and in
+    /// full.
+    axes: [(Option<Real>, Pair, Pair); 3],
+}
+
+impl SweptPose {
+    /// The swept pose that holds the tool (radius and length `r`, `l`) over `λ` within
+    /// `half` of the pose `s`'s, on a move of total turn `omega` whose tool axis's middle
+    /// point accelerates by at most `accel` (see the module docs).
+    fn about(s: &Sample, half: Real, (r, l): (Real, Real), (omega, accel): (Real, Real)) -> Self {
+        let centre = Vector3::new(0.0, 0.0, l / 2.0);
+        let tilt_rate = (s.w_t.x * s.w_t.x + s.w_t.y * s.w_t.y).sqrt();
+        let tilt = half * tilt_rate + 0.75 * omega * omega * half * half;
+        let reach = (s.v_t + s.w_t.cross(&centre)) * half;
+        let grow = (l / 2.0).max(r) * tilt + accel * half * half / 2.0;
+        let grow = (grow + HULL_ROUNDING * reach.norm()) * (1.0 + HULL_ROUNDING) + CULL_MARGIN;
+        Self::new(s, reach, grow)
+    }
+
+    fn new(s: &Sample, reach: Vector3, grow: Real) -> Self {
+        let dxy = Vector3::new(reach.x, reach.y, 0.0);
+        let axes = axis_dirs(s).map(|u| {
+            let uxy = Vector3::new(u.x, u.y, 0.0);
+            let inv_z = (u.z.abs() > tol::RELATIVE_EPS).then(|| 1.0 / u.z);
+            (inv_z, Pair::new(uxy, dxy), Pair::new(u, reach))
+        });
+        Self {
+            rot: s.rot,
+            tip: s.tip,
+            reach,
+            grow,
+            axes,
+        }
+    }
+
+    /// Whether this swept pose of a tool of `shape` (radius `r`, length `l`) meets any of
+    /// the material `segs` of the ray `o + t·e_axis`. Along the tool axis the translation
+    /// is taken into the growth (the end planes `|reach_z|` further out); across it, the
+    /// ray's stretch within the end planes' slab comes within `r + grow` of the segment
+    /// `±reach_xy` somewhere. A ball's sphere is swept in full: the ray's material within
+    /// `r + grow` of the segment `(0, 0, r) ± reach`.
+    #[inline(always)]
+    fn meets(
+        &self,
+        shape: Shape,
+        (r, l): (Real, Real),
+        o: &Point3,
+        axis: usize,
+        segs: &[Segment],
+    ) -> bool {
+        let p = self.rot.tr_mul(&(o - self.tip));
+        let (inv_z, across, full) = &self.axes[axis];
+        let (g, dz) = (self.grow, self.reach.z.abs());
+        let h0 = match shape {
+            Shape::Flat => -g - dz,
+            Shape::Ball => r - g - dz,
+        };
+        let h1 = l + g + dz;
+        let (s0, s1) = match inv_z {
+            None if !(h0 <= p.z && p.z <= h1) => {
+                return shape == Shape::Ball && self.sphere_meets(r, &p, full, segs);
+            }
+            None => (Real::NEG_INFINITY, Real::INFINITY),
+            Some(k) => {
+                let (a, b) = ((h0 - p.z) * k, (h1 - p.z) * k);
+                (a.min(b), a.max(b))
+            }
+        };
+        let rad2 = (r + g) * (r + g);
+        let pxy = Vector3::new(p.x, p.y, 0.0);
+        segs.iter().any(|m| {
+            let (lo, hi) = (s0.max(m.lo.t), s1.min(m.hi.t));
+            lo <= hi && least_distance2(&pxy, across, (lo, hi)) <= rad2
+        }) || (shape == Shape::Ball && self.sphere_meets(r, &p, full, segs))
+    }
+
+    /// Whether the ball's swept sphere (centre `(0, 0, r) ± reach`, radius `r + grow`)
+    /// meets the material `segs` along `p + t·u` (tool frame).
+    fn sphere_meets(&self, r: Real, p: &Vector3, full: &Pair, segs: &[Segment]) -> bool {
+        let rad2 = (r + self.grow) * (r + self.grow);
+        let w = p - Vector3::new(0.0, 0.0, r);
+        segs.iter()
+            .any(|m| least_distance2(&w, full, (m.lo.t, m.hi.t)) <= rad2)
+    }
+}
+
+/// The swept cull of a move whose axes all move at constant rates (see the module docs):
+/// per cell, [`SWEPT_PER_CELL`] swept poses, the cell about its middle sample and its
+/// halves about the quarter poses.
+#[derive(Clone, Debug)]
+pub(super) struct SweptPoses {
+    pub(super) poses: Vec<SweptPose>,
+}
+
+impl SweptPoses {
+    /// The swept poses of a move of `cells = (samples.len() − 1)/2` cells from its
+    /// `samples` and `quarters`, for a tool of radius `r` and length `l`, the move's total
+    /// turn `omega` (rad) and the bound `accel` on the acceleration of the tool axis's
+    /// middle point (mm per unit λ²).
+    pub(super) fn new(
+        (samples, quarters): (&[Sample], &[(Real, Sample)]),
+        (r, l): (Real, Real),
+        omega: Real,
+        accel: Real,
+    ) -> Self {
+        let cells = (samples.len() - 1) / 2;
+        let h = 1.0 / cells as Real;
+        let mut poses = Vec::with_capacity(SWEPT_PER_CELL * cells);
+        for j in 0..cells {
+            poses.push(SweptPose::about(
+                &samples[2 * j + 1],
+                h / 2.0,
+                (r, l),
+                (omega, accel),
+            ));
+            for q in &quarters[2 * j..2 * j + 2] {
+                poses.push(SweptPose::about(&q.1, h / 4.0, (r, l), (omega, accel)));
+            }
+        }
+        Self { poses }
+    }
+
+    /// Whether the move may change the material `segs` of the ray `o + t·e_axis` (tool of
+    /// `shape`, radius and length `rl`): false only when, in every cell, the swept cell or
+    /// both its swept halves miss the material.
+    fn may_cut(
+        &self,
+        shape: Shape,
+        rl: (Real, Real),
+        o: &Point3,
+        axis: usize,
+        segs: &[Segment],
+    ) -> bool {
+        let meets = |s: &SweptPose| s.meets(shape, rl, o, axis, segs);
+        self.poses
+            .chunks_exact(SWEPT_PER_CELL)
+            .any(|c| meets(&c[0]) && (meets(&c[1]) || meets(&c[2])))
+    }
+}
+
 impl RotaryEnvelope {
     /// Whether the move may change the material `segs` of the ray `o + t·e_axis`:
     /// false only when no grown kept pose meets any segment (see the module docs). Each
@@ -147,7 +408,12 @@ impl RotaryEnvelope {
     /// throughout the cell); its kept poses only when that meets the material, the cell's
     /// ends first (where a move that cuts the ray usually meets its material), then the
     /// inner ones of each half-cell whose middle pose, grown to hold the half, meets it.
+    /// Where every axis moves at a constant rate the swept cull decides instead (see the
+    /// module docs).
     pub fn may_cut(&self, o: &Point3, axis: usize, segs: &[Segment]) -> bool {
+        if let Some(swept) = &self.swept {
+            return swept.may_cut(self.shape, (self.r, self.l), o, axis, segs);
+        }
         let meets = |s: &Sample, u: &[Vector3; 3], g: Real| {
             let p = s.rot.tr_mul(&(o - s.tip));
             grown_meets(self.shape, (self.r, self.l), &p, &u[axis], g, segs)

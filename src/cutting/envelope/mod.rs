@@ -88,7 +88,7 @@ mod solve;
 
 pub use cull::GroupHull;
 pub use path::{MovePath, error_motion_speed, rotation_and_travel};
-use path::{Sample, speed_bound};
+use path::{Sample, axis_speed_bounds, speed_bound};
 use probe::{
     Face, Hit, Probe, Ray, Shape, ball_sphere, frame_box, line_segment_distance, tool_interval,
     tool_normal,
@@ -163,6 +163,9 @@ pub struct RotaryEnvelope {
     bounds: Aabb,
     /// The poses of the cull test ([`RotaryEnvelope::may_cut`]).
     cull: cull::CullPoses,
+    /// The swept cull's poses, where every axis moves at a constant rate (used instead of
+    /// `cull`).
+    swept: Option<cull::SweptPoses>,
 }
 
 impl Cutter for RotaryEnvelope {

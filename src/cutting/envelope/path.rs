@@ -148,6 +148,15 @@ impl MovePath {
         }
     }
 
+    /// Whether every axis turns or travels at a constant rate through the move (no error
+    /// motions, not read pose by pose): the condition of the swept cull's bound on the
+    /// acceleration (`cull`).
+    pub(super) fn constant_rates(&self) -> bool {
+        self.factors
+            .iter()
+            .all(|f| matches!(f, Factor::Affine { .. } | Factor::Rotary { .. }))
+    }
+
     /// The tool's pose in the workpiece frame at fraction `lambda` of the move.
     pub fn w_from_t(&self, lambda: Real) -> Isometry3 {
         let s = self.sample(lambda);
@@ -272,6 +281,26 @@ pub(super) fn speed_bound(
     end: &AxisValues,
     state: &[Real; 6],
 ) -> Real {
+    let (whole, per_axis) = axis_speed_bounds(chain, mid, reach, start, end);
+    let base = whole.min(per_axis);
+    if chain.has_error_motions() {
+        let mid = Point3::new(0.0, 0.0, mid);
+        base + error_motion_speed(chain, &mid, reach, start, end, state).0
+    } else {
+        base
+    }
+}
+
+/// The two bounds of [`speed_bound`] without error motions: (whole, per axis). The per-axis
+/// one is at least `Σ_k ω_k·ρ_k` plus the travel, `ρ_k` bounding the points' distance from
+/// rotary line `k` during the move.
+pub(super) fn axis_speed_bounds(
+    chain: &Chain,
+    mid: Real,
+    reach: Real,
+    start: &AxisValues,
+    end: &AxisValues,
+) -> (Real, Real) {
     let (omega, travel) = rotation_and_travel(chain, start, end);
     let turns: Vec<Real> = chain
         .axes()
@@ -299,12 +328,7 @@ pub(super) fn speed_bound(
     for (w, d) in turns.iter().zip(&dist).rev() {
         after += w * (d + reach + travel + after);
     }
-    let base = whole.min(after + travel);
-    if chain.has_error_motions() {
-        base + error_motion_speed(chain, &mid, reach, start, end, state).0
-    } else {
-        base
-    }
+    (whole, after + travel)
 }
 
 /// What error motions add to the speed of points within `reach` of the tool point `mid`

@@ -54,7 +54,14 @@ impl RotaryEnvelope {
             let half = (part_z[k + 1] - part_z[k]) / 2.0;
             speed_bound(chain, part_z[k] + half, half + r, start, end, state)
         });
-        Self::of_path(shape, (r, l), path, speed, (part_z, part_speed))
+        // The swept cull's rates: the total turn Ω and a bound on the acceleration of the
+        // tool axis's middle point, 2·Ω·P with P its per-axis speed bound (see `cull`).
+        let rates = path.constant_rates().then(|| {
+            let (omega, _) = rotation_and_travel(chain, start, end);
+            let per_axis = axis_speed_bounds(chain, l / 2.0, 0.0, start, end).1;
+            (omega, 2.0 * omega * per_axis)
+        });
+        Self::of_path(shape, (r, l), path, speed, (part_z, part_speed), rates)
     }
 
     /// The envelope of `tool` on a move read pose by pose, through its pilot poses `pilot`
@@ -80,18 +87,21 @@ impl RotaryEnvelope {
             MovePath::sampled(curve),
             speed,
             (part_z, part_speed),
+            None,
         )
     }
 
     /// The envelope of a tool of `shape` (radius and length `r`, `l`) on `path`, no tool
     /// point faster than `speed` per unit λ, the capsule pieces between heights `part_z`
-    /// no faster than `part_speed`.
+    /// no faster than `part_speed`; `rates`, where every axis moves at a constant rate, the
+    /// total turn and the acceleration bound of the swept cull (`cull::SweptPoses`).
     fn of_path(
         shape: Shape,
         (r, l): (Real, Real),
         path: MovePath,
         speed: Real,
         (part_z, part_speed): ([Real; PARTS + 1], [Real; PARTS]),
+        rates: Option<(Real, Real)>,
     ) -> Result<Self, EnvelopeError> {
         let want = speed / (2.0 * CELL_GROWTH * r);
         if !(want.is_finite() && want <= MAX_CELLS as Real) {
@@ -122,10 +132,14 @@ impl RotaryEnvelope {
             })
             .collect();
         let cull = cull::CullPoses::new(&path, cells, speed);
+        let swept = rates.map(|(omega, accel)| {
+            cull::SweptPoses::new((&samples, &quarters), (r, l), omega, accel)
+        });
         let sample_dirs = samples.iter().map(cull::axis_dirs).collect();
         let quarter_dirs = quarters.iter().map(|(_, s)| cull::axis_dirs(s)).collect();
         Ok(Self {
             cull,
+            swept,
             shape,
             r,
             l,

@@ -397,6 +397,194 @@ fn the_speed_bound_holds_on_two_turning_axes() {
     }
 }
 
+/// The smallest growth of a swept pose (tool of `shape`, radius `r`, length `l`, swept
+/// along `±reach`) that holds the point `y` of its frame: the tests' own measure, by the
+/// point's distance from the reach's segment across the axis (and, for the ball, from the
+/// sphere centre's segment), never the cull's code.
+fn growth_to_hold(shape: Shape, (r, l): (Real, Real), reach: &Vector3, y: &Vector3) -> Real {
+    let nearest = |p: &Vector3, d: &Vector3| {
+        let dd = d.norm_squared();
+        let tau = if dd > 0.0 {
+            (p.dot(d) / dd).clamp(-1.0, 1.0)
+        } else {
+            0.0
+        };
+        (p - d * tau).norm()
+    };
+    let dz = reach.z.abs();
+    let dxy = Vector3::new(reach.x, reach.y, 0.0);
+    let across = nearest(&Vector3::new(y.x, y.y, 0.0), &dxy) - r;
+    let z0 = match shape {
+        Shape::Flat => 0.0,
+        Shape::Ball => r,
+    };
+    let along = (z0 - dz - y.z).max(y.z - l - dz);
+    let side = across.max(along);
+    match shape {
+        Shape::Flat => side,
+        Shape::Ball => side.min(nearest(&(y - Vector3::new(0.0, 0.0, r)), reach) - r),
+    }
+}
+
+/// The swept cull's poses hold the tool over their stretch of the move: on moves of the
+/// trunnion A/C turning both axes (the side cut's small moves, and moves turning A by 35°
+/// and 60° with C by 50° and 180°, the linear axes moving), for flat and ball end mills,
+/// every point of the tool's surface at 41 poses across each swept pose's stretch (the
+/// chain's own poses, not the envelope's path) lies in that pose's tool translated along
+/// its reach and grown by its growth, measured by the tests' own distance. The bound is
+/// not loose: some point needs more than a tenth of the growth on every move, and on the
+/// side cut's moves a half-cell's growth is below half of the kept poses' growth.
+#[test]
+fn swept_poses_hold_the_tool_over_their_stretch() {
+    let c = trunnion();
+    let (r, l) = (3.0, 25.0);
+    let at = |x: Real, y: Real, z: Real, a: Real, cc: Real| q(x, y, z, a).with(AxisLetter::C, cc);
+    let moves = [
+        (
+            at(0.0, -19.0, 40.0, 0.0, 0.0),
+            at(0.0, -19.0, 39.995, 0.21, 0.5),
+        ),
+        (
+            at(0.0, -19.0, 4.0, 7.9, 250.0),
+            at(0.0, -19.0, 3.995, 8.0, 250.5),
+        ),
+        (
+            at(3.0, -10.0, 20.0, -20.0, 30.0),
+            at(-2.0, -14.0, 25.0, 15.0, 80.0),
+        ),
+        (
+            at(0.0, 5.0, 60.0, 30.0, -90.0),
+            at(1.0, 5.0, 58.0, -30.0, 90.0),
+        ),
+    ];
+    for kind in [ToolKind::Flat, ToolKind::Ball] {
+        let tool = Tool::try_new(kind, 2.0 * r, l).expect("valid");
+        let shape = if kind == ToolKind::Flat {
+            Shape::Flat
+        } else {
+            Shape::Ball
+        };
+        // Points of the tool's surface (tool frame): rims of the side, the end faces' disks
+        // and, for the ball, its hemisphere.
+        let mut points = Vec::new();
+        let z0 = if shape == Shape::Flat { 0.0 } else { r };
+        for h in 0..=10 {
+            let z = z0 + (l - z0) * h as Real / 10.0;
+            for k in 0..24 {
+                let phi = k as Real * std::f64::consts::TAU / 24.0;
+                points.push(Vector3::new(r * phi.cos(), r * phi.sin(), z));
+            }
+        }
+        for k in 0..12 {
+            let phi = k as Real * std::f64::consts::TAU / 12.0;
+            points.push(Vector3::new(0.5 * r * phi.cos(), 0.5 * r * phi.sin(), l));
+            if shape == Shape::Flat {
+                points.push(Vector3::new(0.5 * r * phi.cos(), 0.5 * r * phi.sin(), 0.0));
+            }
+        }
+        if shape == Shape::Ball {
+            for i in 0..=6 {
+                let th = i as Real * std::f64::consts::FRAC_PI_2 / 6.0;
+                for k in 0..24 {
+                    let phi = k as Real * std::f64::consts::TAU / 24.0;
+                    points.push(Vector3::new(
+                        r * th.sin() * phi.cos(),
+                        r * th.sin() * phi.sin(),
+                        r - r * th.cos(),
+                    ));
+                }
+            }
+        }
+        for (m, (a, b)) in moves.iter().enumerate() {
+            let env = RotaryEnvelope::new(&c, &tool, a, b).expect("supported");
+            let swept = env.swept.as_ref().expect("constant rates: the swept cull");
+            let n = env.cells() as Real;
+            assert_eq!(swept.poses.len(), 3 * env.cells());
+            let mut most: Real = 0.0;
+            for (k, s) in swept.poses.iter().enumerate() {
+                let j = (k / 3) as Real;
+                let (mid, half) = match k % 3 {
+                    0 => ((2.0 * j + 1.0) / (2.0 * n), 0.5 / n),
+                    1 => ((4.0 * j + 1.0) / (4.0 * n), 0.25 / n),
+                    _ => ((4.0 * j + 3.0) / (4.0 * n), 0.25 / n),
+                };
+                for i in 0..=40 {
+                    let lam = mid + half * (i as Real / 20.0 - 1.0);
+                    let pose = chain_pose(&c, a, b, lam);
+                    for x in &points {
+                        let w = pose * Point3::from(*x);
+                        let y = s.rot.tr_mul(&(w - s.tip));
+                        let need = growth_to_hold(shape, (r, l), &s.reach, &y);
+                        assert!(
+                            need <= s.grow,
+                            "{kind:?} move {m}, swept pose {k}, λ {lam}: the point {x:?} needs \
+                             {need} > {}",
+                            s.grow
+                        );
+                        most = most.max(need / s.grow);
+                    }
+                }
+                if m < 2 && k % 3 != 0 {
+                    assert!(
+                        s.grow < 0.5 * env.cull.grow,
+                        "{kind:?} move {m}: a half-cell's growth {} vs the kept poses' {}",
+                        s.grow,
+                        env.cull.grow
+                    );
+                }
+            }
+            assert!(
+                most > 0.1,
+                "{kind:?} move {m}: at most {most} of the growth needed"
+            );
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 2000, failure_persistence: None, rng_seed: proptest::test_runner::RngSeed::Fixed(0x5e9), ..ProptestConfig::default() })]
+
+    /// The swept cull's least distance between a ray's stretch and the reach's segment is
+    /// not above the least found by the tests' own search (golden sections over the
+    /// segment, the stretch's nearest point in closed form), and below it by no more than
+    /// its allowance where the two are nearly parallel (none otherwise): over stretches in
+    /// general position, nearly parallel to the segment (1e-7 rad), of no direction, and
+    /// segments of no length.
+    #[test]
+    fn the_swept_cull_finds_the_least_distance(
+        p in prop::array::uniform3(-5.0..5.0f64), u in prop::array::uniform3(-1.0..1.0f64),
+        d in prop::array::uniform3(-2.0..2.0f64), lo in -6.0..6.0f64, len in 0.0..8.0f64,
+        case in 0..4usize, tilt in -1e-7..1e-7f64,
+    ) {
+        let (p, mut u, mut d) = (Vector3::from(p), Vector3::from(u), Vector3::from(d));
+        match case {
+            1 => u = d + Vector3::new(tilt, -tilt, 0.0),
+            2 => d = Vector3::zeros(),
+            3 => u = Vector3::new(0.0, 0.0, 0.0),
+            _ => {}
+        }
+        if u.norm() > 0.0 { u = u.normalize(); }
+        let hi = lo + len;
+        let got = cull::least_distance2(&p, &cull::Pair::new(u, d), (lo, hi));
+        // For a point of the segment, the stretch's nearest point in closed form.
+        let at = |tau: Real| {
+            let w = p - d * tau;
+            let t = if u.norm_squared() > 0.0 { (-w.dot(&u) / u.norm_squared()).clamp(lo, hi) } else { lo };
+            (w + u * t).norm_squared()
+        };
+        let (mut a, mut b) = (-1.0, 1.0);
+        let g = (5.0f64.sqrt() - 1.0) / 2.0;
+        for _ in 0..200 {
+            let (x1, x2) = (b - g * (b - a), a + g * (b - a));
+            if at(x1) <= at(x2) { b = x2 } else { a = x1 }
+        }
+        let best = at(0.5 * (a + b)).min(at(-1.0)).min(at(1.0));
+        prop_assert!(got <= best + 1e-12 * (1.0 + best), "{got} vs {best}");
+        // Nearly parallel, the edges' least less its allowance for the interior.
+        prop_assert!(got >= best - 2e-8 * len * len - 1e-12 * (1.0 + best), "{got} vs {best}");
+    }
+}
+
 /// A case a random search found in an earlier, Brent-based envelope: a z ray the flat
 /// tool leaves through the edge of its top face while A turns. The farthest exit is where
 /// the ray passes through the top edge circle (λ ≈ 0.924), at the end of the poses that
