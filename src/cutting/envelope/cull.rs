@@ -50,7 +50,12 @@
 //! spectral norm of the rotations' difference (for two rotations `‖ΔR‖_F/√2`: its two
 //! non-zero singular values are equal). A ray whose material the reference tool grown by
 //! the largest of these misses is changed by none of the moves: the stock skips them all
-//! at once ([`crate::cutting::stock::GroupCull`]).
+//! at once ([`crate::cutting::stock::GroupCull`]). Where every move has the swept cull, the
+//! hull is swept too: each cell's swept tool is the reference tool translated by the cell's
+//! axis-middle segment and grown by the cell's growth and by its tilt from the reference;
+//! the reference tool swept along the segment from the first cell's start to the last
+//! cell's end, grown by the largest of those plus each cell segment's distance from that
+//! one, holds them all (`GroupHull::swept`).
 //!
 //! **Invariant:** a ray is culled only when the exact envelope could not change it.
 
@@ -457,6 +462,9 @@ pub struct GroupHull {
     dirs: [Vector3; 3],
     /// The growth that holds every move's tool (mm).
     grow: Real,
+    /// Where every move has the swept cull: the reference tool swept along the group's
+    /// path and grown to hold every cell's swept tool (used instead of `grow`).
+    pub(super) swept: Option<SweptPose>,
 }
 
 impl GroupHull {
@@ -486,7 +494,67 @@ impl GroupHull {
             reference,
             dirs: axis_dirs(&reference),
             grow: grow * (1.0 + HULL_ROUNDING) + CULL_MARGIN,
+            swept: Self::swept(group, &reference, (r, l)),
         }
+    }
+
+    /// The swept hull of `group` about the pose `reference` (tool radius and length `r`,
+    /// `l`), where every move has swept poses (see the module docs): each cell's swept tool
+    /// is the reference tool translated by the cell's axis middle `Δc_j + τ·D_j` and grown
+    /// by its own growth `g_j` and by its tilt from the reference `θ_j` (turning the grown
+    /// tool about its middle adds `(max(l/2, r) + g_j)·θ_j`). Those translations lie within
+    /// `e_j` of the segment from the first cell's start to the last cell's end (the
+    /// distance of a segment's points from another is greatest at its ends), so the
+    /// reference tool swept along that segment and grown by the largest
+    /// `g_j + (max(l/2, r) + g_j)·θ_j + e_j` holds every cell.
+    fn swept(
+        group: &[&RotaryEnvelope],
+        reference: &Sample,
+        (r, l): (Real, Real),
+    ) -> Option<SweptPose> {
+        let mut cells = Vec::new();
+        let rot = reference.rot;
+        let axis_mid = Vector3::new(0.0, 0.0, l / 2.0);
+        let centre = rot * axis_mid + reference.tip.coords;
+        let axis = rot.column(2).into_owned();
+        for env in group {
+            for cell in env.swept.as_ref()?.poses.chunks_exact(SWEPT_PER_CELL) {
+                let s = &cell[0];
+                let moved = rot.tr_mul(&(s.rot * axis_mid + s.tip.coords - centre));
+                let reach = rot.tr_mul(&(s.rot * s.reach));
+                let chord = (s.rot.column(2) - axis).norm();
+                let tilt = 2.0 * (0.5 * chord).min(1.0).asin();
+                cells.push((moved, reach, s.grow, tilt));
+            }
+        }
+        let (first, last) = (cells.first()?, cells.last()?);
+        let (start, end) = (first.0 - first.1, last.0 + last.1);
+        let (offset, reach) = ((start + end) / 2.0, (end - start) / 2.0);
+        let rr = reach.norm_squared();
+        let off_path = |x: Vector3| {
+            let w = x - offset;
+            let tau = if rr > 0.0 {
+                (w.dot(&reach) / rr).clamp(-1.0, 1.0)
+            } else {
+                0.0
+            };
+            (w - reach * tau).norm()
+        };
+        let arm = (l / 2.0).max(r);
+        let grow = cells
+            .iter()
+            .map(|&(moved, d, g, tilt)| {
+                g + (arm + g) * tilt + off_path(moved - d).max(off_path(moved + d))
+            })
+            .fold(0.0, Real::max);
+        let grow = (grow + HULL_ROUNDING * (reach.norm() + offset.norm())) * (1.0 + HULL_ROUNDING)
+            + CULL_MARGIN;
+        // The reference tool moved by the offset: its tip there.
+        let at = Sample {
+            tip: reference.tip + rot * offset,
+            ..*reference
+        };
+        Some(SweptPose::new(&at, reach, grow))
     }
 
     /// The growth of the reference tool that holds every move's tool (mm).
@@ -499,6 +567,9 @@ impl crate::cutting::stock::GroupCull for GroupHull {
     /// False only when the grown reference tool's interval along the ray misses every
     /// material segment.
     fn may_cut(&self, o: &Point3, axis: usize, segs: &[Segment]) -> bool {
+        if let Some(s) = &self.swept {
+            return s.meets(self.shape, (self.r, self.l), o, axis, segs);
+        }
         let p = self.reference.rot.tr_mul(&(o - self.reference.tip));
         grown_meets(
             self.shape,

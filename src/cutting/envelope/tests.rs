@@ -976,9 +976,11 @@ fn culled_rays_meet_no_pose_of_the_move() {
 /// move with X, Y and Z, flat and ball end mills), every ray of a fine grid (x, y and z
 /// rays at 0.05 mm across the moves' box) that the hull clears, with material along the
 /// whole ray, is met by no pose of any of the moves sampled every 1/1024 of it (the tool's
-/// interval at each pose, no growth). Hundreds of the rays it clears pass within 0.5 mm of a
-/// pose, and its growth is at most a cell's own growth plus 2.5 moves' travel (the farthest
-/// cell middle is 1.5 moves from the reference pose).
+/// interval at each pose, no growth); so for the grown reference tool alone (the hull of
+/// moves without the swept cull). Hundreds of the rays each clears pass within 0.5 mm of a
+/// pose; the grown tool's growth is at most a cell's own growth plus 2.5 moves' travel (the
+/// farthest cell middle is 1.5 moves from the reference pose), and the swept hull clears
+/// half as many rays again, dozens of them within 0.1 mm of a pose.
 #[test]
 fn rays_a_group_hull_clears_meet_no_pose_of_its_moves() {
     use crate::cutting::stock::GroupCull;
@@ -988,13 +990,16 @@ fn rays_a_group_hull_clears_meet_no_pose_of_its_moves() {
         let tool = Tool::try_new(kind, 4.0, 10.0).expect("valid");
         let envs = move_chain(&c, &tool, [0.5, 3.0, -10.0], &[(1.0, 0.1, -0.05, -0.05); 4]);
         let group: Vec<&RotaryEnvelope> = envs.iter().collect();
-        let hull = GroupHull::of(&group);
+        let swept = GroupHull::of(&group);
+        assert!(swept.swept.is_some(), "constant rates: the swept hull");
+        let mut grown = swept.clone();
+        grown.swept = None;
         // Its growth: the cells' own plus at most two moves' travel from the reference.
         let travel: Real = envs.iter().map(|e| e.speed).fold(0.0, Real::max);
         assert!(
-            hull.grow() <= 2.5 * travel + envs[0].delta,
+            grown.grow() <= 2.5 * travel + envs[0].delta,
             "{} vs {travel}",
-            hull.grow()
+            grown.grow()
         );
         let poses: Vec<Sample> = envs
             .iter()
@@ -1005,28 +1010,43 @@ fn rays_a_group_hull_clears_meet_no_pose_of_its_moves() {
             b.grow(&eb.min);
             b.grow(&eb.max);
         }
-        let (mut cleared, mut near) = (0, 0);
-        grid_rays(&b, |o, axis, e| {
-            if GroupCull::may_cut(&hull, &o, axis, &material) {
-                return;
-            }
-            cleared += 1;
-            let meets = |s: &Sample, g: Real| {
-                let p = s.rot.tr_mul(&(o - s.tip));
-                let w = s.rot.tr_mul(&e);
-                tool_interval(envs[0].shape, envs[0].r, envs[0].l, &p, &w, g).is_some()
-            };
+        let mut counts = Vec::new();
+        for hull in [&grown, &swept] {
+            let (mut cleared, mut near, mut close) = (0, 0, 0);
+            grid_rays(&b, |o, axis, e| {
+                if GroupCull::may_cut(hull, &o, axis, &material) {
+                    return;
+                }
+                cleared += 1;
+                let meets = |s: &Sample, g: Real| {
+                    let p = s.rot.tr_mul(&(o - s.tip));
+                    let w = s.rot.tr_mul(&e);
+                    tool_interval(envs[0].shape, envs[0].r, envs[0].l, &p, &w, g).is_some()
+                };
+                assert!(
+                    !poses.iter().any(|s| meets(s, 0.0)),
+                    "{kind:?}: the hull cleared the ray through {o:?} along axis {axis}, which a pose meets"
+                );
+                if poses.iter().step_by(64).any(|s| meets(s, 0.5)) {
+                    near += 1;
+                }
+                if poses.iter().step_by(16).any(|s| meets(s, 0.1)) {
+                    close += 1;
+                }
+            });
             assert!(
-                !poses.iter().any(|s| meets(s, 0.0)),
-                "{kind:?}: the hull cleared the ray through {o:?} along axis {axis}, which a pose meets"
+                near > 300,
+                "{kind:?}: {near} of {cleared} cleared rays within 0.5 mm of a pose"
             );
-            if poses.iter().step_by(64).any(|s| meets(s, 0.5)) {
-                near += 1;
-            }
-        });
+            counts.push((cleared, close));
+        }
+        let [(grown_cleared, _), (swept_cleared, swept_close)] = counts[..] else {
+            unreachable!("two hulls")
+        };
         assert!(
-            near > 300,
-            "{kind:?}: {near} of {cleared} cleared rays within 0.5 mm of a pose"
+            2 * swept_cleared > 3 * grown_cleared && swept_close > 50,
+            "{kind:?}: the swept hull clears {swept_cleared} ({swept_close} within 0.1 mm), \
+             the grown tool {grown_cleared}"
         );
     }
 }
