@@ -301,6 +301,31 @@ proptest! {
     }
 }
 
+/// Four moves of the trunnion A/C turning both axes: two of the side cut (C 0.5°, A up to
+/// 0.21°, the tool 19 mm from C's line), then A 35° with C 50° and A 60° with C 180°, the
+/// linear axes moving.
+fn trunnion_moves() -> [(AxisValues, AxisValues); 4] {
+    let at = |x: Real, y: Real, z: Real, a: Real, cc: Real| q(x, y, z, a).with(AxisLetter::C, cc);
+    [
+        (
+            at(0.0, -19.0, 40.0, 0.0, 0.0),
+            at(0.0, -19.0, 39.995, 0.21, 0.5),
+        ),
+        (
+            at(0.0, -19.0, 4.0, 7.9, 250.0),
+            at(0.0, -19.0, 3.995, 8.0, 250.5),
+        ),
+        (
+            at(3.0, -10.0, 20.0, -20.0, 30.0),
+            at(-2.0, -14.0, 25.0, 15.0, 80.0),
+        ),
+        (
+            at(0.0, 5.0, 60.0, 30.0, -90.0),
+            at(1.0, 5.0, 58.0, -30.0, 90.0),
+        ),
+    ]
+}
+
 /// The speed bound that sizes the envelope's cells holds: on moves of the trunnion A/C
 /// turning both axes (and the linear axes), no point of the tool, nor any within its reach
 /// of the axis' middle, moves faster per unit λ than the bound, measured here by finite
@@ -336,25 +361,7 @@ fn the_speed_bound_holds_on_two_turning_axes() {
         }))
         .collect();
     let pose = |a: &AxisValues, b: &AxisValues, lam: Real| chain_pose(&c, a, b, lam);
-    let at = |x: Real, y: Real, z: Real, a: Real, cc: Real| q(x, y, z, a).with(AxisLetter::C, cc);
-    let moves = [
-        (
-            at(0.0, -19.0, 40.0, 0.0, 0.0),
-            at(0.0, -19.0, 39.995, 0.21, 0.5),
-        ),
-        (
-            at(0.0, -19.0, 4.0, 7.9, 250.0),
-            at(0.0, -19.0, 3.995, 8.0, 250.5),
-        ),
-        (
-            at(3.0, -10.0, 20.0, -20.0, 30.0),
-            at(-2.0, -14.0, 25.0, 15.0, 80.0),
-        ),
-        (
-            at(0.0, 5.0, 60.0, 30.0, -90.0),
-            at(1.0, 5.0, 58.0, -30.0, 90.0),
-        ),
-    ];
+    let moves = trunnion_moves();
     let state = [0.0; 6];
     let n = 2000;
     for (k, (a, b)) in moves.iter().enumerate() {
@@ -438,25 +445,7 @@ fn growth_to_hold(shape: Shape, (r, l): (Real, Real), reach: &Vector3, y: &Vecto
 fn swept_poses_hold_the_tool_over_their_stretch() {
     let c = trunnion();
     let (r, l) = (3.0, 25.0);
-    let at = |x: Real, y: Real, z: Real, a: Real, cc: Real| q(x, y, z, a).with(AxisLetter::C, cc);
-    let moves = [
-        (
-            at(0.0, -19.0, 40.0, 0.0, 0.0),
-            at(0.0, -19.0, 39.995, 0.21, 0.5),
-        ),
-        (
-            at(0.0, -19.0, 4.0, 7.9, 250.0),
-            at(0.0, -19.0, 3.995, 8.0, 250.5),
-        ),
-        (
-            at(3.0, -10.0, 20.0, -20.0, 30.0),
-            at(-2.0, -14.0, 25.0, 15.0, 80.0),
-        ),
-        (
-            at(0.0, 5.0, 60.0, 30.0, -90.0),
-            at(1.0, 5.0, 58.0, -30.0, 90.0),
-        ),
-    ];
+    let moves = trunnion_moves();
     for kind in [ToolKind::Flat, ToolKind::Ball] {
         let tool = Tool::try_new(kind, 2.0 * r, l).expect("valid");
         let shape = if kind == ToolKind::Flat {
