@@ -109,6 +109,34 @@ pub(super) fn meets_material(interval: Option<(Real, Face, Real, Face)>, segs: &
     interval.is_some_and(|(t0, _, t1, _)| segs.iter().any(|m| t0 < m.hi.t && t1 > m.lo.t))
 }
 
+/// The stretch of a line `p + t·u` (tool frame) between the end planes of the tool of
+/// `shape` (radius `r`, length `l`) moved `g` further out (the bottom plane of a flat end
+/// mill, the ball's equator for a ball end mill, and the top), from `p.z` and `inv_z`, the
+/// reciprocal of `u.z` (`None` where the line is parallel to the planes: all of it between
+/// them, or none). An empty stretch is `(∞, −∞)`.
+#[inline(always)]
+fn end_slab(
+    shape: Shape,
+    (r, l): (Real, Real),
+    g: Real,
+    p_z: Real,
+    inv_z: Option<Real>,
+) -> (Real, Real) {
+    let h0 = match shape {
+        Shape::Flat => -g,
+        Shape::Ball => r - g,
+    };
+    let h1 = l + g;
+    match inv_z {
+        None if !(h0 <= p_z && p_z <= h1) => (Real::INFINITY, Real::NEG_INFINITY),
+        None => (Real::NEG_INFINITY, Real::INFINITY),
+        Some(k) => {
+            let (a, b) = ((h0 - p_z) * k, (h1 - p_z) * k);
+            (a.min(b), a.max(b))
+        }
+    }
+}
+
 /// Whether the tool of `shape` (radius `r`, length `l`) grown by `g` meets any of the
 /// material `segs` along the line `p + t·u` (tool frame, `u` unit): the same answer as
 /// [`tool_interval`] against the segments, but without the interval's roots. Within a
@@ -126,21 +154,8 @@ pub(super) fn grown_meets(
     g: Real,
     segs: &[Segment],
 ) -> bool {
-    let h0 = match shape {
-        Shape::Flat => -g,
-        Shape::Ball => r - g,
-    };
-    let h1 = l + g;
-    let (s0, s1) = if u.z.abs() <= tol::RELATIVE_EPS {
-        if !(h0 <= p.z && p.z <= h1) {
-            (Real::INFINITY, Real::NEG_INFINITY)
-        } else {
-            (Real::NEG_INFINITY, Real::INFINITY)
-        }
-    } else {
-        let (a, b) = ((h0 - p.z) / u.z, (h1 - p.z) / u.z);
-        (a.min(b), a.max(b))
-    };
+    let inv_z = (u.z.abs() > tol::RELATIVE_EPS).then(|| 1.0 / u.z);
+    let (s0, s1) = end_slab(shape, (r, l), g, p.z, inv_z);
     let rad2 = (r + g) * (r + g);
     let a = u.x * u.x + u.y * u.y;
     let b = p.x * u.x + p.y * u.y;
@@ -318,22 +333,8 @@ impl SweptPose {
     ) -> bool {
         let p = self.rot.tr_mul(&(o - self.tip));
         let (inv_z, across, full) = &self.axes[axis];
-        let (g, dz) = (self.grow, self.reach.z.abs());
-        let h0 = match shape {
-            Shape::Flat => -g - dz,
-            Shape::Ball => r - g - dz,
-        };
-        let h1 = l + g + dz;
-        let (s0, s1) = match inv_z {
-            None if !(h0 <= p.z && p.z <= h1) => {
-                return shape == Shape::Ball && self.sphere_meets(r, &p, full, segs);
-            }
-            None => (Real::NEG_INFINITY, Real::INFINITY),
-            Some(k) => {
-                let (a, b) = ((h0 - p.z) * k, (h1 - p.z) * k);
-                (a.min(b), a.max(b))
-            }
-        };
+        let g = self.grow;
+        let (s0, s1) = end_slab(shape, (r, l), g + self.reach.z.abs(), p.z, *inv_z);
         let rad2 = (r + g) * (r + g);
         let pxy = Vector3::new(p.x, p.y, 0.0);
         segs.iter().any(|m| {
