@@ -875,7 +875,11 @@ impl Tool {
     pub fn signed_distance(&self, p: &crate::math::Point3) -> (Real, crate::math::Vector3) {
         use crate::math::Vector3;
         let r = (p.x * p.x + p.y * p.y).sqrt();
-        let (d, q) = self.profile.signed_distance(r, p.z);
+        let (d, q) = match self.kind {
+            ToolKind::Flat => flat_distance(self.radius, self.length, r, p.z),
+            ToolKind::Ball => ball_distance(self.radius, self.length, r, p.z),
+            _ => self.profile.signed_distance(r, p.z),
+        };
         let radial = if r > 0.0 {
             Vector3::new(p.x / r, p.y / r, 0.0)
         } else {
@@ -903,6 +907,49 @@ impl Tool {
             }
             _ => self.profile.contains(r, h),
         }
+    }
+}
+
+/// [`Profile::signed_distance`] of a flat end mill's profile (radius `rad`, length `len`) in
+/// closed form: the solid is the rectangle `r ≤ rad`, `0 ≤ h ≤ len` of the meridian plane.
+/// Outside, its nearest point is the point clamped into it; inside, the nearest of the
+/// bottom, the side and the top (in the profile's order on a tie).
+fn flat_distance(rad: Real, len: Real, r: Real, h: Real) -> (Real, [Real; 2]) {
+    if r > rad || h < 0.0 || h > len {
+        let q = [r.min(rad), h.clamp(0.0, len)];
+        return ((r - q[0]).hypot(h - q[1]), q);
+    }
+    let mut best = (h, [r, 0.0]);
+    for c in [(rad - r, [rad, h]), (len - h, [r, len])] {
+        if c.0 < best.0 {
+            best = c;
+        }
+    }
+    (-best.0, best.1)
+}
+
+/// [`Profile::signed_distance`] of a ball end mill's profile (radius `rad`, length
+/// `len ≥ 2·rad`) in closed form: the solid is the half-disc `r² + (h − rad)² ≤ rad²` below
+/// the centre height and the rectangle `r ≤ rad`, `rad ≤ h ≤ len` above it. Below the centre
+/// the nearest point is on the circle (its radial projection, within the quarter arc for
+/// every `r ≥ 0`): the side and the top are farther (the side's nearest point is the arc's
+/// end, the top more than `rad` away). At or above it the arc's nearest point is its end
+/// `(rad, rad)`, no nearer than the side, so the rectangle's sides decide as for a flat end
+/// mill without a bottom.
+fn ball_distance(rad: Real, len: Real, r: Real, h: Real) -> (Real, [Real; 2]) {
+    if h < rad {
+        let (vr, vh) = (r, h - rad);
+        let dist = (vr * vr + vh * vh).sqrt();
+        return (dist - rad, [vr * rad / dist, rad + vh * rad / dist]);
+    }
+    if r > rad || h > len {
+        let q = [r.min(rad), h.clamp(rad, len)];
+        return ((r - q[0]).hypot(h - q[1]), q);
+    }
+    if len - h < rad - r {
+        (h - len, [r, len])
+    } else {
+        (r - rad, [rad, h])
     }
 }
 
@@ -1035,6 +1082,50 @@ impl ToolAssembly {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn flat_and_ball_closed_forms_agree_with_the_profile_elements() {
+        // The closed forms against the general path through the profile's elements (each
+        // element's nearest point, the least taken, the sign from `contains`), on random
+        // points and on the ones where the nearest face changes: the axis, the faces, the
+        // edges and the ball's centre.
+        let (r, l) = (3.0, 20.0);
+        let mut seed = 0x9e37_79b9_7f4a_7c15_u64;
+        let mut rand = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as Real / (1u64 << 53) as Real
+        };
+        let mut points: Vec<[Real; 2]> = (0..20_000)
+            .map(|_| [8.0 * rand(), 30.0 * rand() - 5.0])
+            .collect();
+        for x in [0.0, 1.5, r, r + 1.0] {
+            for h in [-1.0, 0.0, 1.5, r, 10.0, l - 1.5, l, l + 1.0] {
+                points.push([x, h]);
+            }
+        }
+        for (kind, closed) in [
+            (
+                ToolKind::Flat,
+                flat_distance as fn(Real, Real, Real, Real) -> _,
+            ),
+            (ToolKind::Ball, ball_distance),
+        ] {
+            let tool = Tool::try_new(kind, 2.0 * r, l).expect("valid");
+            for &[x, h] in &points {
+                let (d, q) = closed(r, l, x, h);
+                let (want, _) = tool.profile().signed_distance(x, h);
+                assert!(
+                    (d - want).abs() <= 1e-12,
+                    "{kind:?} at ({x}, {h}): {d} vs {want}"
+                );
+                // The point given is a nearest one: on the profile, at the distance found.
+                assert!(((x - q[0]).hypot(h - q[1]) - d.abs()).abs() <= 1e-12);
+                assert!(tool.profile().signed_distance(q[0], q[1]).0.abs() <= 1e-12);
+            }
+        }
+    }
 
     #[test]
     fn the_signed_distance_is_the_distance_to_the_sampled_surface_and_its_foot_lies_on_it() {
