@@ -159,17 +159,32 @@ impl MovePath {
 
     /// The tool's pose in the workpiece frame at fraction `lambda` of the move.
     pub fn w_from_t(&self, lambda: Real) -> Isometry3 {
-        let s = self.sample(lambda);
-        let rot = nalgebra::Rotation3::from_matrix_unchecked(s.rot);
+        let (rot, tip) = self.pose(lambda);
+        let rot = nalgebra::Rotation3::from_matrix_unchecked(rot);
         Isometry3::from_parts(
-            s.tip.coords.into(),
+            tip.coords.into(),
             nalgebra::UnitQuaternion::from_rotation_matrix(&rot),
         )
+    }
+
+    /// The tool's pose at fraction `lambda` of the move as its rotation matrix (`w_from_t`,
+    /// columns the tool axes in W) and tip: [`Self::sample`]'s pose, bit for bit, without
+    /// the rates.
+    pub fn pose(&self, lambda: Real) -> (Matrix3, Point3) {
+        let s = self.eval::<false>(lambda);
+        (s.rot, s.tip)
     }
 
     /// The pose at `lambda` and its spatial rate (angular velocity `w` and the velocity `v`
     /// of the W point at the origin, so a point `x` of the tool moves at `w × x + v`).
     pub(super) fn sample(&self, lambda: Real) -> Sample {
+        self.eval::<true>(lambda)
+    }
+
+    /// [`Self::sample`], its rates worked out only where `RATES` (else zero): the pose's
+    /// arithmetic is the same either way.
+    #[inline(always)]
+    fn eval<const RATES: bool>(&self, lambda: Real) -> Sample {
         if let [Factor::Sampled(path)] = self.factors.as_slice() {
             return path.sample(lambda);
         }
@@ -178,7 +193,9 @@ impl MovePath {
         for f in &self.factors {
             match f {
                 Factor::Affine { rot, t0, t1 } => {
-                    v += r * t1;
+                    if RATES {
+                        v += r * t1;
+                    }
                     t += r * (t0 + t1 * lambda);
                     r *= rot;
                 }
@@ -190,10 +207,12 @@ impl MovePath {
                     cross,
                     outer,
                 } => {
-                    let omega = (r * dir) * *dth;
-                    let centre = r * origin + t;
-                    w += omega;
-                    v -= omega.cross(&centre);
+                    if RATES {
+                        let omega = (r * dir) * *dth;
+                        let centre = r * origin + t;
+                        w += omega;
+                        v -= omega.cross(&centre);
+                    }
                     let (sin, cos) = (th0 + dth * lambda).sin_cos();
                     let mut rt = cross * sin + outer * (1.0 - cos);
                     for k in 0..3 {
@@ -225,10 +244,12 @@ impl MovePath {
                         }
                     }
                     let g = error_motion::transform(&vals, centre);
-                    let (wl, ul) = error_motion::twist(&vals, &slopes, centre);
-                    let ww = r * wl;
-                    w += ww;
-                    v += r * ul - ww.cross(&t);
+                    if RATES {
+                        let (wl, ul) = error_motion::twist(&vals, &slopes, centre);
+                        let ww = r * wl;
+                        w += ww;
+                        v += r * ul - ww.cross(&t);
+                    }
                     t += r * g.translation.vector;
                     r *= g.rotation.to_rotation_matrix().into_inner();
                 }
@@ -238,8 +259,12 @@ impl MovePath {
         Sample {
             rot: r,
             tip: Point3::from(t),
-            w_t: r.tr_mul(&w),
-            v_t: r.tr_mul(&(w.cross(&t) + v)),
+            w_t: if RATES { r.tr_mul(&w) } else { w },
+            v_t: if RATES {
+                r.tr_mul(&(w.cross(&t) + v))
+            } else {
+                v
+            },
         }
     }
 }
