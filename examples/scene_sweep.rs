@@ -1,10 +1,12 @@
 //! A scene's program swept into its stock once, for profiling and for measuring peak memory:
-//! `cargo run --release --example scene_sweep -- SCENE [MOVES] [PITCH]` (a chain scene, or a
-//! hexapod scene that cuts).
+//! `cargo run --release --example scene_sweep -- SCENE [MOVES] [PITCH] [MESHES]` (a chain
+//! scene, or a hexapod scene that cuts).
 //!
 //! `MOVES` keeps the program's first moves only (all by default), `PITCH` replaces the
 //! scene's `pitch_mm`. Prints the sweep's wall time, moves per second, the crossings'
-//! digest (as `dexel_digest` computes it) and the bytes the tri-dexel holds.
+//! digest (as `dexel_digest` computes it) and the bytes the tri-dexel holds; with `MESHES`,
+//! the cut part's adaptive mesh (what `simulate` writes) is then made that many times and
+//! each wall time printed.
 
 #![allow(clippy::print_stdout, reason = "an example reports on the terminal")]
 
@@ -21,7 +23,7 @@ use crossing_digest::digest;
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let Some(path) = args.get(1) else {
-        println!("usage: scene_sweep SCENE [MOVES] [PITCH]");
+        println!("usage: scene_sweep SCENE [MOVES] [PITCH] [MESHES]");
         return;
     };
     let mut scene = match Scene::load(Path::new(path)) {
@@ -66,4 +68,16 @@ fn main() {
         "digest {h:016x}, {count} crossings, stock {:.1} MiB",
         stock.memory_bytes() as f64 / 1048576.0
     );
+    let meshes: usize = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(0);
+    for _ in 0..meshes {
+        let t = Instant::now();
+        let (mesh, _) =
+            twinmill::cutting::adaptive::mesh_stock_adaptive(&stock, &Default::default())
+                .expect("meshes");
+        println!(
+            "mesh {:.3} s, {} triangles",
+            t.elapsed().as_secs_f64(),
+            mesh.triangles.len()
+        );
+    }
 }

@@ -79,11 +79,13 @@ impl Signs<'_> {
         }
     }
 
-    /// The signs of the face square's (q + 1)² points, point (a, b) at a + b·(q + 1).
-    pub(super) fn face(&self, lat: &Lat, n: usize, f0: [isize; 3], q: usize) -> Vec<bool> {
+    /// The signs of the face square's (q + 1)² points, point (a, b) at a + b·(q + 1), into
+    /// `out`.
+    pub(super) fn face(&self, lat: &Lat, n: usize, f0: [isize; 3], q: usize, out: &mut Vec<bool>) {
         let (u, v) = ((n + 1) % 3, (n + 2) % 3);
         let w = q + 1;
-        let mut out = vec![false; w * w];
+        out.clear();
+        out.resize(w * w, false);
         let bit = |m: u64, k0: isize, k: isize| m >> (k - k0) & 1 == 1;
         match n {
             // z face: one point per column.
@@ -111,7 +113,6 @@ impl Signs<'_> {
                 }
             }
         }
-        out
     }
 }
 

@@ -78,15 +78,21 @@ impl Forest<'_> {
         let (u, v) = ((n + 1) % 3, (n + 2) % 3);
         let c = leaf.o[n] + if upper { leaf.s as isize } else { 0 };
         let beyond = if upper { c } else { c - 1 };
-        let mut stack = vec![(leaf.o[u], leaf.o[v], leaf.s)];
-        while let Some((a, b, q)) = stack.pop() {
+        // Squares still to look at: at most three per level of a tree ROOT cells deep.
+        let mut stack = [(0, 0, 0); 4 * (ROOT.trailing_zeros() as usize + 1)];
+        stack[0] = (leaf.o[u], leaf.o[v], leaf.s);
+        let mut depth = 1;
+        while depth > 0 {
+            depth -= 1;
+            let (a, b, q) = stack[depth];
             let nb = self.leaf_at(point(n, beyond, a, b));
             if q == 1 || nb.is_none_or(|l| l.s >= q) {
                 out.push((point(n, c, a, b), q));
             } else {
                 let h = (q / 2) as isize;
                 for (da, db) in [(0, 0), (h, 0), (0, h), (h, h)] {
-                    stack.push((a + da, b + db, q / 2));
+                    stack[depth] = (a + da, b + db, q / 2);
+                    depth += 1;
                 }
             }
         }
@@ -99,9 +105,12 @@ impl Forest<'_> {
 // Face polylines.
 
 /// A polyline of a minimal face in canonical direction (as the leaf below the face's plane
-/// sees it); `closed`: a loop lying inside the face.
+/// sees it): its vertices `start..end` of the pool they were appended to; `closed`: a loop
+/// lying inside the face.
+#[derive(Clone, Copy, Debug)]
 pub(super) struct Chain {
-    pub(super) v: Vec<Vtx>,
+    pub(super) start: usize,
+    pub(super) end: usize,
     pub(super) closed: bool,
 }
 
@@ -188,28 +197,55 @@ fn cell_face_segments(inside: [bool; 4]) -> ([(usize, usize, usize); 2], usize) 
 impl Forest<'_> {
     /// The polylines of the minimal face with lower lattice point `f0` (axis `n`) and size
     /// `q`, from the signs `inside` gives for its lattice points (which must be the
-    /// lattice's own). Simplified within `tol` when `q > 1`.
+    /// lattice's own), simplified within `tol` when `q > 1`: their vertices appended to
+    /// `pool`, the polylines to `chains`. Returns the tangent-line corners added.
     pub(super) fn face_chains(
         &self,
-        n: usize,
-        f0: [isize; 3],
-        q: usize,
+        (n, f0, q): (usize, [isize; 3], usize),
         signs: &Signs,
         tol: Real,
-    ) -> (Vec<Chain>, usize) {
+        pool: &mut Vec<Vtx>,
+        chains: &mut Vec<Chain>,
+    ) -> usize {
         let lat = &self.lat;
         if signs.uniform(lat, n, f0, q) {
-            return (Vec::new(), 0);
+            return 0;
         }
+        FACE_SCRATCH.with_borrow_mut(|scratch| {
+            self.face_chains_in((n, f0, q), signs, tol, (pool, chains), scratch)
+        })
+    }
+
+    /// [`Self::face_chains`] with its working buffers `scratch`.
+    fn face_chains_in(
+        &self,
+        (n, f0, q): (usize, [isize; 3], usize),
+        signs: &Signs,
+        tol: Real,
+        (pool, chains): (&mut Vec<Vtx>, &mut Vec<Chain>),
+        scratch: &mut FaceScratch,
+    ) -> usize {
+        let lat = &self.lat;
+        let FaceScratch {
+            signs: face_signs,
+            segs,
+            by_from,
+            tos,
+            used,
+            keep,
+            stack,
+            line,
+        } = scratch;
         let (u, v) = ((n + 1) % 3, (n + 2) % 3);
         let (c, u0, v0) = (f0[n], f0[u], f0[v]);
         let w = q + 1;
-        let signs = signs.face(lat, n, f0, q);
+        signs.face(lat, n, f0, q, face_signs);
+        let signs = &*face_signs;
         if signs.iter().all(|&x| x == signs[0]) {
-            return (Vec::new(), 0);
+            return 0;
         }
         // Segments: (from, corner, to).
-        let mut segs: Vec<(Vtx, Option<Vtx>, Vtx)> = Vec::new();
+        segs.clear();
         let mut corners = 0;
         for b in 0..q {
             for a in 0..q {
@@ -254,19 +290,22 @@ impl Forest<'_> {
             }
         }
         // Link into polylines.
-        let mut by_from: Vec<(Key, usize)> =
-            segs.iter().enumerate().map(|(i, s)| (s.0.key, i)).collect();
+        by_from.clear();
+        by_from.extend(segs.iter().enumerate().map(|(i, s)| (s.0.key, i)));
         by_from.sort_unstable();
-        let mut tos: Vec<Key> = segs.iter().map(|s| s.2.key).collect();
+        tos.clear();
+        tos.extend(segs.iter().map(|s| s.2.key));
         tos.sort_unstable();
+        let segs = &*segs;
         let next_of = |key: Key| -> Option<usize> {
             let i = by_from.partition_point(|x| x.0 < key);
             (i < by_from.len() && by_from[i].0 == key).then(|| by_from[i].1)
         };
-        let mut used = vec![false; segs.len()];
-        let mut chains = Vec::new();
-        let follow = |start: usize, used: &mut Vec<bool>| -> Vec<Vtx> {
-            let mut out = Vec::new();
+        used.clear();
+        used.resize(segs.len(), false);
+        // Walks from segment `start` to where the polyline ends, its vertices appended to
+        // `out`.
+        let follow = |start: usize, used: &mut Vec<bool>, out: &mut Vec<Vtx>| {
             let mut i = start;
             loop {
                 used[i] = true;
@@ -279,34 +318,44 @@ impl Forest<'_> {
                     Some(j) if !used[j] => i = j,
                     _ => {
                         out.push(segs[i].2);
-                        return out;
+                        return;
                     }
                 }
             }
         };
+        // Each polyline simplified (when q > 1) and appended to the pool.
+        let mut add = |line: &mut Vec<Vtx>, closed: bool| {
+            if q > 1 {
+                simplify(line, closed, tol, keep, stack);
+            }
+            let start = pool.len();
+            pool.extend_from_slice(line);
+            chains.push(Chain {
+                start,
+                end: pool.len(),
+                closed,
+            });
+        };
         // Open polylines start where no segment ends.
         for (i, seg) in segs.iter().enumerate() {
             if tos.binary_search(&seg.0.key).is_err() {
-                let v = follow(i, &mut used);
-                chains.push(Chain { v, closed: false });
+                line.clear();
+                follow(i, used, line);
+                add(line, false);
             }
         }
         for i in 0..segs.len() {
             if !used[i] {
-                let mut v = follow(i, &mut used);
+                line.clear();
+                follow(i, used, line);
                 // The walk ends back at its first vertex: drop the repeat.
-                if v.len() > 1 && v[v.len() - 1].key == v[0].key {
-                    v.pop();
+                if line.len() > 1 && line[line.len() - 1].key == line[0].key {
+                    line.pop();
                 }
-                chains.push(Chain { v, closed: true });
+                add(line, true);
             }
         }
-        if q > 1 {
-            for ch in &mut chains {
-                simplify(ch, tol);
-            }
-        }
-        (chains, corners)
+        corners
     }
 }
 
@@ -321,25 +370,32 @@ fn dist_to_segment(p: &Point3, a: &Point3, b: &Point3) -> Real {
     (p - (a + d * t)).norm()
 }
 
-/// Douglas–Peucker within `tol`, keeping the ends (of an open polyline), corners, and for a
-/// closed one its smallest key and the vertex farthest from it. Depends on the polyline
-/// only, so both leaves of a face simplify it alike.
-fn simplify(ch: &mut Chain, tol: Real) {
-    let mut v = std::mem::take(&mut ch.v);
-    if ch.closed {
+/// Douglas–Peucker within `tol` of the polyline `v` (a loop when `closed`), keeping the ends
+/// (of an open polyline), corners, and for a closed one its smallest key and the vertex
+/// farthest from it. Depends on the polyline only, so both leaves of a face simplify it
+/// alike. `keep` and `stack` are working buffers.
+fn simplify(
+    v: &mut Vec<Vtx>,
+    closed: bool,
+    tol: Real,
+    keep: &mut Vec<bool>,
+    stack: &mut Vec<(usize, usize)>,
+) {
+    if closed {
         let first = (0..v.len()).min_by_key(|&i| v[i].key).unwrap_or(0);
         v.rotate_left(first);
         let v0 = v[0];
         v.push(v0);
     }
     let m = v.len();
-    let mut keep = vec![false; m];
+    keep.clear();
+    keep.resize(m, false);
     keep[0] = true;
     keep[m - 1] = true;
     for (k, x) in v.iter().enumerate() {
         keep[k] |= x.corner;
     }
-    if ch.closed && m > 2 {
+    if closed && m > 2 {
         let far = (1..m - 1)
             .max_by(|&a, &b| {
                 let da = (v[a].p - v[0].p).norm_squared();
@@ -349,8 +405,15 @@ fn simplify(ch: &mut Chain, tol: Real) {
             .unwrap_or(1);
         keep[far] = true;
     }
-    let anchors: Vec<usize> = (0..m).filter(|&k| keep[k]).collect();
-    let mut stack: Vec<(usize, usize)> = anchors.windows(2).map(|w| (w[0], w[1])).collect();
+    // The spans between consecutive anchors, the last first (as the stack pops them).
+    stack.clear();
+    let mut prev = None;
+    for k in (0..m).filter(|&k| keep[k]) {
+        if let Some(a) = prev {
+            stack.push((a, k));
+        }
+        prev = Some(k);
+    }
     while let Some((a, b)) = stack.pop() {
         if b <= a + 1 {
             continue;
@@ -369,13 +432,30 @@ fn simplify(ch: &mut Chain, tol: Real) {
             stack.push((at, b));
         }
     }
-    if ch.closed {
+    if closed {
         v.pop();
         keep.pop();
     }
-    ch.v = v
-        .into_iter()
-        .zip(keep)
-        .filter_map(|(x, k)| k.then_some(x))
-        .collect();
+    let mut k = keep.iter();
+    v.retain(|_| k.next().copied().unwrap_or(false));
+}
+
+/// Working buffers of [`Forest::face_chains`], per thread, reused from face to face: the
+/// face's signs, its segments, their starts and ends sorted, which are linked, the polyline
+/// being walked, and Douglas–Peucker's kept vertices and spans.
+#[derive(Default)]
+pub(super) struct FaceScratch {
+    signs: Vec<bool>,
+    segs: Vec<(Vtx, Option<Vtx>, Vtx)>,
+    by_from: Vec<(Key, usize)>,
+    tos: Vec<Key>,
+    used: Vec<bool>,
+    line: Vec<Vtx>,
+    keep: Vec<bool>,
+    stack: Vec<(usize, usize)>,
+}
+
+thread_local! {
+    static FACE_SCRATCH: std::cell::RefCell<FaceScratch> =
+        std::cell::RefCell::new(FaceScratch::default());
 }

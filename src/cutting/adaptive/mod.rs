@@ -72,7 +72,7 @@ mod triangles;
 #[cfg(test)]
 use classify::plane_mask;
 use classify::{Grower, Kind, Node, Plane, Signs, Tree, child_origin, occupied_roots};
-use forest::{Forest, LeafRef};
+use forest::{Chain, Forest, LeafRef};
 use lattice::{Key, Lat, Vtx, bit_range, corner_key, local_key, point};
 use triangles::Out;
 

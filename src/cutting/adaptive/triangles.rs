@@ -61,80 +61,132 @@ fn fan_polygon(
     None
 }
 
+/// A leaf's closed loops, vertex by vertex (loop `k` is `v[ranges[k]]`), and the working
+/// buffers that build them: one per tree meshed, reused from leaf to leaf.
+#[derive(Default)]
+pub(super) struct Loops {
+    v: Vec<Vtx>,
+    ranges: Vec<std::ops::Range<usize>>,
+    /// The face polylines' vertices and the polylines.
+    pool: Vec<Vtx>,
+    chains: Vec<Chain>,
+    /// The open polylines (by their first key) and which are linked.
+    open: Vec<Chain>,
+    used: Vec<bool>,
+    faces: Vec<([isize; 3], usize)>,
+}
+
+impl Loops {
+    fn len(&self) -> usize {
+        self.ranges.len()
+    }
+
+    fn get(&self, k: usize) -> &[Vtx] {
+        &self.v[self.ranges[k].clone()]
+    }
+
+    fn iter(&self) -> impl Iterator<Item = &[Vtx]> {
+        self.ranges.iter().map(|r| &self.v[r.clone()])
+    }
+
+    /// Appends the pool's vertices `r` as a loop.
+    fn push(&mut self, r: std::ops::Range<usize>) {
+        let start = self.v.len();
+        self.v.extend_from_slice(&self.pool[r]);
+        self.ranges.push(start..self.v.len());
+    }
+}
+
 impl Forest<'_> {
     /// The closed loops of a leaf's surface from the polylines of its minimal faces, each
-    /// counter-clockwise about the outward normal. None if they do not close.
+    /// counter-clockwise about the outward normal, into `lp` (false if they do not close).
     fn loops(
         &self,
         leaf: &LeafRef,
         signs: &Signs,
         tol: Real,
         corners: &mut usize,
-    ) -> Option<Vec<Vec<Vtx>>> {
-        let mut open: Vec<Vec<Vtx>> = Vec::new();
-        let mut loops = Vec::new();
-        let mut faces = Vec::new();
+        lp: &mut Loops,
+    ) -> bool {
+        lp.v.clear();
+        lp.ranges.clear();
+        lp.pool.clear();
+        lp.chains.clear();
+        lp.open.clear();
         for n in 0..3 {
             for upper in [false, true] {
-                faces.clear();
-                self.minimal_faces(leaf, n, upper, &mut faces);
-                for &(f0, q) in &faces {
-                    let (chains, c) = self.face_chains(n, f0, q, signs, tol);
+                lp.faces.clear();
+                self.minimal_faces(leaf, n, upper, &mut lp.faces);
+                for k in 0..lp.faces.len() {
+                    let (f0, q) = lp.faces[k];
+                    let first = lp.chains.len();
+                    let c = self.face_chains((n, f0, q), signs, tol, &mut lp.pool, &mut lp.chains);
                     // A corner belongs to the face: count it once, from the leaf below.
                     if upper {
                         *corners += c;
                     }
-                    for mut ch in chains {
+                    for j in first..lp.chains.len() {
+                        let ch = lp.chains[j];
                         if !upper {
-                            ch.v.reverse();
+                            lp.pool[ch.start..ch.end].reverse();
                         }
                         if ch.closed {
-                            loops.push(ch.v);
+                            lp.push(ch.start..ch.end);
                         } else {
-                            open.push(ch.v);
+                            lp.open.push(ch);
                         }
                     }
                 }
             }
         }
-        open.sort_unstable_by_key(|c| c[0].key);
-        let mut used = vec![false; open.len()];
-        for s in 0..open.len() {
-            if used[s] {
+        let pool = &lp.pool;
+        let key = |c: &Chain| pool[c.start].key;
+        lp.open.sort_unstable_by_key(key);
+        lp.used.clear();
+        lp.used.resize(lp.open.len(), false);
+        for s in 0..lp.open.len() {
+            if lp.used[s] {
                 continue;
             }
-            let start = open[s][0].key;
-            let mut lp: Vec<Vtx> = Vec::new();
+            let start = key(&lp.open[s]);
+            let at = lp.v.len();
             let mut i = s;
             loop {
-                used[i] = true;
-                let c = &open[i];
-                lp.extend_from_slice(&c[..c.len() - 1]);
-                let end = c[c.len() - 1].key;
+                lp.used[i] = true;
+                let c = lp.open[i];
+                lp.v.extend_from_slice(&lp.pool[c.start..c.end - 1]);
+                let end = lp.pool[c.end - 1].key;
                 if end == start {
                     break;
                 }
-                let j = open.partition_point(|c| c[0].key < end);
-                if j >= open.len() || open[j][0].key != end || used[j] {
-                    return None;
+                let j = lp.open.partition_point(|c| lp.pool[c.start].key < end);
+                if j >= lp.open.len() || lp.pool[lp.open[j].start].key != end || lp.used[j] {
+                    return false;
                 }
                 i = j;
             }
-            loops.push(lp);
+            lp.ranges.push(at..lp.v.len());
         }
-        Some(loops)
+        true
     }
 
-    fn mesh_leaf(&self, leaf: &LeafRef, tol: Real, plane_tol: Real, out: &mut Out) {
+    fn mesh_leaf(
+        &self,
+        leaf: &LeafRef,
+        (tol, plane_tol): (Real, Real),
+        out: &mut Out,
+        loops: &mut Loops,
+    ) {
         match leaf.kind {
             Kind::Empty => {}
-            Kind::Fine => self.mesh_cell(leaf, tol, out),
+            Kind::Fine => self.mesh_cell(leaf, tol, out, loops),
             Kind::Planar(_) | Kind::Edge(..) => {
                 let signs = Signs::Predict(&leaf.kind, leaf.o[2], leaf.s);
                 let mut corners = 0;
                 let ok = self
-                    .loops(leaf, &signs, tol, &mut corners)
-                    .and_then(|loops| self.mesh_planes(leaf, &loops, plane_tol));
+                    .loops(leaf, &signs, tol, &mut corners, loops)
+                    .then(|| self.mesh_planes(leaf, loops, plane_tol))
+                    .flatten();
                 match ok {
                     Some((tris, verts)) => {
                         out.tris.extend(tris);
@@ -155,7 +207,7 @@ impl Forest<'_> {
     fn mesh_planes(
         &self,
         leaf: &LeafRef,
-        loops: &[Vec<Vtx>],
+        loops: &Loops,
         plane_tol: Real,
     ) -> Option<(Vec<[Key; 3]>, Vec<(Key, Point3)>)> {
         let mut tris = Vec::new();
@@ -174,7 +226,7 @@ impl Forest<'_> {
         };
         match leaf.kind {
             Kind::Planar(p) => {
-                for lp in loops {
+                for lp in loops.iter() {
                     if lp.iter().any(|x| x.corner) {
                         return None;
                     }
@@ -185,7 +237,7 @@ impl Forest<'_> {
                 if loops.len() != 1 {
                     return None;
                 }
-                let lp = &loops[0];
+                let lp = loops.get(0);
                 let cs: Vec<usize> = (0..lp.len()).filter(|&k| lp[k].corner).collect();
                 if cs.len() != 2 {
                     return None;
@@ -221,7 +273,7 @@ impl Forest<'_> {
     }
 
     /// A single cell at dexel resolution, as [`crate::cutting::mesh`] meshes it.
-    fn mesh_cell(&self, leaf: &LeafRef, tol: Real, out: &mut Out) {
+    fn mesh_cell(&self, leaf: &LeafRef, tol: Real, out: &mut Out, loops: &mut Loops) {
         let lat = &self.lat;
         let o = leaf.o;
         let mut m = [0u64; 4];
@@ -230,12 +282,12 @@ impl Forest<'_> {
         }
         let signs = Signs::Cell(o, m);
         let mut corners = 0;
-        let Some(loops) = self.loops(leaf, &signs, tol, &mut corners) else {
+        if !self.loops(leaf, &signs, tol, &mut corners, loops) {
             // Cannot happen for a single cell (its face segments always close); keep the
             // mesh closed by failing loudly in the report instead of guessing.
             out.failed.push((leaf.node, leaf.o, leaf.s));
             return;
-        };
+        }
         out.fine += 1;
         out.corners += corners;
         let lo = lat.pos(o);
@@ -301,6 +353,7 @@ impl Forest<'_> {
     /// Meshes every leaf of tree `ti`, in node order.
     pub(super) fn mesh_tree(&self, ti: usize, t: &Tree, tol: Real, plane_tol: Real) -> Out {
         let mut out = Out::default();
+        let mut loops = Loops::default();
         let mut stack = vec![(0usize, t.origin, ROOT)];
         while let Some((node, o, s)) = stack.pop() {
             match t.nodes[node] {
@@ -312,7 +365,7 @@ impl Forest<'_> {
                         s,
                         kind,
                     };
-                    self.mesh_leaf(&leaf, tol, plane_tol, &mut out);
+                    self.mesh_leaf(&leaf, (tol, plane_tol), &mut out, &mut loops);
                 }
                 Node::Split(first) => {
                     for c in (0..8).rev() {
