@@ -116,9 +116,14 @@ impl Signs<'_> {
     }
 }
 
+/// A node of a root block's octree, in 8 bytes: a planar or edge leaf's planes are kept
+/// beside the nodes ([`Tree::kinds`]), so a walk down the tree reads a few cache lines.
 #[derive(Clone, Copy, Debug)]
 pub(super) enum Node {
-    Leaf(Kind),
+    Empty,
+    Fine,
+    /// A planar or edge leaf, its kind at this index of the tree's kinds.
+    Planes(u32),
     /// Children at these eight consecutive nodes (child c at offset (c & 1, c >> 1 & 1,
     /// c >> 2 & 1) halves).
     Split(u32),
@@ -129,6 +134,20 @@ pub(super) struct Tree {
     pub(super) root: usize,
     pub(super) origin: [isize; 3],
     pub(super) nodes: Vec<Node>,
+    /// The kinds of the planar and edge leaves ([`Node::Planes`]).
+    pub(super) kinds: Vec<Kind>,
+}
+
+impl Tree {
+    /// The kind of leaf `node`; None for a split node.
+    pub(super) fn leaf(&self, node: usize) -> Option<Kind> {
+        match self.nodes[node] {
+            Node::Empty => Some(Kind::Empty),
+            Node::Fine => Some(Kind::Fine),
+            Node::Planes(k) => Some(self.kinds[k as usize]),
+            Node::Split(_) => None,
+        }
+    }
 }
 
 /// Which root blocks hold lattice points of both signs, per root block (row-major x, y, z):
@@ -366,6 +385,9 @@ pub(super) fn child_origin(o: [isize; 3], s: usize, c: usize) -> [isize; 3] {
     ]
 }
 
+/// A tree's nodes and its planar and edge leaves' kinds, as [`Grower`] grows them.
+pub(super) type TreeParts<'t> = (&'t mut Vec<Node>, &'t mut Vec<Kind>);
+
 /// Grows a root block's tree: classifies blocks, splitting until every part is a leaf;
 /// keeps the largest plane residual of the leaves it made.
 pub(super) struct Grower<'a, 'b> {
@@ -375,25 +397,35 @@ pub(super) struct Grower<'a, 'b> {
 }
 
 impl Grower<'_, '_> {
-    /// Classifies the block at `nodes[at]` (origin `o`, size `s`).
-    pub(super) fn grow(&mut self, nodes: &mut Vec<Node>, at: usize, o: [isize; 3], s: usize) {
+    /// Classifies the block at `nodes[at]` (origin `o`, size `s`), a planar or edge leaf's
+    /// kind appended to `kinds`.
+    pub(super) fn grow(&mut self, t: TreeParts, at: usize, o: [isize; 3], s: usize) {
         let (kind, r) = classify(self.lat, o, s, self.tol);
+        let (nodes, kinds) = t;
         match kind {
             Some(k) => {
-                nodes[at] = Node::Leaf(k);
+                nodes[at] = match k {
+                    Kind::Empty => Node::Empty,
+                    Kind::Fine => Node::Fine,
+                    Kind::Planar(_) | Kind::Edge(..) => {
+                        kinds.push(k);
+                        Node::Planes((kinds.len() - 1) as u32)
+                    }
+                };
                 self.resid = self.resid.max(r);
             }
-            None => self.split(nodes, at, o, s),
+            None => self.split((nodes, kinds), at, o, s),
         }
     }
 
     /// Makes `nodes[at]` a split node and grows its eight children.
-    pub(super) fn split(&mut self, nodes: &mut Vec<Node>, at: usize, o: [isize; 3], s: usize) {
+    pub(super) fn split(&mut self, t: TreeParts, at: usize, o: [isize; 3], s: usize) {
+        let (nodes, kinds) = t;
         let first = nodes.len();
-        nodes.extend([Node::Leaf(Kind::Empty); 8]);
+        nodes.extend([Node::Empty; 8]);
         nodes[at] = Node::Split(first as u32);
         for c in 0..8 {
-            self.grow(nodes, first + c, child_origin(o, s, c), s / 2);
+            self.grow((nodes, kinds), first + c, child_origin(o, s, c), s / 2);
         }
     }
 }

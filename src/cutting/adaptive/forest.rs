@@ -28,8 +28,8 @@ pub(super) struct LeafRef {
 }
 
 impl Forest<'_> {
-    /// The leaf holding cell `c`; None outside the roots or in an empty root.
-    fn leaf_at(&self, c: [isize; 3]) -> Option<LeafRef> {
+    /// The size of the leaf holding cell `c`; None outside the roots or in an empty root.
+    fn leaf_size_at(&self, c: [isize; 3]) -> Option<usize> {
         let mut r = [0usize; 3];
         for a in 0..3 {
             if c[a] < -1 {
@@ -43,28 +43,16 @@ impl Forest<'_> {
         let tree = self.roots[(r[2] * self.rn[1] + r[1]) * self.rn[0] + r[0]]? as usize;
         let t = &self.trees[tree];
         let (mut node, mut o, mut s) = (0usize, t.origin, ROOT);
-        loop {
-            match t.nodes[node] {
-                Node::Leaf(kind) => {
-                    return Some(LeafRef {
-                        tree,
-                        node,
-                        o,
-                        s,
-                        kind,
-                    });
-                }
-                Node::Split(first) => {
-                    let h = (s / 2) as isize;
-                    let ch = usize::from(c[0] - o[0] >= h)
-                        | usize::from(c[1] - o[1] >= h) << 1
-                        | usize::from(c[2] - o[2] >= h) << 2;
-                    o = child_origin(o, s, ch);
-                    s /= 2;
-                    node = first as usize + ch;
-                }
-            }
+        while let Node::Split(first) = t.nodes[node] {
+            let h = (s / 2) as isize;
+            let ch = usize::from(c[0] - o[0] >= h)
+                | usize::from(c[1] - o[1] >= h) << 1
+                | usize::from(c[2] - o[2] >= h) << 2;
+            o = child_origin(o, s, ch);
+            s /= 2;
+            node = first as usize + ch;
         }
+        Some(s)
     }
 
     /// The minimal faces on one side of a leaf: (lower lattice point of the square, size).
@@ -85,8 +73,8 @@ impl Forest<'_> {
         while depth > 0 {
             depth -= 1;
             let (a, b, q) = stack[depth];
-            let nb = self.leaf_at(point(n, beyond, a, b));
-            if q == 1 || nb.is_none_or(|l| l.s >= q) {
+            let nb = self.leaf_size_at(point(n, beyond, a, b));
+            if q == 1 || nb.is_none_or(|size| size >= q) {
                 out.push((point(n, c, a, b), q));
             } else {
                 let h = (q / 2) as isize;

@@ -161,22 +161,24 @@ pub fn mesh_stock_adaptive(
                 return (None, 0.0);
             }
             let o = origin(r);
-            let mut nodes = vec![Node::Leaf(Kind::Empty)];
+            let (mut nodes, mut kinds) = (vec![Node::Empty], Vec::new());
             let mut g = Grower {
                 lat: &lat,
                 tol,
                 resid: 0.0,
             };
-            g.grow(&mut nodes, 0, o, ROOT);
+            g.grow((&mut nodes, &mut kinds), 0, o, ROOT);
             let resid = g.resid;
-            let empty = matches!(nodes[0], Node::Leaf(Kind::Empty));
+            let empty = matches!(nodes[0], Node::Empty);
             // The tree is kept while every tree is meshed: no spare capacity.
             nodes.shrink_to_fit();
+            kinds.shrink_to_fit();
             (
                 (!empty).then_some(Tree {
                     root: r,
                     origin: o,
                     nodes,
+                    kinds,
                 }),
                 resid,
             )
@@ -250,7 +252,7 @@ pub fn mesh_stock_adaptive(
                     resid: 0.0,
                 };
                 for &(node, o, s) in nodes {
-                    g.split(&mut t.nodes, node, o, s);
+                    g.split((&mut t.nodes, &mut t.kinds), node, o, s);
                 }
                 g.resid
             })

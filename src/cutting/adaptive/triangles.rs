@@ -356,8 +356,8 @@ impl Forest<'_> {
         let mut loops = Loops::default();
         let mut stack = vec![(0usize, t.origin, ROOT)];
         while let Some((node, o, s)) = stack.pop() {
-            match t.nodes[node] {
-                Node::Leaf(kind) => {
+            match (t.nodes[node], t.leaf(node)) {
+                (_, Some(kind)) => {
                     let leaf = LeafRef {
                         tree: ti,
                         node,
@@ -367,11 +367,12 @@ impl Forest<'_> {
                     };
                     self.mesh_leaf(&leaf, (tol, plane_tol), &mut out, &mut loops);
                 }
-                Node::Split(first) => {
+                (Node::Split(first), None) => {
                     for c in (0..8).rev() {
                         stack.push((first as usize + c, child_origin(o, s, c), s / 2));
                     }
                 }
+                (_, None) => {}
             }
         }
         // Each vertex is named by every leaf that uses it: keep one per tree (equal keys
