@@ -307,11 +307,19 @@ pub fn mesh_stock_adaptive(
             format: "32-bit vertex indices",
         });
     }
-    let index = |k: &Key| verts.partition_point(|v| v.0 < *k) as u32;
     let triangles: Vec<[u32; 3]> = outs
         .into_par_iter()
         .map(|o| {
-            let global: Vec<u32> = o.verts.iter().map(|(k, _)| index(k)).collect();
+            // A tree's vertices are in key order: each is found from the last one found.
+            let mut at = 0;
+            let global: Vec<u32> = o
+                .verts
+                .iter()
+                .map(|(k, _)| {
+                    at = gallop(&verts[at..], |v| v.0 < *k) + at;
+                    at as u32
+                })
+                .collect();
             drop(o.verts);
             o.faces
                 .iter()
@@ -327,6 +335,18 @@ pub fn mesh_stock_adaptive(
         },
         report,
     ))
+}
+
+/// [`slice::partition_point`] for a point expected near the start: the bracket doubles from
+/// the start until `pred` fails, then a binary search within it (the same index).
+fn gallop<T>(xs: &[T], pred: impl Fn(&T) -> bool) -> usize {
+    let mut hi = 1;
+    while hi < xs.len() && pred(&xs[hi]) {
+        hi *= 2;
+    }
+    let lo = hi / 2;
+    let hi = hi.min(xs.len());
+    lo + xs[lo..hi].partition_point(pred)
 }
 
 #[cfg(test)]

@@ -232,3 +232,23 @@ fn plane_masks_match_the_points_one_by_one() {
         }
     }
 }
+
+#[test]
+fn gallop_finds_what_partition_point_finds() {
+    // Every split point of sorted runs with repeats, from every start, on empty and short
+    // slices too.
+    for n in 0..70usize {
+        let xs: Vec<usize> = (0..n).map(|i| i / 3).collect();
+        for start in 0..=n {
+            for key in 0..=n / 3 + 1 {
+                let pred = |x: &usize| *x < key;
+                let want = xs[start..].partition_point(pred);
+                assert_eq!(
+                    gallop(&xs[start..], pred),
+                    want,
+                    "n {n} start {start} key {key}"
+                );
+            }
+        }
+    }
+}
