@@ -1083,6 +1083,16 @@ impl ToolAssembly {
 mod tests {
     use super::*;
 
+    /// Uniform numbers in [0, 1) from a xorshift generator started at `seed`.
+    fn uniform(mut seed: u64) -> impl FnMut() -> Real {
+        move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as Real / (1u64 << 53) as Real
+        }
+    }
+
     #[test]
     fn flat_and_ball_closed_forms_agree_with_the_profile_elements() {
         // The closed forms against the general path through the profile's elements (each
@@ -1090,13 +1100,7 @@ mod tests {
         // points and on the ones where the nearest face changes: the axis, the faces, the
         // edges and the ball's centre.
         let (r, l) = (3.0, 20.0);
-        let mut seed = 0x9e37_79b9_7f4a_7c15_u64;
-        let mut rand = || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as Real / (1u64 << 53) as Real
-        };
+        let mut rand = uniform(0x9e37_79b9_7f4a_7c15);
         let mut points: Vec<[Real; 2]> = (0..20_000)
             .map(|_| [8.0 * rand(), 30.0 * rand() - 5.0])
             .collect();
@@ -1192,13 +1196,7 @@ mod tests {
         ];
         let spacing = 2.0 * std::f64::consts::PI * r / steps as Real;
         for (tool, outline, inside) in &cases {
-            let mut seed = 0x2545_f491_4f6c_dd1d_u64;
-            let mut rand = || {
-                seed ^= seed << 13;
-                seed ^= seed >> 7;
-                seed ^= seed << 17;
-                (seed >> 11) as Real / (1u64 << 53) as Real
-            };
+            let mut rand = uniform(0x2545_f491_4f6c_dd1d);
             for _ in 0..400 {
                 let p = Point3::new(
                     10.0 * rand() - 5.0,
