@@ -265,8 +265,20 @@ pub fn mesh_stock_adaptive(
             outs[ti] = None;
             let r = forest.trees[ti].root;
             let rc = [r % rn[0], r / rn[0] % rn[1], r / (rn[0] * rn[1])];
+            let o = forest.trees[ti].origin;
             for axis in 0..3 {
                 for step in [-1isize, 1] {
+                    // Only a split leaf on this root face changes the neighbour's faces.
+                    let on_face = |&(_, lo, s): &(usize, [isize; 3], usize)| {
+                        if step < 0 {
+                            lo[axis] == o[axis]
+                        } else {
+                            lo[axis] + s as isize == o[axis] + ROOT as isize
+                        }
+                    };
+                    if !nodes.iter().any(on_face) {
+                        continue;
+                    }
                     let c = rc[axis] as isize + step;
                     if c < 0 || c >= rn[axis] as isize {
                         continue;
