@@ -356,23 +356,19 @@ impl Forest<'_> {
         let mut loops = Loops::default();
         let mut stack = vec![(0usize, t.origin, ROOT)];
         while let Some((node, o, s)) = stack.pop() {
-            match (t.nodes[node], t.leaf(node)) {
-                (_, Some(kind)) => {
-                    let leaf = LeafRef {
-                        tree: ti,
-                        node,
-                        o,
-                        s,
-                        kind,
-                    };
-                    self.mesh_leaf(&leaf, (tol, plane_tol), &mut out, &mut loops);
+            if let Node::Split(first) = t.nodes[node] {
+                for c in (0..8).rev() {
+                    stack.push((first as usize + c, child_origin(o, s, c), s / 2));
                 }
-                (Node::Split(first), None) => {
-                    for c in (0..8).rev() {
-                        stack.push((first as usize + c, child_origin(o, s, c), s / 2));
-                    }
-                }
-                (_, None) => {}
+            } else if let Some(kind) = t.leaf(node) {
+                let leaf = LeafRef {
+                    tree: ti,
+                    node,
+                    o,
+                    s,
+                    kind,
+                };
+                self.mesh_leaf(&leaf, (tol, plane_tol), &mut out, &mut loops);
             }
         }
         // Each vertex is named by every leaf that uses it: keep one per tree (equal keys
