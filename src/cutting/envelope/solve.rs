@@ -222,8 +222,21 @@ impl RotaryEnvelope {
         }
     }
 
+    /// A Newton step for the crossing of edge circle `edge` (of [`Probe::phi`]: the bottom's
+    /// at height 0, the top's at `l`) from the end of the bracket `(lo, hi)` where `|φ|`
+    /// (`fs`) is least.
+    fn newton(&self, edge: usize, (lo, hi): (&Probe, &Probe), (flo, fhi): (Real, Real)) -> Real {
+        let h = if edge == 0 { 0.0 } else { self.l };
+        let (near, f) = if flo.abs() <= fhi.abs() {
+            (lo, flo)
+        } else {
+            (hi, fhi)
+        };
+        near.lambda - f / near.phi_rate(h)
+    }
+
     #[inline(always)]
-    fn probe_at(&self, lambda: Real, ray: &Ray) -> Probe {
+    pub(super) fn probe_at(&self, lambda: Real, ray: &Ray) -> Probe {
         let (s, u) = self.sample_at(lambda, ray);
         self.probe(&s, lambda, ray, u)
     }
@@ -423,7 +436,10 @@ impl RotaryEnvelope {
                 let (fa, fb) = (a.phi[edge], b.phi[edge]);
                 if !fa.is_nan() && !fb.is_nan() && (fa < 0.0) != (fb < 0.0) {
                     let phi = move |p: &Probe| Some(p.phi[edge]);
-                    if let Some((lo, hi)) = self.solve(ray, a, b, phi, Stop::Crossing, acc) {
+                    let newton = move |ends: (&Probe, &Probe), fs| self.newton(edge, ends, fs);
+                    if let Some((lo, hi)) =
+                        self.solve(ray, (a, b), phi, newton, Stop::Crossing, acc)
+                    {
                         self.refine(ray, a, &lo, acc, depth + 1);
                         self.refine(ray, &hi, b, acc, depth + 1);
                         return;
@@ -462,7 +478,8 @@ impl RotaryEnvelope {
             let (fa, fb) = (a.phi[edge], b.phi[edge]);
             if !fa.is_nan() && !fb.is_nan() && (fa < 0.0) != (fb < 0.0) {
                 let phi = move |p: &Probe| Some(p.phi[edge]);
-                match self.solve(ray, a, b, phi, Stop::Crossing, acc) {
+                let newton = move |ends: (&Probe, &Probe), fs| self.newton(edge, ends, fs);
+                match self.solve(ray, (a, b), phi, newton, Stop::Crossing, acc) {
                     Some((lo, hi)) => {
                         self.refine(ray, a, &lo, acc, depth + 1);
                         self.refine(ray, &hi, b, acc, depth + 1);
@@ -482,13 +499,27 @@ impl RotaryEnvelope {
                 }
                 if !in_done && a.g_in(r) < 0.0 && b.g_in(r) > 0.0 {
                     let g = |p: &Probe| p.hit.map(|_| p.g_in(r));
-                    if self.solve(ray, a, b, g, Stop::Extreme, acc).is_none() {
+                    let t = |p: &Probe| p.hit.map_or(Real::NAN, |h| h.t_in);
+                    let cubic = |(lo, hi): (&Probe, &Probe), fs| {
+                        hermite_extreme((lo.lambda, hi.lambda), (t(lo), t(hi)), fs)
+                    };
+                    if self
+                        .solve(ray, (a, b), g, cubic, Stop::Extreme, acc)
+                        .is_none()
+                    {
                         return bisect(acc);
                     }
                 }
                 if !out_done && a.g_out(r) > 0.0 && b.g_out(r) < 0.0 {
                     let g = |p: &Probe| p.hit.map(|_| p.g_out(r));
-                    if self.solve(ray, a, b, g, Stop::Extreme, acc).is_none() {
+                    let t = |p: &Probe| p.hit.map_or(Real::NAN, |h| h.t_out);
+                    let cubic = |(lo, hi): (&Probe, &Probe), fs| {
+                        hermite_extreme((lo.lambda, hi.lambda), (t(lo), t(hi)), fs)
+                    };
+                    if self
+                        .solve(ray, (a, b), g, cubic, Stop::Extreme, acc)
+                        .is_none()
+                    {
                         bisect(acc);
                     }
                 }
@@ -507,13 +538,16 @@ impl RotaryEnvelope {
 
     /// Brackets the sign change of `f` between `a` and `b` by the Illinois variant of regula
     /// falsi (a bisection every third step that did not halve the bracket), offering every
-    /// pose it evaluates. `None` where `f` is undefined (the ray missed a pose).
+    /// pose it evaluates. Where `guess` offers a point for the bracket `(lo, hi)` with `f`
+    /// there (a Newton step, or the root of a Hermite cubic's slope) inside it, that point
+    /// is taken instead of the secant's. `None` where `f` is undefined (the ray missed a
+    /// pose).
     fn solve(
         &self,
         ray: &Ray,
-        a: &Probe,
-        b: &Probe,
+        (a, b): (&Probe, &Probe),
         f: impl Fn(&Probe) -> Option<Real>,
+        guess: impl Fn((&Probe, &Probe), (Real, Real)) -> Real,
         stop: Stop,
         acc: &mut Option<RawEnd>,
     ) -> Option<(Probe, Probe)> {
@@ -529,7 +563,8 @@ impl RotaryEnvelope {
         let mut width = hi.lambda - lo.lambda;
         for step in 0..MAX_SOLVE_STEPS {
             let w = hi.lambda - lo.lambda;
-            if stop.reached(self, &lo, &hi, flo, fhi, w) {
+            let slope = stop.slope(self, &lo, &hi, flo, fhi);
+            if slope * w <= SOLVE_TOL || w <= 4.0 * Real::EPSILON {
                 break;
             }
             let mut m = (lo.lambda * whi - hi.lambda * wlo) / (whi - wlo);
@@ -538,6 +573,20 @@ impl RotaryEnvelope {
                     m = 0.5 * (lo.lambda + hi.lambda);
                 }
                 width = w;
+            } else {
+                let g = guess((&lo, &hi), (flo, fhi));
+                if g > lo.lambda && g < hi.lambda {
+                    m = g;
+                }
+            }
+            // A step closer to an end than half the width the stop needs goes that far:
+            // where the secant has the root that close, the point lands past it and the
+            // bracket closes at once (regula falsi alone keeps the far end).
+            let need = SOLVE_TOL / slope;
+            if m - lo.lambda < 0.5 * need {
+                m = lo.lambda + 0.5 * need;
+            } else if hi.lambda - m < 0.5 * need {
+                m = hi.lambda - 0.5 * need;
             }
             if !(m > lo.lambda && m < hi.lambda) {
                 m = 0.5 * (lo.lambda + hi.lambda);
@@ -569,6 +618,39 @@ impl RotaryEnvelope {
     }
 }
 
+/// Where the slope of the cubic through an interval end's two bracket ends changes sign:
+/// the cubic (Hermite) takes the end's positions `t` and rates `g` (per unit λ) at `λ`
+/// `l.0` and `l.1`; its slope is a quadratic in `x = (λ − l.0)/(l.1 − l.0)`, and the least
+/// root strictly between 0 and 1 is taken (NaN for none). Exact for a cubic `t(λ)`.
+pub(super) fn hermite_extreme(l: (Real, Real), t: (Real, Real), g: (Real, Real)) -> Real {
+    let w = l.1 - l.0;
+    let (g0, g1) = (g.0 * w, g.1 * w);
+    let dt = t.0 - t.1;
+    // T'(x) = a·x² + b·x + c, from the derivatives of the Hermite basis.
+    let a = 6.0 * dt + 3.0 * (g0 + g1);
+    let b = -6.0 * dt - 4.0 * g0 - 2.0 * g1;
+    let c = g0;
+    let x = if a.abs() <= 1e-12 * (b.abs() + c.abs()) {
+        -c / b
+    } else {
+        let disc = b * b - 4.0 * a * c;
+        // a NaN discriminant (no cubic) fails this too
+        if disc.is_nan() || disc < 0.0 {
+            return Real::NAN;
+        }
+        let q = -0.5 * (b + b.signum() * disc.sqrt());
+        match [q / a, c / q]
+            .into_iter()
+            .filter(|x| *x > 0.0 && *x < 1.0)
+            .reduce(Real::min)
+        {
+            Some(x) => x,
+            None => return Real::NAN,
+        }
+    };
+    l.0 + x * w
+}
+
 /// When a solve's bracket is fine enough.
 #[derive(Clone, Copy, Debug)]
 enum Stop {
@@ -580,18 +662,11 @@ enum Stop {
 }
 
 impl Stop {
-    /// Whether the bracket `lo`–`hi` (width `w` in λ, `f` there `flo`, `fhi`) of `env`'s
-    /// solve is fine enough.
-    fn reached(
-        self,
-        env: &RotaryEnvelope,
-        lo: &Probe,
-        hi: &Probe,
-        flo: Real,
-        fhi: Real,
-        w: Real,
-    ) -> bool {
-        let slope = match self {
+    /// The slope that bounds how far the solved end moves over the bracket `lo`–`hi` (`f`
+    /// there `flo`, `fhi`) of `env`'s solve, per unit λ: the bracket is fine enough when
+    /// its width times this is at most [`SOLVE_TOL`].
+    fn slope(self, env: &RotaryEnvelope, lo: &Probe, hi: &Probe, flo: Real, fhi: Real) -> Real {
+        match self {
             Stop::Extreme => flo.abs().min(fhi.abs()),
             Stop::Crossing => {
                 let rates = [lo, hi]
@@ -602,8 +677,7 @@ impl Stop {
                     .fold(Real::NEG_INFINITY, Real::max);
                 if rates.is_finite() { rates } else { env.speed }
             }
-        };
-        slope * w <= SOLVE_TOL || w <= 4.0 * Real::EPSILON
+        }
     }
 }
 
