@@ -561,6 +561,8 @@ impl RotaryEnvelope {
         let (mut flo, mut fhi) = (f_lo, f_hi);
         let mut last_side = 0i8;
         let mut width = hi.lambda - lo.lambda;
+        // The least |f| at the bracket's ends when `width` was taken.
+        let mut least = f_lo.abs().min(f_hi.abs());
         for step in 0..MAX_SOLVE_STEPS {
             let w = hi.lambda - lo.lambda;
             let slope = stop.slope(self, &lo, &hi, flo, fhi);
@@ -568,11 +570,15 @@ impl RotaryEnvelope {
                 break;
             }
             let mut m = (lo.lambda * whi - hi.lambda * wlo) / (whi - wlo);
+            // Every third step bisects where the last three neither halved the bracket nor
+            // brought the least |f| down sixteenfold (the guesses closing in from one side).
+            let now = flo.abs().min(fhi.abs());
+            let bisect = step % 3 == 2 && w > 0.5 * width && now > least / 16.0;
             if step % 3 == 2 {
-                if w > 0.5 * width {
-                    m = 0.5 * (lo.lambda + hi.lambda);
-                }
-                width = w;
+                (width, least) = (w, now);
+            }
+            if bisect {
+                m = 0.5 * (lo.lambda + hi.lambda);
             } else {
                 let g = guess((&lo, &hi), (flo, fhi));
                 if g > lo.lambda && g < hi.lambda {
