@@ -120,8 +120,9 @@ const PARTS: usize = 4;
 /// Most cells for one move; beyond this the move is refused (the caller falls back).
 const MAX_CELLS: usize = 1 << 16;
 
-/// Regula falsi steps before a solve gives up (each step at least halves the bracket every
-/// third step, so 200 steps reach far below any `λ` resolution).
+/// Regula falsi steps before a solve gives up (every third step halves the bracket unless
+/// the least `|f|` at its ends fell sixteenfold over the last three, which rounding ends
+/// within a few dozen steps, so 200 steps reach far below any `λ` resolution).
 const MAX_SOLVE_STEPS: usize = 200;
 
 /// Recursion depth of the half-cell refinement; each level halves the width, so 60 levels

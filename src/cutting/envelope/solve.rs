@@ -537,7 +537,8 @@ impl RotaryEnvelope {
     }
 
     /// Brackets the sign change of `f` between `a` and `b` by the Illinois variant of regula
-    /// falsi (a bisection every third step that did not halve the bracket), offering every
+    /// falsi (a bisection every third step where the last three neither halved the bracket
+    /// nor brought the least `|f|` at its ends down sixteenfold), offering every
     /// pose it evaluates. Where `guess` offers a point for the bracket `(lo, hi)` with `f`
     /// there (a Newton step, or the root of a Hermite cubic's slope) inside it, that point
     /// is taken instead of the secant's. `None` where `f` is undefined (the ray missed a
