@@ -30,13 +30,14 @@
 //! grown by `δ`. A ray that misses the grown tool misses the cell. The ray is evaluated
 //! exactly at the ends and middle of every cell it may meet; in each half-cell (the tool
 //! moves by at most `R/8`) a sign change of a rate or of `φ` is solved for by the Illinois
-//! variant of regula falsi, and the pose found is offered. Its steps are guesses where a
-//! better one falls inside the bracket: for a rate, the extreme of the cubic through the
-//! end's positions and rates at the bracket's ends (Hermite); for `φ`, a Newton step with
-//! `dφ/dλ` in closed form. A step closer to a bracket end than half the width the stop
-//! needs is moved out to that distance, so that it lands past the root and the bracket
-//! closes. The guesses choose where to look, not what is accepted: the bracket and the
-//! stop are those of the regula falsi. A half-cell whose ends both miss
+//! variant of regula falsi, and the pose found is offered. For a rate its steps are
+//! guesses where one falls inside the bracket: the extreme of the cubic through the end's
+//! positions and rates at the bracket's ends (Hermite), and a step closer to a bracket end
+//! than half the width the stop needs is moved out to that distance, so that it lands past
+//! the root and the bracket closes. The guesses choose where to look, not what is
+//! accepted: the bracket and the stop are those of the regula falsi. (An edge crossing
+//! keeps the plain steps: the faces differ on its two sides, and a bracket closed from one
+//! side keeps the kept end's face, so its normal, alike from ray to ray.) A half-cell whose ends both miss
 //! may hide a touch: the tool lies in capsules of radius `R` about four pieces of its axis,
 //! each with its own speed bound `M_k`, and a touch deeper than [`ENVELOPE_TOL`] needs some
 //! piece to travel from both ends to the ray (`d_k(a) + d_k(b) + 2·tol ≤ M_k·w`, `d_k` the

@@ -99,24 +99,6 @@ impl Probe {
         self.rate(1, r)
     }
 
-    /// `dφ/dλ` of the edge circle in the plane `z = h` (tool frame): the point where the ray
-    /// crosses that plane moves as the ray moves in the tool frame (a fixed point `x` at
-    /// `−(w_t × x + v_t)`, a direction `u` at `−w_t × u`). NaN for a ray parallel to the
-    /// plane or through the axis there.
-    pub(super) fn phi_rate(&self, h: Real) -> Real {
-        let (p, u) = (&self.p, &self.u);
-        if u.z.abs() <= tol::RELATIVE_EPS {
-            return Real::NAN;
-        }
-        let dp = -(self.w_t.cross(p) + self.v_t);
-        let du = -self.w_t.cross(u);
-        let s = (h - p.z) / u.z;
-        let ds = -(dp.z + s * du.z) / u.z;
-        let q = p + u * s;
-        let dq = dp + du * s + u * ds;
-        (q.x * dq.x + q.y * dq.y) / (q.x * q.x + q.y * q.y).sqrt()
-    }
-
     /// The rate of the hit's end `end` (0 in, 1 out): the end's normal speed over the
     /// normal's component along the ray; NaN without a normal or a hit.
     #[inline(always)]

@@ -222,21 +222,8 @@ impl RotaryEnvelope {
         }
     }
 
-    /// A Newton step for the crossing of edge circle `edge` (of [`Probe::phi`]: the bottom's
-    /// at height 0, the top's at `l`) from the end of the bracket `(lo, hi)` where `|φ|`
-    /// (`fs`) is least.
-    fn newton(&self, edge: usize, (lo, hi): (&Probe, &Probe), (flo, fhi): (Real, Real)) -> Real {
-        let h = if edge == 0 { 0.0 } else { self.l };
-        let (near, f) = if flo.abs() <= fhi.abs() {
-            (lo, flo)
-        } else {
-            (hi, fhi)
-        };
-        near.lambda - f / near.phi_rate(h)
-    }
-
     #[inline(always)]
-    pub(super) fn probe_at(&self, lambda: Real, ray: &Ray) -> Probe {
+    fn probe_at(&self, lambda: Real, ray: &Ray) -> Probe {
         let (s, u) = self.sample_at(lambda, ray);
         self.probe(&s, lambda, ray, u)
     }
@@ -436,9 +423,8 @@ impl RotaryEnvelope {
                 let (fa, fb) = (a.phi[edge], b.phi[edge]);
                 if !fa.is_nan() && !fb.is_nan() && (fa < 0.0) != (fb < 0.0) {
                     let phi = move |p: &Probe| Some(p.phi[edge]);
-                    let newton = move |ends: (&Probe, &Probe), fs| self.newton(edge, ends, fs);
                     if let Some((lo, hi)) =
-                        self.solve(ray, (a, b), phi, newton, Stop::Crossing, acc)
+                        self.solve(ray, (a, b), phi, no_guess, Stop::Crossing, acc)
                     {
                         self.refine(ray, a, &lo, acc, depth + 1);
                         self.refine(ray, &hi, b, acc, depth + 1);
@@ -478,8 +464,7 @@ impl RotaryEnvelope {
             let (fa, fb) = (a.phi[edge], b.phi[edge]);
             if !fa.is_nan() && !fb.is_nan() && (fa < 0.0) != (fb < 0.0) {
                 let phi = move |p: &Probe| Some(p.phi[edge]);
-                let newton = move |ends: (&Probe, &Probe), fs| self.newton(edge, ends, fs);
-                match self.solve(ray, (a, b), phi, newton, Stop::Crossing, acc) {
+                match self.solve(ray, (a, b), phi, no_guess, Stop::Crossing, acc) {
                     Some((lo, hi)) => {
                         self.refine(ray, a, &lo, acc, depth + 1);
                         self.refine(ray, &hi, b, acc, depth + 1);
@@ -540,8 +525,8 @@ impl RotaryEnvelope {
     /// falsi (a bisection every third step where the last three neither halved the bracket
     /// nor brought the least `|f|` at its ends down sixteenfold), offering every
     /// pose it evaluates. Where `guess` offers a point for the bracket `(lo, hi)` with `f`
-    /// there (a Newton step, or the root of a Hermite cubic's slope) inside it, that point
-    /// is taken instead of the secant's. `None` where `f` is undefined (the ray missed a
+    /// there (the root of a Hermite cubic's slope) inside it, that point is taken instead
+    /// of the secant's. `None` where `f` is undefined (the ray missed a
     /// pose).
     fn solve(
         &self,
@@ -587,13 +572,18 @@ impl RotaryEnvelope {
                 }
             }
             // A step closer to an end than half the width the stop needs goes that far:
-            // where the secant has the root that close, the point lands past it and the
-            // bracket closes at once (regula falsi alone keeps the far end).
-            let need = SOLVE_TOL / slope;
-            if m - lo.lambda < 0.5 * need {
-                m = lo.lambda + 0.5 * need;
-            } else if hi.lambda - m < 0.5 * need {
-                m = hi.lambda - 0.5 * need;
+            // where the guess has the root that close, the point lands past it and the
+            // bracket closes at once (regula falsi alone keeps the far end). Not for an
+            // edge crossing: there the faces differ on the two sides, and the bracket
+            // closed from one side keeps the kept end's face (so its normal) the same
+            // from ray to ray, which the mesher's features read.
+            if let Stop::Extreme = stop {
+                let need = SOLVE_TOL / slope;
+                if m - lo.lambda < 0.5 * need {
+                    m = lo.lambda + 0.5 * need;
+                } else if hi.lambda - m < 0.5 * need {
+                    m = hi.lambda - 0.5 * need;
+                }
             }
             if !(m > lo.lambda && m < hi.lambda) {
                 m = 0.5 * (lo.lambda + hi.lambda);
@@ -623,6 +613,11 @@ impl RotaryEnvelope {
         }
         Some((lo, hi))
     }
+}
+
+/// No guess: the solve's own secant steps (an edge crossing).
+fn no_guess(_: (&Probe, &Probe), _: (Real, Real)) -> Real {
+    Real::NAN
 }
 
 /// Where the slope of the cubic through an interval end's two bracket ends changes sign:

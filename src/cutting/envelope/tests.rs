@@ -1041,62 +1041,6 @@ fn rays_a_group_hull_clears_meet_no_pose_of_its_moves() {
     }
 }
 
-/// `Probe::phi_rate`, the rate of `φ` (where the ray crosses an edge's plane, less the
-/// radius) that the crossing solve's Newton steps use, is the derivative of `φ` along the
-/// move: against central differences of the probes' own `φ` at λ ± 1e-6, for both edges of
-/// a flat end mill, on the trunnion's moves (both axes turning) and rays through the tool in
-/// every direction not nearly parallel to the edge's plane.
-#[test]
-fn the_edge_crossing_rate_is_the_derivative_of_phi() {
-    let c = trunnion();
-    let tool = Tool::try_new(ToolKind::Flat, 6.0, 25.0).expect("valid");
-    let mut checked = 0;
-    for (a, b) in trunnion_moves() {
-        let env = RotaryEnvelope::new(&c, &tool, &a, &b).expect("supported");
-        let path = MovePath::new(&c, &a, &b);
-        for (k, lambda) in [0.2, 0.5, 0.83].into_iter().enumerate() {
-            let pose = path.w_from_t(lambda);
-            for (j, e) in [
-                Vector3::x(),
-                Vector3::y(),
-                Vector3::z(),
-                Vector3::new(0.3, -0.5, 0.8).normalize(),
-            ]
-            .into_iter()
-            .enumerate()
-            {
-                // A point near each edge circle, so that φ is small there.
-                for (edge, h) in [(0, 0.0), (1, 25.0)] {
-                    let side = 2.0 + (k + j) as Real * 0.3;
-                    let o = pose * Point3::new(side, 1.0, h + 0.2);
-                    let ray = Ray {
-                        o: &o,
-                        e: &e,
-                        span: (Real::NEG_INFINITY, Real::INFINITY),
-                        axis: None,
-                    };
-                    let phi = |l: Real| env.probe_at(l, &ray).phi[edge];
-                    let eps = 1e-6;
-                    let numeric = (phi(lambda + eps) - phi(lambda - eps)) / (2.0 * eps);
-                    let probe = env.probe_at(lambda, &ray);
-                    // A ray nearly parallel to the edge's plane crosses it far away, where
-                    // the differences lose their digits.
-                    if probe.u.z.abs() < 0.2 {
-                        continue;
-                    }
-                    let rate = probe.phi_rate(h);
-                    assert!(
-                        (rate - numeric).abs() <= 1e-5 * (1.0 + numeric.abs()),
-                        "edge {edge}, λ {lambda}, e {e:?}: rate {rate}, differences {numeric}"
-                    );
-                    checked += 1;
-                }
-            }
-        }
-    }
-    assert!(checked >= 40, "only {checked} rates checked");
-}
-
 /// The Hermite guess of the extreme solve is exact for a cubic: for `t(λ) = (λ − p)²·(λ − s)`
 /// (a local minimum at `λ* = (2s + p)/3` when `s > p`), given `t` and `t'` at the bracket's
 /// ends, it returns `λ*`; it returns NaN where the slope keeps its sign, and a quadratic
