@@ -36,8 +36,9 @@
 //! than half the width the stop needs is moved out to that distance, so that it lands past
 //! the root and the bracket closes. The guesses choose where to look, not what is
 //! accepted: the bracket and the stop are those of the regula falsi. (An edge crossing
-//! keeps the plain steps: the faces differ on its two sides, and a bracket closed from one
-//! side keeps the kept end's face, so its normal, alike from ray to ray.) A half-cell whose ends both miss
+//! keeps the plain steps, bit for bit: the faces differ on its two sides, and which side
+//! the kept end comes from picks its normal, which the mesher's features read; other steps
+//! there changed the side cut's mesh by a few thousand feature vertices.) A half-cell whose ends both miss
 //! may hide a touch: the tool lies in capsules of radius `R` about four pieces of its axis,
 //! each with its own speed bound `M_k`, and a touch deeper than [`ENVELOPE_TOL`] needs some
 //! piece to travel from both ends to the ray (`d_k(a) + d_k(b) + 2·tol ≤ M_k·w`, `d_k` the
@@ -121,9 +122,10 @@ const PARTS: usize = 4;
 /// Most cells for one move; beyond this the move is refused (the caller falls back).
 const MAX_CELLS: usize = 1 << 16;
 
-/// Regula falsi steps before a solve gives up (every third step halves the bracket unless
-/// the least `|f|` at its ends fell sixteenfold over the last three, which rounding ends
-/// within a few dozen steps, so 200 steps reach far below any `λ` resolution).
+/// Regula falsi steps before a solve gives up (every third step halves the bracket unless,
+/// for a rate's extreme, the least `|f|` at its ends fell sixteenfold over the last three,
+/// which rounding ends within a few dozen steps, so 200 steps reach far below any `λ`
+/// resolution).
 const MAX_SOLVE_STEPS: usize = 200;
 
 /// Recursion depth of the half-cell refinement; each level halves the width, so 60 levels

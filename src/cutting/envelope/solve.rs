@@ -522,8 +522,9 @@ impl RotaryEnvelope {
     }
 
     /// Brackets the sign change of `f` between `a` and `b` by the Illinois variant of regula
-    /// falsi (a bisection every third step where the last three neither halved the bracket
-    /// nor brought the least `|f|` at its ends down sixteenfold), offering every
+    /// falsi (a bisection every third step where the last three did not halve the bracket
+    /// nor, for a rate's extreme, bring the least `|f|` at its ends down sixteenfold),
+    /// offering every
     /// pose it evaluates. Where `guess` offers a point for the bracket `(lo, hi)` with `f`
     /// there (the root of a Hermite cubic's slope) inside it, that point is taken instead
     /// of the secant's. `None` where `f` is undefined (the ray missed a
@@ -556,10 +557,13 @@ impl RotaryEnvelope {
                 break;
             }
             let mut m = (lo.lambda * whi - hi.lambda * wlo) / (whi - wlo);
-            // Every third step bisects where the last three neither halved the bracket nor
-            // brought the least |f| down sixteenfold (the guesses closing in from one side).
+            // Every third step bisects where the last three did not halve the bracket, unless
+            // (for a rate's extreme) they brought the least |f| down sixteenfold: the
+            // guesses closing in from one side. An edge crossing keeps the plain rule (see
+            // the straddle below).
             let now = flo.abs().min(fhi.abs());
-            let bisect = step % 3 == 2 && w > 0.5 * width && now > least / 16.0;
+            let closing = matches!(stop, Stop::Extreme) && now <= least / 16.0;
+            let bisect = step % 3 == 2 && w > 0.5 * width && !closing;
             if step % 3 == 2 {
                 (width, least) = (w, now);
             }
