@@ -482,31 +482,19 @@ impl RotaryEnvelope {
                 {
                     return bisect(acc);
                 }
-                if !in_done && a.g_in(r) < 0.0 && b.g_in(r) > 0.0 {
-                    let g = |p: &Probe| p.hit.map(|_| p.g_in(r));
-                    let t = |p: &Probe| p.hit.map_or(Real::NAN, |h| h.t_in);
-                    let cubic = |(lo, hi): (&Probe, &Probe), fs| {
-                        hermite_extreme((lo.lambda, hi.lambda), (t(lo), t(hi)), fs)
-                    };
-                    if self
-                        .solve(ray, (a, b), g, cubic, Stop::Extreme, acc)
-                        .is_none()
-                    {
-                        return bisect(acc);
-                    }
+                if !in_done
+                    && a.g_in(r) < 0.0
+                    && b.g_in(r) > 0.0
+                    && self.extreme(ray, (a, b), 0, acc).is_none()
+                {
+                    return bisect(acc);
                 }
-                if !out_done && a.g_out(r) > 0.0 && b.g_out(r) < 0.0 {
-                    let g = |p: &Probe| p.hit.map(|_| p.g_out(r));
-                    let t = |p: &Probe| p.hit.map_or(Real::NAN, |h| h.t_out);
-                    let cubic = |(lo, hi): (&Probe, &Probe), fs| {
-                        hermite_extreme((lo.lambda, hi.lambda), (t(lo), t(hi)), fs)
-                    };
-                    if self
-                        .solve(ray, (a, b), g, cubic, Stop::Extreme, acc)
-                        .is_none()
-                    {
-                        bisect(acc);
-                    }
+                if !out_done
+                    && a.g_out(r) > 0.0
+                    && b.g_out(r) < 0.0
+                    && self.extreme(ray, (a, b), 1, acc).is_none()
+                {
+                    bisect(acc);
                 }
             }
             // Into a touch t_in rises and t_out falls: an end moving the other way on the
@@ -519,6 +507,28 @@ impl RotaryEnvelope {
             }
             _ => {}
         }
+    }
+
+    /// Solves for the extreme of the interval's end `end` (0 in, 1 out) between `a` and `b`,
+    /// where its rate changes sign: [`Self::solve`] on the rate, guided by the Hermite cubic
+    /// through the end's positions and rates ([`hermite_extreme`]).
+    fn extreme(
+        &self,
+        ray: &Ray,
+        (a, b): (&Probe, &Probe),
+        end: usize,
+        acc: &mut Option<RawEnd>,
+    ) -> Option<(Probe, Probe)> {
+        let r = self.r;
+        let g = |p: &Probe| p.hit.map(|_| if end == 0 { p.g_in(r) } else { p.g_out(r) });
+        let t = |p: &Probe| {
+            p.hit
+                .map_or(Real::NAN, |h| if end == 0 { h.t_in } else { h.t_out })
+        };
+        let cubic = |(lo, hi): (&Probe, &Probe), fs| {
+            hermite_extreme((lo.lambda, hi.lambda), (t(lo), t(hi)), fs)
+        };
+        self.solve(ray, (a, b), g, cubic, Stop::Extreme, acc)
     }
 
     /// Brackets the sign change of `f` between `a` and `b` by the Illinois variant of regula
