@@ -38,8 +38,8 @@
 //! accepted: the bracket and the stop are those of the regula falsi. (An edge crossing
 //! keeps the plain steps, bit for bit: the faces differ on its two sides, and which side
 //! the kept end comes from picks its normal, which the mesher's features read; other steps
-//! there changed the side cut's mesh by a few thousand feature vertices.) A half-cell whose ends both miss
-//! may hide a touch: the tool lies in capsules of radius `R` about four pieces of its axis,
+//! there changed the side cut's mesh by a few thousand feature vertices.) A half-cell
+//! whose ends both miss may hide a touch: the tool lies in capsules of radius `R` about four pieces of its axis,
 //! each with its own speed bound `M_k`, and a touch deeper than [`ENVELOPE_TOL`] needs some
 //! piece to travel from both ends to the ray (`d_k(a) + d_k(b) + 2·tol ≤ M_k·w`, `d_k` the
 //! ray's distance from the capsule); while one can, the half-cell is bisected, the middle

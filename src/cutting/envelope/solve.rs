@@ -534,10 +534,9 @@ impl RotaryEnvelope {
     /// Brackets the sign change of `f` between `a` and `b` by the Illinois variant of regula
     /// falsi (a bisection every third step where the last three did not halve the bracket
     /// nor, for a rate's extreme, bring the least `|f|` at its ends down sixteenfold),
-    /// offering every
-    /// pose it evaluates. Where `guess` offers a point for the bracket `(lo, hi)` with `f`
-    /// there (the root of a Hermite cubic's slope) inside it, that point is taken instead
-    /// of the secant's. `None` where `f` is undefined (the ray missed a
+    /// offering every pose it evaluates. Where `guess` offers a point for the bracket
+    /// `(lo, hi)` with `f` there (the root of a Hermite cubic's slope) inside it, that point
+    /// is taken instead of the secant's. `None` where `f` is undefined (the ray missed a
     /// pose).
     fn solve(
         &self,
