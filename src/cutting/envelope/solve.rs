@@ -423,8 +423,7 @@ impl RotaryEnvelope {
                 let (fa, fb) = (a.phi[edge], b.phi[edge]);
                 if !fa.is_nan() && !fb.is_nan() && (fa < 0.0) != (fb < 0.0) {
                     let phi = move |p: &Probe| Some(p.phi[edge]);
-                    if let Some((lo, hi)) =
-                        self.solve(ray, (a, b), phi, no_guess, Stop::Crossing, acc)
+                    if let Some((lo, hi)) = self.solve(ray, (a, b), phi, None, Stop::Crossing, acc)
                     {
                         self.refine(ray, a, &lo, acc, depth + 1);
                         self.refine(ray, &hi, b, acc, depth + 1);
@@ -464,7 +463,7 @@ impl RotaryEnvelope {
             let (fa, fb) = (a.phi[edge], b.phi[edge]);
             if !fa.is_nan() && !fb.is_nan() && (fa < 0.0) != (fb < 0.0) {
                 let phi = move |p: &Probe| Some(p.phi[edge]);
-                match self.solve(ray, (a, b), phi, no_guess, Stop::Crossing, acc) {
+                match self.solve(ray, (a, b), phi, None, Stop::Crossing, acc) {
                     Some((lo, hi)) => {
                         self.refine(ray, a, &lo, acc, depth + 1);
                         self.refine(ray, &hi, b, acc, depth + 1);
@@ -528,22 +527,23 @@ impl RotaryEnvelope {
         let cubic = |(lo, hi): (&Probe, &Probe), fs| {
             hermite_extreme((lo.lambda, hi.lambda), (t(lo), t(hi)), fs)
         };
-        self.solve(ray, (a, b), g, cubic, Stop::Extreme, acc)
+        self.solve(ray, (a, b), g, Some(&cubic), Stop::Extreme, acc)
     }
 
     /// Brackets the sign change of `f` between `a` and `b` by the Illinois variant of regula
     /// falsi (a bisection every third step where the last three did not halve the bracket
     /// nor, for a rate's extreme, bring the least `|f|` at its ends down sixteenfold),
-    /// offering every pose it evaluates. Where `guess` offers a point for the bracket
-    /// `(lo, hi)` with `f` there (the root of a Hermite cubic's slope) inside it, that point
-    /// is taken instead of the secant's. `None` where `f` is undefined (the ray missed a
-    /// pose).
+    /// offering every pose it evaluates. With a `guess` (a point for the bracket `(lo, hi)`
+    /// with `f` there: the root of a Hermite cubic's slope) the solve is guided: a guess
+    /// inside the bracket is taken instead of the secant's point, a step near an end is
+    /// moved past the root, and the bisection waits while `|f|` falls; without one it is the
+    /// plain regula falsi. `None` where `f` is undefined (the ray missed a pose).
     fn solve(
         &self,
         ray: &Ray,
         (a, b): (&Probe, &Probe),
         f: impl Fn(&Probe) -> Option<Real>,
-        guess: impl Fn((&Probe, &Probe), (Real, Real)) -> Real,
+        guess: Option<Guess>,
         stop: Stop,
         acc: &mut Option<RawEnd>,
     ) -> Option<(Probe, Probe)> {
@@ -567,18 +567,17 @@ impl RotaryEnvelope {
             }
             let mut m = (lo.lambda * whi - hi.lambda * wlo) / (whi - wlo);
             // Every third step bisects where the last three did not halve the bracket, unless
-            // (for a rate's extreme) they brought the least |f| down sixteenfold: the
-            // guesses closing in from one side. An edge crossing keeps the plain rule (see
-            // the straddle below).
+            // (guided) they brought the least |f| down sixteenfold: the guesses closing in
+            // from one side.
             let now = flo.abs().min(fhi.abs());
-            let closing = matches!(stop, Stop::Extreme) && now <= least / 16.0;
+            let closing = guess.is_some() && now <= least / 16.0;
             let bisect = step % 3 == 2 && w > 0.5 * width && !closing;
             if step % 3 == 2 {
                 (width, least) = (w, now);
             }
             if bisect {
                 m = 0.5 * (lo.lambda + hi.lambda);
-            } else {
+            } else if let Some(guess) = guess {
                 let g = guess((&lo, &hi), (flo, fhi));
                 if g > lo.lambda && g < hi.lambda {
                     m = g;
@@ -586,11 +585,11 @@ impl RotaryEnvelope {
             }
             // A step closer to an end than half the width the stop needs goes that far:
             // where the guess has the root that close, the point lands past it and the
-            // bracket closes at once (regula falsi alone keeps the far end). Not for an
-            // edge crossing: there the faces differ on the two sides, and the bracket
-            // closed from one side keeps the kept end's face (so its normal) the same
-            // from ray to ray, which the mesher's features read.
-            if let Stop::Extreme = stop {
+            // bracket closes at once (regula falsi alone keeps the far end). Guided only:
+            // an edge crossing's two sides are different faces, and its bracket closed from
+            // one side keeps the kept end's face (so its normal) the same from ray to ray,
+            // which the mesher's features read.
+            if guess.is_some() {
                 let need = SOLVE_TOL / slope;
                 if m - lo.lambda < 0.5 * need {
                     m = lo.lambda + 0.5 * need;
@@ -628,10 +627,8 @@ impl RotaryEnvelope {
     }
 }
 
-/// No guess: the solve's own secant steps (an edge crossing).
-fn no_guess(_: (&Probe, &Probe), _: (Real, Real)) -> Real {
-    Real::NAN
-}
+/// A guided solve's guess of its next point from the bracket's ends and `f` there.
+type Guess<'a> = &'a dyn Fn((&Probe, &Probe), (Real, Real)) -> Real;
 
 /// Where the slope of the cubic through an interval end's two bracket ends changes sign:
 /// the cubic (Hermite) takes the end's positions `t` and rates `g` (per unit λ) at `λ`
