@@ -39,13 +39,13 @@
 //! keeps the plain steps, bit for bit: the faces differ on its two sides, and which side
 //! the kept end comes from picks its normal, which the mesher's features read; other steps
 //! there changed the side cut's mesh by a few thousand feature vertices.) A half-cell
-//! whose ends both miss may hide a touch: the tool lies in capsules of radius `R` about four pieces of its axis,
-//! each with its own speed bound `M_k`, and a touch deeper than [`ENVELOPE_TOL`] needs some
-//! piece to travel from both ends to the ray (`d_k(a) + d_k(b) + 2·tol ≤ M_k·w`, `d_k` the
-//! ray's distance from the capsule); while one can, the half-cell is bisected, the middle
-//! checked against the tool grown by `M·w/2 − tol`. A half-cell with one end inside and a
-//! rate that points to an extreme before the ray leaves is bisected until the extreme is
-//! bracketed.
+//! whose ends both miss may hide a touch: the tool lies in capsules of radius `R` about
+//! four pieces of its axis, each with its own speed bound `M_k`, and a touch deeper than
+//! the tolerance `τ` needs some piece to travel from both ends to the ray
+//! (`d_k(a) + d_k(b) + 2·τ ≤ M_k·w`, `d_k` the ray's distance from the capsule); while one
+//! can, the half-cell is bisected, the middle checked against the tool grown by
+//! `M·w/2 − τ`. A half-cell with one end inside and a rate that points to an extreme before
+//! the ray leaves is bisected until the extreme is bracketed.
 //!
 //! **Span.** The stock asks only about the material's extent along a ray
 //! ([`Cutter::ray_cuts_in_span`]): cells whose grown tool meets the ray only outside it are
@@ -53,11 +53,14 @@
 //!
 //! **Accuracy.** Every interval end is the exact interval of some pose, so nothing is cut
 //! that the tool does not reach. A smooth extreme is solved until
-//! `min(|dt/dλ|) · w ≤` [`SOLVE_TOL`] over the final bracket `w`, which bounds the distance to
-//! the true extreme on a convex stretch; an edge crossing until `w` times the larger rate at
-//! the bracket ends is below it. A touch between two missing poses is ignored only when it
-//! reaches less than [`ENVELOPE_TOL`] into the ray (measured normal to the tool's surface).
-//! The documented bound is [`ENVELOPE_TOL`] = 1e-7 mm (0.1 nm).
+//! `min(|dt/dλ|) · w ≤ τ/10` ([`SOLVE_SHARE`]) over the final bracket `w`, which bounds the
+//! distance to the true extreme on a convex stretch; an edge crossing until `w` times the
+//! larger rate at the bracket ends is below it. A touch between two missing poses is
+//! ignored only when it reaches less than `τ` into the ray (measured normal to the tool's
+//! surface). The bound is the tolerance `τ`: [`ENVELOPE_TOL`] = 1e-7 mm (0.1 nm) as built,
+//! or what the sweep's own bound allows ([`RotaryEnvelope::with_tolerance`]; the sweep
+//! gives its envelopes the user's `rotary_step_bound_mm`, so a looser bound buys fewer
+//! solve steps and fewer bisections, never a different cull or a different pose model).
 //!
 //! **Known limit.** Within one half-cell each rate and each `φ` is taken to change sign at
 //! most once, and a ray inside the tool at both ends of a half-cell to be inside in between.
@@ -103,14 +106,16 @@ use probe::{
 };
 pub use sampled::{SAMPLED_BOUND_FACTOR, SampledPath};
 
-/// Bound (mm) on the distance of the envelope's interval ends from the true swept surface
-/// along a ray: 1e-7 mm (0.1 nm), far below the µm-metrology budget; the solver
-/// reaches [`SOLVE_TOL`] (see the module docs).
+/// The finest bound (mm) on the distance of the envelope's interval ends from the true
+/// swept surface along a ray, and the one an envelope is built with: 1e-7 mm (0.1 nm), far
+/// below the µm-metrology budget. A sweep whose bound allows more loosens it
+/// ([`RotaryEnvelope::with_tolerance`]); the solver brings an end to a tenth of it
+/// ([`SOLVE_SHARE`]).
 pub const ENVELOPE_TOL: Real = 1e-7;
 
-/// Distance (mm) to which the solver brings an interval end to the true extreme: a tenth
-/// of [`ENVELOPE_TOL`].
-pub const SOLVE_TOL: Real = 1e-8;
+/// The share of the envelope's tolerance to which the solver brings an interval end to the
+/// true extreme (1e-8 mm at [`ENVELOPE_TOL`]).
+pub const SOLVE_SHARE: Real = 0.1;
 
 /// Largest grown distance `δ` as a fraction of the tool radius: cells move the tool by at
 /// most twice that, a quarter of its radius, half-cells by an eighth.
@@ -176,6 +181,9 @@ pub struct RotaryEnvelope {
     /// The swept cull's poses, where every axis moves at a constant rate (used instead of
     /// `cull`).
     swept: Option<cull::SweptPoses>,
+    /// The bound (mm) on the interval ends' distance from the true swept surface: a touch
+    /// shallower than this is ignored, and an end is solved to [`SOLVE_SHARE`] of it.
+    tol: Real,
 }
 
 impl Cutter for RotaryEnvelope {

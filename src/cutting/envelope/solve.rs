@@ -3,8 +3,8 @@
 //! the Illinois regula falsi, touches between missing poses ruled out by bisection, the
 //! interval ends merged.
 //!
-//! **Invariant:** every interval end is the exact interval of some pose, within
-//! [`ENVELOPE_TOL`] of the true swept surface.
+//! **Invariant:** every interval end is the exact interval of some pose, within the
+//! envelope's tolerance ([`ENVELOPE_TOL`] unless loosened) of the true swept surface.
 
 use super::*;
 
@@ -155,7 +155,31 @@ impl RotaryEnvelope {
             quarter_dirs,
             cell_boxes,
             bounds,
+            tol: ENVELOPE_TOL,
         })
+    }
+
+    /// This envelope with its interval ends within `tol` (mm) of the true swept surface
+    /// instead of [`ENVELOPE_TOL`] (never finer than that): shallower touches are ignored
+    /// and the solves stop sooner. The cells, the culls and the ends' poses are found the
+    /// same way; only how far each solve and touch test goes changes.
+    pub fn with_tolerance(mut self, tol: Real) -> Self {
+        self.tol = if tol.is_finite() {
+            tol.max(ENVELOPE_TOL)
+        } else {
+            ENVELOPE_TOL
+        };
+        self
+    }
+
+    /// The bound (mm) on the interval ends' distance from the true swept surface.
+    pub fn tolerance(&self) -> Real {
+        self.tol
+    }
+
+    /// The distance (mm) to which a solve brings an interval end to the true extreme.
+    fn solve_tol(&self) -> Real {
+        SOLVE_SHARE * self.tol
     }
 
     /// Number of cells the move is split into.
@@ -394,7 +418,7 @@ impl RotaryEnvelope {
     /// and `b` (see the module docs).
     fn refine(&self, ray: &Ray, a: &Probe, b: &Probe, acc: &mut Option<RawEnd>, depth: u32) {
         let w = b.lambda - a.lambda;
-        if depth > MAX_DEPTH || self.speed * w <= SOLVE_TOL {
+        if depth > MAX_DEPTH || self.speed * w <= self.solve_tol() {
             return;
         }
         let bisect = |acc: &mut Option<RawEnd>| {
@@ -409,8 +433,8 @@ impl RotaryEnvelope {
             let z = &self.part_z;
             let sep =
                 |p: &Probe, k: usize| line_segment_distance(&p.p, &p.u, z[k], z[k + 1]) - self.r;
-            let apart = (0..PARTS)
-                .all(|k| sep(a, k) + sep(b, k) + 2.0 * ENVELOPE_TOL > self.part_speed[k] * w);
+            let apart =
+                (0..PARTS).all(|k| sep(a, k) + sep(b, k) + 2.0 * self.tol > self.part_speed[k] * w);
             if apart {
                 return;
             }
@@ -442,7 +466,7 @@ impl RotaryEnvelope {
             // And the grown tool about the middle to meet it.
             let mid = 0.5 * (a.lambda + b.lambda);
             let (s, u) = self.sample_at(mid, ray);
-            let grow = self.speed * w / 2.0 - ENVELOPE_TOL;
+            let grow = self.speed * w / 2.0 - self.tol;
             if grow > 0.0 && self.meets_grown(&s, ray, &u, grow) {
                 let m = self.probe(&s, mid, ray, u);
                 offer(acc, &m);
@@ -559,10 +583,11 @@ impl RotaryEnvelope {
         let mut width = hi.lambda - lo.lambda;
         // The least |f| at the bracket's ends when `width` was taken.
         let mut least = f_lo.abs().min(f_hi.abs());
+        let solve_tol = self.solve_tol();
         for step in 0..MAX_SOLVE_STEPS {
             let w = hi.lambda - lo.lambda;
             let slope = stop.slope(self, &lo, &hi, flo, fhi);
-            if slope * w <= SOLVE_TOL || w <= 4.0 * Real::EPSILON {
+            if slope * w <= solve_tol || w <= 4.0 * Real::EPSILON {
                 break;
             }
             let mut m = (lo.lambda * whi - hi.lambda * wlo) / (whi - wlo);
@@ -590,7 +615,7 @@ impl RotaryEnvelope {
             // one side keeps the kept end's face (so its normal) the same from ray to ray,
             // which the mesher's features read.
             if guess.is_some() {
-                let need = SOLVE_TOL / slope;
+                let need = solve_tol / slope;
                 if m - lo.lambda < 0.5 * need {
                     m = lo.lambda + 0.5 * need;
                 } else if hi.lambda - m < 0.5 * need {
@@ -676,7 +701,7 @@ enum Stop {
 impl Stop {
     /// The slope that bounds how far the solved end moves over the bracket `lo`–`hi` (`f`
     /// there `flo`, `fhi`) of `env`'s solve, per unit λ: the bracket is fine enough when
-    /// its width times this is at most [`SOLVE_TOL`].
+    /// its width times this is at most the envelope's solve tolerance.
     fn slope(self, env: &RotaryEnvelope, lo: &Probe, hi: &Probe, flo: Real, fhi: Real) -> Real {
         match self {
             Stop::Extreme => flo.abs().min(fhi.abs()),

@@ -134,11 +134,12 @@ fn exact_at(
     Some((out.first()?.t_in, out.last()?.t_out))
 }
 
-/// The envelope of `tool` on the move `a → b` of `c` against a brute-force search over
-/// 4,000 poses, on the axis ray through the tool's middle at λ = ½ shifted by `(ou, ov)`
-/// (×4 mm): no pose reaches further than the envelope (to 1e-7 mm), the sampled poses
-/// come within the sampling error of each end, between intervals no pose touches the ray,
-/// and within the span `(f0, f1)` of the sampled hull the answer is the same.
+/// The envelope of `tool` on the move `a → b` of `c`, built with the tolerance `tol`,
+/// against a brute-force search over 4,000 poses, on the axis ray through the tool's middle
+/// at λ = ½ shifted by `(ou, ov)` (×4 mm): no pose reaches further than the envelope (to
+/// `tol`), the sampled poses come within the sampling error of each end, between intervals
+/// no pose touches the ray, and within the span `(f0, f1)` of the sampled hull the answer
+/// is the same.
 #[allow(clippy::too_many_arguments)]
 fn check_against_brute_force(
     c: &Chain,
@@ -147,9 +148,13 @@ fn check_against_brute_force(
     axis: usize,
     (ou, ov): (Real, Real),
     (f0, f1): (Real, Real),
+    tol: Real,
 ) -> Result<(), TestCaseError> {
     let (c, tool) = (c.clone(), tool.clone());
-    let env = RotaryEnvelope::new(&c, &tool, &a, &b).expect("supported");
+    let env = RotaryEnvelope::new(&c, &tool, &a, &b)
+        .expect("supported")
+        .with_tolerance(tol);
+    prop_assert_eq!(env.tolerance(), tol);
     // A ray through the region the tool sweeps: aimed near the tool's middle at λ = ½.
     let mid = MovePath::new(&c, &a, &b).w_from_t(0.5) * Point3::new(0.0, 0.0, 3.0);
     let mut o = mid;
@@ -218,7 +223,7 @@ fn check_against_brute_force(
         // Every pose's interval lies inside one of the envelope's intervals.
         let inside = cuts
             .iter()
-            .any(|c| c.t_in <= t0 + ENVELOPE_TOL && t1 <= c.t_out + ENVELOPE_TOL);
+            .any(|c| c.t_in <= t0 + tol && t1 <= c.t_out + tol);
         prop_assert!(
             inside || t1 - t0 < 1e-6,
             "pose interval [{t0}, {t1}] not inside {cuts:?}"
@@ -254,7 +259,7 @@ fn check_against_brute_force(
         prop_assert_eq!(full.len(), part.len(), "{:?} vs {:?}", full, part);
         for (x, y) in full.iter().zip(&part) {
             prop_assert!(
-                (x.0 - y.0).abs() <= 2.0 * ENVELOPE_TOL && (x.1 - y.1).abs() <= 2.0 * ENVELOPE_TOL,
+                (x.0 - y.0).abs() <= 2.0 * tol && (x.1 - y.1).abs() <= 2.0 * tol,
                 "{:?} vs {:?}",
                 full,
                 part
@@ -279,7 +284,7 @@ proptest! {
         let kind = if ball { ToolKind::Ball } else { ToolKind::Flat };
         let tool = Tool::try_new(kind, 6.0, 12.0).expect("valid");
         let (a, b) = (q(x0, y, z0, a0), q(x0 + dx, y, z0 + dz, a0 + da));
-        check_against_brute_force(&deviated(), &tool, (a, b), axis, (ou, ov), (f0, f1))?;
+        check_against_brute_force(&deviated(), &tool, (a, b), axis, (ou, ov), (f0, f1), ENVELOPE_TOL)?;
     }
 
     /// The same on the trunnion A/C, C and A turning together while the tool moves: the
@@ -298,8 +303,86 @@ proptest! {
             q(x, y0, z, a).with(AxisLetter::C, cc)
         };
         let (a, b) = (at(x0, z0, a0, c0), at(x0 + dx, z0 + dz, a0 + da, c0 + dc));
-        check_against_brute_force(&trunnion(), &tool, (a, b), axis, (ou, ov), (f0, f1))?;
+        check_against_brute_force(&trunnion(), &tool, (a, b), axis, (ou, ov), (f0, f1), ENVELOPE_TOL)?;
     }
+
+    /// The same with the tolerance loosened to 1 µm, as a sweep whose bound allows it builds
+    /// its envelopes: the solves stop sooner, and still no pose reaches further than an
+    /// interval end by more than the tolerance.
+    #[test]
+    fn a_loosened_envelope_agrees_with_brute_force_to_its_tolerance(
+        ball in any::<bool>(), c0 in -180.0..180.0f64, dc in -20.0..20.0f64,
+        a0 in -20.0..20.0f64, da in -15.0..15.0f64, x0 in -5.0..5.0f64, dx in -2.0..2.0f64,
+        y0 in -20.0..-10.0f64, z0 in 10.0..30.0f64, dz in -2.0..2.0f64,
+        axis in 0usize..3, ou in -1.0..1.0f64, ov in -1.0..1.0f64,
+        f0 in -0.2..0.6f64, f1 in 0.4..1.2f64,
+    ) {
+        let kind = if ball { ToolKind::Ball } else { ToolKind::Flat };
+        let tool = Tool::try_new(kind, 6.0, 12.0).expect("valid");
+        let at = |x: Real, z: Real, a: Real, cc: Real| {
+            q(x, y0, z, a).with(AxisLetter::C, cc)
+        };
+        let (a, b) = (at(x0, z0, a0, c0), at(x0 + dx, z0 + dz, a0 + da, c0 + dc));
+        check_against_brute_force(&trunnion(), &tool, (a, b), axis, (ou, ov), (f0, f1), 1e-3)?;
+    }
+}
+
+/// A loosened envelope's interval ends lie within its tolerance of those of the envelope
+/// built at [`ENVELOPE_TOL`] (itself within that of the true surface, by the brute-force
+/// tests), never beyond them by more than the finer one's own tolerance (every end is the
+/// exact interval of some pose), and some of them differ (the solves stop sooner): on the
+/// trunnion's four moves, rays on a grid about the tool's middle along all three axes.
+#[test]
+fn a_loosened_envelope_stays_within_its_tolerance_of_the_finest() {
+    let c = trunnion();
+    let (mut differ, mut ends) = (0usize, 0usize);
+    for kind in [ToolKind::Flat, ToolKind::Ball] {
+        let tool = Tool::try_new(kind, 6.0, 12.0).expect("valid");
+        for (a, b) in trunnion_moves() {
+            let fine = RotaryEnvelope::new(&c, &tool, &a, &b).expect("supported");
+            for tol in [1e-5, 1e-3] {
+                let loose = fine.clone().with_tolerance(tol);
+                let mid = MovePath::new(&c, &a, &b).w_from_t(0.5) * Point3::new(0.0, 0.0, 6.0);
+                for axis in 0..3 {
+                    let mut e = Vector3::zeros();
+                    e[axis] = 1.0;
+                    for (i, j) in (0..21).flat_map(|i| (0..21).map(move |j| (i, j))) {
+                        let mut o = mid;
+                        o[(axis + 1) % 3] += 0.45 * (i as Real - 10.0);
+                        o[(axis + 2) % 3] += 0.65 * (j as Real - 10.0);
+                        let (mut x, mut y) = (Vec::new(), Vec::new());
+                        fine.intervals(&o, &e, &mut x);
+                        loose.intervals(&o, &e, &mut y);
+                        // A touch shallower than the tolerance may be left out.
+                        let keep = |cs: Vec<RayCut>| -> Vec<RayCut> {
+                            cs.into_iter()
+                                .filter(|c| c.t_out - c.t_in > 4.0 * tol)
+                                .collect()
+                        };
+                        let (x, y) = (keep(x), keep(y));
+                        assert_eq!(x.len(), y.len(), "{kind:?} tol {tol}: {x:?} vs {y:?}");
+                        for (p, q) in x.iter().zip(&y) {
+                            for (f, l, outward) in [(p.t_in, q.t_in, -1.0), (p.t_out, q.t_out, 1.0)]
+                            {
+                                ends += 1;
+                                differ += usize::from(f != l);
+                                assert!(
+                                    (f - l).abs() <= tol + 2.0 * ENVELOPE_TOL,
+                                    "{kind:?} tol {tol}: {f} vs {l}"
+                                );
+                                assert!(
+                                    outward * (l - f) <= 2.0 * ENVELOPE_TOL,
+                                    "{kind:?} tol {tol}: the loose end {l} beyond {f}"
+                                );
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    }
+    assert!(ends > 1000, "{ends} ends");
+    assert!(differ * 10 > ends, "{differ} of {ends} ends differ");
 }
 
 /// Four moves of the trunnion A/C turning both axes: two of the side cut (C 0.5°, A up to

@@ -527,7 +527,8 @@ fn chain_envelopes(
         .zip(starts)
         .map(|(mv, start)| {
             start.map(|st| {
-                RotaryEnvelope::with_state(chain, tool, &mv.start, &mv.end, &st).map(Box::new)
+                RotaryEnvelope::with_state(chain, tool, &mv.start, &mv.end, &st)
+                    .map(|env| Box::new(env.with_tolerance(bound)))
             })
         })
         .collect()
@@ -552,8 +553,9 @@ struct Prepared {
     /// The pilot poses, or the error of a pose the machine cannot take.
     pilot: Result<Pilot, SweepError>,
     /// For a move that is not a pure translation: the estimated error of the curve through
-    /// the pilot poses ([`SampledPath::error_estimate`] + [`ENVELOPE_TOL`]) and, when that
-    /// is within the bound, the curve's envelope (none when it cannot be built).
+    /// the pilot poses ([`SampledPath::error_estimate`]) plus the envelope's tolerance and,
+    /// when the estimate leaves at least [`ENVELOPE_TOL`] of the bound, the curve's envelope
+    /// with what it leaves as its tolerance (none when it cannot be built).
     curve: Option<(Real, Option<Box<RotaryEnvelope>>)>,
 }
 
@@ -562,11 +564,16 @@ impl Prepared {
         let pilot = pilot_of(src, mv);
         let curve = match &pilot {
             Ok(p) if !src.is_translation(&mv.start, &mv.end) => {
-                let error =
-                    SampledPath::error_estimate(&p.poses, tool.reach_from(0.0)) + ENVELOPE_TOL;
-                let envelope = (error <= bound)
-                    .then(|| RotaryEnvelope::sampled(tool, &p.poses).ok().map(Box::new))
-                    .flatten();
+                // The envelope takes what the curve leaves of the bound.
+                let estimate = SampledPath::error_estimate(&p.poses, tool.reach_from(0.0));
+                let envelope = (estimate + ENVELOPE_TOL <= bound)
+                    .then(|| RotaryEnvelope::sampled(tool, &p.poses).ok())
+                    .flatten()
+                    .map(|env| Box::new(env.with_tolerance(bound - estimate)));
+                let error = match &envelope {
+                    Some(env) => (estimate + env.tolerance()).min(bound),
+                    None => estimate + ENVELOPE_TOL,
+                };
                 Some((error, envelope))
             }
             _ => None,
@@ -762,7 +769,7 @@ fn sweep_rotary<'m>(
             .then(|| {
                 RotaryEnvelope::with_state(chain, tool, &mv.start, &mv.end, state)
                     .ok()
-                    .map(Box::new)
+                    .map(|env| Box::new(env.with_tolerance(bound)))
             })
             .flatten(),
     };
@@ -771,8 +778,9 @@ fn sweep_rotary<'m>(
             envelope: true,
             state: *state,
         };
+        let tol = env.tolerance();
         batch.cut(*env, (k, mv), piece, stock, report, observer)?;
-        return Ok(ENVELOPE_TOL);
+        return Ok(tol);
     }
     batch.flush(stock, report, observer)?;
     let rb = RotaryBound::of_state(chain, tool, mv, state);

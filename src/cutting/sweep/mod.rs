@@ -12,9 +12,11 @@
 //! ∩ quadric, line ∩ line), each computed by a quadratic formula.
 //!
 //! **Moves that turn a rotary axis** with a flat or ball end mill are cut by the exact
-//! per-ray envelope of [`crate::cutting::envelope`] (interval ends within
-//! [`crate::cutting::envelope::ENVELOPE_TOL`] = 1e-7 mm (0.1 nm) of the true swept surface, the bound
-//! reported). Other tools, or a bound asked tighter than that, fall back to sub-steps:
+//! per-ray envelope of [`crate::cutting::envelope`], its interval ends within the bound
+//! asked for (`rotary_step_bound_mm`, the envelope's tolerance, so a looser bound buys
+//! fewer solve steps) of the true swept surface, the bound reported. Other tools, or a
+//! bound asked tighter than [`crate::cutting::envelope::ENVELOPE_TOL`] = 1e-7 mm (0.1 nm),
+//! the envelope's finest, fall back to sub-steps:
 //!
 //! such a move is split into `N` sub-steps, each swept as a
 //! translation with the mid-step orientation, its mid-height point `c` moving straight
