@@ -613,8 +613,18 @@ impl CutContext<'_> {
 
     /// Cuts the rays of rows `rows` of block `(bu, bv)` in range, reading the block only.
     fn cut_rows(&self, bu: usize, block: &Block, rows: std::ops::RangeInclusive<usize>) -> RowsCut {
+        with_ray_buffers(|bufs| self.cut_rows_with(bu, block, rows, bufs))
+    }
+
+    /// [`Self::cut_rows`] with the scratch buffers `bufs`.
+    fn cut_rows_with(
+        &self,
+        bu: usize,
+        block: &Block,
+        rows: std::ops::RangeInclusive<usize>,
+        bufs: &mut RayBuffers,
+    ) -> RowsCut {
         let mut used = Vec::new();
-        let mut bufs = RayBuffers::default();
         let mut new: Vec<Segment> = Vec::new();
         let mut changes: Vec<RayChange> = Vec::new();
         let iu_range = self.iu.0.max(bu * BLOCK)..=self.iu.1.min(bu * BLOCK + BLOCK - 1);
@@ -630,7 +640,7 @@ impl CutContext<'_> {
                     &o,
                     self.axis,
                     (segs, None),
-                    &mut bufs,
+                    bufs,
                     &mut new,
                     &mut used,
                 ) {
@@ -656,13 +666,34 @@ impl CutContext<'_> {
     }
 }
 
-/// Scratch buffers of [`cut_ray`], reused from ray to ray.
+/// Scratch buffers of [`cut_ray`], reused from ray to ray (and, per thread, from row to
+/// row: [`RAY_BUFFERS`]).
 #[derive(Default)]
 struct RayBuffers {
     cuts: Vec<RayCut>,
     lines: Vec<[u32; 2]>,
     scratch: Vec<Segment>,
     next: Vec<Segment>,
+    /// A ray's material between the cutters of a batch ([`TriDexel::remove_each`]).
+    own: Vec<Segment>,
+    after: Vec<Segment>,
+}
+
+thread_local! {
+    /// Each thread's [`RayBuffers`], taken by a row's cut and put back after it, so the rows
+    /// of a sweep reuse their capacity instead of growing new buffers from empty.
+    static RAY_BUFFERS: std::cell::Cell<Option<Box<RayBuffers>>> =
+        const { std::cell::Cell::new(None) };
+}
+
+/// Runs `f` with this thread's [`RayBuffers`] (fresh ones when a caller up the stack holds
+/// them): their contents on entry are whatever the last user left, so `f` clears what it
+/// reads.
+fn with_ray_buffers<T>(f: impl FnOnce(&mut RayBuffers) -> T) -> T {
+    let mut bufs = RAY_BUFFERS.take().unwrap_or_default();
+    let out = f(&mut bufs);
+    RAY_BUFFERS.set(Some(bufs));
+    out
 }
 
 /// Cuts the ray `o + t·e_axis` whose material is `segs` by `cutter` (with its NC line and
@@ -698,6 +729,7 @@ fn cut_ray(
         lines,
         scratch,
         next,
+        ..
     } = bufs;
     cuts.clear();
     lines.clear();
@@ -731,6 +763,24 @@ struct RowsCut {
 }
 
 impl RowsCut {
+    /// The rows `rows` of one block, in order, as one: the first's buffers grown once to the
+    /// total and the others' appended.
+    fn concat(rows: impl IntoIterator<Item = RowsCut>) -> RowsCut {
+        let mut rows = rows.into_iter();
+        let Some(mut cut) = rows.next() else {
+            return RowsCut::default();
+        };
+        let rest: Vec<RowsCut> = rows.collect();
+        cut.new.reserve(rest.iter().map(|r| r.new.len()).sum());
+        cut.changes
+            .reserve(rest.iter().map(|r| r.changes.len()).sum());
+        cut.used.reserve(rest.iter().map(|r| r.used.len()).sum());
+        for r in rest {
+            cut.append(r);
+        }
+        cut
+    }
+
     /// Appends `other` (later rays of the same block).
     fn append(&mut self, other: RowsCut) {
         let base = self.new.len();
@@ -1130,11 +1180,11 @@ impl TriDexel {
                 .into_iter()
                 .enumerate()
                 .map(|(t, (c, k, nbu, block))| {
-                    let mut cut = RowsCut::default();
+                    let mut mine = Vec::new();
                     while let Some((_, r)) = rows.next_if(|(owner, _)| *owner == t) {
-                        cut.append(r);
+                        mine.push(r);
                     }
-                    contexts[c].apply(k % nbu, k / nbu, block, cut)
+                    contexts[c].apply(k % nbu, k / nbu, block, RowsCut::concat(mine))
                 })
                 .collect()
         } else {

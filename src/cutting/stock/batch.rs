@@ -124,11 +124,9 @@ impl TriDexel {
             .into_par_iter()
             .zip(per_task)
             .for_each(|((g, k, nbu, block), rows)| {
-                let mut cut = RowsCut::default();
-                for r in rows {
-                    cut.append(r);
-                }
-                grids[g].ctx.apply(k % nbu, k / nbu, block, cut);
+                grids[g]
+                    .ctx
+                    .apply(k % nbu, k / nbu, block, RowsCut::concat(rows));
             });
         removed
     }
@@ -205,15 +203,30 @@ impl BatchContext<'_> {
         iv: usize,
         groups: &[Group],
     ) -> (RowsCut, RowFlags) {
+        with_ray_buffers(|bufs| self.cut_row_with(bu, block, iv, groups, bufs))
+    }
+
+    /// [`Self::cut_row`] with the scratch buffers `bufs`.
+    fn cut_row_with(
+        &self,
+        bu: usize,
+        block: &Block,
+        iv: usize,
+        groups: &[Group],
+        bufs: &mut RayBuffers,
+    ) -> (RowsCut, RowFlags) {
         let c = &self.ctx;
         let mut flags = RowFlags {
             cut: vec![false; self.cutters.len()],
             ..RowFlags::default()
         };
         let mut used = Vec::new();
-        let mut bufs = RayBuffers::default();
         let (mut new, mut changes) = (Vec::new(), Vec::new());
-        let (mut own, mut next): (Vec<Segment>, Vec<Segment>) = (Vec::new(), Vec::new());
+        // The ray's material between cutters: taken out of `bufs`, which `cut_ray` borrows.
+        let (mut own, mut next) = (
+            std::mem::take(&mut bufs.own),
+            std::mem::take(&mut bufs.after),
+        );
         for iu in c.iu.0.max(bu * BLOCK)..=c.iu.1.min(bu * BLOCK + BLOCK - 1) {
             let local = (iv % BLOCK) * BLOCK + iu % BLOCK;
             let o = c.origin(iu, iv);
@@ -254,7 +267,7 @@ impl BatchContext<'_> {
                     &o,
                     c.axis,
                     (segs(&own), Some(before)),
-                    &mut bufs,
+                    bufs,
                     &mut next,
                     &mut used,
                 ) {
@@ -273,6 +286,7 @@ impl BatchContext<'_> {
                 });
             }
         }
+        (bufs.own, bufs.after) = (own, next);
         (RowsCut { new, changes, used }, flags)
     }
 }
