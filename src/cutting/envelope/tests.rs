@@ -325,9 +325,9 @@ fn a_loosened_envelope_stays_within_its_tolerance_of_the_finest() {
         let tool = Tool::try_new(kind, 6.0, 12.0).expect("valid");
         for (a, b) in trunnion_moves() {
             let fine = RotaryEnvelope::new(&c, &tool, &a, &b).expect("supported");
+            let mid = MovePath::new(&c, &a, &b).w_from_t(0.5) * Point3::new(0.0, 0.0, 6.0);
             for tol in [1e-5, 1e-3] {
                 let loose = fine.clone().with_tolerance(tol);
-                let mid = MovePath::new(&c, &a, &b).w_from_t(0.5) * Point3::new(0.0, 0.0, 6.0);
                 for axis in 0..3 {
                     let mut e = Vector3::zeros();
                     e[axis] = 1.0;

@@ -498,6 +498,20 @@ fn chain_curve(chain: &Chain, mv: &Move, errors: bool) -> (bool, bool) {
 /// A chain's move's envelope built ahead of the cut, or why it has none.
 type ChainEnvelope = Result<Box<RotaryEnvelope>, EnvelopeError>;
 
+/// The envelope of `tool` on a chain's move `mv` from the reversal shares `state`, with the
+/// sweep's `bound` as its tolerance: built ahead ([`chain_envelopes`]) or, when it was not,
+/// at the move ([`sweep_rotary`]), the same either way.
+fn chain_envelope(
+    chain: &Chain,
+    tool: &Tool,
+    mv: &Move,
+    state: &[Real; 6],
+    bound: Real,
+) -> ChainEnvelope {
+    RotaryEnvelope::with_state(chain, tool, &mv.start, &mv.end, state)
+        .map(|env| Box::new(env.with_tolerance(bound)))
+}
+
 /// The envelopes of the curved ones among `moves` (a chain's next moves, the first starting
 /// from the reversal shares `state`), built side by side: each the pure function of the
 /// chain, the tool, the move and the shares it starts from, which are followed here move by
@@ -525,12 +539,7 @@ fn chain_envelopes(
     moves
         .par_iter()
         .zip(starts)
-        .map(|(mv, start)| {
-            start.map(|st| {
-                RotaryEnvelope::with_state(chain, tool, &mv.start, &mv.end, &st)
-                    .map(|env| Box::new(env.with_tolerance(bound)))
-            })
-        })
+        .map(|(mv, start)| start.map(|st| chain_envelope(chain, tool, mv, &st, bound)))
         .collect()
 }
 
@@ -766,11 +775,7 @@ fn sweep_rotary<'m>(
     let envelope = match built {
         Some(built) => built.ok(),
         None => (bound >= ENVELOPE_TOL)
-            .then(|| {
-                RotaryEnvelope::with_state(chain, tool, &mv.start, &mv.end, state)
-                    .ok()
-                    .map(|env| Box::new(env.with_tolerance(bound)))
-            })
+            .then(|| chain_envelope(chain, tool, mv, state, bound).ok())
             .flatten(),
     };
     if let Some(env) = envelope {
