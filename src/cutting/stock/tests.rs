@@ -249,3 +249,52 @@ fn bytes_read_back_to_the_same_stock_and_damage_is_refused() {
     long.push(0);
     assert!(TriDexel::from_bytes(&long).is_none());
 }
+
+#[test]
+fn crossings_within_reach_are_the_window_filtered_by_distance_along_the_ray() {
+    // A box with two pockets and a slot: rays with one to three segments, crossings made
+    // by three cuts, some exactly `reach` from the points asked about.
+    let mut s = TriDexel::new_box(unit_box(10.0), 0.25, 1e9).expect("fits");
+    for (k, (lo, hi)) in [
+        ([2.05, -1.0, 5.01], [8.7, 8.2, 7.0]),
+        ([-1.0, 3.1, 1.5], [4.4, 6.6, 3.25]),
+        ([5.5, 1.0, -1.0], [6.25, 11.0, 11.0]),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let pocket = Aabb {
+            min: Point3::from(lo),
+            max: Point3::from(hi),
+        };
+        s.remove(&BoxCutter(pocket), k as u32 + 1);
+    }
+    let mut asked = 0;
+    for g in s.grids() {
+        for p in [
+            Point3::new(5.0, 5.0, 5.0),
+            Point3::new(2.05, 4.0, 7.0),
+            Point3::new(6.25, 3.25, 1.5),
+            Point3::new(0.0, 10.0, 3.0),
+            Point3::new(9.9, 0.1, 6.9),
+        ] {
+            for reach in [0.0, 0.5, 1.75, 2.0, 30.0] {
+                // The window's crossings, and by a plain filter those within reach along
+                // the ray: the restricted walk must give exactly these, in this order.
+                let mut all = Vec::new();
+                g.for_each_crossing_near(&p, 2, |q, c| all.push((q, *c)));
+                let want: Vec<_> = all
+                    .iter()
+                    .filter(|(q, _)| (q[g.axis()] - p[g.axis()]).abs() <= reach)
+                    .copied()
+                    .collect();
+                let mut got = Vec::new();
+                g.for_each_crossing_within(&p, 2, reach, |q, c| got.push((q, *c)));
+                assert_eq!(got, want, "axis {} at {p:?} within {reach}", g.axis());
+                asked += usize::from(!want.is_empty() && want.len() < all.len());
+            }
+        }
+    }
+    // Some cases keep some crossings and leave others out.
+    assert!(asked > 10, "{asked}");
+}
