@@ -141,13 +141,12 @@ pub fn display_part(
     scene: &Scene,
     mesh: &TriMesh,
     cut: &TriDexel,
-    reference: impl FnOnce() -> Result<Reference, PipelineError> + Send,
+    reference: impl FnOnce() -> Result<Reference, PipelineError>,
 ) -> Result<DisplayPart, PipelineError> {
-    let (shown, reference) = rayon::join(
-        || display::simplify(mesh, display::MAX_TRIANGLES),
-        reference,
-    );
-    let reference = reference?;
+    // The reference is made once the display mesh is: the simplifier's working memory and
+    // the reference's are never held at once.
+    let shown = display::simplify(mesh, display::MAX_TRIANGLES);
+    let reference = reference()?;
     let deviations = reference.model.as_ref().map(|m| m.deviations(&shown, cut));
     let view = match scene.view {
         Some(eye) => (eye, display::view_up(&eye)),
