@@ -184,7 +184,7 @@ impl NominalPath {
         // Crossings farther than the window's half-width (its corner) are not around `p`.
         let radius2 = (cut.max_spacing() * (NEAR as Real + 0.5)).powi(2) * 3.0;
         for g in cut.grids() {
-            g.for_each_crossing_within(p, NEAR, radius2.sqrt(), |q, c| {
+            g.for_each_crossing_near(p, NEAR, |q, c| {
                 if (q - p).norm_squared() > radius2 {
                     return;
                 }

@@ -189,7 +189,7 @@ pub trait Cutter: Sync {
     }
     /// Like [`Cutter::ray_cuts_lined`] for a caller that only keeps what lies in `span`
     /// along the ray (the material's extent): an interval end outside `span` may be anywhere
-    /// outside it, with any normal, and an interval wholly outside, not even touching an end of it, may be
+    /// outside it, and an interval wholly outside, not even touching an end of it, may be
     /// left out (cut latest first, [`TriDexel::remove_each`], a cut that only touches the
     /// material's end may take that end's crossing). The default is exact.
     fn ray_cuts_in_span(
@@ -427,38 +427,6 @@ impl DexelGrid {
                     let mut q = o;
                     q[self.axis] = c.t;
                     f(q, c);
-                }
-            }
-        }
-    }
-
-    /// [`Self::for_each_crossing_near`] of the crossings within `reach` of `p` along the
-    /// rays (`|t − p_axis| ≤ reach`; every crossing within `reach` of `p` is among them), in
-    /// the same order: each ray's segments from the first that ends at or after
-    /// `p_axis − reach` (a binary search: they are sorted) to the last that starts at or
-    /// before `p_axis + reach`.
-    pub fn for_each_crossing_within(
-        &self,
-        p: &Point3,
-        w: usize,
-        reach: Real,
-        mut f: impl FnMut(Point3, &Crossing),
-    ) {
-        let (us, vs) = self.window(p, w);
-        let (lo, hi) = (p[self.axis] - reach, p[self.axis] + reach);
-        for iv in vs {
-            for iu in us.clone() {
-                let o = self.ray_origin(iu, iv);
-                let segs = self.ray(iu, iv);
-                let first = segs.partition_point(|s| s.hi.t < lo);
-                for s in segs[first..].iter().take_while(|s| s.lo.t <= hi) {
-                    for c in [&s.lo, &s.hi] {
-                        if (lo..=hi).contains(&c.t) {
-                            let mut q = o;
-                            q[self.axis] = c.t;
-                            f(q, c);
-                        }
-                    }
                 }
             }
         }

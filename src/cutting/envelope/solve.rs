@@ -380,18 +380,18 @@ impl RotaryEnvelope {
             let mut found = comps.iter().flatten();
             match (found.next(), found.next()) {
                 (None, _) => {}
-                (Some(only), None) => emit(only, self.r, &ray, out),
+                (Some(only), None) => emit(only, self.r, out),
                 _ => {
                     cuts.clear();
                     cuts.extend(comps.drain(..).flatten());
-                    self.merge_and_emit(cuts, &ray, out);
+                    self.merge_and_emit(cuts, out);
                 }
             }
         });
     }
 
     /// Sorts the intervals, merges those that overlap and emits them with their normals.
-    fn merge_and_emit(&self, cuts: &mut [RawEnd], ray: &Ray, out: &mut Vec<RayCut>) {
+    fn merge_and_emit(&self, cuts: &mut [RawEnd], out: &mut Vec<RayCut>) {
         cuts.sort_by(|a, b| a.lo.t.total_cmp(&b.lo.t));
         let mut merged: Option<RawEnd> = None;
         for &c in cuts.iter() {
@@ -403,14 +403,14 @@ impl RotaryEnvelope {
                     m
                 }
                 Some(m) => {
-                    emit(&m, self.r, ray, out);
+                    emit(&m, self.r, out);
                     c
                 }
                 None => c,
             });
         }
         if let Some(m) = merged {
-            emit(&m, self.r, ray, out);
+            emit(&m, self.r, out);
         }
     }
 
@@ -718,18 +718,13 @@ impl Stop {
     }
 }
 
-/// Appends the interval `c` (tool radius `r`) of the ray to `out`, unless it lies wholly
-/// outside the ray's span (not even touching an end of it), which the stock leaves as it
-/// is. An end outside the span, which no material meets, takes the ray's own direction as
-/// its normal (pointing into the interval) instead of the tool's: the stock never keeps it.
-fn emit(c: &RawEnd, r: Real, ray: &Ray, out: &mut Vec<RayCut>) {
-    let (s0, s1) = ray.span;
-    if c.hi.t - c.lo.t > tol::LENGTH_EPS && c.hi.t >= s0 && c.lo.t <= s1 {
+fn emit(c: &RawEnd, r: Real, out: &mut Vec<RayCut>) {
+    if c.hi.t - c.lo.t > tol::LENGTH_EPS {
         out.push(RayCut {
             t_in: c.lo.t,
             t_out: c.hi.t,
-            n_in: if c.lo.t < s0 { *ray.e } else { c.lo.normal(r) },
-            n_out: if c.hi.t > s1 { -*ray.e } else { c.hi.normal(r) },
+            n_in: c.lo.normal(r),
+            n_out: c.hi.normal(r),
         });
     }
 }
