@@ -135,7 +135,7 @@ pub struct DisplayPart {
 }
 
 /// The display mesh of `mesh` (the part cut from `scene`'s stock), its deviations from the
-/// reference `reference` makes (made while the mesh is simplified) and its view: the
+/// reference `reference` makes (made once the mesh is simplified) and its view: the
 /// scene's `[report] view`, else the direction its machined faces face.
 pub fn display_part(
     scene: &Scene,
@@ -143,8 +143,7 @@ pub fn display_part(
     cut: &TriDexel,
     reference: impl FnOnce() -> Result<Reference, PipelineError>,
 ) -> Result<DisplayPart, PipelineError> {
-    // The reference is made once the display mesh is: the simplifier's working memory and
-    // the reference's are never held at once.
+    // The simplifier's working memory and the reference's are never held at once.
     let shown = display::simplify(mesh, display::MAX_TRIANGLES);
     let reference = reference()?;
     let deviations = reference.model.as_ref().map(|m| m.deviations(&shown, cut));

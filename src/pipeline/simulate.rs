@@ -80,13 +80,14 @@ pub fn simulate(
         cut_part(scene, program, progress, &mut stock)?;
     timings.insert("sweep".into(), sweep_time);
     timings.insert("mesh".into(), mesh_time);
-    // The part the deviations are measured from: the design model, or the program on the
-    // nominal machine, read near the cut part's surface (no second sweep).
     let clock = Instant::now();
     let render_err = |source| PipelineError::Render {
         path: path.clone(),
         source,
     };
+    // The display part and `part.png`, with the part the deviations are measured from (the
+    // design model, or the program on the nominal machine read near the cut part's surface:
+    // no second sweep) made once the display mesh is, and timed on its own.
     let mut reference_time = 0.0;
     let shown = display_part(scene, &mesh, &stock, || {
         let clock = Instant::now();
