@@ -44,7 +44,13 @@
 //! the tolerance `τ` needs some piece to travel from both ends to the ray
 //! (`d_k(a) + d_k(b) + 2·τ ≤ M_k·w`, `d_k` the ray's distance from the capsule); while one
 //! can, the half-cell is bisected, the middle checked against the tool grown by
-//! `M·w/2 − τ`. A half-cell with one end inside and a rate that points to an extreme before
+//! `M·w/2 − τ`. Before bisecting, where every axis moves at a constant rate, a second-order
+//! test rules the touch out when the tool's capsule (or, for a flat end mill, its
+//! cylinder) stays farther than `R − τ` from an axis ray over the half-cell: the distance
+//! vectors taken to first order from each end, their bilinear patch's hull, less the
+//! acceleration's share (`RotaryEnvelope::touch_ruled_out`). A tool passing along a ray
+//! at a small, nearly constant distance (the side cut's wall and floor rays) is then
+//! settled at once instead of by bisecting until the tool moves less than that distance. A half-cell with one end inside and a rate that points to an extreme before
 //! the ray leaves is bisected until the extreme is bracketed.
 //!
 //! **Span.** The stock asks only about the material's extent along a ray
@@ -163,6 +169,9 @@ pub struct RotaryEnvelope {
     part_z: [Real; PARTS + 1],
     /// Speed bound of each capsule piece's points per unit λ (mm).
     part_speed: [Real; PARTS],
+    /// Where every axis moves at a constant rate: the bounds of the second-order touch test
+    /// (`RotaryEnvelope::touch_ruled_out`).
+    touch: Option<TouchBounds>,
     /// Poses at λ = k/(2N), k = 0..=2N: cell ends at even k, middles at odd k.
     samples: Vec<Sample>,
     /// Each sample's directions of the x, y and z axes in its tool frame (`cull::axis_dirs`).
@@ -185,6 +194,27 @@ pub struct RotaryEnvelope {
     /// shallower than this is ignored, and an end is solved to [`SOLVE_SHARE`] of it.
     tol: Real,
 }
+
+/// The bounds of the second-order touch test between two poses that miss a ray, on a move
+/// whose axes all move at constant rates (see `RotaryEnvelope::touch_ruled_out`).
+#[derive(Clone, Copy, Debug)]
+struct TouchBounds {
+    /// The total turn Ω (rad per unit λ): no direction turns faster.
+    omega: Real,
+    /// A bound on the acceleration of the axis points from `part_z[0]` to the top (mm per
+    /// unit λ²).
+    capsule_accel: Real,
+    /// For a flat end mill, the per-axis speed bound `P` of every point within
+    /// `R +` [`SLAB_REACH`] of its axis (mm per unit λ).
+    slab_speed: Option<Real>,
+}
+
+/// How far beyond the tool's radius (mm) the slab test's speed bound holds: the test is
+/// used only where a ray point cannot drift farther over the half-cell.
+const SLAB_REACH: Real = 1.0;
+
+/// The least `|cos|` of the angle between a ray and the tool's axis for the slab test.
+const SLAB_MIN_COS: Real = 0.25;
 
 impl Cutter for RotaryEnvelope {
     fn bounds(&self) -> Aabb {

@@ -61,7 +61,22 @@ impl RotaryEnvelope {
             let per_axis = axis_speed_bounds(chain, l / 2.0, 0.0, start, end).1;
             (omega, 2.0 * omega * per_axis)
         });
-        Self::of_path(shape, (r, l), path, speed, (part_z, part_speed), rates)
+        // A point accelerates by at most 2·Ω·P, P its per-axis speed bound (the swept cull's
+        // bound, see `cull`).
+        let touch = rates.map(|(omega, _)| {
+            let half = (l - part_z[0]) / 2.0;
+            let per_axis = |reach: Real| {
+                axis_speed_bounds(chain, part_z[0] + half, half + reach, start, end).1
+            };
+            TouchBounds {
+                omega,
+                capsule_accel: 2.0 * omega * per_axis(0.0),
+                slab_speed: (shape == Shape::Flat).then(|| per_axis(r + SLAB_REACH)),
+            }
+        });
+        let mut env = Self::of_path(shape, (r, l), path, speed, (part_z, part_speed), rates)?;
+        env.touch = touch;
+        Ok(env)
     }
 
     /// The envelope of `tool` on a move read pose by pose, through its pilot poses `pilot`
@@ -149,6 +164,7 @@ impl RotaryEnvelope {
             speed,
             part_z,
             part_speed,
+            touch: None,
             samples,
             sample_dirs,
             quarters,
@@ -247,7 +263,7 @@ impl RotaryEnvelope {
     }
 
     #[inline(always)]
-    fn probe_at(&self, lambda: Real, ray: &Ray) -> Probe {
+    pub(super) fn probe_at(&self, lambda: Real, ray: &Ray) -> Probe {
         let (s, u) = self.sample_at(lambda, ray);
         self.probe(&s, lambda, ray, u)
     }
@@ -468,6 +484,9 @@ impl RotaryEnvelope {
             let (s, u) = self.sample_at(mid, ray);
             let grow = self.speed * w / 2.0 - self.tol;
             if grow > 0.0 && self.meets_grown(&s, ray, &u, grow) {
+                if !crossing && self.touch_ruled_out(ray, (a, b)) {
+                    return;
+                }
                 let m = self.probe(&s, mid, ray, u);
                 offer(acc, &m);
                 self.refine(ray, a, &m, acc, depth + 1);
@@ -530,6 +549,97 @@ impl RotaryEnvelope {
             }
             _ => {}
         }
+    }
+
+    /// Whether the tool cannot meet the axis ray deeper than `τ` between the probes `a`
+    /// and `b` (both missing), by second order. The tool lies in the capsule of radius `R`
+    /// about its axis from `part_z[0]` to the top, and a flat end mill is the cylinder
+    /// `r ≤ R` between its end planes (the slab); the tool is clear when either keeps
+    /// farther than `R − τ` from the ray over the half-cell.
+    ///
+    /// Over `[a, (a+b)/2]` a distance vector `D(z, λ)` (from the ray to the axis point at
+    /// height `z` for the capsule; from the axis point at height `z` to the ray's point at
+    /// the same height in the tool frame for the slab, which lies across the axis) is within
+    /// `K·(λ − a)²/2` of `D(z, a) + (λ − a)·Ḋ(z, a)`, `K` a bound on `|D̈|`, and likewise
+    /// from `b` over the other half. Seen along the ray (the capsule) or along the tool's
+    /// axis at `a` (the slab), those first-order vectors form a bilinear patch in `z` and
+    /// `λ`, which lies in the convex hull of its four corners ([`hull_distance`]); when that
+    /// hull stays farther than `R − τ + K·(w/2)²/2` from the origin, so does the tool. For
+    /// the capsule `K = 2·Ω·P` (the acceleration of the axis points, `P` their per-axis
+    /// speed bound, as in `cull`). For the slab the ray's point at height `z` slides along
+    /// the ray at `ṫ = n·V(X)/(n·e)` (`n` the axis, `V` the tool's velocity field), so with
+    /// `c ≤ |n·e|` over the half-cell, `|ṅ| ≤ Ω`, the field's own rate at a point at most
+    /// `Ω·P` and `|ẍ| ≤ 2·Ω·P` at the axis point: `|ẗ| ≤ 2·Ω·P/c + 2·Ω·P/c²` and
+    /// `K = 2·Ω·P·(1 + 1/c + 1/c²)`, `P` the per-axis speed bound within `R +`
+    /// [`SLAB_REACH`] of the axis. The slab is used only where `c ≥` [`SLAB_MIN_COS`] and the
+    /// ray's point at a height cannot drift farther from the axis than that over the
+    /// half-cell (`P·(1 + 1/c)·w/2 ≤` [`SLAB_REACH`]), so that `P` bounds its speed.
+    ///
+    /// `false` where no bound applies (an axis does not move at a constant rate, or the ray
+    /// is not an axis ray). Where the tool passes along the ray at a nearly constant small
+    /// distance, the speed bound alone needs the half-cell bisected until the tool moves
+    /// less than that distance; this needs no bisection.
+    pub(super) fn touch_ruled_out(&self, ray: &Ray, (a, b): (&Probe, &Probe)) -> bool {
+        let (Some(bounds), Some(axis)) = (&self.touch, ray.axis) else {
+            return false;
+        };
+        let half = 0.5 * (b.lambda - a.lambda);
+        let clear = self.r - self.tol + cull::CULL_MARGIN;
+        let (z0, z1) = (self.part_z[0], self.l);
+        let across = |v: Vector3| -> [Real; 2] {
+            match axis {
+                0 => [v.y, v.z],
+                1 => [v.x, v.z],
+                _ => [v.x, v.y],
+            }
+        };
+        [(a, half), (b, -half)].into_iter().all(|(p, tau)| {
+            // The capsule, seen along the ray from its origin: the axis point at height h
+            // is `y0 + h·yz`, moving at `v0 + h·vz` per unit λ.
+            let capsule = || {
+                let y0 = across(-(p.rot * p.p));
+                let yz = across(p.rot.column(2).into_owned());
+                let v0 = across(p.rot * p.v_t);
+                let vz = across(p.rot * Vector3::new(p.w_t.y, -p.w_t.x, 0.0));
+                let at = |h: Real, t: Real| {
+                    [
+                        y0[0] + h * yz[0] + t * (v0[0] + h * vz[0]),
+                        y0[1] + h * yz[1] + t * (v0[1] + h * vz[1]),
+                    ]
+                };
+                let corners = [at(z0, 0.0), at(z1, 0.0), at(z1, tau), at(z0, tau)];
+                hull_distance(&corners) - bounds.capsule_accel * tau * tau / 2.0 > clear
+            };
+            // The slab, in the tool frame at the probe: the ray's point at height h is
+            // `c0 + h·c1` across the axis, sliding along the ray at `t0 + h·t1`.
+            let (u, q, w, v) = (&p.u, &p.p, &p.w_t, &p.v_t);
+            let c = u.z.abs() - bounds.omega * tau.abs();
+            let slab = |speed: Real| {
+                if !(c >= SLAB_MIN_COS && speed * (1.0 + 1.0 / c) * tau.abs() <= SLAB_REACH) {
+                    return false;
+                }
+                let c1 = [u.x / u.z, u.y / u.z];
+                let c0 = [q.x - c1[0] * q.z, q.y - c1[1] * q.z];
+                let t0 = (w.x * c0[1] - w.y * c0[0] + v.z) / u.z;
+                let t1 = (w.x * c1[1] - w.y * c1[0]) / u.z;
+                let at = |h: Real, t: Real| {
+                    let slide = t0 + h * t1;
+                    [
+                        c0[0] + h * c1[0] + t * (u.x * slide - v.x - h * w.y),
+                        c0[1] + h * c1[1] + t * (u.y * slide - v.y + h * w.x),
+                    ]
+                };
+                let corners = [at(z0, 0.0), at(z1, 0.0), at(z1, tau), at(z0, tau)];
+                let accel = 2.0 * bounds.omega * speed * (1.0 + 1.0 / c + 1.0 / (c * c));
+                hull_distance(&corners) - accel * tau * tau / 2.0 > clear
+            };
+            match bounds.slab_speed {
+                // a ray near the axis's direction is better seen by the slab
+                Some(speed) if c >= 0.5 => slab(speed) || capsule(),
+                Some(speed) => capsule() || slab(speed),
+                None => capsule(),
+            }
+        })
     }
 
     /// Solves for the extreme of the interval's end `end` (0 in, 1 out) between `a` and `b`,
@@ -686,6 +796,38 @@ pub(super) fn hermite_extreme(l: (Real, Real), t: (Real, Real), g: (Real, Real))
         }
     };
     l.0 + x * w
+}
+
+/// The distance from the origin to the convex hull of four points of the plane: zero when
+/// the origin lies in one of the triangles of three of them, else the least distance to the
+/// six segments between two of them (the hull's edges are among them, and every other one
+/// lies in the hull).
+pub(super) fn hull_distance(pts: &[[Real; 2]; 4]) -> Real {
+    let cross = |i: usize, j: usize| pts[i][0] * pts[j][1] - pts[i][1] * pts[j][0];
+    let inside = |i: usize, j: usize, k: usize| {
+        let (c0, c1, c2) = (cross(i, j), cross(j, k), cross(k, i));
+        (c0 >= 0.0 && c1 >= 0.0 && c2 >= 0.0) || (c0 <= 0.0 && c1 <= 0.0 && c2 <= 0.0)
+    };
+    if inside(0, 1, 2) || inside(0, 1, 3) || inside(0, 2, 3) || inside(1, 2, 3) {
+        return 0.0;
+    }
+    let segment = |i: usize, j: usize| {
+        let (a, b) = (pts[i], pts[j]);
+        let d = [b[0] - a[0], b[1] - a[1]];
+        let dd = d[0] * d[0] + d[1] * d[1];
+        let t = if dd > 0.0 {
+            (-(a[0] * d[0] + a[1] * d[1]) / dd).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let (x, y) = (a[0] + t * d[0], a[1] + t * d[1]);
+        x * x + y * y
+    };
+    [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+        .into_iter()
+        .map(|(i, j)| segment(i, j))
+        .fold(Real::INFINITY, Real::min)
+        .sqrt()
 }
 
 /// When a solve's bracket is fine enough.

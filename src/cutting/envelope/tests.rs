@@ -1132,3 +1132,119 @@ fn the_hermite_guess_finds_a_cubic_s_extreme() {
     let got = hermite_extreme((0.0, 1.0), (q(0.0), q(1.0)), (dq(0.0), dq(1.0)));
     assert!((got - 0.37).abs() < 1e-12, "{got}");
 }
+
+/// The second-order touch test never rules out a touch deeper than the tolerance: on the
+/// trunnion's moves (the side cut's two and the two large ones), for flat and ball end
+/// mills, axis rays through points near the tool's side, its bottom edge and below its
+/// end at a random pose, in the half-cell around that pose and three finer halvings of it,
+/// wherever both ends miss and the test rules a touch out, no pose of 400 between them
+/// (the chain's own poses, not the envelope's path) meets the tool shrunk by the
+/// tolerance. Both ways are exercised: the test rules out most grazing rays, and some
+/// rays the test keeps do meet the shrunk tool between two missing ends.
+#[test]
+fn the_touch_test_keeps_every_touch_deeper_than_the_tolerance() {
+    let c = trunnion();
+    let (r, l) = (3.0, 25.0);
+    let tol = 1e-4;
+    let mut seed: u64 = 0x70c4;
+    let mut next = move || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as Real / (1u64 << 53) as Real
+    };
+    // Half-cells asked about and ruled out: all, and those of the side cut's moves whose ray
+    // passes the side more than 1 µm clear of it.
+    let (mut asked, mut ruled_out, mut deep_kept) = ([0; 2], [0; 2], 0);
+    for (kind, shape) in [(ToolKind::Flat, Shape::Flat), (ToolKind::Ball, Shape::Ball)] {
+        let tool = Tool::try_new(kind, 2.0 * r, l).expect("valid");
+        for (m, (qa, qb)) in trunnion_moves().into_iter().enumerate() {
+            let env = RotaryEnvelope::new(&c, &tool, &qa, &qb)
+                .expect("envelope")
+                .with_tolerance(tol);
+            for _ in 0..1200 {
+                let (mut lam, mut phi) = (next(), next() * std::f64::consts::TAU);
+                let (mut d, place) = (-2e-3 + next() * 5e-3, (next() * 4.0) as usize);
+                let height = 0.5 + next() * 24.0;
+                if place == 3 {
+                    // Twice the tolerance into the side where it moves along itself, in the
+                    // middle of a half-cell: the tool passes the ray.
+                    let n = 2 * env.cells();
+                    lam = ((lam * n as Real).floor() + 0.5) / n as Real;
+                    d = -2.0 * tol;
+                    let axis_point = Point3::new(0.0, 0.0, height);
+                    let at = |s: Real| chain_pose(&c, &qa, &qb, s);
+                    let moved = at(lam).inverse_transform_vector(
+                        &(at(lam + 1e-4) * axis_point - at(lam - 1e-4) * axis_point),
+                    );
+                    phi = moved.y.atan2(moved.x)
+                        + std::f64::consts::FRAC_PI_2 * (1.0 + 2.0 * (phi / 7.0).floor());
+                }
+                let point = match place {
+                    0 | 3 => Point3::new((r + d) * phi.cos(), (r + d) * phi.sin(), height),
+                    1 if shape == Shape::Flat => {
+                        Point3::new((r + d) * phi.cos(), (r + d) * phi.sin(), -next() * 3e-3)
+                    }
+                    _ => {
+                        let rho = next() * r;
+                        let below = match shape {
+                            Shape::Flat => -d,
+                            Shape::Ball => r - (r * r - rho * rho).sqrt() - d,
+                        };
+                        Point3::new(rho * phi.cos(), rho * phi.sin(), below)
+                    }
+                };
+                let x = chain_pose(&c, &qa, &qb, lam) * point;
+                let axis = if place == 3 {
+                    2
+                } else {
+                    (next() * 3.0) as usize % 3
+                };
+                let mut o = x;
+                o[axis] = 0.0;
+                let mut e = Vector3::zeros();
+                e[axis] = 1.0;
+                let ray = Ray {
+                    o: &o,
+                    e: &e,
+                    span: (Real::NEG_INFINITY, Real::INFINITY),
+                    axis: Some(axis),
+                };
+                for j in 0..4 {
+                    let w = 1.0 / (2 * env.cells() * (1 << j)) as Real;
+                    let a = (lam / w).floor().min((1.0 / w).round() - 1.0) * w;
+                    let b = a + w;
+                    let (pa, pb) = (env.probe_at(a, &ray), env.probe_at(b, &ray));
+                    if pa.hit.is_some() || pb.hit.is_some() {
+                        continue;
+                    }
+                    let grazing = m < 2 && place == 0 && d > 1e-3;
+                    asked[0] += 1;
+                    asked[1] += usize::from(grazing);
+                    let deep = (0..=400).any(|i| {
+                        let pose = chain_pose(&c, &qa, &qb, a + w * i as Real / 400.0);
+                        let p = pose.inverse_transform_point(&o).coords;
+                        let u = pose.inverse_transform_vector(&e);
+                        tool_interval(shape, r, l, &p, &u, -tol).is_some()
+                    });
+                    if env.touch_ruled_out(&ray, (&pa, &pb)) {
+                        ruled_out[0] += 1;
+                        ruled_out[1] += usize::from(grazing);
+                        assert!(
+                            !deep,
+                            "{kind:?}, move {qa:?} → {qb:?}: a touch deeper than {tol} mm \
+                             ruled out on axis {axis} between λ {a} and {b} (ray through {x})"
+                        );
+                    } else if deep {
+                        deep_kept += 1;
+                    }
+                }
+            }
+        }
+    }
+    eprintln!("{ruled_out:?} of {asked:?} half-cells ruled out, {deep_kept} deep touches kept");
+    assert!(
+        ruled_out[1] * 10 >= asked[1] * 9 && asked[1] > 30 && deep_kept > 20,
+        "{ruled_out:?} of {asked:?} half-cells ruled out, {deep_kept} deep touches kept"
+    );
+}
