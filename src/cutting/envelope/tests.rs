@@ -1242,7 +1242,6 @@ fn the_touch_test_keeps_every_touch_deeper_than_the_tolerance() {
             }
         }
     }
-    eprintln!("{ruled_out:?} of {asked:?} half-cells ruled out, {deep_kept} deep touches kept");
     assert!(
         ruled_out[1] * 10 >= asked[1] * 9 && asked[1] > 30 && deep_kept > 20,
         "{ruled_out:?} of {asked:?} half-cells ruled out, {deep_kept} deep touches kept"
