@@ -45,13 +45,15 @@
 //! (`d_k(a) + d_k(b) + 2·τ ≤ M_k·w`, `d_k` the ray's distance from the capsule); while one
 //! can, the half-cell is bisected, the middle checked against the tool grown by
 //! `M·w/2 − τ`. Before bisecting, where every axis moves at a constant rate, a second-order
-//! test rules the touch out when the tool's capsule (or, for a flat end mill, its
-//! cylinder) stays farther than `R − τ` from an axis ray over the half-cell: the distance
+//! test shows the tool missing an axis ray throughout the half-cell when its capsule (or,
+//! for a flat end mill, its cylinder) stays farther than `R` from the ray: the distance
 //! vectors taken to first order from each end, their bilinear patch's hull, less the
-//! acceleration's share (`RotaryEnvelope::touch_ruled_out`). A tool passing along a ray
-//! at a small, nearly constant distance (the side cut's wall and floor rays) is then
-//! settled at once instead of by bisecting until the tool moves less than that distance. A half-cell with one end inside and a rate that points to an extreme before
-//! the ray leaves is bisected until the extreme is bracketed.
+//! acceleration's share (`RotaryEnvelope::touch_ruled_out`). The bisection would then find
+//! nothing, so skipping it changes no bit. A tool passing along a ray at a small, nearly
+//! constant distance (the side cut's wall and floor rays) is settled at once instead of by
+//! bisecting until the tool moves less than that distance. A half-cell with one end inside
+//! and a rate that points to an extreme before the ray leaves is bisected until the extreme
+//! is bracketed.
 //!
 //! **Span.** The stock asks only about the material's extent along a ray
 //! ([`Cutter::ray_cuts_in_span`]): cells whose grown tool meets the ray only outside it are

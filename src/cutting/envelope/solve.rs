@@ -551,11 +551,13 @@ impl RotaryEnvelope {
         }
     }
 
-    /// Whether the tool cannot meet the axis ray deeper than `τ` between the probes `a`
-    /// and `b` (both missing), by second order. The tool lies in the capsule of radius `R`
-    /// about its axis from `part_z[0]` to the top, and a flat end mill is the cylinder
-    /// `r ≤ R` between its end planes (the slab); the tool is clear when either keeps
-    /// farther than `R − τ` from the ray over the half-cell.
+    /// Whether the tool cannot meet the axis ray at all between the probes `a` and `b`
+    /// (both missing), by second order. The tool lies in the capsule of radius `R` about its
+    /// axis from `part_z[0]` to the top, and a flat end mill is the cylinder `r ≤ R` between
+    /// its end planes (the slab); the tool misses the ray when either keeps farther than `R`
+    /// from it over the half-cell. Then no pose between `a` and `b` meets the ray, and the
+    /// bisection that would otherwise look for a touch would find none: skipping it leaves
+    /// the intervals the same, bit for bit.
     ///
     /// Over `[a, (a+b)/2]` a distance vector `D(z, λ)` (from the ray to the axis point at
     /// height `z` for the capsule; from the axis point at height `z` to the ray's point at
@@ -564,12 +566,12 @@ impl RotaryEnvelope {
     /// from `b` over the other half. Seen along the ray (the capsule) or along the tool's
     /// axis at `a` (the slab), those first-order vectors form a bilinear patch in `z` and
     /// `λ`, which lies in the convex hull of its four corners ([`hull_distance`]); when that
-    /// hull stays farther than `R − τ + K·(w/2)²/2` from the origin, so does the tool. For
-    /// the capsule `K = 2·Ω·P` (the acceleration of the axis points, `P` their per-axis
-    /// speed bound, as in `cull`). For the slab the ray's point at height `z` slides along
-    /// the ray at `ṫ = n·V(X)/(n·e)` (`n` the axis, `V` the tool's velocity field), so with
-    /// `c ≤ |n·e|` over the half-cell, `|ṅ| ≤ Ω`, the field's own rate at a point at most
-    /// `Ω·P` and `|ẍ| ≤ 2·Ω·P` at the axis point: `|ẗ| ≤ 2·Ω·P/c + 2·Ω·P/c²` and
+    /// hull stays farther than `R + K·(w/2)²/2` from the origin, the tool stays farther than
+    /// `R`. For the capsule `K = 2·Ω·P` (the acceleration of the axis points, `P` their
+    /// per-axis speed bound, as in `cull`). For the slab the ray's point at height `z` slides
+    /// along the ray at `ṫ = n·V(X)/(n·e)` (`n` the axis, `V` the tool's velocity field), so
+    /// with `c ≤ |n·e|` over the half-cell, `|ṅ| ≤ Ω`, the field's own rate at a point at
+    /// most `Ω·P` and `|ẍ| ≤ 2·Ω·P` at the axis point: `|ẗ| ≤ 2·Ω·P/c + 2·Ω·P/c²` and
     /// `K = 2·Ω·P·(1 + 1/c + 1/c²)`, `P` the per-axis speed bound within `R +`
     /// [`SLAB_REACH`] of the axis. The slab is used only where `c ≥` [`SLAB_MIN_COS`] and the
     /// ray's point at a height cannot drift farther from the axis than that over the
@@ -578,13 +580,14 @@ impl RotaryEnvelope {
     /// `false` where no bound applies (an axis does not move at a constant rate, or the ray
     /// is not an axis ray). Where the tool passes along the ray at a nearly constant small
     /// distance, the speed bound alone needs the half-cell bisected until the tool moves
-    /// less than that distance; this needs no bisection.
+    /// less than that distance; this needs none once the distance exceeds `K·(w/2)²/2`.
     pub(super) fn touch_ruled_out(&self, ray: &Ray, (a, b): (&Probe, &Probe)) -> bool {
         let (Some(bounds), Some(axis)) = (&self.touch, ray.axis) else {
             return false;
         };
         let half = 0.5 * (b.lambda - a.lambda);
-        let clear = self.r - self.tol + cull::CULL_MARGIN;
+        // Farther than R (and the rounding's margin): the tool misses the ray.
+        let clear = self.r + cull::CULL_MARGIN;
         let (z0, z1) = (self.part_z[0], self.l);
         let across = |v: Vector3| -> [Real; 2] {
             match axis {
