@@ -565,7 +565,7 @@ impl RotaryEnvelope {
     /// `K·(λ − a)²/2` of `D(z, a) + (λ − a)·Ḋ(z, a)`, `K` a bound on `|D̈|`, and likewise
     /// from `b` over the other half. Seen along the ray (the capsule) or along the tool's
     /// axis at `a` (the slab), those first-order vectors form a bilinear patch in `z` and
-    /// `λ`, which lies in the convex hull of its four corners ([`hull_distance`]); when that
+    /// `λ`, which lies in the convex hull of its four corners ([`hull_clear`]); when that
     /// hull stays farther than `R + K·(w/2)²/2` from the origin, the tool stays farther than
     /// `R`. For the capsule `K = 2·Ω·P` (the acceleration of the axis points, `P` their
     /// per-axis speed bound, as in `cull`). For the slab the ray's point at height `z` slides
@@ -611,7 +611,7 @@ impl RotaryEnvelope {
                     ]
                 };
                 let corners = [at(z0, 0.0), at(z1, 0.0), at(z1, tau), at(z0, tau)];
-                hull_distance(&corners) - bounds.capsule_accel * tau * tau / 2.0 > clear
+                hull_clear(&corners, clear + bounds.capsule_accel * tau * tau / 2.0)
             };
             // The slab, in the tool frame at the probe: the ray's point at height h is
             // `c0 + h·c1` across the axis, sliding along the ray at `t0 + h·t1`.
@@ -634,7 +634,7 @@ impl RotaryEnvelope {
                 };
                 let corners = [at(z0, 0.0), at(z1, 0.0), at(z1, tau), at(z0, tau)];
                 let accel = 2.0 * bounds.omega * speed * (1.0 + 1.0 / c + 1.0 / (c * c));
-                hull_distance(&corners) - accel * tau * tau / 2.0 > clear
+                hull_clear(&corners, clear + accel * tau * tau / 2.0)
             };
             match bounds.slab_speed {
                 // a ray near the axis's direction is better seen by the slab
@@ -801,20 +801,14 @@ pub(super) fn hermite_extreme(l: (Real, Real), t: (Real, Real), g: (Real, Real))
     l.0 + x * w
 }
 
-/// The distance from the origin to the convex hull of four points of the plane: zero when
-/// the origin lies in one of the triangles of three of them, else the least distance to the
-/// six segments between two of them (the hull's edges are among them, and every other one
-/// lies in the hull).
-pub(super) fn hull_distance(pts: &[[Real; 2]; 4]) -> Real {
-    let cross = |i: usize, j: usize| pts[i][0] * pts[j][1] - pts[i][1] * pts[j][0];
-    let inside = |i: usize, j: usize, k: usize| {
-        let (c0, c1, c2) = (cross(i, j), cross(j, k), cross(k, i));
-        (c0 >= 0.0 && c1 >= 0.0 && c2 >= 0.0) || (c0 <= 0.0 && c1 <= 0.0 && c2 <= 0.0)
-    };
-    if inside(0, 1, 2) || inside(0, 1, 3) || inside(0, 2, 3) || inside(1, 2, 3) {
-        return 0.0;
-    }
-    let segment = |i: usize, j: usize| {
+/// Whether the convex hull of four points of the plane stays farther than `need` from the
+/// origin: the origin lies in none of the triangles of three of them, and every segment
+/// between two of them (the hull's edges are among them, and every other one lies in the
+/// hull) is farther than `need`. The segment from the first point to the second is looked
+/// at first: where the tool's side passes close to the ray it alone decides.
+pub(super) fn hull_clear(pts: &[[Real; 2]; 4], need: Real) -> bool {
+    let need2 = need * need;
+    let far = |i: usize, j: usize| {
         let (a, b) = (pts[i], pts[j]);
         let d = [b[0] - a[0], b[1] - a[1]];
         let dd = d[0] * d[0] + d[1] * d[1];
@@ -824,13 +818,20 @@ pub(super) fn hull_distance(pts: &[[Real; 2]; 4]) -> Real {
             0.0
         };
         let (x, y) = (a[0] + t * d[0], a[1] + t * d[1]);
-        x * x + y * y
+        x * x + y * y > need2
     };
-    [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
-        .into_iter()
-        .map(|(i, j)| segment(i, j))
-        .fold(Real::INFINITY, Real::min)
-        .sqrt()
+    if !(need >= 0.0 && far(0, 1)) {
+        return false;
+    }
+    let cross = |i: usize, j: usize| pts[i][0] * pts[j][1] - pts[i][1] * pts[j][0];
+    let inside = |i: usize, j: usize, k: usize| {
+        let (c0, c1, c2) = (cross(i, j), cross(j, k), cross(k, i));
+        (c0 >= 0.0 && c1 >= 0.0 && c2 >= 0.0) || (c0 <= 0.0 && c1 <= 0.0 && c2 <= 0.0)
+    };
+    !(inside(0, 1, 2) || inside(0, 1, 3) || inside(0, 2, 3) || inside(1, 2, 3))
+        && [(0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+            .into_iter()
+            .all(|(i, j)| far(i, j))
 }
 
 /// When a solve's bracket is fine enough.
