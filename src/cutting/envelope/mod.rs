@@ -256,7 +256,8 @@ impl Cutter for RotaryEnvelope {
         let mut e = Vector3::zeros();
         e[axis] = 1.0;
         let before = out.len();
-        self.intervals_in(origin, &e, span, out);
+        // The stock asks only about rays that passed the cull (`stock::cut_ray`).
+        self.intervals_near(origin, &e, span, true, out);
         lines.resize(lines.len() + out.len() - before, [line, line]);
     }
 }

@@ -298,6 +298,26 @@ impl RotaryEnvelope {
     /// material's extent): interval ends outside it are left unrefined (they stay outside
     /// it) and parts of the move whose grown tool meets the ray only outside it are skipped.
     pub fn intervals_in(&self, o: &Point3, e: &Vector3, span: (Real, Real), out: &mut Vec<RayCut>) {
+        self.intervals_near(o, e, span, false, out);
+    }
+
+    /// [`RotaryEnvelope::intervals_in`] for a ray that passed this move's cull
+    /// ([`RotaryEnvelope::may_cut`]) where `culled`: a move of one cell then has its cell
+    /// probed without the cell's own grown-tool test. That test only skips cells whose tool
+    /// grown by `δ` misses the ray within `span`; such a cell's poses miss it there too, so
+    /// probing it adds no interval that reaches into `span` (at most some wholly outside,
+    /// which the stock leaves out), and after the cull, whose swept tool is far tighter than
+    /// the tool grown by `δ`, the test nearly always passes: it would cost as much as a
+    /// probe and skip nothing.
+    pub(super) fn intervals_near(
+        &self,
+        o: &Point3,
+        e: &Vector3,
+        span: (Real, Real),
+        culled: bool,
+        out: &mut Vec<RayCut>,
+    ) {
+        let probe_all = culled && self.cells == 1;
         // a dexel ray's box tests need no divisions (the same results)
         let axis = Aabb::unit_axis(e);
         let box_meets = |b: &Aabb| match axis {
@@ -326,12 +346,13 @@ impl RotaryEnvelope {
             grown.clear();
             grown.extend((0..n).map(|j| {
                 box_meets(&self.cell_boxes[j]).is_some_and(|(t0, t1)| t1 >= span.0 && t0 <= span.1)
-                    && self.meets_grown(
-                        &self.samples[2 * j + 1],
-                        &ray,
-                        &along(2 * j + 1),
-                        self.delta,
-                    )
+                    && (probe_all
+                        || self.meets_grown(
+                            &self.samples[2 * j + 1],
+                            &ray,
+                            &along(2 * j + 1),
+                            self.delta,
+                        ))
             }));
             if !grown.iter().any(|&g| g) {
                 return;

@@ -1250,3 +1250,65 @@ fn the_touch_test_rules_out_only_rays_the_tool_never_meets() {
         "{ruled_out:?} of {asked:?} half-cells ruled out, {deep_kept} deep touches kept"
     );
 }
+
+/// A move of one cell probed without its grown-tool test (a ray the cull kept,
+/// [`RotaryEnvelope::intervals_near`]) cuts the material's extent exactly as with the test:
+/// on the side cut's two moves (C 0.5°, flat and ball end mills, one cell each), every x, y
+/// and z ray of a 0.05 mm grid across the move's box, with the material's extent a random
+/// stretch of the ray (or the whole ray), gets the same intervals, bit for bit, wherever
+/// they reach into that stretch; what else it gets lies wholly outside it. Some rays do get
+/// such intervals (the grown test had skipped the cell: the stretch lies clear of the tool),
+/// and thousands get the same intervals inside it.
+#[test]
+fn a_one_cell_move_probed_without_its_grown_test_cuts_the_same_span() {
+    let c = trunnion();
+    let mut seed: u64 = 0x5ba7;
+    let mut next = move || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as Real / (1u64 << 53) as Real
+    };
+    let bits = |c: &RayCut| {
+        [
+            c.t_in, c.t_out, c.n_in.x, c.n_in.y, c.n_in.z, c.n_out.x, c.n_out.y, c.n_out.z,
+        ]
+        .map(Real::to_bits)
+    };
+    let (mut same, mut outside) = (0, 0);
+    for kind in [ToolKind::Flat, ToolKind::Ball] {
+        let tool = Tool::try_new(kind, 6.0, 25.0).expect("valid");
+        for (qa, qb) in trunnion_moves().into_iter().take(2) {
+            let env = RotaryEnvelope::new(&c, &tool, &qa, &qb).expect("envelope");
+            assert_eq!(env.cells(), 1);
+            let b = env.bounds();
+            grid_rays(&b, |o, axis, e| {
+                let (lo, hi) = (b.min[axis], b.max[axis]);
+                let span = if next() < 0.2 {
+                    (Real::NEG_INFINITY, Real::INFINITY)
+                } else {
+                    let (x, y) = (lo + next() * (hi - lo), lo + next() * (hi - lo));
+                    (x.min(y), x.max(y))
+                };
+                let (mut with, mut without) = (Vec::new(), Vec::new());
+                env.intervals_in(&o, &e, span, &mut with);
+                env.intervals_near(&o, &e, span, true, &mut without);
+                let reaches = |c: &&RayCut| c.t_out >= span.0 && c.t_in <= span.1;
+                let (a, b): (Vec<_>, Vec<_>) = (
+                    with.iter().filter(reaches).map(bits).collect(),
+                    without.iter().filter(reaches).map(bits).collect(),
+                );
+                assert_eq!(
+                    a, b,
+                    "{kind:?}: the ray through {o:?} along {axis}, span {span:?}"
+                );
+                same += a.len();
+                outside += without.len() - b.len();
+            });
+        }
+    }
+    assert!(
+        same > 100_000 && outside > 1000,
+        "{same} the same, {outside} outside"
+    );
+}
