@@ -596,19 +596,34 @@ impl CutContext<'_> {
     /// changed a ray (consecutive repeats dropped).
     fn cut_block(&self, bu: usize, bv: usize, block: &mut Block) -> Vec<u32> {
         let cut = self.cut_rows(bu, block, self.rows_of(bv));
-        self.apply(bu, bv, block, cut)
+        self.apply(bu, bv, block, vec![cut])
     }
 
-    /// Writes what cutting the block's rays produced into it; returns the NC lines used.
-    fn apply(&self, bu: usize, bv: usize, block: &mut Block, cut: RowsCut) -> Vec<u32> {
-        if cut.changes.is_empty() {
-            return cut.used;
+    /// Writes what cutting the block's rays produced (`rows`, in ray order) into it, each
+    /// changed ray's segments read where its row left them; returns the NC lines used (the
+    /// rows' in turn).
+    fn apply(&self, bu: usize, bv: usize, block: &mut Block, rows: Vec<RowsCut>) -> Vec<u32> {
+        let rays: Vec<(usize, &[Segment])> = rows
+            .iter()
+            .flat_map(|r| {
+                r.changes
+                    .iter()
+                    .map(move |c| (c.local, &r.new[c.start..c.end]))
+            })
+            .collect();
+        if !rays.is_empty() {
+            let in_grid = |local: usize| {
+                bu * BLOCK + local % BLOCK < self.nu && bv * BLOCK + local / BLOCK < self.nv
+            };
+            apply_changes(block, &rays, &self.fill, in_grid);
         }
-        let in_grid = |local: usize| {
-            bu * BLOCK + local % BLOCK < self.nu && bv * BLOCK + local / BLOCK < self.nv
-        };
-        apply_changes(block, &cut.new, &cut.changes, &self.fill, in_grid);
-        cut.used
+        drop(rays);
+        let mut rows = rows.into_iter();
+        let mut used = rows.next().map(|r| r.used).unwrap_or_default();
+        for r in rows {
+            used.extend(r.used);
+        }
+        used
     }
 
     /// Cuts the rays of rows `rows` of block `(bu, bv)` in range, reading the block only.
@@ -762,55 +777,21 @@ struct RowsCut {
     used: Vec<u32>,
 }
 
-impl RowsCut {
-    /// The rows `rows` of one block, in order, as one: the first's buffers grown once to the
-    /// total and the others' appended.
-    fn concat(rows: impl IntoIterator<Item = RowsCut>) -> RowsCut {
-        let mut rows = rows.into_iter();
-        let Some(mut cut) = rows.next() else {
-            return RowsCut::default();
-        };
-        let rest: Vec<RowsCut> = rows.collect();
-        cut.new.reserve(rest.iter().map(|r| r.new.len()).sum());
-        cut.changes
-            .reserve(rest.iter().map(|r| r.changes.len()).sum());
-        cut.used.reserve(rest.iter().map(|r| r.used.len()).sum());
-        for r in rest {
-            cut.append(r);
-        }
-        cut
-    }
-
-    /// Appends `other` (later rays of the same block).
-    fn append(&mut self, other: RowsCut) {
-        let base = self.new.len();
-        self.new.extend(other.new);
-        self.changes
-            .extend(other.changes.into_iter().map(|c| RayChange {
-                local: c.local,
-                start: c.start + base,
-                end: c.end + base,
-            }));
-        self.used.extend(other.used);
-    }
-}
-
-/// Replaces the changed rays of `block` (`changes` sorted by ray) by their new segments in
-/// `new`: in place when every changed ray keeps its segment count, else by one rebuild of
-/// the block at its exact size. An untouched block is materialised, its rays in the grid
-/// (`in_grid`) holding `fill`.
+/// Replaces the changed rays of `block` (`rays`: each ray's index in the block and its new
+/// segments, sorted by ray): in place when every changed ray keeps its segment count, else
+/// by one rebuild of the block at its exact size. An untouched block is materialised, its
+/// rays in the grid (`in_grid`) holding `fill`.
 fn apply_changes(
     block: &mut Block,
-    new: &[Segment],
-    changes: &[RayChange],
+    rays: &[(usize, &[Segment])],
     fill: &[Segment; 1],
     in_grid: impl Fn(usize) -> bool,
 ) {
     let old_len = |local: usize| block.ray(local, fill).len();
-    if !block.is_fill() && changes.iter().all(|c| c.end - c.start == old_len(c.local)) {
-        for c in changes {
-            let at = block.offsets[c.local] as usize;
-            block.segs[at..at + c.end - c.start].copy_from_slice(&new[c.start..c.end]);
+    if !block.is_fill() && rays.iter().all(|(l, new)| new.len() == old_len(*l)) {
+        for (l, new) in rays {
+            let at = block.offsets[*l] as usize;
+            block.segs[at..at + new.len()].copy_from_slice(new);
         }
         return;
     }
@@ -819,17 +800,17 @@ fn apply_changes(
     } else {
         block.segs.len()
     };
-    let total = changes
+    let total = rays
         .iter()
-        .fold(before, |n, c| n + (c.end - c.start) - old_len(c.local));
+        .fold(before, |n, (l, new)| n + new.len() - old_len(*l));
     let mut segs = Vec::with_capacity(total);
     let mut offsets = Vec::with_capacity(BLOCK * BLOCK + 1);
     offsets.push(0u32);
-    let mut pending = changes.iter().peekable();
+    let mut pending = rays.iter().peekable();
     for local in 0..BLOCK * BLOCK {
         match pending.peek() {
-            Some(c) if c.local == local => {
-                segs.extend_from_slice(&new[c.start..c.end]);
+            Some((l, new)) if *l == local => {
+                segs.extend_from_slice(new);
                 pending.next();
             }
             _ if block.is_fill() => {
@@ -1184,7 +1165,7 @@ impl TriDexel {
                     while let Some((_, r)) = rows.next_if(|(owner, _)| *owner == t) {
                         mine.push(r);
                     }
-                    contexts[c].apply(k % nbu, k / nbu, block, RowsCut::concat(mine))
+                    contexts[c].apply(k % nbu, k / nbu, block, mine)
                 })
                 .collect()
         } else {

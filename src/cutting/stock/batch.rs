@@ -124,9 +124,7 @@ impl TriDexel {
             .into_par_iter()
             .zip(per_task)
             .for_each(|((g, k, nbu, block), rows)| {
-                grids[g]
-                    .ctx
-                    .apply(k % nbu, k / nbu, block, RowsCut::concat(rows));
+                grids[g].ctx.apply(k % nbu, k / nbu, block, rows);
             });
         removed
     }
