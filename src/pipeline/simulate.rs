@@ -180,6 +180,10 @@ pub fn simulate(
             None,
         ),
     };
+    // The stock's last reads: its figures. Freed before the page is built (the page's
+    // buffers then reuse its memory rather than add to the process's peak).
+    let stock_report = StockReport::of(&stock, volume0);
+    drop(stock);
     let clock = Instant::now();
     let markers = checked
         .events
@@ -198,7 +202,7 @@ pub fn simulate(
     let report = SimulationReport {
         scene: scene.name.clone(),
         program: program.path.display().to_string(),
-        stock: StockReport::of(&stock, volume0),
+        stock: stock_report,
         sweep: checked.sweep,
         mesh: MeshSummary {
             vertices: mesh.vertices.len(),

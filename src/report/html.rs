@@ -383,11 +383,10 @@ pub fn render_page(page: &Page) -> String {
             "<script type=\"application/json\" id=\"twinmill-view\">{}</script>",
             script_json(&meta)
         );
-        let _ = writeln!(
-            out,
-            "<script type=\"text/plain\" id=\"twinmill-glb\">{}</script>",
-            base64::engine::general_purpose::STANDARD.encode(&v.glb)
-        );
+        // Encoded straight into the page: no second copy of the geometry's text.
+        out.push_str("<script type=\"text/plain\" id=\"twinmill-glb\">");
+        base64::engine::general_purpose::STANDARD.encode_string(&v.glb, &mut out);
+        out.push_str("</script>\n");
         if let Some(png) = &v.picture {
             let _ = writeln!(
                 out,
