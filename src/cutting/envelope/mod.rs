@@ -57,7 +57,10 @@
 //!
 //! **Span.** The stock asks only about the material's extent along a ray
 //! ([`Cutter::ray_cuts_in_span`]): cells whose grown tool meets the ray only outside it are
-//! skipped, and an interval end already beyond it is not refined (it stays beyond it).
+//! skipped, and an interval end already beyond it is not refined (it stays beyond it). It
+//! asks only about rays the cull kept, so a move of one cell is probed without that grown
+//! test: after the swept cull it nearly always passes, and a cell it would have skipped
+//! gives no interval reaching into the span.
 //!
 //! **Accuracy.** Every interval end is the exact interval of some pose, so nothing is cut
 //! that the tool does not reach. A smooth extreme is solved until
