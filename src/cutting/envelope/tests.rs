@@ -1133,6 +1133,17 @@ fn the_hermite_guess_finds_a_cubic_s_extreme() {
     assert!((got - 0.37).abs() < 1e-12, "{got}");
 }
 
+/// A reproducible stream of numbers uniform in [0, 1) from `seed` (a 64-bit linear
+/// congruential generator's top 53 bits).
+fn uniform(mut seed: u64) -> impl FnMut() -> Real {
+    move || {
+        seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (seed >> 11) as Real / (1u64 << 53) as Real
+    }
+}
+
 /// The second-order touch test rules a touch out only where the tool never meets the ray:
 /// on the trunnion's moves (the side cut's two and the two large ones), for flat and ball
 /// end mills, axis rays through points near the tool's side, its bottom edge and below its
@@ -1146,13 +1157,7 @@ fn the_touch_test_rules_out_only_rays_the_tool_never_meets() {
     let c = trunnion();
     let (r, l) = (3.0, 25.0);
     let tol = 1e-4;
-    let mut seed: u64 = 0x70c4;
-    let mut next = move || {
-        seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (seed >> 11) as Real / (1u64 << 53) as Real
-    };
+    let mut next = uniform(0x70c4);
     // Half-cells asked about and ruled out: all, and those of the side cut's moves whose ray
     // passes the side more than 1 µm clear of it.
     let (mut asked, mut ruled_out, mut deep_kept) = ([0; 2], [0; 2], 0);
@@ -1262,13 +1267,7 @@ fn the_touch_test_rules_out_only_rays_the_tool_never_meets() {
 #[test]
 fn a_one_cell_move_probed_without_its_grown_test_cuts_the_same_span() {
     let c = trunnion();
-    let mut seed: u64 = 0x5ba7;
-    let mut next = move || {
-        seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (seed >> 11) as Real / (1u64 << 53) as Real
-    };
+    let mut next = uniform(0x5ba7);
     let bits = |c: &RayCut| {
         [
             c.t_in, c.t_out, c.n_in.x, c.n_in.y, c.n_in.z, c.n_out.x, c.n_out.y, c.n_out.z,
