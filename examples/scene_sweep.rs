@@ -10,6 +10,7 @@
 
 #![allow(clippy::print_stdout, reason = "an example reports on the terminal")]
 
+use std::io::Write;
 use std::path::Path;
 use std::time::Instant;
 use twinmill::cutting::sweep::sweep_program;
@@ -23,7 +24,9 @@ use crossing_digest::digest;
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let Some(path) = args.get(1) else {
-        println!("usage: scene_sweep SCENE [MOVES] [PITCH] [MESHES]");
+        say(format_args!(
+            "usage: scene_sweep SCENE [MOVES] [PITCH] [MESHES]"
+        ));
         return;
     };
     let mut scene = match Scene::load(Path::new(path)) {
@@ -56,28 +59,35 @@ fn main() {
     .expect("sweeps");
     let dt = t.elapsed().as_secs_f64();
     let (h, count) = digest(&stock);
-    println!(
+    say(format_args!(
         "{}: {n} moves at {} mm in {dt:.3} s, {:.0} moves/s, {} cutting, {} sweeps",
         scene.name,
         scene.pitch_mm,
         n as f64 / dt,
         rep.cutting_moves,
         rep.sweeps
-    );
-    println!(
+    ));
+    say(format_args!(
         "digest {h:016x}, {count} crossings, stock {:.1} MiB",
         stock.memory_bytes() as f64 / 1048576.0
-    );
+    ));
     let meshes: usize = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(0);
     for _ in 0..meshes {
         let t = Instant::now();
         let (mesh, _) =
             twinmill::cutting::adaptive::mesh_stock_adaptive(&stock, &Default::default())
                 .expect("meshes");
-        println!(
+        say(format_args!(
             "mesh {:.3} s, {} triangles",
             t.elapsed().as_secs_f64(),
             mesh.triangles.len()
-        );
+        ));
+    }
+}
+
+/// Prints a line; a closed pipe (`scene_sweep … | head`) ends the program quietly.
+fn say(line: std::fmt::Arguments) {
+    if writeln!(std::io::stdout().lock(), "{line}").is_err() {
+        std::process::exit(0);
     }
 }
