@@ -29,7 +29,7 @@
 //! stated σ, solved again — the spread of each identified parameter beside its σ, for any
 //! forward model.
 //!
-//! **Goodness of fit.** [`goodness::least_squares_check`] with one part per block, so a
+//! **Goodness of fit.** [`goodness::least_squares_check`](crate::calibration::goodness::least_squares_check) with one part per block, so a
 //! misfit is refused naming the file it is blamed on.
 //!
 //! **Invariant:** knows nothing of machines, instruments or files; the same problem gives

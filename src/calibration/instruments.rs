@@ -679,7 +679,7 @@ impl MachineModel {
     }
 
     /// The travel each axis covers in the measurements (mm, per axis index): the largest
-    /// |value| it takes, at least 1 mm; [`DEFAULT_TRAVEL_MM`] where none moves it.
+    /// |value| it takes, at least 1 mm; `DEFAULT_TRAVEL_MM` where none moves it.
     pub fn travel(&self) -> [Real; 6] {
         let mut t = [0.0; 6];
         for f in &self.files {

@@ -20,7 +20,7 @@
 //! (gives an interior point) start the search; Brent's method looks for a point with φ ≤ 0
 //! when the chord frustum is missed, and each end is then found by a sign-bracketing root search
 //! (Illinois regula falsi) to [`NUMERIC_T_TOL`]; the inner minimum over s is also taken by
-//! Brent's method ([`NUMERIC_S_TOL`]). The tests check this path against the closed forms on
+//! Brent's method (`NUMERIC_S_TOL`). The tests check this path against the closed forms on
 //! the pieces both solve ([`NUMERIC_AGREEMENT`]).
 //!
 //! **Invariant:** the cutter knows only tool geometry and straight moves; it never reads

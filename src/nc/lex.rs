@@ -1,4 +1,4 @@
-//! Byte-level reading of one RS274/NGC line into a [`Block`].
+//! Byte-level reading of one RS274/NGC line into a `Block`.
 //!
 //! A line is first normalised into a reusable buffer (spaces and tabs outside comments
 //! dropped, letters lower-cased; where bytes were dropped is remembered, which gives the
@@ -6,7 +6,7 @@
 //! 15 digits are converted exactly by one division of an integer mantissa by a power of
 //! ten; longer ones go through the standard library's parser. Values (`X[1+#2]`, `X#<a>`, `Xsin[30]`) are evaluated while reading, as
 //! LinuxCNC does: parameter reads see the values from before the line, and parameter
-//! assignments on the line are collected in [`Block::assigns`] to be applied after the whole
+//! assignments on the line are collected in `Block::assigns` to be applied after the whole
 //! line has been read. Words live in fixed arrays, so reading a plain motion block does not
 //! allocate once the buffers have grown.
 

@@ -47,7 +47,7 @@
 //! `#1`–`#5601` (with LinuxCNC's meaning of `#5161…` G28 home, `#5181…` G30 home,
 //! `#5210…` G92, `#5220` current system, `#5221…` G54 …), local and global (`#<_name>`)
 //! named parameters; expressions with RS274/NGC precedence (`**`; `* / MOD`; `+ -`;
-//! `EQ NE GT GE LT LE`; `AND OR XOR`) and functions SIN COS TAN ASIN ACOS ATAN[a]/[b]
+//! `EQ NE GT GE LT LE`; `AND OR XOR`) and functions SIN COS TAN ASIN ACOS ATAN\[a\]/\[b\]
 //! SQRT ABS EXP LN ROUND FIX FUP EXISTS (degrees). Comments `( )` and `;`, `(MSG,…)`,
 //! block delete `/`, N numbers, `%` delimiters, case and space insensitivity.
 //!

@@ -179,7 +179,7 @@ fn face_match(
 }
 
 /// The model-correction loop on measured features: identify → update the twin → compare
-/// its predicted faces with the measured ones over each face's extent ([`face_match`]) →
+/// its predicted faces with the measured ones over each face's extent (`face_match`) →
 /// repeat, re-identifying from the updated twin, until every face agrees within
 /// `tolerance_mm` or what its scan noise allows (a twin cannot match noise better than the
 /// noise).

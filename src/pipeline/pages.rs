@@ -5,8 +5,8 @@
 //! a part and a cloud ([`view`]), and the page of `run`, `scan`, `identify`, `design` and
 //! `correct` ([`run_page`], [`scan_page`], [`identify_page`], [`design_page`],
 //! [`correct_page`]; `simulate` makes its own), and the pages of the commands whose
-//! reports live here: the rotary-axis tests of `measure` ([`rotary_page`]), the hexapod's
-//! ball bar ([`hexapod_ballbar_page`]) and calibration ([`calibrate_page`]).
+//! reports live here: the rotary-axis tests of `measure` ([`rotary_page`](super::instrument_pages::rotary_page)), the hexapod's
+//! ball bar ([`hexapod_ballbar_page`](super::instrument_pages::hexapod_ballbar_page)) and calibration ([`calibrate_page`](super::instrument_pages::calibrate_page)).
 
 use super::{PipelineError, make_stock, sweep_failed};
 use crate::calibration::calibrate::Feature;

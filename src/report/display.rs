@@ -14,7 +14,7 @@
 //! centroids lie up to about twice the reported error inside it.
 //!
 //! **In pieces.** A mesh of more than [`CHUNKED_ABOVE`] triangles takes the first pass in
-//! pieces of [`PIECE_TRIANGLES`] consecutive triangles in Morton order of their centroids,
+//! pieces of `PIECE_TRIANGLES` consecutive triangles in Morton order of their centroids,
 //! side by side, each with the vertices it shares with another piece locked (the pieces
 //! still meet, closed), then once more joined, within the same bound, so that the seams
 //! collapse too; the two passes' errors add up. The simplifier's working memory is then that
@@ -590,7 +590,7 @@ const EXTREME_TIE_MM: Real = 1e-6;
 
 /// The figures of a display mesh's corner deviations (`deviations`, as [`deviations`] gives
 /// them): the largest and smallest corner value and where (of the corners within
-/// [`EXTREME_TIE_MM`] of it, the one on the largest triangle), and the mean and RMS over the
+/// `EXTREME_TIE_MM` of it, the one on the largest triangle), and the mean and RMS over the
 /// surface with the deviation linear across each triangle between its corners — as the
 /// colours interpolate it — integrated exactly: over a triangle of corners a, b, c the mean
 /// is (a + b + c)/3 and the mean square (a² + b² + c² + ab + bc + ca)/6, weighted by its

@@ -1,5 +1,5 @@
 //! Each command's `report.html`: which geometry its 3-D view shows and which tables and
-//! plots its page has, from the command's report and what it made ([`html::Page`]).
+//! plots its page has, from the command's report and what it made ([`html::Page`](crate::report::html::Page)).
 //!
 //! - [`part_view3d`] / [`View3dParts`]: the display mesh coloured by deviation (with the
 //!   deviations at its vertices as `_DEVIATION_UM` for picking), the scanned cloud decimated

@@ -8,16 +8,16 @@
 //! Every value is checked when the scene loads; an error names the file, line and column
 //! of the offending value. TOML accepts `nan` and `inf`: they are rejected here.
 //!
-//! The folder, in reading order: [`file`] (the serde structs of the format), [`check`] (the
-//! bounds of coordinates, angles and directions), [`memory`]
-//! (the stock's memory budget), [`machine`] (a serial chain, and the [`Machine`] variants),
-//! [`deviations`] (an identified machine's deviations file, `--deviations`, replacing a
+//! The folder, in reading order: `file` (the serde structs of the format), `check` (the
+//! bounds of coordinates, angles and directions), `memory`
+//! (the stock's memory budget), `machine` (a serial chain, and the [`Machine`] variants),
+//! `deviations` (an identified machine's deviations file, `--deviations`, replacing a
 //! serial machine's deviation model),
-//! [`hexapod`] (a hexapod and its sections), [`cut`] (tool, holder, stock, fixtures, design
-//! model, sweep), [`scanner`] (the virtual scanner and the scanner-effects study),
-//! [`identify`] (`[identify]`), [`report`] (`[report]`), [`program`] (the files a scene
-//! names and the program read from them), [`read`] (the one reader that puts them
-//! together) and [`write`] (a scene written back for a designed test).
+//! `hexapod` (a hexapod and its sections), `cut` (tool, holder, stock, fixtures, design
+//! model, sweep), `scanner` (the virtual scanner and the scanner-effects study),
+//! `identify` (`[identify]`), `report` (`[report]`), `program` (the files a scene
+//! names and the program read from them), `read` (the one reader that puts them
+//! together) and `write` (a scene written back for a designed test).
 //!
 //! **Invariant:** this folder and [`crate::output`] are the only modules that touch files;
 //! a scene file is parsed once, whatever its machine kind.

@@ -19,7 +19,7 @@ pub struct NcFiles {
     pub tool_table: Option<PathBuf>,
     /// LinuxCNC parameter (var) file.
     pub var_file: Option<PathBuf>,
-    /// INI file ([RS274NGC] SUBROUTINE_PATH, DISABLE_FANUC_STYLE_SUB).
+    /// INI file (\[RS274NGC\] SUBROUTINE_PATH, DISABLE_FANUC_STYLE_SUB).
     pub ini: Option<PathBuf>,
     /// Unit of tool-table and var-file lengths.
     pub external_unit: LengthUnit,

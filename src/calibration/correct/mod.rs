@@ -41,7 +41,7 @@
 //! undo. Near there the least-squares optimum is flat along the rotary (exactly flat at the
 //! parallel pose), and an undamped step turns it by degrees to buy micro-radians of direction.
 //! The solve minimises instead `F(q') + λ²·(L²/6)/2·|r' − r|²` over the rotary values `r'`
-//! (commanded `r`, radians), [`ROTARY_DAMPING`] `λ`, so a rotary departure costs what the same
+//! (commanded `r`, radians), `ROTARY_DAMPING` `λ`, so a rotary departure costs what the same
 //! angle of direction error costs on the flute: one damping row per free rotary axis beside
 //! the six flute residuals. A rotary then moves by at most `|δv|/(2λ)` to remove a direction
 //! error `δv`, continuously in the commanded pose, and stays on the commanded branch; what

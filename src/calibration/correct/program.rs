@@ -28,7 +28,7 @@ pub struct Block {
     pub s: (Real, Real),
     /// Inverse-time feed `F` (1/min) when the block is written in `G93`: a corrected move
     /// that turns a rotary axis and would take another time than its part of the source
-    /// move at the programmed feed (see [`inverse_time_feeds`]); `None`: `G94`.
+    /// move at the programmed feed (see `inverse_time_feeds`); `None`: `G94`.
     pub inverse_time_per_min: Option<Real>,
 }
 

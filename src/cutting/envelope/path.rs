@@ -168,7 +168,7 @@ impl MovePath {
     }
 
     /// The tool's pose at fraction `lambda` of the move as its rotation matrix (`w_from_t`,
-    /// columns the tool axes in W) and tip: [`Self::sample`]'s pose, bit for bit, without
+    /// columns the tool axes in W) and tip: `Self::sample`'s pose, bit for bit, without
     /// the rates.
     pub fn pose(&self, lambda: Real) -> (Matrix3, Point3) {
         let s = self.eval::<false>(lambda);

@@ -119,7 +119,7 @@ impl RotaryBound {
         self.a / n + self.b / (n * n)
     }
 
-    /// The smallest multiple of [`COARSE`] sub-steps meeting `bound`, if not absurd.
+    /// The smallest multiple of `COARSE` sub-steps meeting `bound`, if not absurd.
     pub fn steps_for(&self, bound: Real, line: usize) -> Result<usize, SweepError> {
         let n = (self.a + (self.a * self.a + 4.0 * self.b * bound).sqrt()) / (2.0 * bound);
         let n = ((n.ceil() / COARSE as Real).ceil() * COARSE as Real).max(COARSE as Real);
