@@ -4,9 +4,9 @@
 //! shows its machined faces ([`display_part`]), `part.png` ([`part_png`]), the 3-D view of
 //! a part and a cloud ([`view`]), and the page of `run`, `scan`, `identify`, `design` and
 //! `correct` ([`run_page`], [`scan_page`], [`identify_page`], [`design_page`],
-//! [`correct_page`]; `simulate` makes its own), and the pages of the commands whose
-//! reports live here: the rotary-axis tests of `measure` ([`rotary_page`](super::instrument_pages::rotary_page)), the hexapod's
-//! ball bar ([`hexapod_ballbar_page`](super::instrument_pages::hexapod_ballbar_page)) and calibration ([`calibrate_page`](super::instrument_pages::calibrate_page)).
+//! [`correct_page`]; `simulate` makes its own). The instruments' pages (the rotary-axis
+//! tests of `measure`, the hexapod's ball bar and calibration) are in
+//! [`super::instrument_pages`].
 
 use super::{PipelineError, make_stock, sweep_failed};
 use crate::calibration::calibrate::Feature;
