@@ -179,7 +179,13 @@ impl NominalPath {
     /// surface, with that surface's outward normal at its point nearest `p`; `None` where
     /// `cut` has no crossing near `p` (see the module docs).
     pub fn nearest(&self, cut: &TriDexel, p: &Point3) -> Option<Nearest> {
-        let mut lines: Vec<u32> = Vec::new();
+        SCRATCH.with_borrow_mut(|scratch| self.nearest_with(cut, p, scratch))
+    }
+
+    /// [`Self::nearest`] with the scratch buffers `scratch`.
+    fn nearest_with(&self, cut: &TriDexel, p: &Point3, scratch: &mut Scratch) -> Option<Nearest> {
+        let Scratch { lines, cands } = scratch;
+        lines.clear();
         let mut stock_face: Option<(Real, Point3, Vector3)> = None;
         // Crossings farther than the window's half-width (its corner) are not around `p`.
         let radius2 = (cut.max_spacing() * (NEAR as Real + 0.5)).powi(2) * 3.0;
@@ -206,7 +212,7 @@ impl NominalPath {
         });
         // Inside the swept volume is outside the part: the part's distance is the negated
         // one, its outward normal the tool's inward one.
-        let swept = self.swept_distance(p, &lines).map(|(d, n)| Nearest {
+        let swept = self.swept_distance(p, lines, cands).map(|(d, n)| Nearest {
             distance: -d,
             normal: -n,
         });
@@ -218,36 +224,43 @@ impl NominalPath {
 
     /// The least signed distance of `p` from the tool over the moves of `lines`, with the
     /// tool's outward normal there (`None` without such a move).
-    fn swept_distance(&self, p: &Point3, lines: &[u32]) -> Option<(Real, Vector3)> {
+    fn swept_distance(
+        &self,
+        p: &Point3,
+        lines: &[u32],
+        cands: &mut Vec<Candidate>,
+    ) -> Option<(Real, Vector3)> {
         // (lower bound, least sample, its index, move) of every candidate, least bound
         // first. Between consecutive kept poses no tool point moves by more than `D`, and the
         // signed distance moves no more than the point: the interval's values are at least
         // the mean of its ends' less `D/2`.
-        let mut cands: Vec<(Real, (Real, Vector3), usize, u32)> = lines
-            .iter()
-            .filter_map(|l| self.by_line.get(l))
-            .flatten()
-            .filter_map(|&m| {
-                let kept = self.kept[m as usize].as_ref()?;
-                let f: [(Real, Vector3); KEPT + 1] =
-                    std::array::from_fn(|k| self.tool_distance(&kept.poses[k], p));
-                let (k, s) = f
-                    .iter()
-                    .enumerate()
-                    .min_by(|a, b| a.1.0.total_cmp(&b.1.0))?;
-                let bound = f
-                    .windows(2)
-                    .map(|w| 0.5 * (w[0].0 + w[1].0 - kept.step))
-                    .fold(Real::INFINITY, Real::min);
-                Some((bound, *s, k, m))
-            })
-            .collect();
+        cands.clear();
+        cands.extend(
+            lines
+                .iter()
+                .filter_map(|l| self.by_line.get(l))
+                .flatten()
+                .filter_map(|&m| {
+                    let kept = self.kept[m as usize].as_ref()?;
+                    let f: [(Real, Vector3); KEPT + 1] =
+                        std::array::from_fn(|k| self.tool_distance(&kept.poses[k], p));
+                    let (k, s) = f
+                        .iter()
+                        .enumerate()
+                        .min_by(|a, b| a.1.0.total_cmp(&b.1.0))?;
+                    let bound = f
+                        .windows(2)
+                        .map(|w| 0.5 * (w[0].0 + w[1].0 - kept.step))
+                        .fold(Real::INFINITY, Real::min);
+                    Some((bound, *s, k, m))
+                }),
+        );
         cands.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.3.cmp(&b.3)));
         let mut best = cands
             .iter()
             .map(|c| c.1)
             .min_by(|a, b| a.0.total_cmp(&b.0))?;
-        for &(bound, s, k, m) in &cands {
+        for &(bound, s, k, m) in cands.iter() {
             if bound >= best.0 {
                 break;
             }
@@ -285,6 +298,24 @@ impl NominalPath {
         let tol = self.kept[m].as_ref().map_or(1e-12, |k| k.lambda_tol);
         brent(at, (a, b), (x0, fk), tol)
     }
+}
+
+/// A candidate move of [`NominalPath::swept_distance`]: the lower bound on its tool's
+/// signed distance, its least kept sample (value and normal), that sample's index and the
+/// move.
+type Candidate = (Real, (Real, Vector3), usize, u32);
+
+/// The buffers of [`NominalPath::nearest`], kept per thread: the candidate lines and moves
+/// of each point, without an allocation a point (the colours read about 100 k points on
+/// two threads, whose allocations would otherwise contend).
+#[derive(Default)]
+struct Scratch {
+    lines: Vec<u32>,
+    cands: Vec<Candidate>,
+}
+
+thread_local! {
+    static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::new(Scratch::default());
 }
 
 /// How far (mm) a tool point may move within the bracket at which a move's refinement
