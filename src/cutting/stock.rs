@@ -230,6 +230,7 @@ impl Block {
 }
 
 /// A ray of a block whose segments a cut replaced: `new[start..end]` of the block's scratch.
+#[derive(Clone, Copy)]
 struct RayChange {
     local: usize,
     start: usize,
@@ -692,6 +693,9 @@ struct RayBuffers {
     /// A ray's material between the cutters of a batch ([`TriDexel::remove_each`]).
     own: Vec<Segment>,
     after: Vec<Segment>,
+    /// A batch's row as it is cut: its new segments, changed rays and NC lines, copied out
+    /// at their exact size when the row is done (no buffer grown from empty a row).
+    row: RowsCut,
 }
 
 thread_local! {

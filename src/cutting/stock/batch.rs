@@ -218,9 +218,16 @@ impl BatchContext<'_> {
             cut: vec![false; self.cutters.len()],
             ..RowFlags::default()
         };
-        let mut used = Vec::new();
-        let (mut new, mut changes) = (Vec::new(), Vec::new());
-        // The ray's material between cutters: taken out of `bufs`, which `cut_ray` borrows.
+        // The row's output and the ray's material between cutters: taken out of `bufs`,
+        // which `cut_ray` borrows.
+        let RowsCut {
+            mut new,
+            mut changes,
+            mut used,
+        } = std::mem::take(&mut bufs.row);
+        new.clear();
+        changes.clear();
+        used.clear();
         let (mut own, mut next) = (
             std::mem::take(&mut bufs.own),
             std::mem::take(&mut bufs.after),
@@ -285,7 +292,13 @@ impl BatchContext<'_> {
             }
         }
         (bufs.own, bufs.after) = (own, next);
-        (RowsCut { new, changes, used }, flags)
+        let cut = RowsCut {
+            new: new.to_vec(),
+            changes: changes.to_vec(),
+            used: used.to_vec(),
+        };
+        bufs.row = RowsCut { new, changes, used };
+        (cut, flags)
     }
 }
 
