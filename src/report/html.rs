@@ -346,6 +346,14 @@ fn legend_html(out: &mut String, l: &Legend) {
     out.push_str("</div></div>");
 }
 
+/// Appends `bytes` to the page as a plain-text script block `id`, base64-encoded straight
+/// into it (no second copy of the text).
+fn embed_base64(out: &mut String, id: &str, bytes: &[u8]) {
+    let _ = write!(out, "<script type=\"text/plain\" id=\"{id}\">");
+    base64::engine::general_purpose::STANDARD.encode_string(bytes, out);
+    out.push_str("</script>\n");
+}
+
 /// The page as HTML.
 pub fn render_page(page: &Page) -> String {
     let mut out =
@@ -383,16 +391,9 @@ pub fn render_page(page: &Page) -> String {
             "<script type=\"application/json\" id=\"twinmill-view\">{}</script>",
             script_json(&meta)
         );
-        // Encoded straight into the page: no second copy of the geometry's text.
-        out.push_str("<script type=\"text/plain\" id=\"twinmill-glb\">");
-        base64::engine::general_purpose::STANDARD.encode_string(&v.glb, &mut out);
-        out.push_str("</script>\n");
+        embed_base64(&mut out, "twinmill-glb", &v.glb);
         if let Some(png) = &v.picture {
-            let _ = writeln!(
-                out,
-                "<script type=\"text/plain\" id=\"twinmill-picture\">{}</script>",
-                base64::engine::general_purpose::STANDARD.encode(png)
-            );
+            embed_base64(&mut out, "twinmill-picture", png);
         }
     }
     for s in &page.sections {
