@@ -180,8 +180,8 @@ pub fn simulate(
             None,
         ),
     };
-    // The stock's last reads: its figures. Freed before the page is built (the page's
-    // buffers then reuse its memory rather than add to the process's peak).
+    // The stock's last reads: its figures. Freed before the page is built, whose buffers
+    // may then reuse its memory.
     let stock_report = StockReport::of(&stock, volume0);
     drop(stock);
     let clock = Instant::now();
