@@ -208,15 +208,21 @@ pub(super) fn occupied_roots(lat: &Lat, rn: [usize; 3]) -> Vec<bool> {
     out
 }
 
-/// The column words of a block: `(s + 1)²` columns, column (a, b) at `a + b·(s + 1)`.
-fn block_masks(lat: &Lat, o: [isize; 3], s: usize) -> Vec<u64> {
-    let mut m = Vec::with_capacity((s + 1) * (s + 1));
-    for b in 0..=s as isize {
-        for a in 0..=s as isize {
-            m.push(lat.column(o[0] + a, o[1] + b, o[2], s));
-        }
+/// The column words of a block (origin `o`, size `s`) inside the root block whose column
+/// words ([`Lat::column`] over the root's `ROOT + 1` points, from its origin `r0`) are
+/// `root`: `(s + 1)²` columns, column (a, b) at `a + b·(s + 1)`. A block's k range lies in
+/// its root's, so its words are the root's shifted down to its first k and cut to `s + 1`
+/// bits: the same words [`Lat::column`] reads, without reading the rays again.
+fn block_masks(root: &[u64], r0: [isize; 3], o: [isize; 3], s: usize, m: &mut Vec<u64>) {
+    let w = ROOT + 1;
+    let (di, dj) = ((o[0] - r0[0]) as usize, (o[1] - r0[1]) as usize);
+    let shift = (o[2] - r0[2]) as usize;
+    let keep = bit_range(0, s);
+    m.clear();
+    for b in 0..=s {
+        let row = &root[(dj + b) * w + di..][..=s];
+        m.extend(row.iter().map(|&c| c >> shift & keep));
     }
-    m
 }
 
 /// Bits t = 0..=s where A + B·t < 0 (a plane's inside along a column).
@@ -271,8 +277,7 @@ fn fit_plane(hits: &[&Vtx]) -> (Plane, Real) {
 }
 
 /// The leaf a block is, or None if it must split. Also returns the plane residual.
-fn classify(lat: &Lat, o: [isize; 3], s: usize, tol: Real) -> (Option<Kind>, Real) {
-    let masks = block_masks(lat, o, s);
+fn classify(lat: &Lat, masks: &[u64], o: [isize; 3], s: usize, tol: Real) -> (Option<Kind>, Real) {
     let w = s + 1;
     let full = bit_range(0, s);
     if masks.iter().all(|&m| m == 0) || masks.iter().all(|&m| m == full) {
@@ -391,16 +396,40 @@ pub(super) type TreeParts<'t> = (&'t mut Vec<Node>, &'t mut Vec<Kind>);
 /// Grows a root block's tree: classifies blocks, splitting until every part is a leaf;
 /// keeps the largest plane residual of the leaves it made.
 pub(super) struct Grower<'a, 'b> {
-    pub(super) lat: &'a Lat<'b>,
-    pub(super) tol: Real,
+    lat: &'a Lat<'b>,
+    tol: Real,
     pub(super) resid: Real,
+    /// The root block's origin and its column words ([`Lat::column`] over its `ROOT + 1`
+    /// points, column (a, b) at `a + b·(ROOT + 1)`), read once for all its blocks.
+    r0: [isize; 3],
+    root: Vec<u64>,
+    /// The block being classified's column words.
+    masks: Vec<u64>,
 }
 
-impl Grower<'_, '_> {
+impl<'a, 'b> Grower<'a, 'b> {
+    /// A grower of the tree of the root block at `r0`, with the plane tolerance `tol`.
+    pub(super) fn new(lat: &'a Lat<'b>, tol: Real, r0: [isize; 3]) -> Self {
+        let w = ROOT as isize;
+        let root = (0..=w)
+            .flat_map(|b| (0..=w).map(move |a| (a, b)))
+            .map(|(a, b)| lat.column(r0[0] + a, r0[1] + b, r0[2], ROOT))
+            .collect();
+        Self {
+            lat,
+            tol,
+            resid: 0.0,
+            r0,
+            root,
+            masks: Vec::new(),
+        }
+    }
+
     /// Classifies the block at `nodes[at]` (origin `o`, size `s`), a planar or edge leaf's
     /// kind appended to `kinds`.
     pub(super) fn grow(&mut self, t: TreeParts, at: usize, o: [isize; 3], s: usize) {
-        let (kind, r) = classify(self.lat, o, s, self.tol);
+        block_masks(&self.root, self.r0, o, s, &mut self.masks);
+        let (kind, r) = classify(self.lat, &self.masks, o, s, self.tol);
         let (nodes, kinds) = t;
         match kind {
             Some(k) => {

@@ -162,11 +162,7 @@ pub fn mesh_stock_adaptive(
             }
             let o = origin(r);
             let (mut nodes, mut kinds) = (vec![Node::Empty], Vec::new());
-            let mut g = Grower {
-                lat: &lat,
-                tol,
-                resid: 0.0,
-            };
+            let mut g = Grower::new(&lat, tol, o);
             g.grow((&mut nodes, &mut kinds), 0, o, ROOT);
             let resid = g.resid;
             let empty = matches!(nodes[0], Node::Empty);
@@ -246,11 +242,10 @@ pub fn mesh_stock_adaptive(
             .par_iter_mut()
             .zip(&failed)
             .map(|(t, nodes)| {
-                let mut g = Grower {
-                    lat,
-                    tol,
-                    resid: 0.0,
-                };
+                if nodes.is_empty() {
+                    return 0.0;
+                }
+                let mut g = Grower::new(lat, tol, t.origin);
                 for &(node, o, s) in nodes {
                     g.split((&mut t.nodes, &mut t.kinds), node, o, s);
                 }
