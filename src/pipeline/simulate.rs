@@ -3,7 +3,7 @@
 //! (from the design model, or from the part the nominal machine cuts) with the figures
 //! behind the colours, and the deviation map against the design model.
 
-use super::pages::{display_part, part_png, reference_part, view};
+use super::pages::{DisplayPart, display_part, part_png, reference_part, view};
 use super::{PipelineError, make_stock, sweep_failed};
 use crate::cutting::adaptive::AdaptiveReport;
 use crate::cutting::collide::{CollisionReport, sweep_with_checks};
@@ -70,7 +70,6 @@ pub fn simulate(
     program: &Program,
     progress: &dyn Progress,
 ) -> Result<Simulation, PipelineError> {
-    let path = scene.path.display().to_string();
     let mut timings: BTreeMap<String, Real> = BTreeMap::new();
     let clock = Instant::now();
     let mut stock = make_stock(scene)?;
@@ -81,13 +80,9 @@ pub fn simulate(
     timings.insert("sweep".into(), sweep_time);
     timings.insert("mesh".into(), mesh_time);
     let clock = Instant::now();
-    let render_err = |source| PipelineError::Render {
-        path: path.clone(),
-        source,
-    };
-    // The display part and `part.png`, with the part the deviations are measured from (the
-    // design model, or the program on the nominal machine read near the cut part's surface:
-    // no second sweep) made once the display mesh is, and timed on its own.
+    // The display part, with the part the deviations are measured from (the design model,
+    // or the program on the nominal machine read near the cut part's surface: no second
+    // sweep) made once the display mesh is, and timed on its own.
     let mut reference_time = 0.0;
     let shown = display_part(scene, &mesh, &stock, || {
         let clock = Instant::now();
@@ -95,18 +90,114 @@ pub fn simulate(
         reference_time = clock.elapsed().as_secs_f64();
         reference
     })?;
-    let part_png = part_png(scene, &shown)?;
-    timings.insert("reference".into(), reference_time);
-    timings.insert(
-        "render".into(),
-        clock.elapsed().as_secs_f64() - reference_time,
+    let display_time = clock.elapsed().as_secs_f64() - reference_time;
+    let markers = checked
+        .events
+        .iter()
+        .map(|e| {
+            let c = CollisionEvent::of(e);
+            Marker {
+                position: c.point_mm,
+                label: format!("line {}: {}", c.line, c.kind.replace('_', " ")),
+            }
+        })
+        .collect();
+    // What is read off the display part, the stock and the mesh, made side by side (each
+    // only reads them): the picture, the page's 3-D view, the deviation figures, and the
+    // stock's and the mesh's figures. Each task is timed on its own, so the timings of
+    // `render` (the display part and the picture), `page` and `deviation` may overlap.
+    let ((png, view3d), (deviation, (stock_report, mesh_summary))) = rayon::join(
+        || {
+            rayon::join(
+                || {
+                    let clock = Instant::now();
+                    part_png(scene, &shown).map(|p| (p, clock.elapsed().as_secs_f64()))
+                },
+                || {
+                    let clock = Instant::now();
+                    view(scene, Some(&shown), None, Vec::new(), None, markers)
+                        .map(|v| (v, clock.elapsed().as_secs_f64()))
+                },
+            )
+        },
+        || {
+            rayon::join(
+                || deviation_of(scene, &stock, &shown),
+                || {
+                    (
+                        StockReport::of(&stock, volume0),
+                        mesh_summary(&mesh, &mesh_report),
+                    )
+                },
+            )
+        },
     );
+    let (part_png, png_time) = png?;
+    let (mut view3d, view_time) = view3d?;
+    let (deviation, deviation_png, plots, deviation_time) = deviation?;
+    // The stock's last read is done: freed before the page is built, whose buffers may
+    // then reuse its memory.
+    drop(stock);
+    timings.insert("reference".into(), reference_time);
+    timings.insert("render".into(), display_time + png_time);
+    if let Some(t) = deviation_time {
+        timings.insert("deviation".into(), t);
+    }
+    timings.insert("page".into(), view_time);
+    view3d.picture = Some(part_png.clone());
+    let report = SimulationReport {
+        scene: scene.name.clone(),
+        program: program.path.display().to_string(),
+        stock: stock_report,
+        sweep: checked.sweep,
+        mesh: mesh_summary,
+        collisions: checked.events.iter().map(CollisionEvent::of).collect(),
+        deviation,
+        timings_s: timings,
+    };
+    let html = render_page(&crate::report::pages::simulate_page(
+        &report,
+        Some(view3d),
+        plots,
+    ));
+    Ok(Simulation {
+        report,
+        mesh,
+        part_png,
+        html,
+        deviation_png,
+    })
+}
+
+/// The part's deviation figures: from the scene's design model when it has one (the
+/// deviation map, its picture and its plot, with the seconds they took), else the figures
+/// behind the display part's colours (its deviations from the nominal part).
+#[allow(clippy::type_complexity)]
+fn deviation_of(
+    scene: &Scene,
+    stock: &TriDexel,
+    shown: &DisplayPart,
+) -> Result<
+    (
+        Option<DeviationSummary>,
+        Option<Vec<u8>>,
+        Vec<Plot>,
+        Option<Real>,
+    ),
+    PipelineError,
+> {
+    let path = scene.path.display().to_string();
+    let render_err = |source| PipelineError::Render {
+        path: path.clone(),
+        source,
+    };
     let mut plots = Vec::new();
+    let mut deviation_time = None;
     let (deviation, deviation_png) = match &scene.design {
         Some((design_path, design)) => {
             let clock = Instant::now();
             let (points, summary) =
-                deviation_map(&stock, design).map_err(|source| PipelineError::Deviation {
+                deviation_map(stock, design).map_err(|source| PipelineError::Deviation {
                     path: path.clone(),
                     source,
                 })?;
@@ -145,7 +236,7 @@ pub fn simulate(
                 caption: "Deviation map, top view: each cell shows the crossing of largest |deviation| in its column of the part.".into(),
                 svg,
             });
-            timings.insert("deviation".into(), clock.elapsed().as_secs_f64());
+            deviation_time = Some(clock.elapsed().as_secs_f64());
             (
                 Some(DeviationSummary {
                     from: "design",
@@ -173,66 +264,31 @@ pub fn simulate(
                         rms_mm: d.rms_mm,
                         at_max: d.max.corner.coords.into(),
                         at_min: d.min.corner.coords.into(),
-                        line_at_max: nearest_line(&stock, &d.max.centroid),
-                        line_at_min: nearest_line(&stock, &d.min.centroid),
+                        line_at_max: nearest_line(stock, &d.max.centroid),
+                        line_at_min: nearest_line(stock, &d.min.centroid),
                     },
                 }),
             None,
         ),
     };
-    // The stock's last reads: its figures. Freed before the page is built, whose buffers
-    // may then reuse its memory.
-    let stock_report = StockReport::of(&stock, volume0);
-    drop(stock);
-    let clock = Instant::now();
-    let markers = checked
-        .events
-        .iter()
-        .map(|e| {
-            let c = CollisionEvent::of(e);
-            Marker {
-                position: c.point_mm,
-                label: format!("line {}: {}", c.line, c.kind.replace('_', " ")),
-            }
-        })
-        .collect();
-    let mut view3d = view(scene, Some(&shown), None, Vec::new(), None, markers)?;
-    view3d.picture = Some(part_png.clone());
-    timings.insert("page".into(), clock.elapsed().as_secs_f64());
-    let report = SimulationReport {
-        scene: scene.name.clone(),
-        program: program.path.display().to_string(),
-        stock: stock_report,
-        sweep: checked.sweep,
-        mesh: MeshSummary {
-            vertices: mesh.vertices.len(),
-            triangles: mesh.triangles.len(),
-            euler_characteristic: mesh.euler_characteristic(),
-            volume_mm3: mesh.signed_volume(),
-            area_mm2: mesh.area(),
-            feature_vertices: mesh_report.feature_vertices,
-            bound_mm: mesh_report.bound_mm,
-            max_plane_residual_mm: mesh_report.max_plane_residual_mm,
-            planar_regions: mesh_report.planar_leaves,
-            edge_regions: mesh_report.edge_leaves,
-            fine_cells: mesh_report.fine_cells,
-        },
-        collisions: checked.events.iter().map(CollisionEvent::of).collect(),
-        deviation,
-        timings_s: timings,
-    };
-    let html = render_page(&crate::report::pages::simulate_page(
-        &report,
-        Some(view3d),
-        plots,
-    ));
-    Ok(Simulation {
-        report,
-        mesh,
-        part_png,
-        html,
-        deviation_png,
-    })
+    Ok((deviation, deviation_png, plots, deviation_time))
+}
+
+/// The surface mesh's figures, with the adaptive mesher's report.
+fn mesh_summary(mesh: &TriMesh, r: &AdaptiveReport) -> MeshSummary {
+    MeshSummary {
+        vertices: mesh.vertices.len(),
+        triangles: mesh.triangles.len(),
+        euler_characteristic: mesh.euler_characteristic(),
+        volume_mm3: mesh.signed_volume(),
+        area_mm2: mesh.area(),
+        feature_vertices: r.feature_vertices,
+        bound_mm: r.bound_mm,
+        max_plane_residual_mm: r.max_plane_residual_mm,
+        planar_regions: r.planar_leaves,
+        edge_regions: r.edge_leaves,
+        fine_cells: r.fine_cells,
+    }
 }
 
 /// The program cut into `stock` on the scene's deviated machine (with the collision checks
