@@ -378,15 +378,67 @@ impl Forest<'_> {
         // Kept until every tree is meshed: hold no spare capacity (the duplicates just
         // removed were most of the vertices), and the triangles by index, not by key.
         out.verts.shrink_to_fit();
-        let verts = &out.verts;
-        // Every corner's key is among the tree's vertices (each leaf adds those it uses).
-        let index = |k: &Key| {
-            let i = verts.partition_point(|v| v.0 < *k);
-            debug_assert_eq!(verts.get(i).map(|v| v.0), Some(*k));
-            i as u32
-        };
-        out.faces = out.tris.iter().map(|t| t.each_ref().map(index)).collect();
+        // Every corner's key is among the tree's vertices (each leaf adds those it uses):
+        // its index is its place among them, found through a hash table.
+        let index = KeyIndex::of(&out.verts);
+        out.faces = out
+            .tris
+            .iter()
+            .map(|t| t.each_ref().map(|k| index.find(&out.verts, *k)))
+            .collect();
         out.tris = Vec::new();
         out
+    }
+}
+
+/// The places of distinct vertex keys, by open addressing: a key's slot run starts at its
+/// hash and holds the index of each key placed there. Faster than a binary search over a
+/// tree's vertices for each triangle corner; the index found is the key's place, whatever
+/// the hash.
+struct KeyIndex {
+    slots: Vec<u32>,
+    mask: usize,
+}
+
+impl KeyIndex {
+    /// The index of `verts`' keys (distinct), in a table at least twice their count.
+    fn of(verts: &[(Key, Point3)]) -> Self {
+        let size = (2 * verts.len()).next_power_of_two().max(2);
+        let mut t = Self {
+            slots: vec![u32::MAX; size],
+            mask: size - 1,
+        };
+        for (i, (k, _)) in verts.iter().enumerate() {
+            let mut at = t.start(*k);
+            while t.slots[at] != u32::MAX {
+                at = (at + 1) & t.mask;
+            }
+            t.slots[at] = i as u32;
+        }
+        t
+    }
+
+    /// Where `k`'s run starts: its 128 bits folded and mixed (Fibonacci hashing).
+    fn start(&self, k: Key) -> usize {
+        let folded = (k as u64) ^ ((k >> 64) as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+        (folded.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 32) as usize & self.mask
+    }
+
+    /// The place of `k` among `verts`, the keys the index was made of.
+    fn find(&self, verts: &[(Key, Point3)], k: Key) -> u32 {
+        let mut at = self.start(k);
+        loop {
+            let i = self.slots[at];
+            if i == u32::MAX {
+                // Not a key of the index (never: each leaf adds the vertices it uses): where
+                // it would sort, as a binary search finds it.
+                debug_assert!(false, "a corner's key is among the tree's vertices");
+                return verts.partition_point(|v| v.0 < k) as u32;
+            }
+            if verts[i as usize].0 == k {
+                return i;
+            }
+            at = (at + 1) & self.mask;
+        }
     }
 }
