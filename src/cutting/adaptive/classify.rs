@@ -57,6 +57,30 @@ impl Signs<'_> {
         }
     }
 
+    /// Whether lattice point (i, j, k) of the leaf is inside: bit `k − k0` of
+    /// [`Self::column`], the plane(s) evaluated at that point alone.
+    fn inside(&self, lat: &Lat, i: isize, j: isize, k: isize) -> bool {
+        match self {
+            Signs::Predict(kind, k0, _) => {
+                let t = k - *k0;
+                let m = |pl: &Plane| {
+                    let x = lat.pos([i, j, *k0]);
+                    plane_inside(pl.n.dot(&x.coords) - pl.d, pl.n.z * lat.f.h[2], t as usize)
+                };
+                match kind {
+                    Kind::Planar(p) => m(p),
+                    Kind::Edge(p, q, true) => m(p) && m(q),
+                    Kind::Edge(p, q, false) => m(p) || m(q),
+                    Kind::Empty | Kind::Fine => false,
+                }
+            }
+            Signs::Cell(..) => {
+                let (m, k0) = self.column(lat, i, j);
+                m >> (k - k0) & 1 == 1
+            }
+        }
+    }
+
     /// Whether the face square (axis `n`, lower point `f0`, size `q`) certainly has one sign
     /// throughout: each plane is at least 1e-9 mm from all four corners on one side.
     pub(super) fn uniform(&self, lat: &Lat, n: usize, f0: [isize; 3], q: usize) -> bool {
@@ -93,8 +117,7 @@ impl Signs<'_> {
                 for b in 0..w {
                     for a in 0..w {
                         let p = point(n, f0[n], f0[u] + a as isize, f0[v] + b as isize);
-                        let (m, k0) = self.column(lat, p[0], p[1]);
-                        out[a + b * w] = bit(m, k0, p[2]);
+                        out[a + b * w] = self.inside(lat, p[0], p[1], p[2]);
                     }
                 }
             }
@@ -223,6 +246,17 @@ fn block_masks(root: &[u64], r0: [isize; 3], o: [isize; 3], s: usize, m: &mut Ve
         let row = &root[(dj + b) * w + di..][..=s];
         m.extend(row.iter().map(|&c| c >> shift & keep));
     }
+}
+
+/// Whether A + B·t < 0: bit `t` (0 ≤ t ≤ s) of [`plane_mask`]`(a, b, s)`, which holds the
+/// points where that holds (A + B·t is monotone in t, rounding included), and all or none
+/// of them as at t = 0 where the crossing is not finite.
+pub(super) fn plane_inside(a: Real, b: Real, t: usize) -> bool {
+    let pred = |t: usize| a + b * (t as Real) < 0.0;
+    if b == 0.0 || !(a / b).is_finite() {
+        return pred(0);
+    }
+    pred(t)
 }
 
 /// Bits t = 0..=s where A + B·t < 0 (a plane's inside along a column).

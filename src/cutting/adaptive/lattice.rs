@@ -20,7 +20,7 @@ fn point_bits(p: [isize; 3]) -> Key {
         .fold(0, |acc, &c| acc << 32 | (c + 1) as u32 as Key)
 }
 
-fn crossing_key(axis: usize, p: [isize; 3]) -> Key {
+pub(super) fn crossing_key(axis: usize, p: [isize; 3]) -> Key {
     (axis as Key) << 96 | point_bits(p)
 }
 

@@ -69,9 +69,9 @@ mod forest;
 mod lattice;
 mod triangles;
 
-#[cfg(test)]
-use classify::plane_mask;
 use classify::{Grower, Kind, Node, Plane, Signs, Tree, child_origin, occupied_roots};
+#[cfg(test)]
+use classify::{plane_inside, plane_mask};
 use forest::{Chain, Forest, LeafRef};
 use lattice::{Key, Lat, Vtx, bit_range, corner_key, local_key, point};
 use triangles::Out;

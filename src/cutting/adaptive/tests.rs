@@ -234,6 +234,74 @@ fn plane_masks_match_the_points_one_by_one() {
 }
 
 #[test]
+fn a_point_read_alone_has_its_plane_mask_bit() {
+    // The cases above, then a plane's crossing landing on lattice points (exact and one ulp
+    // off), slopes too small for a finite crossing, and non-finite values.
+    let mut cases: Vec<(Real, Real)> = vec![
+        (-3.2, 0.1),
+        (2.0, -0.25),
+        (0.0, 1.0),
+        (-1.0, 0.0),
+        (5.0, 0.0),
+        (-0.5, 1e-30),
+        (0.5, -1e-300),
+        (-1e300, 1e-300),
+        (Real::NAN, 1.0),
+        (1.0, Real::NAN),
+        (Real::INFINITY, -1.0),
+        (-0.0, -0.0),
+    ];
+    for k in 0..=32 {
+        let b = 0.1 * (k % 7 + 1) as Real;
+        for a in [
+            -b * k as Real,
+            (-b * k as Real).next_up(),
+            (-b * k as Real).next_down(),
+        ] {
+            cases.push((a, b));
+            cases.push((-a, -b));
+        }
+    }
+    for (a, b) in cases {
+        for s in [1usize, 4, 17, 32] {
+            let m = plane_mask(a, b, s);
+            for t in 0..=s {
+                assert_eq!(plane_inside(a, b, t), m >> t & 1 == 1, "{a} {b} {s} {t}");
+            }
+        }
+    }
+}
+
+#[test]
+fn the_key_index_finds_each_key_where_it_sorts() {
+    // Keys as the mesher makes them (crossings, corners, fan centres) on a small lattice,
+    // sorted and distinct: each found at its place, as a binary search finds it.
+    for n in [0usize, 1, 2, 3, 7, 50, 400] {
+        let mut keys: Vec<Key> = (0..n)
+            .flat_map(|i| {
+                let p = [
+                    (i % 5) as isize,
+                    (i / 5 % 5) as isize,
+                    (i / 25) as isize - 1,
+                ];
+                [
+                    lattice::crossing_key(i % 3, p),
+                    corner_key(i % 3, i % 4, p),
+                    local_key(i, i / 2, i % 3),
+                ]
+            })
+            .collect();
+        keys.sort_unstable();
+        keys.dedup();
+        let verts: Vec<(Key, Point3)> = keys.iter().map(|&k| (k, Point3::origin())).collect();
+        let index = triangles::KeyIndex::of(&verts);
+        for (i, &k) in keys.iter().enumerate() {
+            assert_eq!(index.find(&verts, k), i as u32);
+        }
+    }
+}
+
+#[test]
 fn gallop_finds_what_partition_point_finds() {
     // Every split point of sorted runs with repeats, from every start, on empty and short
     // slices too.

@@ -395,14 +395,14 @@ impl Forest<'_> {
 /// hash and holds the index of each key placed there. Faster than a binary search over a
 /// tree's vertices for each triangle corner; the index found is the key's place, whatever
 /// the hash.
-struct KeyIndex {
+pub(super) struct KeyIndex {
     slots: Vec<u32>,
     mask: usize,
 }
 
 impl KeyIndex {
     /// The index of `verts`' keys (distinct), in a table at least twice their count.
-    fn of(verts: &[(Key, Point3)]) -> Self {
+    pub(super) fn of(verts: &[(Key, Point3)]) -> Self {
         let size = (2 * verts.len()).next_power_of_two().max(2);
         let mut t = Self {
             slots: vec![u32::MAX; size],
@@ -425,7 +425,7 @@ impl KeyIndex {
     }
 
     /// The place of `k` among `verts`, the keys the index was made of.
-    fn find(&self, verts: &[(Key, Point3)], k: Key) -> u32 {
+    pub(super) fn find(&self, verts: &[(Key, Point3)], k: Key) -> u32 {
         let mut at = self.start(k);
         loop {
             let i = self.slots[at];
