@@ -296,22 +296,35 @@ fn predicted_mask(lat: &Lat, p: &Plane, o: [isize; 3], a: isize, b: isize, s: us
 }
 
 /// Fits a plane to crossings: the mean normal, the mean offset, and the largest residual.
-fn fit_plane(hits: &[&Vtx]) -> (Plane, Real) {
-    let n = hits
-        .iter()
+fn fit_plane(hits: &[Vtx], group: &[u32]) -> (Plane, Real) {
+    let each = || group.iter().map(|&i| &hits[i as usize]);
+    let n = each()
         .fold(Vector3::zeros(), |s, h| s + h.n)
         .try_normalize(0.0)
         .unwrap_or_else(Vector3::z);
-    let d = hits.iter().map(|h| n.dot(&h.p.coords)).sum::<Real>() / hits.len() as Real;
-    let r = hits
-        .iter()
+    let d = each().map(|h| n.dot(&h.p.coords)).sum::<Real>() / group.len() as Real;
+    let r = each()
         .map(|h| (n.dot(&h.p.coords) - d).abs())
         .fold(0.0, Real::max);
     (Plane { n, d }, r)
 }
 
+/// The working buffers of [`classify`], kept by the [`Grower`] from block to block: the
+/// block's crossings and the two groups of their normals (indices into the crossings).
+#[derive(Default)]
+pub(super) struct ClassifyBuffers {
+    hits: Vec<Vtx>,
+    groups: [Vec<u32>; 2],
+}
+
 /// The leaf a block is, or None if it must split. Also returns the plane residual.
-fn classify(lat: &Lat, masks: &[u64], o: [isize; 3], s: usize, tol: Real) -> (Option<Kind>, Real) {
+fn classify(
+    lat: &Lat,
+    masks: &[u64],
+    (o, s): ([isize; 3], usize),
+    tol: Real,
+    bufs: &mut ClassifyBuffers,
+) -> (Option<Kind>, Real) {
     let w = s + 1;
     let full = bit_range(0, s);
     if masks.iter().all(|&m| m == 0) || masks.iter().all(|&m| m == full) {
@@ -320,7 +333,11 @@ fn classify(lat: &Lat, masks: &[u64], o: [isize; 3], s: usize, tol: Real) -> (Op
     if s == 1 {
         return (Some(Kind::Fine), 0.0);
     }
-    let mut hits = Vec::new();
+    let ClassifyBuffers {
+        hits,
+        groups: [g0, g1],
+    } = bufs;
+    hits.clear();
     let mut push = |axis: usize, p: [isize; 3], inside_low: bool| -> bool {
         let (v, found) = lat.crossing(axis, p, inside_low);
         hits.push(v);
@@ -358,22 +375,23 @@ fn classify(lat: &Lat, masks: &[u64], o: [isize; 3], s: usize, tol: Real) -> (Op
     let cos = GROUP_DEGREES.to_radians().cos();
     let n0 = hits[0].n;
     let mut second: Option<Vector3> = None;
-    let (mut g0, mut g1) = (Vec::new(), Vec::new());
-    for h in &hits {
+    g0.clear();
+    g1.clear();
+    for (i, h) in hits.iter().enumerate() {
         if h.n.dot(&n0) >= cos {
-            g0.push(h);
+            g0.push(i as u32);
         } else {
             match second {
                 None => {
                     second = Some(h.n);
-                    g1.push(h);
+                    g1.push(i as u32);
                 }
-                Some(r) if h.n.dot(&r) >= cos => g1.push(h),
+                Some(r) if h.n.dot(&r) >= cos => g1.push(i as u32),
                 Some(_) => return (None, 0.0),
             }
         }
     }
-    let (p, r0) = fit_plane(&g0);
+    let (p, r0) = fit_plane(hits, g0);
     if r0 > tol {
         return (None, 0.0);
     }
@@ -402,7 +420,7 @@ fn classify(lat: &Lat, masks: &[u64], o: [isize; 3], s: usize, tol: Real) -> (Op
             (None, 0.0)
         };
     }
-    let (q, r1) = fit_plane(&g1);
+    let (q, r1) = fit_plane(hits, g1);
     if r1 > tol {
         return (None, 0.0);
     }
@@ -439,6 +457,7 @@ pub(super) struct Grower<'a, 'b> {
     root: Vec<u64>,
     /// The block being classified's column words.
     masks: Vec<u64>,
+    bufs: ClassifyBuffers,
 }
 
 impl<'a, 'b> Grower<'a, 'b> {
@@ -456,6 +475,7 @@ impl<'a, 'b> Grower<'a, 'b> {
             r0,
             root,
             masks: Vec::new(),
+            bufs: ClassifyBuffers::default(),
         }
     }
 
@@ -463,7 +483,7 @@ impl<'a, 'b> Grower<'a, 'b> {
     /// kind appended to `kinds`.
     pub(super) fn grow(&mut self, t: TreeParts, at: usize, o: [isize; 3], s: usize) {
         block_masks(&self.root, self.r0, o, s, &mut self.masks);
-        let (kind, r) = classify(self.lat, &self.masks, o, s, self.tol);
+        let (kind, r) = classify(self.lat, &self.masks, (o, s), self.tol, &mut self.bufs);
         let (nodes, kinds) = t;
         match kind {
             Some(k) => {
