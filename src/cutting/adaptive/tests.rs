@@ -294,7 +294,7 @@ fn the_key_index_finds_each_key_where_it_sorts() {
         keys.sort_unstable();
         keys.dedup();
         let verts: Vec<(Key, Point3)> = keys.iter().map(|&k| (k, Point3::origin())).collect();
-        let index = triangles::KeyIndex::of(&verts);
+        let index = triangles::KeyIndex::of(&verts, Vec::new());
         for (i, &k) in keys.iter().enumerate() {
             assert_eq!(index.find(&verts, k), i as u32);
         }

@@ -62,7 +62,7 @@ fn fan_polygon(
 }
 
 /// A leaf's closed loops, vertex by vertex (loop `k` is `v[ranges[k]]`), and the working
-/// buffers that build them: one per tree meshed, reused from leaf to leaf.
+/// buffers that build them: one per thread, reused from leaf to leaf and tree to tree.
 #[derive(Default)]
 pub(super) struct Loops {
     v: Vec<Vtx>,
@@ -352,9 +352,35 @@ fn share_cell_face(a: Key, b: Key) -> bool {
 impl Forest<'_> {
     /// Meshes every leaf of tree `ti`, in node order.
     pub(super) fn mesh_tree(&self, ti: usize, t: &Tree, tol: Real, plane_tol: Real) -> Out {
-        let mut out = Out::default();
-        let mut loops = Loops::default();
-        let mut stack = vec![(0usize, t.origin, ROOT)];
+        TREE_SCRATCH.with_borrow_mut(|scratch| self.mesh_tree_in(ti, t, (tol, plane_tol), scratch))
+    }
+
+    /// [`Self::mesh_tree`] with the working buffers `scratch`: the tree's triangles and
+    /// vertices are gathered there and copied out at their exact sizes, so a thread meshing
+    /// tree after tree grows no vector once its buffers have reached the largest tree's.
+    fn mesh_tree_in(
+        &self,
+        ti: usize,
+        t: &Tree,
+        (tol, plane_tol): (Real, Real),
+        scratch: &mut TreeScratch,
+    ) -> Out {
+        let TreeScratch {
+            tris,
+            verts,
+            loops,
+            stack,
+            slots,
+        } = scratch;
+        let mut out = Out {
+            tris: std::mem::take(tris),
+            verts: std::mem::take(verts),
+            ..Out::default()
+        };
+        out.tris.clear();
+        out.verts.clear();
+        stack.clear();
+        stack.push((0usize, t.origin, ROOT));
         while let Some((node, o, s)) = stack.pop() {
             if let Node::Split(first) = t.nodes[node] {
                 for c in (0..8).rev() {
@@ -368,27 +394,44 @@ impl Forest<'_> {
                     s,
                     kind,
                 };
-                self.mesh_leaf(&leaf, (tol, plane_tol), &mut out, &mut loops);
+                self.mesh_leaf(&leaf, (tol, plane_tol), &mut out, loops);
             }
         }
         // Each vertex is named by every leaf that uses it: keep one per tree (equal keys
         // carry equal positions), so the trees' outputs stay near the mesh's size.
         out.verts.sort_unstable_by_key(|v| v.0);
         out.verts.dedup_by_key(|v| v.0);
-        // Kept until every tree is meshed: hold no spare capacity (the duplicates just
-        // removed were most of the vertices), and the triangles by index, not by key.
-        out.verts.shrink_to_fit();
         // Every corner's key is among the tree's vertices (each leaf adds those it uses):
         // its index is its place among them, found through a hash table.
-        let index = KeyIndex::of(&out.verts);
+        let index = KeyIndex::of(&out.verts, std::mem::take(slots));
         out.faces = out
             .tris
             .iter()
             .map(|t| t.each_ref().map(|k| index.find(&out.verts, *k)))
             .collect();
-        out.tris = Vec::new();
+        // Kept until every tree is meshed: the vertices at their exact size, and the
+        // triangles by index, not by key; the buffers go back for the next tree.
+        let kept = out.verts.to_vec();
+        *verts = std::mem::replace(&mut out.verts, kept);
+        *tris = std::mem::take(&mut out.tris);
+        *slots = index.slots;
         out
     }
+}
+
+/// Per-thread working buffers of [`Forest::mesh_tree`], reused from tree to tree.
+#[derive(Default)]
+struct TreeScratch {
+    tris: Vec<[Key; 3]>,
+    verts: Vec<(Key, Point3)>,
+    loops: Loops,
+    stack: Vec<(usize, [isize; 3], usize)>,
+    slots: Vec<u32>,
+}
+
+thread_local! {
+    static TREE_SCRATCH: std::cell::RefCell<TreeScratch> =
+        std::cell::RefCell::new(TreeScratch::default());
 }
 
 /// The places of distinct vertex keys, by open addressing: a key's slot run starts at its
@@ -401,11 +444,14 @@ pub(super) struct KeyIndex {
 }
 
 impl KeyIndex {
-    /// The index of `verts`' keys (distinct), in a table at least twice their count.
-    pub(super) fn of(verts: &[(Key, Point3)]) -> Self {
+    /// The index of `verts`' keys (distinct), in a table at least twice their count, kept
+    /// in `slots` (whose contents are dropped; its capacity is reused).
+    pub(super) fn of(verts: &[(Key, Point3)], mut slots: Vec<u32>) -> Self {
         let size = (2 * verts.len()).next_power_of_two().max(2);
+        slots.clear();
+        slots.resize(size, u32::MAX);
         let mut t = Self {
-            slots: vec![u32::MAX; size],
+            slots,
             mask: size - 1,
         };
         for (i, (k, _)) in verts.iter().enumerate() {
