@@ -83,7 +83,10 @@ pub struct SimulationReport {
     pub collisions: Vec<CollisionEvent>,
     /// The deviation from the scene's design model, if it has one.
     pub deviation: Option<DeviationSummary>,
-    /// Stage timings (s).
+    /// Stage timings (s): `stock`, `sweep`, `mesh`, `reference`, `render` (the display part
+    /// and its picture), `page` (its 3-D view) and `deviation` (from a design model). The
+    /// picture, the view and the deviation are made side by side, each timed on its own, so
+    /// those three may overlap.
     pub timings_s: BTreeMap<String, f64>,
 }
 
