@@ -208,35 +208,9 @@ fn the_mesh_is_identical_on_one_and_two_threads() {
     assert_eq!(ra, rb);
 }
 
-#[test]
-fn plane_masks_match_the_points_one_by_one() {
-    for (a, b) in [
-        (-3.2, 0.1),
-        (2.0, -0.25),
-        (0.0, 1.0),
-        (-1.0, 0.0),
-        (5.0, 0.0),
-        (-0.5, 1e-30),
-        (7.5, -0.25),
-    ] {
-        for s in [1usize, 4, 32] {
-            let m = plane_mask(a, b, s);
-            for t in 0..=s {
-                assert_eq!(
-                    m >> t & 1 == 1,
-                    a + b * (t as Real) < 0.0,
-                    "{a} {b} {s} {t}"
-                );
-            }
-            assert_eq!(m >> (s + 1), 0);
-        }
-    }
-}
-
-#[test]
-fn a_point_read_alone_has_its_plane_mask_bit() {
-    // The cases above, then a plane's crossing landing on lattice points (exact and one ulp
-    // off), slopes too small for a finite crossing, and non-finite values.
+/// Planes along a column (`A + B·t`): plain ones, a crossing landing on lattice points
+/// (exact and one ulp off), slopes too small for a finite crossing, and non-finite values.
+fn plane_cases() -> Vec<(Real, Real)> {
     let mut cases: Vec<(Real, Real)> = vec![
         (-3.2, 0.1),
         (2.0, -0.25),
@@ -244,6 +218,7 @@ fn a_point_read_alone_has_its_plane_mask_bit() {
         (-1.0, 0.0),
         (5.0, 0.0),
         (-0.5, 1e-30),
+        (7.5, -0.25),
         (0.5, -1e-300),
         (-1e300, 1e-300),
         (Real::NAN, 1.0),
@@ -262,12 +237,23 @@ fn a_point_read_alone_has_its_plane_mask_bit() {
             cases.push((-a, -b));
         }
     }
-    for (a, b) in cases {
+    cases
+}
+
+#[test]
+fn plane_masks_match_the_points_one_by_one() {
+    for (a, b) in plane_cases() {
         for s in [1usize, 4, 17, 32] {
             let m = plane_mask(a, b, s);
             for t in 0..=s {
+                assert_eq!(
+                    m >> t & 1 == 1,
+                    a + b * (t as Real) < 0.0,
+                    "{a} {b} {s} {t}"
+                );
                 assert_eq!(plane_inside(a, b, t), m >> t & 1 == 1, "{a} {b} {s} {t}");
             }
+            assert_eq!(m >> (s + 1), 0);
         }
     }
 }
