@@ -91,15 +91,12 @@ pub fn simulate(
         reference
     })?;
     let display_time = clock.elapsed().as_secs_f64() - reference_time;
-    let markers = checked
-        .events
+    let collisions: Vec<CollisionEvent> = checked.events.iter().map(CollisionEvent::of).collect();
+    let markers = collisions
         .iter()
-        .map(|e| {
-            let c = CollisionEvent::of(e);
-            Marker {
-                position: c.point_mm,
-                label: format!("line {}: {}", c.line, c.kind.replace('_', " ")),
-            }
+        .map(|c| Marker {
+            position: c.point_mm,
+            label: format!("line {}: {}", c.line, c.kind.replace('_', " ")),
         })
         .collect();
     // What is read off the display part, the stock and the mesh, made side by side (each
@@ -109,15 +106,8 @@ pub fn simulate(
     let ((png, view3d), (deviation, (stock_report, mesh_summary))) = rayon::join(
         || {
             rayon::join(
-                || {
-                    let clock = Instant::now();
-                    part_png(scene, &shown).map(|p| (p, clock.elapsed().as_secs_f64()))
-                },
-                || {
-                    let clock = Instant::now();
-                    view(scene, Some(&shown), None, Vec::new(), None, markers)
-                        .map(|v| (v, clock.elapsed().as_secs_f64()))
-                },
+                || timed(|| part_png(scene, &shown)),
+                || timed(|| view(scene, Some(&shown), None, Vec::new(), None, markers)),
             )
         },
         || {
@@ -151,7 +141,7 @@ pub fn simulate(
         stock: stock_report,
         sweep: checked.sweep,
         mesh: mesh_summary,
-        collisions: checked.events.iter().map(CollisionEvent::of).collect(),
+        collisions,
         deviation,
         timings_s: timings,
     };
@@ -167,6 +157,12 @@ pub fn simulate(
         html,
         deviation_png,
     })
+}
+
+/// What `f` gives, with the seconds it took.
+fn timed<T>(f: impl FnOnce() -> Result<T, PipelineError>) -> Result<(T, Real), PipelineError> {
+    let clock = Instant::now();
+    f().map(|x| (x, clock.elapsed().as_secs_f64()))
 }
 
 /// The part's deviation figures: from the scene's design model when it has one (the

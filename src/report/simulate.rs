@@ -25,12 +25,13 @@ pub struct StockReport {
 impl StockReport {
     /// The figures of a cut `stock` whose volume before cutting was `volume0` (mm³).
     pub fn of(stock: &crate::cutting::stock::TriDexel, volume0: f64) -> Self {
+        let volume = stock.volume();
         Self {
             pitch_mm: stock.pitch(),
             rays: stock.grids().iter().map(|g| g.dims().0 * g.dims().1).sum(),
             segments: stock.grids().iter().map(|g| g.segment_count()).sum(),
-            volume_mm3: stock.volume(),
-            removed_mm3: volume0 - stock.volume(),
+            volume_mm3: volume,
+            removed_mm3: volume0 - volume,
             memory_mib: stock.memory_bytes() as f64 / 1048576.0,
         }
     }
