@@ -43,6 +43,25 @@
 //! then its halves (about the quarter poses, `s = h/4`): a ray whose material misses the
 //! swept cell, or both swept halves, is not changed by the cell.
 //!
+//! **The height-aware test** (`AxisSweep`, one per cell of the swept cull). The growth
+//! `max(l/2, r)·θ` holds the whole tool turning about its middle; a ray across the tool
+//! meets it within a short band of heights, and the tilt's first-order motion is a
+//! translation that grows linearly with height. Turning about the axis point `c_h` at any
+//! height `h` instead: the point moves by `τ·D(h) + e`, `D(h) = D + (h − l/2)·s·(w_t × ẑ)`
+//! (the reach at that height; `|e| ≤ A'·s²/2` with `A' = 2·Ω·P'` and `P'` the per-axis
+//! speed bound of any axis point), and a tool point at height `z` lies within
+//! `r + θ·|z − h|` of the axis through the moved `c_h` across it (a point turned by `θ`
+//! about an axis square to the tool's moves by at most `|z − h|·sin θ` across it, its
+//! height by at most `r·θ + |z − h|·θ²/2`). So for a ray's stretch of material within the
+//! end planes (grown by `r·θ + l·θ²/2 + e + |D_z|`) and within the swept pose's own clip
+//! radius of the axis, whose heights span `h ± b` (`h` its middle, kept on the axis), the
+//! tool lies within `r + g` of the segment `τ·D(h)`, `g = (r + θ·(b + |D_z| + e))/(1 − θ²)
+//! − r + e`: a growth of a micrometre or so where the swept pose's is tens. A ball's
+//! sphere turns into itself, so only its centre's path `τ·D(r)`, grown by `e`, matters.
+//! Used on rays crossing the tool (`|u_z| < 1/2` in the tool frame) whose material the swept
+//! cell meets but does not reach `r − g` deep into (deeper, no finer test would clear it),
+//! instead of the swept halves; rays along the tool keep the halves.
+//!
 //! **Consecutive moves** ([`GroupHull`]): each cell's tool lies in its middle pose's tool
 //! grown by `δ`, and that in the tool at one reference pose grown further by how far any
 //! tool point lies between the two poses: `|Δc| + ‖ΔR‖₂·ρ`, with `c` the middle of the tool's
@@ -227,6 +246,32 @@ impl Pair {
     }
 }
 
+impl Pair {
+    /// [`Pair::new`] from `u` with `u·u` and its reciprocal known, `d`, `u·d` and `d·d`
+    /// (one division where the two are apart).
+    #[inline(always)]
+    fn across((u, uu, inv_uu): (Vector3, Real, Real), d: Vector3, ud: Real, dd: Real) -> Self {
+        let den = uu * dd - ud * ud;
+        let both = dd * den;
+        if den > PARALLEL * uu * dd && both > Real::MIN_POSITIVE {
+            let x = 1.0 / both;
+            return Self {
+                u,
+                d,
+                ud,
+                dd,
+                inv_uu,
+                inv_dd: den * x,
+                inv_den: dd * x,
+                slack: 0.0,
+            };
+        }
+        let mut pair = Self::new(u, d);
+        pair.inv_uu = inv_uu;
+        pair
+    }
+}
+
 /// A lower bound, exact where the two are not nearly parallel, on the squared distance
 /// between the stretch `p + t·u`, `t ∈ [lo, hi]`, and the segment `τ·D`, `τ ∈ [−1, 1]` (`u`,
 /// `D` and their products in `q`): the least of the convex quadratic `|p + t·u − τ·D|²`
@@ -326,21 +371,64 @@ impl SweptPose {
     fn meets(
         &self,
         shape: Shape,
-        (r, l): (Real, Real),
+        rl: (Real, Real),
         o: &Point3,
         axis: usize,
         segs: &[Segment],
     ) -> bool {
         let p = self.rot.tr_mul(&(o - self.tip));
+        self.meets_at(shape, rl, &p, axis, segs)
+    }
+
+    /// [`Self::meets`] for the ray's origin `p` in the pose's tool frame.
+    #[inline(always)]
+    fn meets_at(
+        &self,
+        shape: Shape,
+        (r, l): (Real, Real),
+        p: &Vector3,
+        axis: usize,
+        segs: &[Segment],
+    ) -> bool {
+        self.reach_at(shape, (r, l), p, axis, segs) != Reach::Miss
+    }
+
+    /// [`Self::meets_at`], telling a ray whose material comes within `r − grow` of the
+    /// segment `±reach_xy` ([`Reach::Deep`]: the pose's own tool meets it there, so no finer
+    /// test would clear it) from one that only comes within `r + grow` ([`Reach::Near`]).
+    #[inline(always)]
+    fn reach_at(
+        &self,
+        shape: Shape,
+        (r, l): (Real, Real),
+        p: &Vector3,
+        axis: usize,
+        segs: &[Segment],
+    ) -> Reach {
         let (inv_z, across, full) = &self.axes[axis];
         let g = self.grow;
         let (s0, s1) = end_slab(shape, (r, l), g + self.reach.z.abs(), p.z, *inv_z);
         let rad2 = (r + g) * (r + g);
+        let deep2 = if g < r { (r - g) * (r - g) } else { -1.0 };
         let pxy = Vector3::new(p.x, p.y, 0.0);
-        segs.iter().any(|m| {
+        for m in segs {
             let (lo, hi) = (s0.max(m.lo.t), s1.min(m.hi.t));
-            lo <= hi && least_distance2(&pxy, across, (lo, hi)) <= rad2
-        }) || (shape == Shape::Ball && self.sphere_meets(r, &p, full, segs))
+            if lo <= hi {
+                let d2 = least_distance2(&pxy, across, (lo, hi));
+                if d2 <= rad2 {
+                    return if d2 <= deep2 {
+                        Reach::Deep
+                    } else {
+                        Reach::Near
+                    };
+                }
+            }
+        }
+        if shape == Shape::Ball && self.sphere_meets(r, p, full, segs) {
+            Reach::Near
+        } else {
+            Reach::Miss
+        }
     }
 
     /// Whether the ball's swept sphere (centre `(0, 0, r) ± reach`, radius `r + grow`)
@@ -353,45 +441,64 @@ impl SweptPose {
     }
 }
 
+/// How a swept pose's tool meets a ray's material ([`SweptPose::reach_at`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Reach {
+    Miss,
+    Near,
+    Deep,
+}
+
+/// The rates of a move whose axes all move at constant rates, for its swept cull: the total
+/// turn `omega` (rad) and bounds on the acceleration of the tool axis's middle point
+/// (`accel`) and of any point of the axis (`axis_accel`), in mm per unit λ².
+#[derive(Clone, Copy, Debug)]
+pub(super) struct SweptRates {
+    pub(super) omega: Real,
+    pub(super) accel: Real,
+    pub(super) axis_accel: Real,
+}
+
 /// The swept cull of a move whose axes all move at constant rates (see the module docs):
 /// per cell, [`SWEPT_PER_CELL`] swept poses, the cell about its middle sample and its
-/// halves about the quarter poses.
+/// halves about the quarter poses, each with its height-aware test ([`AxisSweep`]).
 #[derive(Clone, Debug)]
 pub(super) struct SweptPoses {
     pub(super) poses: Vec<SweptPose>,
+    axis: Vec<AxisSweep>,
 }
 
 impl SweptPoses {
     /// The swept poses of a move of `cells = (samples.len() − 1)/2` cells from its
-    /// `samples` and `quarters`, for a tool of radius `r` and length `l`, the move's total
-    /// turn `omega` (rad) and the bound `accel` on the acceleration of the tool axis's
-    /// middle point (mm per unit λ²).
+    /// `samples` and `quarters`, for a tool of `shape`, radius `r` and length `l`, and the
+    /// move's `rates`.
     pub(super) fn new(
         (samples, quarters): (&[Sample], &[(Real, Sample)]),
-        (r, l): (Real, Real),
-        omega: Real,
-        accel: Real,
+        (shape, r, l): (Shape, Real, Real),
+        rates: SweptRates,
     ) -> Self {
         let cells = (samples.len() - 1) / 2;
         let h = 1.0 / cells as Real;
         let mut poses = Vec::with_capacity(SWEPT_PER_CELL * cells);
+        let mut axis = Vec::with_capacity(cells);
+        let about =
+            |s: &Sample, half: Real| SweptPose::about(s, half, (r, l), (rates.omega, rates.accel));
         for j in 0..cells {
-            poses.push(SweptPose::about(
-                &samples[2 * j + 1],
-                h / 2.0,
-                (r, l),
-                (omega, accel),
-            ));
+            let s = &samples[2 * j + 1];
+            let pose = about(s, h / 2.0);
+            axis.push(AxisSweep::about(s, &pose, h / 2.0, (shape, r, l), rates));
+            poses.push(pose);
             for q in &quarters[2 * j..2 * j + 2] {
-                poses.push(SweptPose::about(&q.1, h / 4.0, (r, l), (omega, accel)));
+                poses.push(about(&q.1, h / 4.0));
             }
         }
-        Self { poses }
+        Self { poses, axis }
     }
 
     /// Whether the move may change the material `segs` of the ray `o + t·e_axis` (tool of
     /// `shape`, radius and length `rl`): false only when, in every cell, the swept cell or
-    /// both its swept halves miss the material.
+    /// both its swept halves miss the material. A swept pose meets it when both its test
+    /// and its height-aware one do (the second only asked where the first does).
     fn may_cut(
         &self,
         shape: Shape,
@@ -403,9 +510,221 @@ impl SweptPoses {
         let meets = |s: &SweptPose| s.meets(shape, rl, o, axis, segs);
         self.poses
             .chunks_exact(SWEPT_PER_CELL)
+            .zip(self.axis.iter())
+            .any(|(c, tight)| {
+                let p = c[0].rot.tr_mul(&(o - c[0].tip));
+                match c[0].reach_at(shape, rl, &p, axis, segs) {
+                    Reach::Miss => false,
+                    Reach::Deep => true,
+                    Reach::Near if tight.across(axis) => {
+                        let (inv_z, _, full) = &c[0].axes[axis];
+                        tight.meets((shape, rl.0, rl.1), (&p, full.u.z, *inv_z), axis, segs)
+                    }
+                    Reach::Near => meets(&c[1]) || meets(&c[2]),
+                }
+            })
+    }
+}
+
+#[cfg(test)]
+impl SweptPoses {
+    /// [`Self::may_cut`] by the swept poses alone, every cell by its swept halves (the
+    /// height-aware test left out): what the cull was without it.
+    pub(super) fn may_cut_by_halves(
+        &self,
+        (shape, r, l): (Shape, Real, Real),
+        o: &Point3,
+        axis: usize,
+        segs: &[Segment],
+    ) -> bool {
+        let meets = |s: &SweptPose| s.meets(shape, (r, l), o, axis, segs);
+        self.poses
+            .chunks_exact(SWEPT_PER_CELL)
             .any(|c| meets(&c[0]) && (meets(&c[1]) || meets(&c[2])))
     }
 }
+
+/// The height-aware test of one swept pose (see the module docs): the tool turned by `θ`
+/// about its axis point at height `z_c`, whose path is `τ·D(z_c)` to first order, lies in
+/// the tool about that path with radius `r + θ·|z − z_c|` (and the second-order terms) at
+/// height `z`. A ray's stretch spans a band of heights about its middle `z_c`: across a
+/// tool the band is far narrower than the tool, so the growth is far smaller than the
+/// swept pose's `max(l/2, r)·θ`, which holds the whole tool about its middle.
+#[derive(Clone, Debug)]
+struct AxisSweep {
+    /// The axis middle's reach across the axis, `D_xy`, and its change per unit height:
+    /// the axis point at height `z` is reached by `D + (z − l/2)·tilt` (`tilt` lies across
+    /// the axis, so `D_z` is the same for every height).
+    reach: Vector3,
+    tilt: Vector3,
+    /// `|D_xy|²`, `D_xy·tilt` and `|tilt|²`: `|D(z)_xy|²` as a quadratic in height.
+    dd: Real,
+    dt: Real,
+    tt: Real,
+    /// The growth for a stretch spanning heights `z_c ± b`: `grow.0 + grow.1·b` (mm), the
+    /// rounding's allowances included.
+    grow: (Real, Real),
+    /// The end planes' growth, the reach along the axis included (mm).
+    slab: Real,
+    /// Per axis ray: whether it crosses the tool (`|u_z| <` [`ACROSS_COS`]), where this
+    /// test is used instead of the swept halves, and what the test needs of its direction.
+    rays: [Option<AcrossRay>; 3],
+    /// For a ball end mill, per axis ray: its pair with the sphere centre's reach `D(r)`
+    /// (the sphere turns into itself: only its centre's path matters), and the sphere's
+    /// growth.
+    sphere: Option<Box<([Pair; 3], Real)>>,
+}
+
+/// An axis ray's direction `u` in a swept pose's tool frame, for the height-aware test:
+/// its part across the axis, `|u_xy|²` and its reciprocal, the half-length of its longest
+/// stretch within the clip radius of the axis (`(r + g + |D_xy|)/|u_xy|`, from the swept
+/// pose's own bound), and `u_xy·D_xy`, `u_xy·tilt`.
+#[derive(Clone, Copy, Debug)]
+struct AcrossRay {
+    u: Vector3,
+    uu: Real,
+    inv_uu: Real,
+    half: Real,
+    ud: Real,
+    ut: Real,
+}
+
+impl AxisSweep {
+    /// The height-aware test of the swept pose `pose` about the sample `s` over `λ` within
+    /// `half` of it, for a tool of `shape`, radius `r` and length `l`, on a move of `rates`.
+    fn about(
+        s: &Sample,
+        pose: &SweptPose,
+        half: Real,
+        (shape, r, l): (Shape, Real, Real),
+        rates: SweptRates,
+    ) -> Self {
+        let tilt_rate = (s.w_t.x * s.w_t.x + s.w_t.y * s.w_t.y).sqrt();
+        let theta = half * tilt_rate + 0.75 * rates.omega * rates.omega * half * half;
+        let drift = rates.axis_accel * half * half / 2.0;
+        let tilt = Vector3::new(s.w_t.y, -s.w_t.x, 0.0) * half;
+        let reach = Vector3::new(pose.reach.x, pose.reach.y, 0.0);
+        let reach_z = pose.reach.z.abs();
+        // The rounding of any axis point's reach and of the quantities built on it.
+        let round = HULL_ROUNDING * (pose.reach.norm() + tilt.norm() * l.max(r) + r);
+        // Across the axis: g = (r + θ·(b + |D_z| + e))/(1 − θ²) − r + e, e the drift.
+        let inv = 1.0 / (1.0 - theta * theta);
+        let grow0 = (r + theta * (reach_z + drift)) * inv - r + drift;
+        let grow = (
+            (grow0 + round) * (1.0 + HULL_ROUNDING) + CULL_MARGIN,
+            theta * inv * (1.0 + HULL_ROUNDING),
+        );
+        // A point at radius r turns along the axis by r·θ, one at height z from the turn's
+        // centre by z·θ²/2; the centre drifts by `drift` and moves by |D_z| along it.
+        let slab = r * theta + l * theta * theta / 2.0 + drift + reach_z;
+        let slab = (slab + round) * (1.0 + HULL_ROUNDING) + CULL_MARGIN;
+        let clip = r + pose.grow + reach.norm() + CULL_MARGIN;
+        let dirs = axis_dirs(s);
+        let rays = dirs.map(|u| {
+            let uxy = Vector3::new(u.x, u.y, 0.0);
+            let uu = uxy.norm_squared();
+            (u.z.abs() < ACROSS_COS).then(|| AcrossRay {
+                u: uxy,
+                uu,
+                inv_uu: 1.0 / uu,
+                half: clip / uu.sqrt(),
+                ud: uxy.dot(&reach),
+                ut: uxy.dot(&tilt),
+            })
+        });
+        let sphere = (shape == Shape::Ball).then(|| {
+            let d = pose.reach + tilt * (r - l / 2.0);
+            let g = (drift + round) * (1.0 + HULL_ROUNDING) + CULL_MARGIN;
+            Box::new((dirs.map(|u| Pair::new(u, d)), g))
+        });
+        Self {
+            reach,
+            tilt,
+            dd: reach.norm_squared(),
+            dt: reach.dot(&tilt),
+            tt: tilt.norm_squared(),
+            grow,
+            slab,
+            rays,
+            sphere,
+        }
+    }
+
+    /// Whether this test is used for the axis ray `axis` (it crosses the tool).
+    fn across(&self, axis: usize) -> bool {
+        self.rays[axis].is_some()
+    }
+
+    /// Whether the swept pose of a tool of `shape` (radius `r`, length `l`), seen by this
+    /// test, meets any of the material `segs` of the axis ray `axis` (one that crosses the
+    /// tool) whose origin is `p` and direction `u_z` along the axis in the pose's tool
+    /// frame. Per segment, the stretch within the end planes and within the clip radius of
+    /// the axis spans heights `z_c ± b` (`z_c` kept on the axis between 0 and `l`); the
+    /// axis point at `z_c` moves along `τ·D(z_c)` and the tool about it lies within `r + g`
+    /// of that segment, `g = (r + θ·(b + |D_z| + e))/(1 − θ²) − r + e` (`e` the drift). A
+    /// ball's sphere turns into itself: its centre's path alone, grown by the drift.
+    #[inline(always)]
+    fn meets(
+        &self,
+        (shape, r, l): (Shape, Real, Real),
+        (p, u_z, inv_z): (&Vector3, Real, Option<Real>),
+        axis: usize,
+        segs: &[Segment],
+    ) -> bool {
+        let Some(ray) = &self.rays[axis] else {
+            return true;
+        };
+        let (s0, s1) = end_slab(shape, (r, l), self.slab, p.z, inv_z);
+        // The stretch within the clip radius of the axis lies within the longest chord's
+        // half-length of the point nearest the axis (widened for the rounding).
+        let near = -(p.x * ray.u.x + p.y * ray.u.y) * ray.inv_uu;
+        let pad = CLIP_PAD * (1.0 + near.abs() + ray.half);
+        let (lo_c, hi_c) = (s0.max(near - ray.half - pad), s1.min(near + ray.half + pad));
+        let pxy = Vector3::new(p.x, p.y, 0.0);
+        segs.iter().any(|m| {
+            let (lo, hi) = (lo_c.max(m.lo.t), hi_c.min(m.hi.t));
+            if lo > hi {
+                return false;
+            }
+            let (z0, z1) = (p.z + lo * u_z, p.z + hi * u_z);
+            let zc = (0.5 * (z0 + z1)).clamp(0.0, l);
+            let band = (z0 - zc).abs().max((z1 - zc).abs());
+            if !band.is_finite() {
+                return true;
+            }
+            let k = zc - l / 2.0;
+            let g = self.grow.0 + self.grow.1 * band;
+            let across = Pair::across(
+                (ray.u, ray.uu, ray.inv_uu),
+                self.reach + self.tilt * k,
+                ray.ud + k * ray.ut,
+                self.dd + k * (2.0 * self.dt + k * self.tt),
+            );
+            least_distance2(&pxy, &across, (lo, hi)) <= (r + g) * (r + g)
+        }) || (shape == Shape::Ball && self.sphere_meets(r, p, axis, segs))
+    }
+
+    /// Whether the ball's sphere, its centre swept along `τ·D(r)` and grown by the drift,
+    /// meets the material `segs` along the axis ray `axis` from `p` (tool frame).
+    fn sphere_meets(&self, r: Real, p: &Vector3, axis: usize, segs: &[Segment]) -> bool {
+        let Some(sphere) = &self.sphere else {
+            return true;
+        };
+        let (pairs, g) = &**sphere;
+        let rad2 = (r + g) * (r + g);
+        let w = p - Vector3::new(0.0, 0.0, r);
+        segs.iter()
+            .any(|m| least_distance2(&w, &pairs[axis], (m.lo.t, m.hi.t)) <= rad2)
+    }
+}
+
+/// Below this `|u_z|` (the cosine between an axis ray and the tool axis) a ray crosses the
+/// tool and the height-aware test is used instead of the swept halves.
+const ACROSS_COS: Real = 0.5;
+
+/// The height-aware test widens a stretch's ends by this much per mm of their distance from
+/// the ray's origin (and this much, mm) for the rounding of the quadratic's roots.
+const CLIP_PAD: Real = 1e-9;
 
 impl RotaryEnvelope {
     /// Whether the move may change the material `segs` of the ray `o + t·e_axis`:

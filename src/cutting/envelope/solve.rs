@@ -54,16 +54,21 @@ impl RotaryEnvelope {
             let half = (part_z[k + 1] - part_z[k]) / 2.0;
             speed_bound(chain, part_z[k] + half, half + r, start, end, state)
         });
-        // The swept cull's rates: the total turn Ω and a bound on the acceleration of the
-        // tool axis's middle point, 2·Ω·P with P its per-axis speed bound (see `cull`).
+        // The swept cull's rates: the total turn Ω and bounds on the acceleration of the
+        // tool axis's middle point and of any point of the axis, 2·Ω·P with P their
+        // per-axis speed bound (see `cull`).
         let rates = path.constant_rates().then(|| {
             let (omega, _) = rotation_and_travel(chain, start, end);
-            let per_axis = axis_speed_bounds(chain, l / 2.0, 0.0, start, end).1;
-            (omega, 2.0 * omega * per_axis)
+            let per_axis = |reach| axis_speed_bounds(chain, l / 2.0, reach, start, end).1;
+            cull::SweptRates {
+                omega,
+                accel: 2.0 * omega * per_axis(0.0),
+                axis_accel: 2.0 * omega * per_axis(l / 2.0),
+            }
         });
         // A point accelerates by at most 2·Ω·P, P its per-axis speed bound (the swept cull's
         // bound, see `cull`).
-        let touch = rates.map(|(omega, _)| {
+        let touch = rates.map(|cull::SweptRates { omega, .. }| {
             let half = (l - part_z[0]) / 2.0;
             let per_axis = |reach: Real| {
                 axis_speed_bounds(chain, part_z[0] + half, half + reach, start, end).1
@@ -109,14 +114,14 @@ impl RotaryEnvelope {
     /// The envelope of a tool of `shape` (radius and length `r`, `l`) on `path`, no tool
     /// point faster than `speed` per unit λ, the capsule pieces between heights `part_z`
     /// no faster than `part_speed`; `rates`, where every axis moves at a constant rate, the
-    /// total turn and the acceleration bound of the swept cull (`cull::SweptPoses`).
+    /// total turn and the acceleration bounds of the swept cull (`cull::SweptPoses`).
     fn of_path(
         shape: Shape,
         (r, l): (Real, Real),
         path: MovePath,
         speed: Real,
         (part_z, part_speed): ([Real; PARTS + 1], [Real; PARTS]),
-        rates: Option<(Real, Real)>,
+        rates: Option<cull::SweptRates>,
     ) -> Result<Self, EnvelopeError> {
         let want = speed / (2.0 * CELL_GROWTH * r);
         if !(want.is_finite() && want <= MAX_CELLS as Real) {
@@ -147,9 +152,8 @@ impl RotaryEnvelope {
             })
             .collect();
         let cull = cull::CullPoses::new(&path, cells, speed);
-        let swept = rates.map(|(omega, accel)| {
-            cull::SweptPoses::new((&samples, &quarters), (r, l), omega, accel)
-        });
+        let swept =
+            rates.map(|rates| cull::SweptPoses::new((&samples, &quarters), (shape, r, l), rates));
         let sample_dirs = samples.iter().map(cull::axis_dirs).collect();
         let quarter_dirs = quarters.iter().map(|(_, s)| cull::axis_dirs(s)).collect();
         Ok(Self {
