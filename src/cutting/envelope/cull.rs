@@ -377,25 +377,13 @@ impl SweptPose {
         segs: &[Segment],
     ) -> bool {
         let p = self.rot.tr_mul(&(o - self.tip));
-        self.meets_at(shape, rl, &p, axis, segs)
+        self.reach_at(shape, rl, &p, axis, segs) != Reach::Miss
     }
 
-    /// [`Self::meets`] for the ray's origin `p` in the pose's tool frame.
-    #[inline(always)]
-    fn meets_at(
-        &self,
-        shape: Shape,
-        (r, l): (Real, Real),
-        p: &Vector3,
-        axis: usize,
-        segs: &[Segment],
-    ) -> bool {
-        self.reach_at(shape, (r, l), p, axis, segs) != Reach::Miss
-    }
-
-    /// [`Self::meets_at`], telling a ray whose material comes within `r − grow` of the
-    /// segment `±reach_xy` ([`Reach::Deep`]: the pose's own tool meets it there, so no finer
-    /// test would clear it) from one that only comes within `r + grow` ([`Reach::Near`]).
+    /// [`Self::meets`] for the ray's origin `p` in the pose's tool frame, telling a ray
+    /// whose material comes within `r − grow` of the segment `±reach_xy` ([`Reach::Deep`]:
+    /// the pose's own tool meets it there, so no finer test would clear it) from one that
+    /// only comes within `r + grow` ([`Reach::Near`]).
     #[inline(always)]
     fn reach_at(
         &self,
