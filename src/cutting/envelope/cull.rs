@@ -337,8 +337,7 @@ impl SweptPose {
     /// point accelerates by at most `accel` (see the module docs).
     fn about(s: &Sample, half: Real, (r, l): (Real, Real), (omega, accel): (Real, Real)) -> Self {
         let centre = Vector3::new(0.0, 0.0, l / 2.0);
-        let tilt_rate = (s.w_t.x * s.w_t.x + s.w_t.y * s.w_t.y).sqrt();
-        let tilt = half * tilt_rate + 0.75 * omega * omega * half * half;
+        let tilt = turn_bound(s, half, omega);
         let reach = (s.v_t + s.w_t.cross(&centre)) * half;
         let grow = (l / 2.0).max(r) * tilt + accel * half * half / 2.0;
         let grow = (grow + HULL_ROUNDING * reach.norm()) * (1.0 + HULL_ROUNDING) + CULL_MARGIN;
@@ -429,6 +428,13 @@ impl SweptPose {
     }
 }
 
+/// The bound `θ ≤ h·|w_⊥| + 0.75·Ω²·h²` on the turn of the tool's axis over `λ` within
+/// `half` (`h`) of the sample `s` on a move of total turn `omega` (see the module docs).
+fn turn_bound(s: &Sample, half: Real, omega: Real) -> Real {
+    let tilt_rate = (s.w_t.x * s.w_t.x + s.w_t.y * s.w_t.y).sqrt();
+    half * tilt_rate + 0.75 * omega * omega * half * half
+}
+
 /// How a swept pose's tool meets a ray's material ([`SweptPose::reach_at`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Reach {
@@ -485,8 +491,9 @@ impl SweptPoses {
 
     /// Whether the move may change the material `segs` of the ray `o + t·e_axis` (tool of
     /// `shape`, radius and length `rl`): false only when, in every cell, the swept cell or
-    /// both its swept halves miss the material. A swept pose meets it when both its test
-    /// and its height-aware one do (the second only asked where the first does).
+    /// both its swept halves miss the material; on a ray across the tool whose material the
+    /// swept cell meets but not deeply, its height-aware test ([`AxisSweep`]) decides
+    /// instead of the halves.
     fn may_cut(
         &self,
         shape: Shape,
@@ -587,8 +594,7 @@ impl AxisSweep {
         (shape, r, l): (Shape, Real, Real),
         rates: SweptRates,
     ) -> Self {
-        let tilt_rate = (s.w_t.x * s.w_t.x + s.w_t.y * s.w_t.y).sqrt();
-        let theta = half * tilt_rate + 0.75 * rates.omega * rates.omega * half * half;
+        let theta = turn_bound(s, half, rates.omega);
         let drift = rates.axis_accel * half * half / 2.0;
         let tilt = Vector3::new(s.w_t.y, -s.w_t.x, 0.0) * half;
         let reach = Vector3::new(pose.reach.x, pose.reach.y, 0.0);
