@@ -717,7 +717,8 @@ impl AxisSweep {
 const ACROSS_COS: Real = 0.5;
 
 /// The height-aware test widens a stretch's ends by this much per mm of their distance from
-/// the ray's origin (and this much, mm) for the rounding of the quadratic's roots.
+/// the ray's origin and of the chord's half-length (and this much, mm), for the rounding of
+/// the nearest point and the half-length.
 const CLIP_PAD: Real = 1e-9;
 
 impl RotaryEnvelope {

@@ -7,6 +7,22 @@
 
 use super::*;
 
+/// Whether any of `poses` (the move of `env`) meets the open stretch `lo`–`hi` of the ray
+/// `o + t·e`: the tool's own interval at each pose, no growth.
+fn poses_reach(
+    env: &RotaryEnvelope,
+    poses: &[Sample],
+    (o, e): (&Point3, &Vector3),
+    (lo, hi): (Real, Real),
+) -> bool {
+    poses.iter().any(|s| {
+        let p = s.rot.tr_mul(&(o - s.tip));
+        let w = s.rot.tr_mul(e);
+        tool_interval(env.shape, env.r, env.l, &p, &w, 0.0)
+            .is_some_and(|(t0, _, t1, _)| t0 < hi && t1 > lo)
+    })
+}
+
 /// The height-aware swept cull clears near misses and never a ray the tool reaches. On a
 /// one-cell move of a long tool (Ø6 × 25 mm, flat and ball) turning A by 0.5° (the tool's
 /// ends sweep 0.1 mm more than its middle), for every x and y ray of a 0.05 mm grid that the
@@ -58,15 +74,6 @@ fn the_height_aware_cull_clears_near_misses_and_only_those() {
                 return;
             };
             let (t_in, t_out) = (first.t_in, last.t_out);
-            let reaches = |material: &[Segment]| {
-                poses.iter().any(|s| {
-                    let p = s.rot.tr_mul(&(o - s.tip));
-                    let w = s.rot.tr_mul(&e);
-                    tool_interval(env.shape, env.r, env.l, &p, &w, 0.0).is_some_and(
-                        |(a, _, b, _)| material.iter().any(|m| a < m.hi.t && b > m.lo.t),
-                    )
-                })
-            };
             for depth in [1e-6, 1e-3, 0.1] {
                 for material in [
                     [Segment {
@@ -103,7 +110,12 @@ fn the_height_aware_cull_clears_near_misses_and_only_those() {
                     if !env.may_cut(&o, axis, &material) {
                         skipped += 1;
                         assert!(
-                            !reaches(&material),
+                            !poses_reach(
+                                &env,
+                                &poses,
+                                (&o, &e),
+                                (material[0].lo.t, material[0].hi.t)
+                            ),
                             "{kind:?}: the ray through {o:?} along axis {axis} was                              skipped but a pose reaches its material"
                         );
                     }
@@ -209,12 +221,7 @@ fn the_cull_keeps_every_ray_a_pose_reaches() {
                     lo: end(lo),
                     hi: end(hi),
                 }];
-                let reaches = poses.iter().any(|s| {
-                    let p = s.rot.tr_mul(&(o - s.tip));
-                    let w = s.rot.tr_mul(&e);
-                    tool_interval(env.shape, env.r, env.l, &p, &w, 0.0)
-                        .is_some_and(|(t0, _, t1, _)| t0 < hi - 1e-7 && t1 > lo + 1e-7)
-                });
+                let reaches = poses_reach(&env, &poses, (&o, &e), (lo + 1e-7, hi - 1e-7));
                 let may = env.may_cut(&o, axis, &material);
                 if reaches {
                     reached += 1;
