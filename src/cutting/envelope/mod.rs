@@ -112,8 +112,8 @@ pub use cull::GroupHull;
 pub use path::{MovePath, error_motion_speed, rotation_and_travel};
 use path::{Sample, axis_speed_bounds, speed_bound};
 use probe::{
-    Face, Hit, Probe, Ray, Shape, ball_sphere, frame_box, line_segment_distance, tool_interval,
-    tool_normal,
+    EdgeSign, Face, Hit, Probe, Ray, Shape, ball_sphere, end_slab, frame_box,
+    line_segment_distance, tool_interval, tool_interval_in, tool_normal,
 };
 pub use sampled::{SAMPLED_BOUND_FACTOR, SampledPath};
 
@@ -198,6 +198,8 @@ pub struct RotaryEnvelope {
     /// The bound (mm) on the interval ends' distance from the true swept surface: a touch
     /// shallower than this is ignored, and an end is solved to [`SOLVE_SHARE`] of it.
     tol: Real,
+    /// The sign of an edge's `φ` from a probe's squared radius ([`Probe::phi`]).
+    edge: EdgeSign,
 }
 
 /// The bounds of the second-order touch test between two poses that miss a ray, on a move

@@ -65,13 +65,13 @@ pub(super) struct Hit {
 }
 
 /// A ray evaluated at one pose: its interval (if any) and, per edge circle (bottom, top),
-/// `φ` = the radius where the ray crosses the edge's plane minus `R` (`+∞` for no edge or a
-/// ray parallel to the plane).
+/// the squared radius where the ray crosses the edge's plane (`+∞` for no edge or a ray
+/// parallel to the plane), from which [`Probe::phi`] is read.
 #[derive(Clone, Debug)]
 pub(super) struct Probe {
     pub(super) lambda: Real,
     pub(super) hit: Option<Hit>,
-    pub(super) phi: [Real; 2],
+    pub(super) edge_r2: [Real; 2],
     /// The ray's origin and direction in the tool frame.
     pub(super) p: Vector3,
     pub(super) u: Vector3,
@@ -87,6 +87,14 @@ pub(super) struct Probe {
 }
 
 impl Probe {
+    /// `φ` of edge circle `edge` (0 bottom, 1 top): the radius where the ray crosses the
+    /// edge's plane minus the tool radius `r` (`+∞` for no edge or a ray parallel to the
+    /// plane). Its sign is [`EdgeSign::inside`]'s, without the square root.
+    #[inline(always)]
+    pub(super) fn phi(&self, edge: usize, r: Real) -> Real {
+        self.edge_r2[edge].sqrt() - r
+    }
+
     /// `dt_in/dλ` of the hit (the tool radius `r`).
     #[inline(always)]
     pub(super) fn g_in(&self, r: Real) -> Real {
@@ -217,12 +225,41 @@ pub(super) fn tool_interval(
     u: &Vector3,
     g: Real,
 ) -> Option<(Real, Face, Real, Face)> {
+    tool_interval_in(shape, r, p, u, g, || end_slab(shape, r, l, p, u, g))
+}
+
+/// The interval of the line `p + t·u` (tool frame, `u` unit) between the end planes of the
+/// tool of `shape`, radius `r` and length `l` grown by `g` (the slab `tool_interval` clips the
+/// cylinder to), with the face at each end.
+#[inline(always)]
+pub(super) fn end_slab(
+    shape: Shape,
+    r: Real,
+    l: Real,
+    p: &Vector3,
+    u: &Vector3,
+    g: Real,
+) -> Option<(Real, Face, Real, Face)> {
     let h0 = match shape {
         Shape::Flat => -g,
         Shape::Ball => r - g,
     };
+    slab(p.z, u.z, h0, l + g)
+}
+
+/// [`tool_interval`] with its end slab ([`end_slab`] of the same tool, line and growth)
+/// from `slab` (asked only where the line meets the cylinder).
+#[inline(always)]
+pub(super) fn tool_interval_in(
+    shape: Shape,
+    r: Real,
+    p: &Vector3,
+    u: &Vector3,
+    g: Real,
+    slab: impl FnOnce() -> Option<(Real, Face, Real, Face)>,
+) -> Option<(Real, Face, Real, Face)> {
     let cyl = cylinder(p, u, r + g).and_then(|(c0, c1)| {
-        let (s0, f0, s1, f1) = slab(p.z, u.z, h0, l + g)?;
+        let (s0, f0, s1, f1) = slab()?;
         let (t0, face0) = if c0 >= s0 { (c0, Face::Side) } else { (s0, f0) };
         let (t1, face1) = if c1 <= s1 { (c1, Face::Side) } else { (s1, f1) };
         (t0 <= t1).then_some((t0, face0, t1, face1))
@@ -259,4 +296,38 @@ pub(super) fn ball_sphere(
         let sq = disc.sqrt();
         (-b - sq, Face::Sphere, -b + sq, Face::Sphere)
     })
+}
+
+/// The sign of `φ = √s − r` read off the squared radius `s` alone: `√s − r < 0` exactly when
+/// `s` is below the least `s` whose rounded root is not below `r` (the root is correctly
+/// rounded, so it never falls as `s` grows; and `x − r < 0` exactly when `x < r`). The same
+/// answer as the root's, bit for bit, for every `s`, NaN included (never inside).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct EdgeSign {
+    least_outside: Real,
+}
+
+impl EdgeSign {
+    /// The sign test of `φ` for a tool of radius `r` (positive and finite).
+    pub(super) fn new(r: Real) -> Self {
+        let inside = |s: Real| s.sqrt() - r < 0.0;
+        // r² is within an ulp or two of the threshold: step to the least s not inside
+        let mut s = r * r;
+        for _ in 0..64 {
+            if inside(s) {
+                s = s.next_up();
+            } else if s > 0.0 && !inside(s.next_down()) {
+                s = s.next_down();
+            } else {
+                break;
+            }
+        }
+        Self { least_outside: s }
+    }
+
+    /// Whether `φ = √s − r < 0` (the ray crosses the edge's plane inside the circle).
+    #[inline(always)]
+    pub(super) fn inside(self, s: Real) -> bool {
+        s < self.least_outside
+    }
 }

@@ -176,6 +176,7 @@ impl RotaryEnvelope {
             cell_boxes,
             bounds,
             tol: ENVELOPE_TOL,
+            edge: EdgeSign::new(r),
         })
     }
 
@@ -234,28 +235,43 @@ impl RotaryEnvelope {
     #[inline(always)]
     fn probe(&self, s: &Sample, lambda: Real, ray: &Ray, u: Vector3) -> Probe {
         let p = s.rot.tr_mul(&(ray.o - s.tip));
+        // The end planes' crossings serve both the interval and the edges' radii.
+        let slab = end_slab(self.shape, self.r, self.l, &p, &u, 0.0);
         let hit =
-            tool_interval(self.shape, self.r, self.l, &p, &u, 0.0).map(|(t0, f0, t1, f1)| Hit {
-                t_in: t0,
-                face_in: f0,
-                t_out: t1,
-                face_out: f1,
+            tool_interval_in(self.shape, self.r, &p, &u, 0.0, || slab).map(|(t0, f0, t1, f1)| {
+                Hit {
+                    t_in: t0,
+                    face_in: f0,
+                    t_out: t1,
+                    face_out: f1,
+                }
             });
-        let phi = |h: Real| {
-            if u.z.abs() <= tol::RELATIVE_EPS {
-                return Real::INFINITY;
-            }
-            let q = p + u * ((h - p.z) / u.z);
-            (q.x * q.x + q.y * q.y).sqrt() - self.r
+        // The squared radius where the ray crosses the plane at `t` along it (the plane's
+        // crossing `(h − p_z)/u_z`, as the slab has it: a bottom plane at `−0` instead of
+        // `0` changes only the sign of a zero `t`, so not the radius).
+        let radius2 = |t: Real| {
+            let q = p + u * t;
+            q.x * q.x + q.y * q.y
         };
-        let bottom = match self.shape {
-            Shape::Flat => phi(0.0),
-            Shape::Ball => Real::INFINITY,
+        let (bottom, top) = match slab {
+            Some((s0, Face::Bottom, s1, Face::Top)) => (s0, s1),
+            Some((s0, Face::Top, s1, Face::Bottom)) => (s1, s0),
+            // parallel to the planes (or no slab)
+            _ => (Real::NAN, Real::NAN),
+        };
+        let edge_r2 = if bottom.is_nan() {
+            [Real::INFINITY; 2]
+        } else {
+            let below = match self.shape {
+                Shape::Flat => radius2(bottom),
+                Shape::Ball => Real::INFINITY,
+            };
+            [below, radius2(top)]
         };
         Probe {
             lambda,
             hit,
-            phi: [bottom, phi(self.l)],
+            edge_r2,
             p,
             u,
             rot: s.rot,
@@ -485,9 +501,9 @@ impl RotaryEnvelope {
             // is solved for like one between hits: the ray meets the tool there, if at all.
             let mut crossing = false;
             for edge in 0..2 {
-                let (fa, fb) = (a.phi[edge], b.phi[edge]);
-                if !fa.is_nan() && !fb.is_nan() && (fa < 0.0) != (fb < 0.0) {
-                    let phi = move |p: &Probe| Some(p.phi[edge]);
+                let (fa, fb) = (a.edge_r2[edge], b.edge_r2[edge]);
+                if !fa.is_nan() && !fb.is_nan() && self.edge.inside(fa) != self.edge.inside(fb) {
+                    let phi = move |p: &Probe| Some(p.phi(edge, self.r));
                     if let Some((lo, hi)) = self.solve(ray, (a, b), phi, None, Stop::Crossing, acc)
                     {
                         self.refine(ray, a, &lo, acc, depth + 1);
@@ -528,9 +544,9 @@ impl RotaryEnvelope {
         }
         // The ray crosses an edge circle: a kink or the ray leaving through the edge.
         for edge in 0..2 {
-            let (fa, fb) = (a.phi[edge], b.phi[edge]);
-            if !fa.is_nan() && !fb.is_nan() && (fa < 0.0) != (fb < 0.0) {
-                let phi = move |p: &Probe| Some(p.phi[edge]);
+            let (fa, fb) = (a.edge_r2[edge], b.edge_r2[edge]);
+            if !fa.is_nan() && !fb.is_nan() && self.edge.inside(fa) != self.edge.inside(fb) {
+                let phi = move |p: &Probe| Some(p.phi(edge, self.r));
                 match self.solve(ray, (a, b), phi, None, Stop::Crossing, acc) {
                     Some((lo, hi)) => {
                         self.refine(ray, a, &lo, acc, depth + 1);

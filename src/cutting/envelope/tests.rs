@@ -12,6 +12,7 @@ use crate::nc::AxisLetter;
 use proptest::prelude::*;
 
 mod height;
+mod probe;
 
 fn deviated() -> Chain {
     let mut c = crate::machine::chain::mdx50_for_tests();
