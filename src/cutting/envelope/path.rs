@@ -190,7 +190,31 @@ impl MovePath {
         }
         let (mut r, mut t) = (Matrix3::identity(), Vector3::zeros());
         let (mut w, mut v) = (Vector3::zeros(), Vector3::zeros());
-        for f in &self.factors {
+        let mut factors = self.factors.iter();
+        // A chain whose first axis turns (a table's C, say) starts with its rotation while
+        // the pose so far is the identity: the products with the identity (and the sums
+        // with zero) are skipped. They are exact, so the values are the same but for the
+        // sign of an exact zero, which the later factors' sums absorb (every recorded
+        // digest is unchanged).
+        if let Some(Factor::Rotary {
+            dir,
+            origin,
+            th0,
+            dth,
+            cross,
+            outer,
+        }) = self.factors.first()
+        {
+            factors.next();
+            if RATES {
+                w = dir * *dth;
+                v = -w.cross(origin);
+            }
+            let (sin, cos) = (th0 + dth * lambda).sin_cos();
+            r = rodrigues(cross, outer, sin, cos);
+            t = origin - r * origin;
+        }
+        for f in factors {
             match f {
                 Factor::Affine { rot, t0, t1 } => {
                     if RATES {
@@ -214,10 +238,7 @@ impl MovePath {
                         v -= omega.cross(&centre);
                     }
                     let (sin, cos) = (th0 + dth * lambda).sin_cos();
-                    let mut rt = cross * sin + outer * (1.0 - cos);
-                    for k in 0..3 {
-                        rt[(k, k)] += cos;
-                    }
+                    let rt = rodrigues(cross, outer, sin, cos);
                     t += r * (origin - rt * origin);
                     r *= rt;
                 }
@@ -414,4 +435,15 @@ fn centre_in_w(chain: &Chain, i: usize, q: &AxisValues, state: &[Real; 6]) -> Po
         pose *= dev.transform();
     }
     pose * Point3::origin()
+}
+
+/// Rodrigues' rotation by the angle of sine and cosine `sin`, `cos` about the unit axis `d`:
+/// `[d]×·sin + d·dᵀ·(1 − cos) + cos·I` (`cross` and `outer` are `[d]×` and `d·dᵀ`).
+#[inline(always)]
+fn rodrigues(cross: &Matrix3, outer: &Matrix3, sin: Real, cos: Real) -> Matrix3 {
+    let mut m = cross * sin + outer * (1.0 - cos);
+    for k in 0..3 {
+        m[(k, k)] += cos;
+    }
+    m
 }

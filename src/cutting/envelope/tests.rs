@@ -63,6 +63,100 @@ fn move_path_is_the_chain_pose() {
     }
 }
 
+/// A chain that starts with a turn (a table's rotary axis; its pose is built from the
+/// identity without the products with it): on a first axis tilted and off the origin, and on
+/// the trunnion (C about z through the origin, A after it), the pose is the chain's own and
+/// its rates (tool frame) are the central differences of the chain's poses.
+#[test]
+fn a_chain_starting_with_a_turn_has_the_chain_pose_and_its_rates() {
+    use crate::machine::chain::{Axis, AxisKind};
+    let ax = |letter, kind, d: Vector3, o: Point3| Axis {
+        letter,
+        kind,
+        direction: nalgebra::Unit::new_normalize(d),
+        origin: o,
+    };
+    let o = Point3::origin();
+    let tilted = Chain::new(
+        vec![
+            ax(
+                AxisLetter::B,
+                AxisKind::Rotary,
+                Vector3::new(0.2, 1.0, -0.1),
+                Point3::new(7.0, -4.0, 12.0),
+            ),
+            ax(
+                AxisLetter::A,
+                AxisKind::Rotary,
+                Vector3::x(),
+                Point3::new(0.0, 3.0, -40.0),
+            ),
+            ax(AxisLetter::X, AxisKind::Linear, Vector3::x(), o),
+            ax(AxisLetter::Y, AxisKind::Linear, Vector3::y(), o),
+            ax(AxisLetter::Z, AxisKind::Linear, Vector3::z(), o),
+        ],
+        "S",
+    )
+    .expect("valid chain");
+    let at = |x, y, z, a, b, c| {
+        AxisValues::default()
+            .with(AxisLetter::X, x)
+            .with(AxisLetter::Y, y)
+            .with(AxisLetter::Z, z)
+            .with(AxisLetter::A, a)
+            .with(AxisLetter::B, b)
+            .with(AxisLetter::C, c)
+    };
+    let cases = [
+        (
+            tilted,
+            at(2.0, -5.0, 30.0, -10.0, 25.0, 0.0),
+            at(6.0, -1.0, 27.0, 35.0, -40.0, 0.0),
+        ),
+        (
+            trunnion(),
+            at(0.0, -19.0, 10.0, -10.0, 0.0, 20.0),
+            at(0.5, -19.0, 12.0, 15.0, 0.0, 65.0),
+        ),
+    ];
+    for (c, a, b) in &cases {
+        let path = MovePath::new(c, a, b);
+        let h = 1e-6;
+        for k in 0..=20 {
+            let l = (k as Real + 0.3) / 21.0;
+            let s = path.sample(l);
+            let p = chain_pose(c, a, b, l);
+            let rot = p.rotation.to_rotation_matrix().into_inner();
+            assert!(
+                (s.rot - rot).abs().max() < 1e-12,
+                "λ {l}: {} vs {rot}",
+                s.rot
+            );
+            assert!(
+                (s.tip.coords - p.translation.vector).norm() < 1e-12,
+                "λ {l}"
+            );
+            let (lo, hi) = (chain_pose(c, a, b, l - h), chain_pose(c, a, b, l + h));
+            let v = rot.tr_mul(&((hi.translation.vector - lo.translation.vector) / (2.0 * h)));
+            let dr = (hi.rotation.to_rotation_matrix().into_inner()
+                - lo.rotation.to_rotation_matrix().into_inner())
+                / (2.0 * h);
+            let w = rot.transpose() * dr;
+            let w = Vector3::new(w[(2, 1)], w[(0, 2)], w[(1, 0)]);
+            assert!(
+                (v - s.v_t).norm() < 1e-6 * (1.0 + v.norm()),
+                "λ {l}: v {v} vs {}",
+                s.v_t
+            );
+            assert!(
+                (w - s.w_t).norm() < 1e-6 * (1.0 + w.norm()),
+                "λ {l}: ω {w} vs {}",
+                s.w_t
+            );
+        }
+    }
+}
+
 /// The curve through a move's pilot poses ([`SampledPath`]): on the nodes it is the pose,
 /// between them within its own error estimate of the chain's exact pose (which it never
 /// sees between the nodes), and its rates are its derivatives (central differences of its
