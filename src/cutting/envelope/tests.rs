@@ -63,6 +63,30 @@ fn move_path_is_the_chain_pose() {
     }
 }
 
+/// The rates of the sample `s` at `l` (tool frame) are the central differences of the poses
+/// `(rotation, tip)` at `l ∓ h`, to 1e-6 relative.
+fn assert_rates_are_differences(
+    l: Real,
+    s: &Sample,
+    lo: (Matrix3, Vector3),
+    hi: (Matrix3, Vector3),
+    h: Real,
+) {
+    let v = s.rot.tr_mul(&((hi.1 - lo.1) / (2.0 * h)));
+    let w = s.rot.transpose() * ((hi.0 - lo.0) / (2.0 * h));
+    let w = Vector3::new(w[(2, 1)], w[(0, 2)], w[(1, 0)]);
+    assert!(
+        (v - s.v_t).norm() < 1e-6 * (1.0 + v.norm()),
+        "λ {l}: v {v} vs {}",
+        s.v_t
+    );
+    assert!(
+        (w - s.w_t).norm() < 1e-6 * (1.0 + w.norm()),
+        "λ {l}: ω {w} vs {}",
+        s.w_t
+    );
+}
+
 /// A chain that starts with a turn (a table's rotary axis; its pose is built from the
 /// identity without the products with it): on a first axis tilted and off the origin, and on
 /// the trunnion (C about z through the origin, A after it), the pose is the chain's own and
@@ -136,23 +160,14 @@ fn a_chain_starting_with_a_turn_has_the_chain_pose_and_its_rates() {
                 (s.tip.coords - p.translation.vector).norm() < 1e-12,
                 "λ {l}"
             );
+            let pose = |p: Isometry3| {
+                (
+                    p.rotation.to_rotation_matrix().into_inner(),
+                    p.translation.vector,
+                )
+            };
             let (lo, hi) = (chain_pose(c, a, b, l - h), chain_pose(c, a, b, l + h));
-            let v = rot.tr_mul(&((hi.translation.vector - lo.translation.vector) / (2.0 * h)));
-            let dr = (hi.rotation.to_rotation_matrix().into_inner()
-                - lo.rotation.to_rotation_matrix().into_inner())
-                / (2.0 * h);
-            let w = rot.transpose() * dr;
-            let w = Vector3::new(w[(2, 1)], w[(0, 2)], w[(1, 0)]);
-            assert!(
-                (v - s.v_t).norm() < 1e-6 * (1.0 + v.norm()),
-                "λ {l}: v {v} vs {}",
-                s.v_t
-            );
-            assert!(
-                (w - s.w_t).norm() < 1e-6 * (1.0 + w.norm()),
-                "λ {l}: ω {w} vs {}",
-                s.w_t
-            );
+            assert_rates_are_differences(l, &s, pose(lo), pose(hi), h);
         }
     }
 }
@@ -195,20 +210,8 @@ fn the_curve_through_pilot_poses_follows_the_move_within_its_estimate() {
     for k in 0..40 {
         let l = (k as Real + 0.37) / 40.0;
         let (s, lo, hi) = (curve.sample(l), curve.sample(l - h), curve.sample(l + h));
-        let v = s.rot.tr_mul(&((hi.tip - lo.tip) / (2.0 * h)));
-        let dr = (hi.rot - lo.rot) / (2.0 * h);
-        let w = s.rot.transpose() * dr;
-        let w = Vector3::new(w[(2, 1)], w[(0, 2)], w[(1, 0)]);
-        assert!(
-            (v - s.v_t).norm() < 1e-6 * (1.0 + v.norm()),
-            "λ {l}: v {v} vs {}",
-            s.v_t
-        );
-        assert!(
-            (w - s.w_t).norm() < 1e-6 * (1.0 + w.norm()),
-            "λ {l}: ω {w} vs {}",
-            s.w_t
-        );
+        let pose = |p: Sample| (p.rot, p.tip.coords);
+        assert_rates_are_differences(l, &s, pose(lo), pose(hi), h);
     }
 }
 
