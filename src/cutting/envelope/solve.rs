@@ -471,6 +471,14 @@ impl RotaryEnvelope {
         }
     }
 
+    /// Whether the ray crosses edge circle `edge` between the probes `a` and `b`: `φ` has a
+    /// sign at both and the signs differ.
+    #[inline(always)]
+    fn crosses_edge(&self, (a, b): (&Probe, &Probe), edge: usize) -> bool {
+        let (fa, fb) = (a.edge_r2[edge], b.edge_r2[edge]);
+        !fa.is_nan() && !fb.is_nan() && self.edge.inside(fa) != self.edge.inside(fb)
+    }
+
     /// Offers to `acc` every extreme of the ray's interval strictly between the probes `a`
     /// and `b` (see the module docs).
     fn refine(&self, ray: &Ray, a: &Probe, b: &Probe, acc: &mut Option<RawEnd>, depth: u32) {
@@ -501,8 +509,7 @@ impl RotaryEnvelope {
             // is solved for like one between hits: the ray meets the tool there, if at all.
             let mut crossing = false;
             for edge in 0..2 {
-                let (fa, fb) = (a.edge_r2[edge], b.edge_r2[edge]);
-                if !fa.is_nan() && !fb.is_nan() && self.edge.inside(fa) != self.edge.inside(fb) {
+                if self.crosses_edge((a, b), edge) {
                     let phi = move |p: &Probe| Some(p.phi(edge, self.r));
                     if let Some((lo, hi)) = self.solve(ray, (a, b), phi, None, Stop::Crossing, acc)
                     {
@@ -544,8 +551,7 @@ impl RotaryEnvelope {
         }
         // The ray crosses an edge circle: a kink or the ray leaving through the edge.
         for edge in 0..2 {
-            let (fa, fb) = (a.edge_r2[edge], b.edge_r2[edge]);
-            if !fa.is_nan() && !fb.is_nan() && self.edge.inside(fa) != self.edge.inside(fb) {
+            if self.crosses_edge((a, b), edge) {
                 let phi = move |p: &Probe| Some(p.phi(edge, self.r));
                 match self.solve(ray, (a, b), phi, None, Stop::Crossing, acc) {
                     Some((lo, hi)) => {
