@@ -23,16 +23,8 @@ enum Factor {
         t0: Vector3,
         t1: Vector3,
     },
-    /// Rotation by `th0 + λ·dth` (rad) about the unit `dir` through `origin`; `cross` and
-    /// `outer` are `[dir]×` and `dir·dirᵀ` for Rodrigues' formula.
-    Rotary {
-        dir: Vector3,
-        origin: Vector3,
-        th0: Real,
-        dth: Real,
-        cross: Matrix3,
-        outer: Matrix3,
-    },
+    /// A turning rotary axis.
+    Rotary(Turn),
     /// The error motions of an axis that moves from `q0` by `dq`, turning about `centre`,
     /// with its reversal share moving from `off0` toward `target` at the commanded rate.
     Error {
@@ -98,14 +90,14 @@ impl MovePath {
                         factors.push(Factor::Affine { rot, t0, t1 });
                     }
                     let dir = axis.direction.into_inner();
-                    factors.push(Factor::Rotary {
+                    factors.push(Factor::Rotary(Turn {
                         dir,
                         origin: axis.origin.coords,
                         th0: q0.to_radians(),
                         dth: (q1 - q0).to_radians(),
                         cross: dir.cross_matrix(),
                         outer: dir * dir.transpose(),
-                    });
+                    }));
                     (rot, t0, t1) = (Matrix3::identity(), Vector3::zeros(), Vector3::zeros());
                 }
             }
@@ -154,7 +146,7 @@ impl MovePath {
     pub(super) fn constant_rates(&self) -> bool {
         self.factors
             .iter()
-            .all(|f| matches!(f, Factor::Affine { .. } | Factor::Rotary { .. }))
+            .all(|f| matches!(f, Factor::Affine { .. } | Factor::Rotary(_)))
     }
 
     /// The tool's pose in the workpiece frame at fraction `lambda` of the move.
@@ -196,23 +188,14 @@ impl MovePath {
         // with zero) are skipped. They are exact, so the values are the same but for the
         // sign of an exact zero, which the later factors' sums absorb (every recorded
         // digest is unchanged).
-        if let Some(Factor::Rotary {
-            dir,
-            origin,
-            th0,
-            dth,
-            cross,
-            outer,
-        }) = self.factors.first()
-        {
+        if let Some(Factor::Rotary(turn)) = self.factors.first() {
             factors.next();
             if RATES {
-                w = dir * *dth;
-                v = -w.cross(origin);
+                w = turn.dir * turn.dth;
+                v = -w.cross(&turn.origin);
             }
-            let (sin, cos) = (th0 + dth * lambda).sin_cos();
-            r = rodrigues(cross, outer, sin, cos);
-            t = origin - r * origin;
+            r = turn.at(lambda);
+            t = turn.origin - r * turn.origin;
         }
         for f in factors {
             match f {
@@ -223,23 +206,15 @@ impl MovePath {
                     t += r * (t0 + t1 * lambda);
                     r *= rot;
                 }
-                Factor::Rotary {
-                    dir,
-                    origin,
-                    th0,
-                    dth,
-                    cross,
-                    outer,
-                } => {
+                Factor::Rotary(turn) => {
                     if RATES {
-                        let omega = (r * dir) * *dth;
-                        let centre = r * origin + t;
+                        let omega = (r * turn.dir) * turn.dth;
+                        let centre = r * turn.origin + t;
                         w += omega;
                         v -= omega.cross(&centre);
                     }
-                    let (sin, cos) = (th0 + dth * lambda).sin_cos();
-                    let rt = rodrigues(cross, outer, sin, cos);
-                    t += r * (origin - rt * origin);
+                    let rt = turn.at(lambda);
+                    t += r * (turn.origin - rt * turn.origin);
                     r *= rt;
                 }
                 Factor::Error {
@@ -437,13 +412,27 @@ fn centre_in_w(chain: &Chain, i: usize, q: &AxisValues, state: &[Real; 6]) -> Po
     pose * Point3::origin()
 }
 
-/// Rodrigues' rotation by the angle of sine and cosine `sin`, `cos` about the unit axis `d`:
-/// `[d]×·sin + d·dᵀ·(1 − cos) + cos·I` (`cross` and `outer` are `[d]×` and `d·dᵀ`).
-#[inline(always)]
-fn rodrigues(cross: &Matrix3, outer: &Matrix3, sin: Real, cos: Real) -> Matrix3 {
-    let mut m = cross * sin + outer * (1.0 - cos);
-    for k in 0..3 {
-        m[(k, k)] += cos;
+/// A rotary axis turning through a move: by `th0 + λ·dth` (rad) about the unit `dir`
+/// through `origin`; `cross` and `outer` are `[dir]×` and `dir·dirᵀ` for Rodrigues' formula.
+#[derive(Clone, Debug)]
+struct Turn {
+    dir: Vector3,
+    origin: Vector3,
+    th0: Real,
+    dth: Real,
+    cross: Matrix3,
+    outer: Matrix3,
+}
+
+impl Turn {
+    /// The rotation at `lambda` (Rodrigues: `[d]×·sin + d·dᵀ·(1 − cos) + cos·I`).
+    #[inline(always)]
+    fn at(&self, lambda: Real) -> Matrix3 {
+        let (sin, cos) = (self.th0 + self.dth * lambda).sin_cos();
+        let mut m = self.cross * sin + self.outer * (1.0 - cos);
+        for k in 0..3 {
+            m[(k, k)] += cos;
+        }
+        m
     }
-    m
 }
