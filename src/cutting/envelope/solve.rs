@@ -437,7 +437,7 @@ impl RotaryEnvelope {
             let mut found = comps.iter().flatten();
             match (found.next(), found.next()) {
                 (None, _) => {}
-                (Some(only), None) => emit(only, self.r, out),
+                (Some(only), None) => emit(only, self.rim(), out),
                 _ => {
                     cuts.clear();
                     cuts.extend(comps.drain(..).flatten());
@@ -460,20 +460,30 @@ impl RotaryEnvelope {
                     m
                 }
                 Some(m) => {
-                    emit(&m, self.r, out);
+                    emit(&m, self.rim(), out);
                     c
                 }
                 None => c,
             });
         }
         if let Some(m) = merged {
-            emit(&m, self.r, out);
+            emit(&m, self.rim(), out);
         }
     }
 
     /// Whether the ray crosses edge circle `edge` between the probes `a` and `b`: `φ` has a
     /// sign at both and the signs differ.
     #[inline(always)]
+    /// The tool radius and the heights of its edge circles' planes in the tool frame
+    /// (bottom and top; NaN for none: a ball's end is smooth).
+    fn rim(&self) -> (Real, [Real; 2]) {
+        let bottom = match self.shape {
+            Shape::Flat => 0.0,
+            Shape::Ball => Real::NAN,
+        };
+        (self.r, [bottom, self.l])
+    }
+
     fn crosses_edge(&self, (a, b): (&Probe, &Probe), edge: usize) -> bool {
         let (fa, fb) = (a.edge_r2[edge], b.edge_r2[edge]);
         !fa.is_nan() && !fb.is_nan() && self.edge.inside(fa) != self.edge.inside(fb)
@@ -911,13 +921,13 @@ impl Stop {
     }
 }
 
-fn emit(c: &RawEnd, r: Real, out: &mut Vec<RayCut>) {
+fn emit(c: &RawEnd, (r, edges): (Real, [Real; 2]), out: &mut Vec<RayCut>) {
     if c.hi.t - c.lo.t > tol::LENGTH_EPS {
         out.push(RayCut {
             t_in: c.lo.t,
             t_out: c.hi.t,
-            n_in: c.lo.normal(r),
-            n_out: c.hi.normal(r),
+            n_in: c.lo.normal(r, edges),
+            n_out: c.hi.normal(r, edges),
         });
     }
 }
@@ -942,7 +952,7 @@ thread_local! {
 }
 
 /// One end of an interval and where it was found: its normal is worked out only for the
-/// ends that are kept (the same arithmetic as at the probe, so the same bits).
+/// ends that are kept.
 #[derive(Clone, Copy, Debug)]
 struct End {
     t: Real,
@@ -951,9 +961,14 @@ struct End {
     q: Vector3,
     u: Vector3,
     rot: Matrix3,
+    /// The pose's angular velocity and tip velocity (tool frame), for the normal of the
+    /// surface an edge sweeps.
+    w_t: Vector3,
+    v_t: Vector3,
 }
 
 impl End {
+    #[inline(always)]
     fn at(p: &Probe, t: Real, face: Face) -> Self {
         Self {
             t,
@@ -961,17 +976,78 @@ impl End {
             q: p.p + p.u * t,
             u: p.u,
             rot: p.rot,
+            w_t: p.w_t,
+            v_t: p.v_t,
         }
     }
 
-    /// The material normal (W): the tool's inward normal at the end, the ray where no face
-    /// (`r` the tool radius).
-    fn normal(&self, r: Real) -> Vector3 {
+    /// The material normal (W): the inward normal of the swept volume at the end. On an
+    /// edge circle (within [`EDGE_REACH`]) the normal of the surface the edge sweeps
+    /// ([`edge_normal`]); elsewhere the tool's inward normal on the end's face, the ray where
+    /// no face. `edges`: the edge circles' plane heights in the tool frame (NaN for none),
+    /// `r` the tool radius.
+    fn normal(&self, r: Real, edges: [Real; 2]) -> Vector3 {
+        if let Some(n) = edge_normal(&self.q, (&self.w_t, &self.v_t), r, edges) {
+            return -(self.rot * n);
+        }
         match tool_normal(&self.q, self.face, r) {
             Some(n) => -(self.rot * n),
             None => self.rot * self.u,
         }
     }
+}
+
+/// How far from an edge circle (mm, in radius and in height) an end takes the swept edge's
+/// normal ([`edge_normal`]). An end at a kink, where the ray passes through the edge, lies
+/// on the edge to within the solve's bracket, far inside this; an end on a face this close
+/// to the edge has the face's normal to within the edge point's velocity change over it.
+const EDGE_REACH: Real = 1e-3;
+
+/// Below this share of the edge point's speed across the edge (its velocity's part in the
+/// plane of the edge's two face normals), the edge slides along itself and the swept
+/// surface's normal is not read from it: the face's normal is taken.
+const EDGE_MIN_ACROSS: Real = 1e-3;
+
+/// The outward normal (tool frame) of the surface swept by the edge circle nearest the
+/// tool-frame point `q` (radius `r`, planes at the heights `edges`, bottom and top; NaN for
+/// none), at its point nearest `q`, the pose moving at `w × x + v` (`rates`). The edge's
+/// outward normals span the quarter circle between the radial direction `ρ` and the
+/// plane's axial normal `a` (`−z` at the bottom, `+z` at the top). Where the edge point's
+/// velocity `V` has parts of opposite signs along them, one of those normals is across `V`,
+/// `|a·V|·ρ + |ρ·V|·a`: the swept surface's normal (`τ × V`, `τ` the edge's tangent), which
+/// at a kink of the interval end (the two faces' rates of opposite signs) is neither face's,
+/// and which tends to the face's own where that face's rate vanishes. `None` where `q` is
+/// not within [`EDGE_REACH`] of an edge, no normal of the edge is across `V`, or `V` runs
+/// along the edge.
+fn edge_normal(
+    q: &Vector3,
+    (w, v): (&Vector3, &Vector3),
+    r: Real,
+    edges: [Real; 2],
+) -> Option<Vector3> {
+    let rho = q.xy().norm();
+    if !((rho - r).abs() <= EDGE_REACH) || rho == 0.0 {
+        return None;
+    }
+    let top = (0..2).find(|&k| (q.z - edges[k]).abs() <= EDGE_REACH)? == 1;
+    let h = edges[usize::from(top)];
+    let radial = Vector3::new(q.x / rho, q.y / rho, 0.0);
+    let point = Vector3::new(radial.x * r, radial.y * r, h);
+    let axial = if top { Vector3::z() } else { -Vector3::z() };
+    let vel = w.cross(&point) + v;
+    let (av, rv) = (axial.dot(&vel), radial.dot(&vel));
+    if av.hypot(rv) <= EDGE_MIN_ACROSS * vel.norm() {
+        return None;
+    }
+    // along ρ and along a, both at least 0 for a normal of the edge
+    let (x, y) = if av >= 0.0 && rv <= 0.0 {
+        (av, -rv)
+    } else if av <= 0.0 && rv >= 0.0 {
+        (-av, rv)
+    } else {
+        return None;
+    };
+    (radial * x + axial * y).try_normalize(0.0)
 }
 
 /// An interval: its lower and upper ends.

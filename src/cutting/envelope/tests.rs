@@ -11,6 +11,7 @@ use crate::machine::chain::trunnion_for_tests as trunnion;
 use crate::nc::AxisLetter;
 use proptest::prelude::*;
 
+mod edge_normal;
 mod height;
 mod probe;
 
