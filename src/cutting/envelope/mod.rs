@@ -36,9 +36,9 @@
 //! than half the width the stop needs is moved out to that distance, so that it lands past
 //! the root and the bracket closes. The guesses choose where to look, not what is
 //! accepted: the bracket and the stop are those of the regula falsi. (An edge crossing
-//! keeps the plain steps, bit for bit: the faces differ on its two sides, and which side
-//! the kept end comes from picks its normal, which the mesher's features read; other steps
-//! there changed the side cut's mesh by a few thousand feature vertices.) A half-cell
+//! keeps the plain steps: with the face's normal at the kept end, which side of the kink it
+//! came from changed the mesh; since the normal there is the swept edge's, guided steps
+//! are open to it.) A half-cell
 //! whose ends both miss may hide a touch: the tool lies in capsules of radius `R` about
 //! four pieces of its axis, each with its own speed bound `M_k`, and a touch deeper than
 //! the tolerance `τ` needs some piece to travel from both ends to the ray
@@ -78,8 +78,15 @@
 //! A ray that leaves the tool and meets it again while the tool moves by less than `R/8`, or
 //! crosses an edge circle twice in that motion, can only be grazing it.
 //!
-//! Normals at the interval ends are the tool's outward normal of the face that bounds the
-//! interval (side, end plane, or sphere) at that point and pose.
+//! **Normals.** The normal at an interval end is the swept volume's: on a face, the tool's
+//! outward normal of the face that bounds the interval (side, end plane, or sphere) at that
+//! point and pose; within 1 µm of an edge circle, the normal of the surface the edge sweeps,
+//! `τ × V` (`τ` the edge's tangent, `V` the edge point's velocity), taken within the edge's
+//! normal cone (between its two faces' normals). At a kink, where the ray's end is farthest
+//! as it passes through the edge, that is neither face's normal, and the kept end's pose,
+//! on one side of the kink or the other, no longer changes it; on a face next to the edge it
+//! tends to the face's own. Where no normal of the cone is across `V` (or `V` runs along
+//! the edge) the face's normal is kept.
 //!
 //! **Pose sources.** A machine read pose by pose (a hexapod) has no chain: its move is the
 //! smooth curve through its pilot poses ([`SampledPath`], [`RotaryEnvelope::sampled`]), with

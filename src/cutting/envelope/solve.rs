@@ -1026,7 +1026,7 @@ fn edge_normal(
     edges: [Real; 2],
 ) -> Option<Vector3> {
     let rho = q.xy().norm();
-    if !((rho - r).abs() <= EDGE_REACH) || rho == 0.0 {
+    if rho.is_nan() || (rho - r).abs() > EDGE_REACH || rho == 0.0 {
         return None;
     }
     let top = (0..2).find(|&k| (q.z - edges[k]).abs() <= EDGE_REACH)? == 1;

@@ -68,8 +68,8 @@ fn an_end_on_an_edge_circle_has_the_swept_edge_s_normal() {
         let env = RotaryEnvelope::new(&c, &tool, &a, &b).expect("supported");
         let (r, l) = (env.r, env.l);
         let edges: &[Real] = match kind {
-            ToolKind::Flat => &[0.0, 25.0],
-            _ => &[25.0],
+            ToolKind::Flat => &[0.0, l],
+            _ => &[l],
         };
         let bounds = env.bounds();
         let mut rays = Vec::new();
