@@ -35,10 +35,10 @@
 //! positions and rates at the bracket's ends (Hermite), and a step closer to a bracket end
 //! than half the width the stop needs is moved out to that distance, so that it lands past
 //! the root and the bracket closes. The guesses choose where to look, not what is
-//! accepted: the bracket and the stop are those of the regula falsi. (An edge crossing
-//! keeps the plain steps: with the face's normal at the kept end, which side of the kink it
-//! came from changed the mesh; since the normal there is the swept edge's, guided steps
-//! are open to it.) A half-cell
+//! accepted: the bracket and the stop are those of the regula falsi. An edge crossing is
+//! guided likewise, by Newton's step on `φ` from the bracket end where `|φ|` is least
+//! (`dφ/dλ` in closed form, `RotaryEnvelope::phi_rate`); which side of its kink the kept end
+//! comes from no longer changes its normal (see **Normals**). A half-cell
 //! whose ends both miss may hide a touch: the tool lies in capsules of radius `R` about
 //! four pieces of its axis, each with its own speed bound `M_k`, and a touch deeper than
 //! the tolerance `τ` needs some piece to travel from both ends to the ray

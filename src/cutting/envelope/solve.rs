@@ -484,6 +484,37 @@ impl RotaryEnvelope {
         (self.r, [bottom, self.l])
     }
 
+    /// `dφ/dλ` of edge circle `edge` at the probe `p`: the ray's point `q = p + u·t_e` in
+    /// the edge's plane `z = h` moves in the tool frame at `−(w × q + v) + u·ṫ_e`, a point
+    /// fixed in W moving against the tool, with `ṫ_e = (w × q + v)_z/u_z` keeping it in the
+    /// plane; `φ = |q_xy| − R` changes at `q_xy·q̇_xy/|q_xy|`. NaN where the ray runs along
+    /// the plane or crosses it on the axis.
+    pub(super) fn phi_rate(&self, p: &Probe, edge: usize) -> Real {
+        let h = match (edge, self.shape) {
+            (1, _) => self.l,
+            (_, Shape::Flat) => 0.0,
+            (_, Shape::Ball) => self.r,
+        };
+        let q = p.p + p.u * ((h - p.p.z) / p.u.z);
+        let m = p.w_t.cross(&q) + p.v_t;
+        let dq = p.u * (m.z / p.u.z) - m;
+        (q.x * dq.x + q.y * dq.y) / q.xy().norm()
+    }
+
+    /// A guided edge crossing's guess ([`Self::solve`]): Newton's step on `φ` from the
+    /// bracket end where `|φ|` is least, `φ'` from [`Self::phi_rate`] (NaN, so no guess,
+    /// where that is not finite).
+    fn crossing_guess(&self, edge: usize) -> impl Fn((&Probe, &Probe), (Real, Real)) -> Real {
+        move |(lo, hi), (flo, fhi)| {
+            let (p, f) = if flo.abs() <= fhi.abs() {
+                (lo, flo)
+            } else {
+                (hi, fhi)
+            };
+            p.lambda - f / self.phi_rate(p, edge)
+        }
+    }
+
     fn crosses_edge(&self, (a, b): (&Probe, &Probe), edge: usize) -> bool {
         let (fa, fb) = (a.edge_r2[edge], b.edge_r2[edge]);
         !fa.is_nan() && !fb.is_nan() && self.edge.inside(fa) != self.edge.inside(fb)
@@ -521,7 +552,9 @@ impl RotaryEnvelope {
             for edge in 0..2 {
                 if self.crosses_edge((a, b), edge) {
                     let phi = move |p: &Probe| Some(p.phi(edge, self.r));
-                    if let Some((lo, hi)) = self.solve(ray, (a, b), phi, None, Stop::Crossing, acc)
+                    let newton = self.crossing_guess(edge);
+                    if let Some((lo, hi)) =
+                        self.solve(ray, (a, b), phi, Some(&newton), Stop::Crossing, acc)
                     {
                         self.refine(ray, a, &lo, acc, depth + 1);
                         self.refine(ray, &hi, b, acc, depth + 1);
@@ -563,7 +596,8 @@ impl RotaryEnvelope {
         for edge in 0..2 {
             if self.crosses_edge((a, b), edge) {
                 let phi = move |p: &Probe| Some(p.phi(edge, self.r));
-                match self.solve(ray, (a, b), phi, None, Stop::Crossing, acc) {
+                let newton = self.crossing_guess(edge);
+                match self.solve(ray, (a, b), phi, Some(&newton), Stop::Crossing, acc) {
                     Some((lo, hi)) => {
                         self.refine(ray, a, &lo, acc, depth + 1);
                         self.refine(ray, &hi, b, acc, depth + 1);
@@ -728,7 +762,8 @@ impl RotaryEnvelope {
     /// falsi (a bisection every third step where the last three did not halve the bracket
     /// nor, for a rate's extreme, bring the least `|f|` at its ends down sixteenfold),
     /// offering every pose it evaluates. With a `guess` (a point for the bracket `(lo, hi)`
-    /// with `f` there: the root of a Hermite cubic's slope) the solve is guided: a guess
+    /// with `f` there: the root of a Hermite cubic's slope for a rate's extreme, Newton's
+    /// step for an edge crossing) the solve is guided: a guess
     /// inside the bracket is taken instead of the secant's point, a step near an end is
     /// moved past the root, and the bisection waits while `|f|` falls; without one it is the
     /// plain regula falsi. `None` where `f` is undefined (the ray missed a pose).
@@ -780,10 +815,9 @@ impl RotaryEnvelope {
             }
             // A step closer to an end than half the width the stop needs goes that far:
             // where the guess has the root that close, the point lands past it and the
-            // bracket closes at once (regula falsi alone keeps the far end). Guided only:
-            // an edge crossing's two sides are different faces, and its bracket closed from
-            // one side keeps the kept end's face (so its normal) the same from ray to ray,
-            // which the mesher's features read.
+            // bracket closes at once (regula falsi alone keeps the far end). Guided only
+            // (an edge crossing is guided too: its two sides are different faces, but the
+            // kept end's normal there is the swept edge's whichever side it comes from).
             if guess.is_some() {
                 let need = solve_tol / slope;
                 if m - lo.lambda < 0.5 * need {

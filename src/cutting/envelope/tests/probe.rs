@@ -121,3 +121,61 @@ fn a_probes_edges_are_where_the_ray_crosses_the_end_planes() {
         );
     }
 }
+
+/// The rate of `φ` that guides an edge crossing's solve is `φ`'s own derivative: on a
+/// trunnion move turning A and C with X, Y and Z, for rays from every side (the three axes
+/// and oblique ones) and both edges of a flat end mill, [`RotaryEnvelope::phi_rate`] at a
+/// probe equals the central difference of the probes' `φ` over `λ ± 1e-6` (`φ` itself is
+/// checked against the direct formula above), to 1e-5 relative, wherever `φ` is finite
+/// and the ray crosses the plane away from the tool's axis.
+#[test]
+fn the_edge_crossing_s_rate_is_the_derivative_of_phi() {
+    let c = trunnion();
+    let (a, b) = (
+        q(3.0, -10.0, 20.0, -20.0).with(AxisLetter::C, 30.0),
+        q(-2.0, -14.0, 25.0, 15.0).with(AxisLetter::C, 80.0),
+    );
+    let tool = Tool::try_new(ToolKind::Flat, 6.0, 25.0).expect("valid");
+    let env = RotaryEnvelope::new(&c, &tool, &a, &b).expect("supported");
+    let h = 1e-6;
+    let mut checked = 0;
+    for k in 1..200 {
+        let lambda = k as Real / 200.0;
+        let f = k as Real;
+        let o = Point3::new(
+            (f * 0.37).sin() * 8.0,
+            (f * 0.23).cos() * 8.0 - 12.0,
+            25.0 + (f * 0.11).sin() * 20.0,
+        );
+        let dirs = [
+            Vector3::x(),
+            Vector3::y(),
+            Vector3::z(),
+            Vector3::new((f * 0.7).cos(), (f * 0.3).sin(), (f * 0.5).cos()).normalize(),
+        ];
+        for (i, e) in dirs.iter().enumerate() {
+            let ray = Ray {
+                o: &o,
+                e,
+                span: (Real::NEG_INFINITY, Real::INFINITY),
+                axis: (i < 3).then_some(i),
+            };
+            let at = |l: Real| env.probe_at(l, &ray);
+            let (p, lo, hi) = (at(lambda), at(lambda - h), at(lambda + h));
+            for edge in 0..2 {
+                let phi = |p: &Probe| p.phi(edge, env.r);
+                let want = (phi(&hi) - phi(&lo)) / (2.0 * h);
+                if !(want.is_finite() && phi(&p) > -0.5 * env.r) {
+                    continue;
+                }
+                let got = env.phi_rate(&p, edge);
+                assert!(
+                    (got - want).abs() <= 1e-5 * (1.0 + want.abs()),
+                    "λ {lambda}, ray {i}, edge {edge}: φ' {got} against {want}"
+                );
+                checked += 1;
+            }
+        }
+    }
+    assert!(checked > 400, "{checked} rates checked");
+}
