@@ -68,25 +68,9 @@ fn a_probes_edges_are_where_the_ray_crosses_the_end_planes() {
         for k in 0..400 {
             let lambda = k as Real / 399.0;
             // origins about the tool, directions from every side (the three axes among them)
-            let f = k as Real;
-            let o = Point3::new(
-                (f * 0.37).sin() * 8.0,
-                (f * 0.23).cos() * 8.0,
-                10.0 + (f * 0.11).sin() * 20.0,
-            );
-            let dirs = [
-                Vector3::x(),
-                Vector3::y(),
-                Vector3::z(),
-                Vector3::new((f * 0.7).cos(), (f * 0.3).sin(), (f * 0.5).cos()).normalize(),
-            ];
+            let (o, dirs) = rays_about(k, Vector3::new(0.0, 0.0, 10.0));
             for (i, e) in dirs.iter().enumerate() {
-                let ray = Ray {
-                    o: &o,
-                    e,
-                    span: (Real::NEG_INFINITY, Real::INFINITY),
-                    axis: (i < 3).then_some(i),
-                };
+                let ray = whole(&o, e, i);
                 let probe = env.probe_at(lambda, &ray);
                 let s = env.path.sample(lambda);
                 let p = s.rot.tr_mul(&(o - s.tip));
@@ -141,25 +125,9 @@ fn the_edge_crossing_s_rate_is_the_derivative_of_phi() {
     let mut checked = 0;
     for k in 1..200 {
         let lambda = k as Real / 200.0;
-        let f = k as Real;
-        let o = Point3::new(
-            (f * 0.37).sin() * 8.0,
-            (f * 0.23).cos() * 8.0 - 12.0,
-            25.0 + (f * 0.11).sin() * 20.0,
-        );
-        let dirs = [
-            Vector3::x(),
-            Vector3::y(),
-            Vector3::z(),
-            Vector3::new((f * 0.7).cos(), (f * 0.3).sin(), (f * 0.5).cos()).normalize(),
-        ];
+        let (o, dirs) = rays_about(k, Vector3::new(0.0, -12.0, 25.0));
         for (i, e) in dirs.iter().enumerate() {
-            let ray = Ray {
-                o: &o,
-                e,
-                span: (Real::NEG_INFINITY, Real::INFINITY),
-                axis: (i < 3).then_some(i),
-            };
+            let ray = whole(&o, e, i);
             let at = |l: Real| env.probe_at(l, &ray);
             let (p, lo, hi) = (at(lambda), at(lambda - h), at(lambda + h));
             for edge in 0..2 {
@@ -178,4 +146,28 @@ fn the_edge_crossing_s_rate_is_the_derivative_of_phi() {
         }
     }
     assert!(checked > 400, "{checked} rates checked");
+}
+
+/// The `k`-th of a family of rays about `centre`: an origin within 8 mm across and 20 mm
+/// along z of it, and four directions, the x, y and z axes and an oblique one.
+fn rays_about(k: usize, centre: Vector3) -> (Point3, [Vector3; 4]) {
+    let f = k as Real;
+    let o = Point3::new(
+        (f * 0.37).sin() * 8.0,
+        (f * 0.23).cos() * 8.0,
+        (f * 0.11).sin() * 20.0,
+    ) + centre;
+    let oblique = Vector3::new((f * 0.7).cos(), (f * 0.3).sin(), (f * 0.5).cos()).normalize();
+    (o, [Vector3::x(), Vector3::y(), Vector3::z(), oblique])
+}
+
+/// The whole ray from `o` along `e`, the `i`-th of [`rays_about`]'s directions (an axis ray
+/// for the first three).
+fn whole<'a>(o: &'a Point3, e: &'a Vector3, i: usize) -> Ray<'a> {
+    Ray {
+        o,
+        e,
+        span: (Real::NEG_INFINITY, Real::INFINITY),
+        axis: (i < 3).then_some(i),
+    }
 }
