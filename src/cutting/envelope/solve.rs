@@ -471,9 +471,6 @@ impl RotaryEnvelope {
         }
     }
 
-    /// Whether the ray crosses edge circle `edge` between the probes `a` and `b`: `φ` has a
-    /// sign at both and the signs differ.
-    #[inline(always)]
     /// The tool radius and the heights of its edge circles' planes in the tool frame
     /// (bottom and top; NaN for none: a ball's end is smooth).
     fn rim(&self) -> (Real, [Real; 2]) {
@@ -488,13 +485,9 @@ impl RotaryEnvelope {
     /// the edge's plane `z = h` moves in the tool frame at `−(w × q + v) + u·ṫ_e`, a point
     /// fixed in W moving against the tool, with `ṫ_e = (w × q + v)_z/u_z` keeping it in the
     /// plane; `φ = |q_xy| − R` changes at `q_xy·q̇_xy/|q_xy|`. NaN where the ray runs along
-    /// the plane or crosses it on the axis.
+    /// the plane or crosses it on the axis, or the edge is not there (a ball's bottom).
     pub(super) fn phi_rate(&self, p: &Probe, edge: usize) -> Real {
-        let h = match (edge, self.shape) {
-            (1, _) => self.l,
-            (_, Shape::Flat) => 0.0,
-            (_, Shape::Ball) => self.r,
-        };
+        let h = self.rim().1[edge];
         let q = p.p + p.u * ((h - p.p.z) / p.u.z);
         let m = p.w_t.cross(&q) + p.v_t;
         let dq = p.u * (m.z / p.u.z) - m;
@@ -515,6 +508,9 @@ impl RotaryEnvelope {
         }
     }
 
+    /// Whether the ray crosses edge circle `edge` between the probes `a` and `b`: `φ` has a
+    /// sign at both and the signs differ.
+    #[inline(always)]
     fn crosses_edge(&self, (a, b): (&Probe, &Probe), edge: usize) -> bool {
         let (fa, fb) = (a.edge_r2[edge], b.edge_r2[edge]);
         !fa.is_nan() && !fb.is_nan() && self.edge.inside(fa) != self.edge.inside(fb)
