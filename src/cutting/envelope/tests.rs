@@ -1063,15 +1063,20 @@ fn whole_ray() -> [crate::cutting::stock::Segment; 1] {
 }
 
 /// Every x, y and z ray of a 0.05 mm grid across `b`: `f(origin, axis, direction)`.
-fn grid_rays(b: &Aabb, mut f: impl FnMut(Point3, usize, Vector3)) {
+fn grid_rays(b: &Aabb, f: impl FnMut(Point3, usize, Vector3)) {
+    grid_rays_every(0.05, b, f);
+}
+
+/// Every x, y and z ray of a grid of pitch `step` (mm) across `b`.
+fn grid_rays_every(step: Real, b: &Aabb, mut f: impl FnMut(Point3, usize, Vector3)) {
     for axis in 0..3 {
         let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-        let n = |k: usize| ((b.max[k] - b.min[k]) / 0.05) as usize;
+        let n = |k: usize| ((b.max[k] - b.min[k]) / step) as usize;
         for i in 0..=n(u) {
             for j in 0..=n(v) {
                 let mut o = Point3::origin();
-                o[u] = b.min[u] + 0.05 * i as Real;
-                o[v] = b.min[v] + 0.05 * j as Real;
+                o[u] = b.min[u] + step * i as Real;
+                o[v] = b.min[v] + step * j as Real;
                 f(o, axis, Vector3::ith(axis, 1.0));
             }
         }

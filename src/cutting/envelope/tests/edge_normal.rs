@@ -50,10 +50,9 @@ fn brute_end(
 /// poses) has the normal of the surface through the neighbouring rays' ends (central
 /// differences over ±1 µm across the ray, each end searched likewise): within 1e-3 rad,
 /// where the one-sided differences agree (elsewhere the end is on a crease of the swept
-/// volume, which few are).
-/// About a thousand such ends are checked (on the 1.5 mm grid), and at hundreds of them the face's own normal (the side's
-/// radial or the end plane's axial one, at the farthest pose) is more than 0.05 rad off:
-/// the normal is the swept edge's, not a face's.
+/// volume, which few are). About a thousand such ends are checked, and at hundreds of them
+/// the face's own normal (the side's radial or the end plane's axial one, at the farthest
+/// pose) is more than 0.05 rad off: the normal is the swept edge's, not a face's.
 #[test]
 fn an_end_on_an_edge_circle_has_the_swept_edge_s_normal() {
     let c = trunnion();
@@ -71,21 +70,8 @@ fn an_end_on_an_edge_circle_has_the_swept_edge_s_normal() {
             ToolKind::Flat => &[0.0, l],
             _ => &[l],
         };
-        let bounds = env.bounds();
         let mut rays = Vec::new();
-        for axis in 0..3 {
-            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-            let n = |k: usize| ((bounds.max[k] - bounds.min[k]) / 1.5) as usize;
-            for i in 0..=n(u) {
-                for j in 0..=n(v) {
-                    let mut o = bounds.min;
-                    o[axis] -= 1.0;
-                    o[u] += 1.5 * i as Real;
-                    o[v] += 1.5 * j as Real;
-                    rays.push((o, axis));
-                }
-            }
-        }
+        grid_rays_every(1.5, &env.bounds(), |o, axis, _| rays.push((o, axis)));
         let mv = (&c, &tool, &a, &b);
         for (o, axis) in rays {
             let e = Vector3::ith(axis, 1.0);
