@@ -90,43 +90,24 @@ impl TriDexel {
             );
             grids.push(ctx);
         }
-        let jobs: Vec<(usize, usize)> = tasks
-            .iter()
-            .enumerate()
-            .flat_map(|(t, (g, k, nbu, _))| {
-                let b: &BatchContext = &grids[*g];
-                b.rows_of(k / nbu).map(move |iv| (t, iv))
-            })
-            .collect();
-        let rows: Vec<(RowsCut, RowFlags)> = jobs
-            .par_iter()
-            .map(|&(t, iv)| {
-                let (g, k, nbu, block) = &tasks[t];
-                grids[*g].cut_row(k % nbu, block, iv, groups)
-            })
-            .collect();
-        let mut removed = Removed {
-            by_cutter: vec![false; cutters.len()],
-            ..Removed::default()
-        };
-        // Each block's rows in order (they came in the order of `jobs`), then every block
-        // rewritten on its own: blocks are disjoint, so the stock is the same in any order.
-        let mut per_task: Vec<Vec<RowsCut>> = tasks.iter().map(|_| Vec::new()).collect();
-        for (&(t, _), (r, flags)) in jobs.iter().zip(rows) {
-            per_task[t].push(r);
-            for (any, f) in removed.by_cutter.iter_mut().zip(flags.cut) {
-                *any |= f;
-            }
-            removed.group_tests += flags.group_tests;
-            removed.group_skips += flags.group_skips;
-        }
-        tasks
+        // Each block in one task: its rows cut side by side (reading the block), then the
+        // block rewritten from them. Blocks are disjoint, so the stock is the same in any
+        // order; what the cutters did is combined by `or` and sums, the same in any order.
+        let flags = tasks
             .into_par_iter()
-            .zip(per_task)
-            .for_each(|((g, k, nbu, block), rows)| {
-                grids[g].ctx.apply(k % nbu, k / nbu, block, rows);
-            });
-        removed
+            .map(|(g, k, nbu, block)| {
+                let b: &BatchContext = &grids[g];
+                let (bu, bv) = (k % nbu, k / nbu);
+                let (rows, flags) = b.cut_rows(bu, block, b.rows_of(bv), groups);
+                b.ctx.apply(bu, bv, block, vec![rows]);
+                flags
+            })
+            .reduce(|| RowFlags::none(cutters.len()), RowFlags::and);
+        Removed {
+            by_cutter: flags.cut,
+            group_tests: flags.group_tests,
+            group_skips: flags.group_skips,
+        }
     }
 }
 
@@ -191,25 +172,25 @@ impl BatchContext<'_> {
         self.ctx.rows_of(bv)
     }
 
-    /// Cuts the rays of row `iv` of block column `bu` by every cutter, the last first, a
+    /// Cuts the rays of rows `rows` of block column `bu` by every cutter, the last first, a
     /// group's cutters skipped where its test clears the ray, reading the block only; also
     /// which cutters changed a ray.
-    fn cut_row(
+    fn cut_rows(
         &self,
         bu: usize,
         block: &Block,
-        iv: usize,
+        rows: std::ops::RangeInclusive<usize>,
         groups: &[Group],
     ) -> (RowsCut, RowFlags) {
-        with_ray_buffers(|bufs| self.cut_row_with(bu, block, iv, groups, bufs))
+        with_ray_buffers(|bufs| self.cut_rows_with(bu, block, rows, groups, bufs))
     }
 
-    /// [`Self::cut_row`] with the scratch buffers `bufs`.
-    fn cut_row_with(
+    /// [`Self::cut_rows`] with the scratch buffers `bufs`.
+    fn cut_rows_with(
         &self,
         bu: usize,
         block: &Block,
-        iv: usize,
+        rows: std::ops::RangeInclusive<usize>,
         groups: &[Group],
         bufs: &mut RayBuffers,
     ) -> (RowsCut, RowFlags) {
@@ -232,63 +213,66 @@ impl BatchContext<'_> {
             std::mem::take(&mut bufs.own),
             std::mem::take(&mut bufs.after),
         );
-        for iu in c.iu.0.max(bu * BLOCK)..=c.iu.1.min(bu * BLOCK + BLOCK - 1) {
-            let local = (iv % BLOCK) * BLOCK + iu % BLOCK;
-            let o = c.origin(iu, iv);
-            // The ray's material before the batch.
-            let before = block.ray(local, &c.fill);
-            let mut changed = false;
-            // Whether the ray lies in cutter k's index ranges, and those ranges' extent along it.
-            let reach = |k: usize| {
-                self.each[k]
-                    .filter(|(u, v, _)| (u.0..=u.1).contains(&iu) && (v.0..=v.1).contains(&iv))
-                    .map(|(_, _, along)| along)
-            };
-            let mut group = groups.iter().rev().peekable();
-            let mut k = self.cutters.len();
-            while k > 0 {
-                // The ray's material as the cutters after k left it.
-                let segs = |own| {
-                    if changed { own } else { before }
+        for iv in rows {
+            for iu in c.iu.0.max(bu * BLOCK)..=c.iu.1.min(bu * BLOCK + BLOCK - 1) {
+                let local = (iv % BLOCK) * BLOCK + iu % BLOCK;
+                let o = c.origin(iu, iv);
+                // The ray's material before the batch.
+                let before = block.ray(local, &c.fill);
+                let mut changed = false;
+                // Whether the ray lies in cutter k's index ranges, and those ranges' extent
+                // along it.
+                let reach = |k: usize| {
+                    self.each[k]
+                        .filter(|(u, v, _)| (u.0..=u.1).contains(&iu) && (v.0..=v.1).contains(&iv))
+                        .map(|(_, _, along)| along)
                 };
-                if let Some(g) = group.next_if(|g| g.cutters.end == k) {
-                    let asked = g.cutters.clone().any(|j| reach(j).is_some());
-                    flags.group_tests += u64::from(asked);
-                    if !asked || !g.cull.may_cut(&o, c.axis, segs(&own)) {
-                        flags.group_skips += u64::from(asked);
-                        k = g.cutters.start;
+                let mut group = groups.iter().rev().peekable();
+                let mut k = self.cutters.len();
+                while k > 0 {
+                    // The ray's material as the cutters after k left it.
+                    let segs = |own| {
+                        if changed { own } else { before }
+                    };
+                    if let Some(g) = group.next_if(|g| g.cutters.end == k) {
+                        let asked = g.cutters.clone().any(|j| reach(j).is_some());
+                        flags.group_tests += u64::from(asked);
+                        if !asked || !g.cull.may_cut(&o, c.axis, segs(&own)) {
+                            flags.group_skips += u64::from(asked);
+                            k = g.cutters.start;
+                            continue;
+                        }
+                    }
+                    k -= 1;
+                    let (cutter, line) = self.cutters[k];
+                    let Some(along) = reach(k) else {
                         continue;
+                    };
+                    next.clear();
+                    let cutter = (cutter, line, along);
+                    if cut_ray(
+                        cutter,
+                        &o,
+                        c.axis,
+                        (segs(&own), Some(before)),
+                        bufs,
+                        &mut next,
+                        &mut used,
+                    ) {
+                        flags.cut[k] = true;
+                        changed = true;
+                        std::mem::swap(&mut own, &mut next);
                     }
                 }
-                k -= 1;
-                let (cutter, line) = self.cutters[k];
-                let Some(along) = reach(k) else {
-                    continue;
-                };
-                next.clear();
-                let cutter = (cutter, line, along);
-                if cut_ray(
-                    cutter,
-                    &o,
-                    c.axis,
-                    (segs(&own), Some(before)),
-                    bufs,
-                    &mut next,
-                    &mut used,
-                ) {
-                    flags.cut[k] = true;
-                    changed = true;
-                    std::mem::swap(&mut own, &mut next);
+                if changed {
+                    let start = new.len();
+                    new.extend_from_slice(&own);
+                    changes.push(RayChange {
+                        local,
+                        start,
+                        end: new.len(),
+                    });
                 }
-            }
-            if changed {
-                let start = new.len();
-                new.extend_from_slice(&own);
-                changes.push(RayChange {
-                    local,
-                    start,
-                    end: new.len(),
-                });
             }
         }
         (bufs.own, bufs.after) = (own, next);
@@ -302,11 +286,32 @@ impl BatchContext<'_> {
     }
 }
 
-/// What one row's cut says of the cutters: which changed a ray, and how often the groups'
+/// What cutting some rows says of the cutters: which changed a ray, and how often the groups'
 /// tests were asked and cleared a ray.
 #[derive(Default)]
 struct RowFlags {
     cut: Vec<bool>,
     group_tests: u64,
     group_skips: u64,
+}
+
+impl RowFlags {
+    /// No cutter changed a ray, no test asked: for `n` cutters.
+    fn none(n: usize) -> Self {
+        Self {
+            cut: vec![false; n],
+            ..Self::default()
+        }
+    }
+
+    /// What `self` and `other` say together (the cutters that changed a ray in either, the
+    /// tests of both): the same in any order.
+    fn and(mut self, other: Self) -> Self {
+        for (a, b) in self.cut.iter_mut().zip(other.cut) {
+            *a |= b;
+        }
+        self.group_tests += other.group_tests;
+        self.group_skips += other.group_skips;
+        self
+    }
 }
