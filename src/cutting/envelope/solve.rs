@@ -354,6 +354,15 @@ impl RotaryEnvelope {
             Some(a) => self.sample_dirs[k][a],
             None => self.samples[k].rot.tr_mul(e),
         };
+        if n == 1 && !general_path_forced() {
+            // A move of one cell (most small moves): its three samples on the stack.
+            if box_meets(&self.cell_boxes[0]).is_some_and(|(t0, t1)| t1 >= span.0 && t0 <= span.1)
+                && (probe_all || self.meets_grown(&self.samples[1], &ray, &along(1), self.delta))
+            {
+                self.one_cell(&ray, along, out);
+            }
+            return;
+        }
         SCRATCH.with_borrow_mut(|scratch| {
             let Scratch {
                 grown,
@@ -445,6 +454,58 @@ impl RotaryEnvelope {
                 }
             }
         });
+    }
+
+    /// [`Self::intervals_near`] on a move of one cell whose cell may meet the ray: the
+    /// general case's steps with its buffers on the stack (the same probes, components and
+    /// refinements in the same order, so the same intervals). `along(k)`: the ray's
+    /// direction in sample `k`'s tool frame.
+    fn one_cell(&self, ray: &Ray, along: impl Fn(usize) -> Vector3, out: &mut Vec<RayCut>) {
+        let probes: [Probe; 3] =
+            std::array::from_fn(|k| self.probe(&self.samples[k], self.lambda_of(k), ray, along(k)));
+        // Runs of samples inside the tool, then a touch found between two missing samples:
+        // at most two runs and two touches.
+        let mut comps: [Option<RawEnd>; 4] = [None; 4];
+        let mut len = 0;
+        let mut comp_of = [None; 3];
+        for (k, p) in probes.iter().enumerate() {
+            if p.hit.is_none() {
+                continue;
+            }
+            let id = match (k > 0).then(|| comp_of[k - 1]).flatten() {
+                Some(id) => id,
+                None => {
+                    len += 1;
+                    len - 1
+                }
+            };
+            comp_of[k] = Some(id);
+            offer(&mut comps[id], p);
+        }
+        for k in 0..2 {
+            let id = match comp_of[k].or(comp_of[k + 1]) {
+                Some(id) => id,
+                None => {
+                    len += 1;
+                    len - 1
+                }
+            };
+            self.refine(ray, &probes[k], &probes[k + 1], &mut comps[id], 0);
+        }
+        let mut found = comps[..len].iter().flatten();
+        match (found.next(), found.next()) {
+            (None, _) => {}
+            (Some(only), None) => emit(only, self.rim(), out),
+            (Some(&first), Some(_)) => {
+                let mut cuts = [first; 4];
+                let mut m = 0;
+                for c in comps[..len].iter().flatten() {
+                    cuts[m] = *c;
+                    m += 1;
+                }
+                self.merge_and_emit(&mut cuts[..m], out);
+            }
+        }
     }
 
     /// Sorts the intervals, merges those that overlap and emits them with their normals.
@@ -960,6 +1021,25 @@ fn emit(c: &RawEnd, (r, edges): (Real, [Real; 2]), out: &mut Vec<RayCut>) {
             n_out: c.hi.normal(r, edges),
         });
     }
+}
+
+/// Whether [`RotaryEnvelope::intervals_near`] takes its general path on a move of one cell
+/// too: never outside the tests.
+#[cfg(not(test))]
+#[inline(always)]
+fn general_path_forced() -> bool {
+    false
+}
+
+#[cfg(test)]
+thread_local! {
+    /// Set by a test to take a one-cell move through the general path.
+    pub(super) static GENERAL_PATH: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+#[cfg(test)]
+fn general_path_forced() -> bool {
+    GENERAL_PATH.with(std::cell::Cell::get)
 }
 
 /// `Scratch::slot` of a sample not evaluated.

@@ -1417,3 +1417,72 @@ fn a_one_cell_move_probed_without_its_grown_test_cuts_the_same_span() {
         "{same} the same, {outside} outside"
     );
 }
+
+/// A one-cell move's rays go through `RotaryEnvelope::one_cell`, its buffers on the stack:
+/// the same intervals, bit for bit, as the general path that serves moves of any number of
+/// cells gives them. Every x, y and z ray of a 0.05 mm grid across two trunnion moves (A and
+/// C turning, Y and Z moving; flat and ball), with the whole ray or a random stretch of it as
+/// the material's span, after the cull and not: hundreds of thousands of intervals, among
+/// them rays that only some of the three samples meet (the components and the refinement
+/// between a hit and a miss) and rays that none meets but the move touches (a component
+/// of its own).
+#[test]
+fn a_one_cell_move_s_stack_path_gives_the_general_path_s_intervals() {
+    use super::solve::GENERAL_PATH;
+    let c = trunnion();
+    let mut next = uniform(0x0ce1);
+    let bits = |c: &RayCut| {
+        [
+            c.t_in, c.t_out, c.n_in.x, c.n_in.y, c.n_in.z, c.n_out.x, c.n_out.y, c.n_out.z,
+        ]
+        .map(Real::to_bits)
+    };
+    let (mut intervals, mut partial, mut touched) = (0, 0, 0);
+    for kind in [ToolKind::Flat, ToolKind::Ball] {
+        let tool = Tool::try_new(kind, 6.0, 25.0).expect("valid");
+        for (qa, qb) in trunnion_moves().into_iter().take(2) {
+            let env = RotaryEnvelope::new(&c, &tool, &qa, &qb).expect("envelope");
+            assert_eq!(env.cells(), 1);
+            let b = env.bounds();
+            grid_rays(&b, |o, axis, e| {
+                // How many of the three samples' tools the whole ray meets.
+                let hits = env
+                    .samples
+                    .iter()
+                    .filter(|s| {
+                        let (p, w) = (s.rot.tr_mul(&(o - s.tip)), s.rot.tr_mul(&e));
+                        tool_interval(env.shape, env.r, env.l, &p, &w, 0.0).is_some()
+                    })
+                    .count();
+                let (lo, hi) = (b.min[axis], b.max[axis]);
+                let span = if next() < 0.3 {
+                    (Real::NEG_INFINITY, Real::INFINITY)
+                } else {
+                    let (x, y) = (lo + next() * (hi - lo), lo + next() * (hi - lo));
+                    (x.min(y), x.max(y))
+                };
+                let culled = next() < 0.5;
+                let run = |general: bool| {
+                    GENERAL_PATH.with(|g| g.set(general));
+                    let mut out = Vec::new();
+                    env.intervals_near(&o, &e, span, culled, &mut out);
+                    GENERAL_PATH.with(|g| g.set(false));
+                    out.iter().map(bits).collect::<Vec<_>>()
+                };
+                let (stack, general) = (run(false), run(true));
+                assert_eq!(
+                    stack, general,
+                    "{kind:?}: the ray through {o:?} along {axis}, span {span:?}"
+                );
+                intervals += stack.len();
+                let whole = span.0 == Real::NEG_INFINITY;
+                partial += usize::from(whole && (hits == 1 || hits == 2));
+                touched += usize::from(whole && hits == 0 && !stack.is_empty());
+            });
+        }
+    }
+    assert!(
+        intervals > 100_000 && partial > 1000 && touched >= 5,
+        "{intervals} intervals, {partial} rays some samples meet, {touched} touched only"
+    );
+}
