@@ -461,8 +461,8 @@ impl RotaryEnvelope {
     /// refinements in the same order, so the same intervals). `along(k)`: the ray's
     /// direction in sample `k`'s tool frame.
     fn one_cell(&self, ray: &Ray, along: impl Fn(usize) -> Vector3, out: &mut Vec<RayCut>) {
-        let probes: [Probe; 3] =
-            std::array::from_fn(|k| self.probe(&self.samples[k], self.lambda_of(k), ray, along(k)));
+        let probe = |k: usize| self.probe(&self.samples[k], self.lambda_of(k), ray, along(k));
+        let probes = [probe(0), probe(1), probe(2)];
         // Runs of samples inside the tool, then a touch found between two missing samples:
         // at most two runs and two touches.
         let mut comps: [Option<RawEnd>; 4] = [None; 4];
