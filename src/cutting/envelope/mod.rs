@@ -60,7 +60,10 @@
 //! skipped, and an interval end already beyond it is not refined (it stays beyond it). It
 //! asks only about rays the cull kept, so a move of one cell is probed without that grown
 //! test: after the swept cull it nearly always passes, and a cell it would have skipped
-//! gives no interval reaching into the span.
+//! gives no interval reaching into the span. Such a move (most small moves) has its three
+//! probes, their components and the touches between them on the stack
+//! (`RotaryEnvelope::one_cell`); the general path, with per-thread buffers sized by the
+//! cells, takes the same steps in the same order for any number of cells.
 //!
 //! **Accuracy.** Every interval end is the exact interval of some pose, so nothing is cut
 //! that the tool does not reach. A smooth extreme is solved until
