@@ -1362,6 +1362,51 @@ fn the_touch_test_rules_out_only_rays_the_tool_never_meets() {
     );
 }
 
+/// The bits of an interval: its ends and their normals.
+fn cut_bits(c: &RayCut) -> [u64; 8] {
+    [
+        c.t_in, c.t_out, c.n_in.x, c.n_in.y, c.n_in.z, c.n_out.x, c.n_out.y, c.n_out.z,
+    ]
+    .map(Real::to_bits)
+}
+
+/// Every x, y and z ray of a 0.05 mm grid across the first two trunnion moves (one cell
+/// each), for a flat and a ball end mill (Ø6 × 25 mm), given to `f` with the move's envelope
+/// and a span along it: the whole ray with probability `whole`, else a random stretch of the
+/// move's box (drawn from `seed`), and the draws for `f`'s own use.
+fn one_cell_rays(
+    seed: u64,
+    whole: Real,
+    mut f: impl FnMut(
+        ToolKind,
+        &RotaryEnvelope,
+        (Point3, usize, Vector3),
+        (Real, Real),
+        &mut dyn FnMut() -> Real,
+    ),
+) {
+    let c = trunnion();
+    let mut next = uniform(seed);
+    for kind in [ToolKind::Flat, ToolKind::Ball] {
+        let tool = Tool::try_new(kind, 6.0, 25.0).expect("valid");
+        for (qa, qb) in trunnion_moves().into_iter().take(2) {
+            let env = RotaryEnvelope::new(&c, &tool, &qa, &qb).expect("envelope");
+            assert_eq!(env.cells(), 1);
+            let b = env.bounds();
+            grid_rays(&b, |o, axis, e| {
+                let (lo, hi) = (b.min[axis], b.max[axis]);
+                let span = if next() < whole {
+                    (Real::NEG_INFINITY, Real::INFINITY)
+                } else {
+                    let (x, y) = (lo + next() * (hi - lo), lo + next() * (hi - lo));
+                    (x.min(y), x.max(y))
+                };
+                f(kind, &env, (o, axis, e), span, &mut next);
+            });
+        }
+    }
+}
+
 /// A move of one cell probed without its grown-tool test (a ray the cull kept,
 /// [`RotaryEnvelope::intervals_near`]) cuts the material's extent exactly as with the test:
 /// on the side cut's two moves (C 0.5°, flat and ball end mills, one cell each), every x, y
@@ -1372,46 +1417,23 @@ fn the_touch_test_rules_out_only_rays_the_tool_never_meets() {
 /// and thousands get the same intervals inside it.
 #[test]
 fn a_one_cell_move_probed_without_its_grown_test_cuts_the_same_span() {
-    let c = trunnion();
-    let mut next = uniform(0x5ba7);
-    let bits = |c: &RayCut| {
-        [
-            c.t_in, c.t_out, c.n_in.x, c.n_in.y, c.n_in.z, c.n_out.x, c.n_out.y, c.n_out.z,
-        ]
-        .map(Real::to_bits)
-    };
     let (mut same, mut outside) = (0, 0);
-    for kind in [ToolKind::Flat, ToolKind::Ball] {
-        let tool = Tool::try_new(kind, 6.0, 25.0).expect("valid");
-        for (qa, qb) in trunnion_moves().into_iter().take(2) {
-            let env = RotaryEnvelope::new(&c, &tool, &qa, &qb).expect("envelope");
-            assert_eq!(env.cells(), 1);
-            let b = env.bounds();
-            grid_rays(&b, |o, axis, e| {
-                let (lo, hi) = (b.min[axis], b.max[axis]);
-                let span = if next() < 0.2 {
-                    (Real::NEG_INFINITY, Real::INFINITY)
-                } else {
-                    let (x, y) = (lo + next() * (hi - lo), lo + next() * (hi - lo));
-                    (x.min(y), x.max(y))
-                };
-                let (mut with, mut without) = (Vec::new(), Vec::new());
-                env.intervals_in(&o, &e, span, &mut with);
-                env.intervals_near(&o, &e, span, true, &mut without);
-                let reaches = |c: &&RayCut| c.t_out >= span.0 && c.t_in <= span.1;
-                let (a, b): (Vec<_>, Vec<_>) = (
-                    with.iter().filter(reaches).map(bits).collect(),
-                    without.iter().filter(reaches).map(bits).collect(),
-                );
-                assert_eq!(
-                    a, b,
-                    "{kind:?}: the ray through {o:?} along {axis}, span {span:?}"
-                );
-                same += a.len();
-                outside += without.len() - b.len();
-            });
-        }
-    }
+    one_cell_rays(0x5ba7, 0.2, |kind, env, (o, axis, e), span, _| {
+        let (mut with, mut without) = (Vec::new(), Vec::new());
+        env.intervals_in(&o, &e, span, &mut with);
+        env.intervals_near(&o, &e, span, true, &mut without);
+        let reaches = |c: &&RayCut| c.t_out >= span.0 && c.t_in <= span.1;
+        let (a, b): (Vec<_>, Vec<_>) = (
+            with.iter().filter(reaches).map(cut_bits).collect(),
+            without.iter().filter(reaches).map(cut_bits).collect(),
+        );
+        assert_eq!(
+            a, b,
+            "{kind:?}: the ray through {o:?} along {axis}, span {span:?}"
+        );
+        same += a.len();
+        outside += without.len() - b.len();
+    });
     assert!(
         same > 100_000 && outside > 1000,
         "{same} the same, {outside} outside"
@@ -1429,58 +1451,35 @@ fn a_one_cell_move_probed_without_its_grown_test_cuts_the_same_span() {
 #[test]
 fn a_one_cell_move_s_stack_path_gives_the_general_path_s_intervals() {
     use super::solve::GENERAL_PATH;
-    let c = trunnion();
-    let mut next = uniform(0x0ce1);
-    let bits = |c: &RayCut| {
-        [
-            c.t_in, c.t_out, c.n_in.x, c.n_in.y, c.n_in.z, c.n_out.x, c.n_out.y, c.n_out.z,
-        ]
-        .map(Real::to_bits)
-    };
     let (mut intervals, mut partial, mut touched) = (0, 0, 0);
-    for kind in [ToolKind::Flat, ToolKind::Ball] {
-        let tool = Tool::try_new(kind, 6.0, 25.0).expect("valid");
-        for (qa, qb) in trunnion_moves().into_iter().take(2) {
-            let env = RotaryEnvelope::new(&c, &tool, &qa, &qb).expect("envelope");
-            assert_eq!(env.cells(), 1);
-            let b = env.bounds();
-            grid_rays(&b, |o, axis, e| {
-                // How many of the three samples' tools the whole ray meets.
-                let hits = env
-                    .samples
-                    .iter()
-                    .filter(|s| {
-                        let (p, w) = (s.rot.tr_mul(&(o - s.tip)), s.rot.tr_mul(&e));
-                        tool_interval(env.shape, env.r, env.l, &p, &w, 0.0).is_some()
-                    })
-                    .count();
-                let (lo, hi) = (b.min[axis], b.max[axis]);
-                let span = if next() < 0.3 {
-                    (Real::NEG_INFINITY, Real::INFINITY)
-                } else {
-                    let (x, y) = (lo + next() * (hi - lo), lo + next() * (hi - lo));
-                    (x.min(y), x.max(y))
-                };
-                let culled = next() < 0.5;
-                let run = |general: bool| {
-                    GENERAL_PATH.with(|g| g.set(general));
-                    let mut out = Vec::new();
-                    env.intervals_near(&o, &e, span, culled, &mut out);
-                    GENERAL_PATH.with(|g| g.set(false));
-                    out.iter().map(bits).collect::<Vec<_>>()
-                };
-                let (stack, general) = (run(false), run(true));
-                assert_eq!(
-                    stack, general,
-                    "{kind:?}: the ray through {o:?} along {axis}, span {span:?}"
-                );
-                intervals += stack.len();
-                let whole = span.0 == Real::NEG_INFINITY;
-                partial += usize::from(whole && (hits == 1 || hits == 2));
-                touched += usize::from(whole && hits == 0 && !stack.is_empty());
-            });
-        }
-    }
+    one_cell_rays(0x0ce1, 0.3, |kind, env, (o, axis, e), span, next| {
+        // How many of the three samples' tools the whole ray meets.
+        let hits = env
+            .samples
+            .iter()
+            .filter(|s| {
+                let (p, w) = (s.rot.tr_mul(&(o - s.tip)), s.rot.tr_mul(&e));
+                tool_interval(env.shape, env.r, env.l, &p, &w, 0.0).is_some()
+            })
+            .count();
+        let culled = next() < 0.5;
+        let run = |general: bool| {
+            GENERAL_PATH.with(|g| g.set(general));
+            let mut out = Vec::new();
+            env.intervals_near(&o, &e, span, culled, &mut out);
+            GENERAL_PATH.with(|g| g.set(false));
+            out.iter().map(cut_bits).collect::<Vec<_>>()
+        };
+        let (stack, general) = (run(false), run(true));
+        assert_eq!(
+            stack, general,
+            "{kind:?}: the ray through {o:?} along {axis}, span {span:?}"
+        );
+        intervals += stack.len();
+        let whole = span.0 == Real::NEG_INFINITY;
+        partial += usize::from(whole && (hits == 1 || hits == 2));
+        touched += usize::from(whole && hits == 0 && !stack.is_empty());
+    });
     assert!(
         intervals > 100_000 && partial > 1000 && touched >= 5,
         "{intervals} intervals, {partial} rays some samples meet, {touched} touched only"
