@@ -429,8 +429,8 @@ struct Turn {
 }
 
 /// The largest turn (rad) of a move whose sine and cosine at `λ` are taken by angle
-/// addition from the start's and the short series of `dth·λ` ([`small_sin_cos`]): a
-/// tenth of the time of `sin_cos` on the poses between a small move's samples.
+/// addition from the start's and the short series of `dth·λ` ([`small_sin_cos`]), fewer
+/// instructions than `sin_cos` on the poses between a small move's samples.
 const SMALL_TURN: Real = 0.25;
 
 /// `sin x` and `cos x` for `|x| ≤` [`SMALL_TURN`]: their Taylor series to `x¹³` and `x¹⁴`

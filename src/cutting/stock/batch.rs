@@ -90,8 +90,8 @@ impl TriDexel {
             );
             grids.push(ctx);
         }
-        // Each block in one task: its rows cut side by side (reading the block), then the
-        // block rewritten from them. Blocks are disjoint, so the stock is the same in any
+        // Each block in one task: its rows cut in turn (reading the block), then the block
+        // rewritten from them. Blocks are disjoint, so the stock is the same in any
         // order; what the cutters did is combined by `or` and sums, the same in any order.
         let flags = tasks
             .into_par_iter()
