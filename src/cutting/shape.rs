@@ -792,7 +792,7 @@ pub fn read_stl(bytes: &[u8], path: &Path) -> Result<ClosedMesh, ShapeError> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     /// OBJ text of the box [0, s]³ with every face split into n × n squares of two

@@ -11,7 +11,7 @@
 use super::{PipelineError, make_stock, sweep_failed};
 use crate::calibration::calibrate::Feature;
 use crate::cutting::mesh::TriMesh;
-use crate::cutting::nominal::{NominalMachine, NominalPath};
+use crate::cutting::nominal::{NominalMachine, NominalPath, NominalStock};
 use crate::cutting::stock::TriDexel;
 use crate::cutting::sweep::sweep_program;
 use crate::machine::hexapod::{HexapodTwin, TableAxes};
@@ -28,7 +28,7 @@ use crate::report::pages::{self as page, FittedPlane, PartGeometry, View3dParts}
 use crate::report::part_view::{PartViewOptions, render_part_view};
 use crate::report::render::encode_png;
 use crate::report::{CorrectReport, DesignReport, IdentifyReport, ScanFileReport};
-use crate::scene::{Machine, Scene};
+use crate::scene::{Machine, Scene, StockShape};
 
 /// What a part's deviation is measured from.
 pub struct Reference {
@@ -74,10 +74,23 @@ pub fn reference_part(scene: &Scene, moves: &[Move]) -> Result<Reference, Pipeli
                 .into(),
         });
     };
+    let b = scene.stock_box;
+    let stock = match &scene.stock_shape {
+        StockShape::Box => Some(NominalStock::boxed(b)),
+        StockShape::Cylinder(c) => Some(NominalStock::cylinder(b, *c)),
+        StockShape::Mesh { mesh, .. } => NominalStock::mesh(b, mesh),
+    };
+    let Some(stock) = stock else {
+        return Ok(Reference {
+            model: None,
+            what: "the stock's mesh cannot be read as a signed distance".into(),
+        });
+    };
     Ok(Reference {
         model: Some(ReferenceModel::Path(NominalPath::new(
             &scene.tool,
             machine,
+            stock,
             moves,
             scene.sweep.rotary_step_bound_mm,
         ))),

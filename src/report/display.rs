@@ -1031,7 +1031,7 @@ mod tests {
 
     /// The slot of [`slot`] as a program of one move (NC line 1) on a nominal 3-axis mill.
     fn slot_path() -> NominalPath {
-        use crate::cutting::nominal::NominalMachine;
+        use crate::cutting::nominal::{NominalMachine, NominalStock};
         use crate::cutting::tool::{Tool, ToolKind};
         use crate::nc::{AxisValues, Move, MoveKind};
         let tool = Tool::try_new(ToolKind::Flat, 6.0, 30.0).expect("valid");
@@ -1043,7 +1043,11 @@ mod tests {
             line: 1,
         };
         let machine = NominalMachine::Chain(crate::machine::chain::xyz_for_tests());
-        NominalPath::new(&tool, machine, &[mv], 1e-4)
+        let block = Aabb {
+            min: Point3::new(-10.0, -10.0, 0.0),
+            max: Point3::new(10.0, 10.0, 20.0),
+        };
+        NominalPath::new(&tool, machine, NominalStock::boxed(block), &[mv], 1e-4)
     }
 
     #[test]
@@ -1223,72 +1227,42 @@ mod tests {
         // The trunnion with its location errors cutting a 16 mm cube's side while C turns
         // 5° a move through a turn, A swings ±5° and Z descends 2 mm. At display vertices of
         // the cut part, the nominal part's signed distance from the program on the nominal
-        // machine (read as a chain, and pose by pose like the hexapod) against brute force:
-        // every move's poses at 400 steps, the least refined by ternary search, and the
-        // stock box's own distance.
+        // machine (read as a chain, and pose by pose like the hexapod) against brute force
+        // (every move's poses at 400 steps, the least refined by ternary search, and the
+        // stock box's own distance).
         use crate::cutting::adaptive::{AdaptiveOptions, mesh_stock_adaptive};
-        use crate::cutting::nominal::NominalMachine;
-        use crate::cutting::sweep::{Kinematics, SweepOptions, sweep_program};
-        use crate::cutting::tool::{Tool, ToolKind};
-        use crate::machine::chain::{ChainPoses, trunnion_for_tests};
-        use crate::nc::{AxisValues, Move, MoveKind};
-        use crate::progress::NoProgress;
-        let chain = trunnion_for_tests();
-        let nominal = chain.nominal();
-        let tool = Tool::try_new(ToolKind::Flat, 6.0, 25.0).expect("valid");
-        let at = |k: usize| {
-            let f = k as Real / 72.0;
-            AxisValues::from_array([
-                0.0,
-                -10.0,
-                14.0 - 2.0 * f,
-                5.0 * (std::f64::consts::TAU * 2.0 * f).sin(),
-                0.0,
-                360.0 * f,
-            ])
-        };
-        let moves: Vec<Move> = (0..72)
-            .map(|k| Move {
-                kind: MoveKind::Linear,
-                start: at(k),
-                end: at(k + 1),
-                feed_mm_per_min: Some(1000.0),
-                line: k + 10,
-            })
-            .collect();
-        let opts = SweepOptions {
-            rotary_step_bound_mm: 1e-4,
-        };
-        let b = Aabb {
-            min: Point3::new(-8.0, -8.0, 0.0),
-            max: Point3::new(8.0, 8.0, 16.0),
-        };
-        let cut_on = |k: Kinematics| {
-            let mut s = TriDexel::new_box(b, 0.1, 1e9).expect("fits");
-            sweep_program(&mut s, k, &tool, &moves, &opts, &NoProgress).expect("cuts");
-            s
-        };
-        let part = cut_on(Kinematics::Chain(&chain));
-        let (mesh, _) = mesh_stock_adaptive(&part, &AdaptiveOptions::default()).expect("meshes");
+        use crate::cutting::nominal::tests::five_axis_cut;
+        use crate::cutting::nominal::{NominalMachine, NominalStock};
+        use crate::machine::chain::ChainPoses;
+        let cut = five_axis_cut();
+        let (nominal, part) = (&cut.nominal, &cut.part);
+        let (mesh, _) = mesh_stock_adaptive(part, &AdaptiveOptions::default()).expect("meshes");
         let shown = simplify(&mesh, MAX_TRIANGLES);
-        let as_chain =
-            NominalPath::new(&tool, NominalMachine::Chain(nominal.clone()), &moves, 1e-4);
-        let from_path = path_deviations(&shown, &part, &as_chain);
-        let pose_by_pose = NominalPath::new(
-            &tool,
-            NominalMachine::Poses(Box::new(ChainPoses(nominal.clone()))),
-            &moves,
+        let stock = || NominalStock::boxed(cut.stock);
+        let as_chain = NominalPath::new(
+            &cut.tool,
+            NominalMachine::Chain(nominal.clone()),
+            stock(),
+            &cut.moves,
             1e-4,
         );
-        let by_poses = path_deviations(&shown, &part, &pose_by_pose);
+        let from_path = path_deviations(&shown, part, &as_chain);
+        let pose_by_pose = NominalPath::new(
+            &cut.tool,
+            NominalMachine::Poses(Box::new(ChainPoses(nominal.clone()))),
+            stock(),
+            &cut.moves,
+            1e-4,
+        );
+        let by_poses = path_deviations(&shown, part, &pose_by_pose);
         // Read pose by pose (the chain's own poses, not the envelope's folded path): the same
         // distance at every vertex within twice the refinement's tolerance (its bracket
         // lands elsewhere when the poses round differently); the display's corners alike
         // but for a few at edges, whose choice between their own plane and the centroid's
         // that may tip.
         for v in &shown.vertices {
-            let a = as_chain.nearest(&part, v).map(|f| f.distance);
-            let b = pose_by_pose.nearest(&part, v).map(|f| f.distance);
+            let a = as_chain.nearest(part, v).map(|f| f.distance);
+            let b = pose_by_pose.nearest(part, v).map(|f| f.distance);
             assert!(
                 a.zip(b).is_some_and(|(a, b)| (a - b).abs() < 2e-6),
                 "{v:?}: {a:?} {b:?}"
@@ -1304,33 +1278,6 @@ mod tests {
             differ * 1000 < 3 * from_path.len(),
             "{differ} corners differ"
         );
-        let brute = |v: &Point3| {
-            let sd = |mv: &Move, l: Real| {
-                let t = nominal.w_from_t(&mv.point_at(l));
-                tool.signed_distance(&t.inverse_transform_point(v)).0
-            };
-            let mut least = Real::INFINITY;
-            for mv in &moves {
-                let j = (0..=400)
-                    .min_by(|&a, &b| sd(mv, a as Real / 4e2).total_cmp(&sd(mv, b as Real / 4e2)))
-                    .expect("steps");
-                let (mut lo, mut hi) =
-                    ((j.max(1) - 1) as Real / 4e2, (j + 1).min(400) as Real / 4e2);
-                for _ in 0..60 {
-                    let (m1, m2) = (lo + (hi - lo) / 3.0, hi - (hi - lo) / 3.0);
-                    if sd(mv, m1) <= sd(mv, m2) {
-                        hi = m2;
-                    } else {
-                        lo = m1;
-                    }
-                }
-                least = least.min(sd(mv, lo)).min(sd(mv, 0.0)).min(sd(mv, 1.0));
-            }
-            let to_box = [v.x + 8.0, 8.0 - v.x, v.y + 8.0, 8.0 - v.y, v.z, 16.0 - v.z]
-                .into_iter()
-                .fold(Real::INFINITY, Real::min);
-            (-to_box).max(-least)
-        };
         let mut checked = 0;
         let mut deviating = 0;
         for v in shown
@@ -1338,11 +1285,11 @@ mod tests {
             .iter()
             .step_by(shown.vertices.len() / 100 + 1)
         {
-            let want = brute(v);
+            let want = cut.brute(v);
             if want.abs() > 0.5 {
                 continue;
             }
-            let got = as_chain.nearest(&part, v).expect("near the cut").distance;
+            let got = as_chain.nearest(part, v).expect("near the cut").distance;
             assert!(
                 (got - want).abs() < 1e-6,
                 "at {v:?}: {got} mm, brute force {want}"
