@@ -281,6 +281,9 @@ struct Kept {
     step: Real,
     /// The refinement's bracket width in `λ`: [`DISTANCE_TOL`] over the tool's speed.
     lambda_tol: Real,
+    /// The middle kept pose's axis (tip, unit direction) and how far every kept axis lies
+    /// from it at most (mm): one capsule holding every kept one ([`Kept::hull_bound`]).
+    hull: (Point3, Vector3, Real),
 }
 
 impl Kept {
@@ -307,6 +310,30 @@ impl Kept {
         b.inflated(tool.radius() + 0.5 * self.step)
     }
 
+    /// The middle kept pose's axis and the farthest any kept axis lies from it (the
+    /// distance from a segment is convex along another: its ends' farthest).
+    fn hull(&self, length: Real) -> (Point3, Vector3, Real) {
+        let (a, u) = self.axis(KEPT / 2);
+        let rho = (0..=KEPT)
+            .flat_map(|k| {
+                let (b, v) = self.axis(k);
+                [b, b + v * length]
+            })
+            .map(|q| segment_distance2(&q, &a, &u, length))
+            .fold(0.0, Real::max)
+            .sqrt();
+        (a, u, rho)
+    }
+
+    /// A lower bound on the tool's signed distance at `p` over the move from one capsule:
+    /// every kept axis within `ρ` of the middle one's, so no nearer than that axis less the
+    /// radius, `ρ` and `D/2` (a looser bound than [`Kept::capsule_bound`], at a ninth of
+    /// its cost).
+    fn hull_bound(&self, p: &Point3, radius: Real, length: Real) -> Real {
+        let (a, u, rho) = &self.hull;
+        segment_distance2(p, a, u, length).sqrt() - radius - rho - 0.5 * self.step
+    }
+
     /// A lower bound on the tool's signed distance at `p` over the move: the tool lies in
     /// the capsule of its radius about its axis, and between two kept poses within `D/2` of
     /// one of theirs, so no nearer than the nearest kept axis less the radius and `D/2`.
@@ -314,15 +341,20 @@ impl Kept {
         (0..=KEPT)
             .map(|k| {
                 let (a, u) = self.axis(k);
-                let w = p - a;
-                let h = w.dot(&u).clamp(0.0, length);
-                (w - u * h).norm_squared()
+                segment_distance2(p, &a, &u, length)
             })
             .fold(Real::INFINITY, Real::min)
             .sqrt()
             - radius
             - 0.5 * self.step
     }
+}
+
+/// The squared distance of `p` from the segment from `a` along the unit `u` for `length`.
+fn segment_distance2(p: &Point3, a: &Point3, u: &Vector3, length: Real) -> Real {
+    let w = p - a;
+    let h = w.dot(u).clamp(0.0, length);
+    (w - u * h).norm_squared()
 }
 
 /// The moves' swept-tool boxes ([`Kept::swept_box`]) as a bounding-volume tree: halves by
@@ -491,12 +523,15 @@ impl NominalPath {
                 } else {
                     2.0
                 };
-                Some(Kept {
+                let mut kept = Kept {
                     path,
                     poses: poses.try_into().ok()?,
                     step: bow * chord,
                     lambda_tol: (DISTANCE_TOL / (KEPT as Real * chord)).clamp(1e-12, 1e-4),
-                })
+                    hull: (Point3::origin(), Vector3::z(), 0.0),
+                };
+                kept.hull = kept.hull(tool.length());
+                Some(kept)
             })
             .collect();
         let mut by_line: BTreeMap<u32, Vec<u32>> = BTreeMap::new();
@@ -605,7 +640,9 @@ impl NominalPath {
             let Some(kept) = self.kept[m as usize].as_ref() else {
                 return threshold;
             };
-            if kept.capsule_bound(p, radius, length) >= threshold {
+            if kept.hull_bound(p, radius, length) >= threshold
+                || kept.capsule_bound(p, radius, length) >= threshold
+            {
                 return threshold;
             }
             match self.candidate(m, p) {
