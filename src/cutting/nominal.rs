@@ -108,7 +108,7 @@ enum StockSolid {
     Box,
     Cylinder(Cylinder),
     /// The mesh with its pseudo-normals (inside or outside at its edges and corners too).
-    Mesh(parry3d_f64::shape::TriMesh),
+    Mesh(Box<parry3d_f64::shape::TriMesh>),
 }
 
 impl std::fmt::Debug for NominalStock {
@@ -153,7 +153,7 @@ impl NominalStock {
         .ok()?;
         Some(Self {
             bounds,
-            solid: StockSolid::Mesh(mesh),
+            solid: StockSolid::Mesh(Box::new(mesh)),
         })
     }
 

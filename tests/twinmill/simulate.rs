@@ -418,6 +418,33 @@ fn simulate_mesh_stock_cuts_like_the_box_it_describes() {
     );
 }
 
+#[test]
+fn simulate_colours_a_mesh_stock_from_the_nominal_part() {
+    // The slot cut with the spindle 20 µm (then 50 µm) low into a mesh blank (the box
+    // [0, 40] × [0, 30] × [0, 20] as a closed mesh of twelve triangles): the nominal part is
+    // read against the stock's own surface (the mesh's nearest triangle, inside by its
+    // pseudo-normals). The floor lies dz below the nominal part's; nothing lies above it.
+    let sb = Sandbox::new("sim-nominal-mesh-stock");
+    let program = "G21 G90\nG0 X-10 Y15 Z60\nG0 Z14\nG1 X50 F600\nG0 Z60\nM30\n";
+    let blank = box_obj([0.0, 0.0, 0.0], [40.0, 30.0, 20.0]);
+    let stock = "kind = \"mesh\"\nfile = \"blank.obj\"\npitch_mm = 0.25";
+    for dz in [-0.02, -0.05] {
+        let scene = xyz_scene(FLAT6, stock, &format!("[deviations]\ndz_ZS = {dz}"));
+        let (code, report, stderr) =
+            simulate_in(&sb, &scene, program, &[("blank.obj", blank.as_str())]);
+        assert_eq!(code, 0, "{stderr}");
+        let d = &report["deviation"];
+        assert_eq!(d["from"], "nominal part", "{d}");
+        let (min, max) = (
+            d["min_mm"].as_f64().expect("min"),
+            d["max_mm"].as_f64().expect("max"),
+        );
+        assert!((min - dz).abs() < 1e-6, "{dz}: {d}");
+        assert!(max.abs() < 1e-6, "{dz}: {d}");
+        assert_eq!(d["line_at_min"], 4, "{d}");
+    }
+}
+
 /// Signed distance of a point on the cut slot part to the slot design with floor
 /// `design_floor` (≤ the part's floor 14): inside the design's slot void the distance to its
 /// floor or nearer wall, else 0 (the part's other faces lie on the design's).
