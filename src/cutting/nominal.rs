@@ -24,7 +24,7 @@
 //! where several moves cut nearly the same surface (a side cut's passes, turn after turn),
 //! the deviated machine's deepest there can be another than the nominal machine's by a
 //! micrometre. So every other move whose swept tool could come nearer than the least so far
-//! is read too: a tree of the moves' swept-tool boxes ([`MoveTree`]) and each move's capsule
+//! is read too: a tree of the moves' swept-tool boxes (`MoveTree`) and each move's capsule
 //! bound (the nearest kept axis less the tool's radius and `D/2`) leave only the moves whose
 //! tool passes within about `D/2` of `p`. The least is over every move; none is missed.
 //!
