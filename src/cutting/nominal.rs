@@ -624,7 +624,7 @@ impl NominalPath {
                 .flatten()
                 .filter_map(|&m| self.candidate(m, p)),
         );
-        let mut best = self.refine_candidates(p, scratch, None);
+        let best = self.refine_candidates(p, scratch, None);
         // Every other move that could reach below the least so far: a move is no nearer
         // than its box ([`MoveTree`]) nor than its capsules ([`Kept::capsule_bound`]).
         seen.clear();
@@ -654,8 +654,7 @@ impl NominalPath {
                 None => threshold,
             }
         });
-        best = self.refine_candidates(p, scratch, best);
-        best
+        self.refine_candidates(p, scratch, best)
     }
 
     /// Move `m`'s candidate at `p`: its kept poses' signed distances, the least of them and a

@@ -418,33 +418,6 @@ fn simulate_mesh_stock_cuts_like_the_box_it_describes() {
     );
 }
 
-#[test]
-fn simulate_colours_a_mesh_stock_from_the_nominal_part() {
-    // The slot cut with the spindle 20 µm (then 50 µm) low into a mesh blank (the box
-    // [0, 40] × [0, 30] × [0, 20] as a closed mesh of twelve triangles): the nominal part is
-    // read against the stock's own surface (the mesh's nearest triangle, inside by its
-    // pseudo-normals). The floor lies dz below the nominal part's; nothing lies above it.
-    let sb = Sandbox::new("sim-nominal-mesh-stock");
-    let program = "G21 G90\nG0 X-10 Y15 Z60\nG0 Z14\nG1 X50 F600\nG0 Z60\nM30\n";
-    let blank = box_obj([0.0, 0.0, 0.0], [40.0, 30.0, 20.0]);
-    let stock = "kind = \"mesh\"\nfile = \"blank.obj\"\npitch_mm = 0.25";
-    for dz in [-0.02, -0.05] {
-        let scene = xyz_scene(FLAT6, stock, &format!("[deviations]\ndz_ZS = {dz}"));
-        let (code, report, stderr) =
-            simulate_in(&sb, &scene, program, &[("blank.obj", blank.as_str())]);
-        assert_eq!(code, 0, "{stderr}");
-        let d = &report["deviation"];
-        assert_eq!(d["from"], "nominal part", "{d}");
-        let (min, max) = (
-            d["min_mm"].as_f64().expect("min"),
-            d["max_mm"].as_f64().expect("max"),
-        );
-        assert!((min - dz).abs() < 1e-6, "{dz}: {d}");
-        assert!(max.abs() < 1e-6, "{dz}: {d}");
-        assert_eq!(d["line_at_min"], 4, "{d}");
-    }
-}
-
 /// Signed distance of a point on the cut slot part to the slot design with floor
 /// `design_floor` (≤ the part's floor 14): inside the design's slot void the distance to its
 /// floor or nearer wall, else 0 (the part's other faces lie on the design's).
@@ -849,24 +822,37 @@ fn simulate_meshes_the_p1_pocket_adaptively_small_closed_and_within_its_bound() 
 fn simulate_colours_the_slot_by_the_spindles_offset_without_sweeping_it_twice() {
     // A slot cut with the spindle 20 µm (then 50 µm) low: its floor lies that far below the
     // nominal part's, its walls and the stock's faces on it. The colours come from the
-    // program on the nominal machine read near the cut part (no second sweep).
+    // program on the nominal machine read near the cut part (no second sweep), against the
+    // stock's own surface: a box, and the same box as a closed mesh of twelve triangles (the
+    // mesh's nearest triangle, inside by its pseudo-normals).
     let sb = Sandbox::new("sim-nominal-path");
-    let stock = "min = [0.0, 0.0, 0.0]\nmax = [40.0, 30.0, 20.0]\npitch_mm = 0.25";
+    let boxed = "min = [0.0, 0.0, 0.0]\nmax = [40.0, 30.0, 20.0]\npitch_mm = 0.25";
+    let meshed = "kind = \"mesh\"\nfile = \"blank.obj\"\npitch_mm = 0.25";
     let program = "G21 G90\nG0 X-10 Y15 Z60\nG0 Z14\nG1 X50 F600\nG0 Z60\nM30\n";
     sb.write("p.ngc", program.as_bytes());
-    for dz in [-0.02, -0.05] {
+    sb.write(
+        "blank.obj",
+        box_obj([0.0, 0.0, 0.0], [40.0, 30.0, 20.0]).as_bytes(),
+    );
+    for (stock, dz) in [
+        (boxed, -0.02),
+        (boxed, -0.05),
+        (meshed, -0.02),
+        (meshed, -0.05),
+    ] {
         let scene = xyz_scene(FLAT6, stock, &format!("[deviations]\ndz_ZS = {dz}"));
         sb.write("s.toml", scene.as_bytes());
         let (code, out, stderr) = sb.run(&["simulate", "s.toml", "--json"]);
         assert_eq!(code, 0, "{stderr}");
         let r: serde_json::Value = serde_json::from_str(&out).expect("report");
         let d = &r["deviation"];
-        assert_eq!(d["from"], "nominal part", "{d}");
+        assert_eq!(d["from"], "nominal part", "{stock}: {d}");
         let (min, max) = (
             d["min_mm"].as_f64().expect("min"),
             d["max_mm"].as_f64().expect("max"),
         );
-        assert!((min - dz).abs() < 1e-6, "{dz}: {d}");
-        assert!(max.abs() < 1e-6, "{dz}: {d}");
+        assert!((min - dz).abs() < 1e-6, "{stock} {dz}: {d}");
+        assert!(max.abs() < 1e-6, "{stock} {dz}: {d}");
+        assert_eq!(d["line_at_min"], 4, "{stock}: {d}");
     }
 }
