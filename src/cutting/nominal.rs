@@ -350,6 +350,12 @@ impl Kept {
     }
 }
 
+/// The squared radius within which a crossing is around a point: crossings farther than the
+/// [`NEAR`] window's half-width (its corner) are not.
+fn near_radius2(cut: &TriDexel) -> Real {
+    (cut.max_spacing() * (NEAR as Real + 0.5)).powi(2) * 3.0
+}
+
 /// The squared distance of `p` from the segment from `a` along the unit `u` for `length`.
 fn segment_distance2(p: &Point3, a: &Point3, u: &Vector3, length: Real) -> Real {
     let w = p - a;
@@ -567,8 +573,7 @@ impl NominalPath {
         let Scratch { lines, cands, seen } = scratch;
         lines.clear();
         let mut near = false;
-        // Crossings farther than the window's half-width (its corner) are not around `p`.
-        let radius2 = (cut.max_spacing() * (NEAR as Real + 0.5)).powi(2) * 3.0;
+        let radius2 = near_radius2(cut);
         for g in cut.grids() {
             g.for_each_crossing_near(p, NEAR, |q, c| {
                 if (q - p).norm_squared() > radius2 {
@@ -962,7 +967,7 @@ pub(crate) mod tests {
     /// The lines of the cut part's crossings around `p` that [`NominalPath::nearest`] reads
     /// first (its window and radius).
     fn lines_near(part: &TriDexel, p: &Point3) -> Vec<usize> {
-        let radius2 = (part.max_spacing() * (NEAR as Real + 0.5)).powi(2) * 3.0;
+        let radius2 = near_radius2(part);
         let mut lines = Vec::new();
         for g in part.grids() {
             g.for_each_crossing_near(p, NEAR, |q, c| {
