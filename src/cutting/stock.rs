@@ -398,14 +398,22 @@ impl DexelGrid {
         (weight > 0.0).then(|| sum / weight)
     }
 
-    /// The crossing nearest `p` among the rays within `w` indices of it, as
-    /// (squared distance, crossing point, outward normal).
-    fn nearest_crossing(&self, p: &Point3, w: usize) -> Option<(Real, Point3, Vector3)> {
+    /// The crossing nearest `p` among the rays within `w` indices of it whose outward normal
+    /// passes `keep`, as (squared distance, crossing point, outward normal).
+    fn nearest_crossing(
+        &self,
+        p: &Point3,
+        w: usize,
+        keep: &impl Fn(&Vector3) -> bool,
+    ) -> Option<(Real, Point3, Vector3)> {
         let mut best: Option<(Real, Point3, Vector3)> = None;
         self.for_each_crossing_near(p, w, |q, c| {
             let d = (q - p).norm_squared();
             if best.is_none_or(|b| d < b.0) {
-                best = Some((d, q, c.normal()));
+                let n = c.normal();
+                if keep(&n) {
+                    best = Some((d, q, n));
+                }
             }
         });
         best
@@ -1083,6 +1091,19 @@ impl TriDexel {
     /// `reach` of `p` (searched from the two nearest rays outwards); `None` without a
     /// crossing there.
     pub fn nearest_offset(&self, p: &Point3, reach: Real) -> Option<Real> {
+        self.nearest_crossing(p, reach, |_| true)
+            .map(|(q, n)| (p - q).dot(&n))
+    }
+
+    /// The crossing nearest `p` within `reach` (mm) among the three grids' rays whose
+    /// outward normal passes `keep`, as (point, outward unit normal); searched from the two
+    /// nearest rays outwards. `None` without such a crossing there.
+    pub fn nearest_crossing(
+        &self,
+        p: &Point3,
+        reach: Real,
+        keep: impl Fn(&Vector3) -> bool,
+    ) -> Option<(Point3, Vector3)> {
         // Rays within `w` indices hold every crossing within `w` pitches of `p`.
         let pitch = self
             .grids
@@ -1095,12 +1116,12 @@ impl TriDexel {
             let best = self
                 .grids
                 .iter()
-                .filter_map(|g| g.nearest_crossing(p, w))
+                .filter_map(|g| g.nearest_crossing(p, w, &keep))
                 .min_by(|x, y| x.0.total_cmp(&y.0));
             let covered = |d2: Real| d2.sqrt() <= w as Real * pitch;
             match best {
                 Some((d2, q, n)) if covered(d2) || w >= wide => {
-                    return (d2.sqrt() <= reach).then(|| (p - q).dot(&n));
+                    return (d2.sqrt() <= reach).then_some((q, n));
                 }
                 Some((d2, _, _)) => w = ((d2.sqrt() / pitch).ceil() as usize).clamp(w + 1, wide),
                 None if w >= wide => return None,
