@@ -43,13 +43,12 @@
 //! **Sag.** A display triangle is a chord of the cut surface: on a curved face its centroid
 //! lies under the part, by up to the simplification's bound and more (tens of µm on a
 //! bar's round face), and a tangent plane at its middle lies under its corners by as much.
-//! The centroid's closest distance is therefore taken less the centroid's own distance from
-//! the cut part (from the tangent plane of the part's crossing nearest it on a face like the
-//! triangle's), and a corner measured from a plane near the centroid (the program on the
-//! nominal machine, [`path_deviations`]) is measured from the two parts' tangent planes at
-//! one place, the difference of the two: what remains is the two surfaces' offset, not the
-//! display's sag. A corner measured from its own vertex shows that vertex's own error (the
-//! source mesh places some, at edges, a µm or two off the part).
+//! What is read at the centroid (its closest distance, and for the program on the nominal
+//! machine, [`path_deviations`], the value of a corner whose own vertex does not serve) is
+//! therefore read at the cut part's crossing nearest the centroid on a face like the
+//! triangle's, within two pitches: a point of the cut surface itself. A corner measured
+//! from its own vertex shows that vertex's own error (the source mesh places some, at
+//! edges, a µm or two off the part).
 //!
 //! **Invariant:** deterministic (meshoptimizer is sequential, the pieces are fixed by the mesh
 //! and joined in order; distances run in fixed chunks joined in order); reads meshes and
@@ -355,18 +354,18 @@ pub fn distances(points: &[Point3], reference: &ReferenceSurface) -> Vec<Real> {
 
 /// The deviation at each corner of each display triangle of the cut part `cut` from
 /// `reference` (mm; see the module docs); NaN for a degenerate triangle. The centroid's
-/// closest distance is taken less its distance from the cut part's own surface (the
-/// tangent plane of the cut part's crossing nearest it on a face like the triangle's): the
-/// display triangle's sag on a curved face, which is not the part's.
+/// closest distance is read at the cut part's crossing nearest it on a face like the
+/// triangle's ([`near_crossing`]): on a curved face the centroid of a display triangle
+/// lies under the part by the display's sag, which is not the part's deviation.
 pub fn deviations(
     mesh: &DisplayMesh,
     reference: &ReferenceSurface,
     cut: &TriDexel,
 ) -> Vec<[Real; 3]> {
     per_triangle(mesh, |_, p, n, centre| {
-        let sag = sag(cut, &centre, &n);
+        let at = near_crossing(cut, &centre, &n).map_or(centre, |(x, _)| x);
         let n = UnitVector3::new_unchecked(n);
-        let nearest = reference.signed_distance(&centre) - sag;
+        let nearest = reference.signed_distance(&at);
         let side = if nearest.abs() <= COUNTERPART_SLACK_MM {
             0.0
         } else {
@@ -382,13 +381,13 @@ pub fn deviations(
     })
 }
 
-/// How far `centre` (a display triangle's centroid, `n` its unit normal) lies outside the
-/// cut part `cut` (mm; − under it, as a chord of a curved face does): its distance from the
-/// tangent plane of the cut part's crossing nearest it on a face like the triangle's (within
-/// [`SAME_FACE_COS`]); 0 without one within [`PART_REACH_MM`].
-fn sag(cut: &TriDexel, centre: &Point3, n: &Vector3) -> Real {
-    cut.nearest_crossing(centre, PART_REACH_MM, |m| n.dot(m) >= SAME_FACE_COS)
-        .map_or(0.0, |(x, m)| (centre - x).dot(&m))
+/// The point a display triangle's centroid `centre` (`n` the triangle's unit normal) is read
+/// at: the cut part's crossing nearest it on a face like the triangle's (within
+/// [`SAME_FACE_COS`]) and within twice the stock's pitch — a point of the cut surface,
+/// where the centroid of a chord of a curved face lies under it by the display's sag — with
+/// its outward normal; `None` without one.
+fn near_crossing(cut: &TriDexel, centre: &Point3, n: &Vector3) -> Option<(Point3, Vector3)> {
+    cut.nearest_crossing(centre, 2.0 * cut.pitch(), |m| n.dot(m) >= SAME_FACE_COS)
 }
 
 /// Reach (mm) of the search for a display corner's counterpart on a reference part's
@@ -498,29 +497,51 @@ pub fn path_deviations(mesh: &DisplayMesh, cut: &TriDexel, path: &NominalPath) -
             return along.map(|d| d.unwrap_or(Real::NAN));
         }
         // A vertex whose nearest point lies on another face of the nominal part (at
-        // an edge): a tangent plane near the centroid instead, and its distance for the
-        // counterpart test, each less the same measure of the cut part's own tangent
-        // plane there. The triangle is a chord of the cut surface: on a curved face its
-        // inside (the centroid) lies under the surface, and its corners above a tangent
-        // plane at the middle, by the display's sag (up to tens of µm); measured from
-        // the two parts' planes at one place (the cut part's crossing nearest the
-        // centroid on a face like the triangle's, and the nominal part's nearest point
-        // to that crossing), the sag is in both and cancels, leaving the two surfaces'
-        // offset. Without such a crossing, the nominal part's plane at the centroid alone.
-        let actual = cut.nearest_crossing(&centre, PART_REACH_MM, |m| n.dot(m) >= SAME_FACE_COS);
-        let central = plane_at(actual.as_ref().map_or(&centre, |(x, _)| x));
-        let from_actual = |q: &Point3| actual.map_or(0.0, |(x, m)| (q - x).dot(&m) / n.dot(&m));
+        // an edge): the deviation at the cut part's crossing nearest the centroid on a
+        // face like the triangle's (`near_crossing`), a point of the cut surface itself,
+        // where the nominal part faces like the triangle too. Not the centroid's: the
+        // triangle is a chord of the cut surface, whose inside lies under a curved face,
+        // and a tangent plane at its middle under its corners, by the display's sag (up
+        // to tens of µm). Where the two parts' planes there are nearly parallel, the gap
+        // between them along the normal line from the pulled corner; else the deviation
+        // at the crossing. Without such a crossing, the centroid's tangent plane, and its
+        // distance for the counterpart test.
+        let at_crossing = near_crossing(cut, &centre, &n).and_then(|(x, m)| {
+            let f = path.nearest(cut, &x)?;
+            let cos = n.dot(&f.normal);
+            (within(f.distance) && cos >= SAME_FACE_COS).then_some((x, m, f, cos))
+        });
+        if let Some((x, m, f, face_cos)) = at_crossing {
+            return std::array::from_fn(|k| {
+                along[k].unwrap_or_else(|| {
+                    if m.dot(&f.normal) < PARALLEL_COS {
+                        return f.distance / face_cos;
+                    }
+                    // The two parts' tangent planes there, nearly parallel: their gap
+                    // along the normal line from the pulled corner (the deviation's
+                    // slope across the face kept).
+                    let q = &pulled[k];
+                    let nominal = (q - x).dot(&f.normal) + f.distance;
+                    nominal / face_cos - (q - x).dot(&m) / n.dot(&m)
+                })
+            });
+        }
+        let central = plane_at(&centre);
         for k in 0..3 {
             if along[k].is_none() {
-                along[k] = facing(central, &pulled[k]).map(|d| d - from_actual(&pulled[k]));
+                along[k] = facing(central, &pulled[k]);
             }
         }
-        let nearest = central.map(|(x, big_n)| {
-            (centre - x).dot(&big_n) - actual.map_or(0.0, |(x, m)| (centre - x).dot(&m))
-        });
+        let nearest = central.map(|(x, big_n)| (centre - x).dot(&big_n));
         along.map(|along| counterpart(along, nearest))
     })
 }
+
+/// Least cosine between the cut part's normal at a crossing and the nominal part's at its
+/// nearest point for [`path_deviations`] to take the two tangent planes as one face's, its
+/// deviation's slope with them (0.5°: a machine's deviations tilt a face by far less; the
+/// passes that meet at a crease differ by more).
+const PARALLEL_COS: Real = 0.999_96;
 
 /// Least cosine between a display triangle's normal and the nominal part's normal at a
 /// corner's nearest point for [`path_deviations`] to take that point's tangent plane as the
@@ -534,13 +555,13 @@ pub const SAME_FACE_COS: Real = 0.94;
 /// part's surface along the dexel rays most nearly along the normal
 /// ([`TriDexel::offset_along`], the crossings facing like the triangle, interpolated
 /// between the four rays around the corner); the centroid's closest distance is that from
-/// the tangent plane of the nearest crossing ([`TriDexel::nearest_offset`]); the same
+/// the tangent plane of the nearest crossing ([`TriDexel::nearest_offset`]), read at the cut
+/// part `cut`'s crossing nearest the centroid ([`near_crossing`]); the same
 /// counterpart test. A corner with neither within [`PART_REACH_MM`] is NaN (not coloured).
 pub fn part_deviations(mesh: &DisplayMesh, part: &TriDexel, cut: &TriDexel) -> Vec<[Real; 3]> {
     per_triangle(mesh, |_, p, n, centre| {
-        let nearest = part
-            .nearest_offset(&centre, PART_REACH_MM)
-            .map(|d| d - sag(cut, &centre, &n));
+        let at = near_crossing(cut, &centre, &n).map_or(centre, |(x, _)| x);
+        let nearest = part.nearest_offset(&at, PART_REACH_MM);
         p.map(|q| {
             let pulled = q + (centre - q) * CORNER_PULL;
             counterpart(part.offset_along(&pulled, &n, PART_REACH_MM), nearest)

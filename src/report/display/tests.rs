@@ -305,8 +305,9 @@ fn deviations_from_a_cut_part_are_its_displacement_along_the_normal() {
     let from_mesh = deviations(&shown, &surface, &part);
     // Nine in ten corners of either within 5 µm of the displacement: the display's
     // chords of the half-round end lie up to tens of µm under the part (the sag of
-    // meshoptimizer's bound), and a corner that takes its centroid's distance takes it
-    // less the centroid's own distance from the part (see `sag`); the rest are edges.
+    // meshoptimizer's bound), and a corner that takes its centroid's distance reads it at
+    // the cut part's crossing nearest the centroid (`near_crossing`), a point of the part
+    // itself; the rest are edges.
     for from in [&from_mesh, &from_part] {
         let mut off: Vec<Real> = shown
             .triangles
