@@ -355,7 +355,7 @@ pub fn distances(points: &[Point3], reference: &ReferenceSurface) -> Vec<Real> {
 /// The deviation at each corner of each display triangle of the cut part `cut` from
 /// `reference` (mm; see the module docs); NaN for a degenerate triangle. The centroid's
 /// closest distance is read at the cut part's crossing nearest it on a face like the
-/// triangle's ([`near_crossing`]): on a curved face the centroid of a display triangle
+/// triangle's (within two pitches): on a curved face the centroid of a display triangle
 /// lies under the part by the display's sag, which is not the part's deviation.
 pub fn deviations(
     mesh: &DisplayMesh,
@@ -556,7 +556,7 @@ pub const SAME_FACE_COS: Real = 0.94;
 /// ([`TriDexel::offset_along`], the crossings facing like the triangle, interpolated
 /// between the four rays around the corner); the centroid's closest distance is that from
 /// the tangent plane of the nearest crossing ([`TriDexel::nearest_offset`]), read at the cut
-/// part `cut`'s crossing nearest the centroid ([`near_crossing`]); the same
+/// part `cut`'s crossing nearest the centroid; the same
 /// counterpart test. A corner with neither within [`PART_REACH_MM`] is NaN (not coloured).
 pub fn part_deviations(mesh: &DisplayMesh, part: &TriDexel, cut: &TriDexel) -> Vec<[Real; 3]> {
     per_triangle(mesh, |_, p, n, centre| {
