@@ -4,8 +4,8 @@ started in turn (peer, twinmill, peer, twinmill, ...) so that a drift in the mac
 speed hits both alike; prints each command's median wall and CPU seconds and peak memory,
 and the median of the pair-by-pair wall-time ratios.
 
-    python3 benches/peers/run.py [--runs N] [--warmup N] [--only nc|segment|commands]
-                                 [--twinmill PATH]
+    python3 benches/peers/run.py [--runs N] [--warmup N]
+                                 [--only nc|segment|commands|five-axis] [--twinmill PATH]
 
 Pairs (docs/benchmarks.md#peers-as-processes):
 
@@ -23,6 +23,13 @@ And twinmill's own commands as a user runs them (no peer runs these; medians of 
 * commands: `twinmill simulate scenes/p1-pocket.toml` (benchmark P1 at 0.05 mm, with its
   report page and part.stl; acceptance: <= 1.5 s wall, <= 400 MB peak, part.stl <= 30 MB)
   and `twinmill run scenes/mdx50-step.toml` (the whole pipeline and its page).
+* five-axis: `twinmill simulate` on the simultaneous 5-axis family of benches/data (the
+  programs of benches/support/five_axis.rs): the trunnion side cut with the flat and the
+  ball end mill (7,203 moves), the blade-like finishing path (1,443 moves) and the hexapod
+  machining centre's side cut (720 moves, read pose by pose). Besides each run's wall, CPU
+  and peak memory it reads the run's report.json: the sweep's moves per second
+  (`sweep.moves` over `timings_s.sweep`), the stock's own size (`stock.memory_mib`) and the
+  peak's ratio to it, and prints each figure beside its target (docs/benchmarks.md).
 
 A peer that is not installed is skipped, saying so. Standard library only (Open3D's own
 process imports Open3D). Every command's output goes to a file in a temporary directory,
@@ -31,6 +38,7 @@ accounting of the finished child (`os.wait4`).
 """
 
 import argparse
+import json
 import os
 import random
 import shutil
@@ -106,6 +114,78 @@ def solo(name, argv, runs, warmup, workdir, files=()):
             print(f"  {f}: {os.path.getsize(path) / 1e6:.2f} MB")
 
 
+# The simultaneous 5-axis family: (scene under benches/data, its targets). The targets are
+# those of docs/benchmarks.md: the whole command's wall seconds, the sweep's moves per
+# second, the peak (MiB) and the peak over the stock's own size; None where none is set.
+FIVE_AXIS = (
+    ("trunnion-side-cut.toml", {"wall": 5.0, "moves_per_s": 2000.0, "peak": 300.0, "ratio": 1.5}),
+    ("trunnion-side-cut-ball.toml", {"wall": 5.0, "moves_per_s": 2000.0, "peak": 300.0, "ratio": 1.5}),
+    ("trunnion-blade.toml", {"wall": None, "moves_per_s": 3000.0, "peak": 300.0, "ratio": 1.5}),
+    ("hexapod-side-cut.toml", {"wall": None, "moves_per_s": 1000.0, "peak": 300.0, "ratio": 1.5}),
+)
+
+
+def report_json(out, scene):
+    """The report.json `twinmill simulate` wrote under `out` for `scene` (its `name`)."""
+    with open(os.path.join(REPO, "benches", "data", scene), encoding="utf-8") as f:
+        name = next(
+            line.split("=", 1)[1].strip().strip('"')
+            for line in f
+            if line.startswith("name")
+        )
+    with open(os.path.join(out, f"{name}-simulate", "report.json"), encoding="utf-8") as f:
+        return json.load(f)
+
+
+def five_axis(tw, runs, warmup, workdir):
+    """Runs `twinmill simulate` on each scene of FIVE_AXIS `runs` times (after `warmup`),
+    in turn scene by scene; prints the medians and each figure against its target."""
+    print(f"\nfive-axis: twinmill simulate on benches/data ({runs} runs each, {warmup} warm-up)")
+    print(
+        f"  {'scene':<28} {'moves':>6} {'wall s':>7} {'cpu s':>7} {'sweep s':>8} "
+        f"{'moves/s':>8} {'peak MiB':>9} {'stock MiB':>10} {'peak/stock':>10}"
+    )
+    verdicts = []
+    for scene, target in FIVE_AXIS:
+        out = os.path.join(workdir, "five-axis")
+        argv = [tw, "simulate", os.path.join(REPO, "benches", "data", scene), "--out", out]
+        for _ in range(warmup):
+            run_once(argv, os.path.join(workdir, "five-axis.stdout"))
+        rs = []
+        for _ in range(runs):
+            wall, cpu, peak, code = run_once(argv, os.path.join(workdir, "five-axis.stdout"))
+            if code != 0:
+                break
+            rep = report_json(out, scene)
+            moves = rep["sweep"]["moves"]
+            rs.append((wall, cpu, peak, rep["timings_s"]["sweep"], moves, rep["stock"]["memory_mib"]))
+        if len(rs) < runs:
+            print(f"  {scene}: a run failed (see above); no figures")
+            continue
+        med = lambda k: statistics.median(r[k] for r in rs)
+        wall, cpu, peak, sweep, moves, stock = (med(k) for k in range(6))
+        rate = statistics.median(r[4] / r[3] for r in rs)
+        ratio = statistics.median(r[2] / r[5] for r in rs)
+        print(
+            f"  {scene:<28} {moves:6.0f} {wall:7.2f} {cpu:7.2f} {sweep:8.2f} "
+            f"{rate:8.0f} {peak:9.1f} {stock:10.1f} {ratio:10.2f}"
+        )
+        checks = (
+            ("wall s", wall, target["wall"], wall <= (target["wall"] or 0.0)),
+            ("moves/s", rate, target["moves_per_s"], rate >= (target["moves_per_s"] or 0.0)),
+            ("peak MiB", peak, target["peak"], peak <= (target["peak"] or 0.0)),
+            ("peak/stock", ratio, target["ratio"], ratio <= (target["ratio"] or 0.0)),
+        )
+        for what, value, goal, met in checks:
+            if goal is not None:
+                sign = "<=" if what != "moves/s" else ">="
+                state = "met" if met else "NOT MET"
+                verdicts.append(f"  {scene:<28} {what:<10} {value:9.2f} (target {sign} {goal:g}): {state}")
+    print("  targets:")
+    for v in verdicts:
+        print(v)
+
+
 def write_cloud(path):
     """The segmentation cloud of benches/segment.rs as binary little-endian PLY (doubles):
     rows 0-383 face B (y = 1, z < 0), 384-767 face A (y = 0, z > 0), 768-1151 the top face
@@ -158,7 +238,9 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", type=int, default=5, help="timed pairs per comparison (default 5)")
     ap.add_argument("--warmup", type=int, default=1, help="untimed pairs first (default 1)")
-    ap.add_argument("--only", choices=["nc", "segment", "commands"], help="run one comparison")
+    ap.add_argument(
+        "--only", choices=["nc", "segment", "commands", "five-axis"], help="run one comparison"
+    )
     ap.add_argument(
         "--twinmill",
         default=os.path.join(REPO, "target", "release", "twinmill"),
@@ -224,6 +306,8 @@ def main():
                 work,
                 files=("out/mdx50-step/report.html",),
             )
+        if args.only in (None, "five-axis"):
+            five_axis(tw, args.runs, args.warmup, work)
     print(f"\nload average after: {os.getloadavg()}")
 
 
