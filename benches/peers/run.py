@@ -96,13 +96,25 @@ def compare(name, twinmill, peer, runs, warmup, workdir):
     print(f"  twinmill faster by {wall:.2f}x wall (pairs {lo:.2f}-{hi:.2f}), {cpu:.2f}x CPU")
 
 
+def repeated(argv, runs, warmup, stdout_path, after=lambda: ()):
+    """Runs argv `warmup` times untimed, then `runs` times: each run's (wall s, cpu s, peak
+    MiB) followed by what `after` reads of its output; None as soon as a run fails."""
+    for _ in range(warmup):
+        run_once(argv, stdout_path)
+    rs = []
+    for _ in range(runs):
+        wall, cpu, peak, code = run_once(argv, stdout_path)
+        if code != 0:
+            return None
+        rs.append((wall, cpu, peak, *after()))
+    return rs
+
+
 def solo(name, argv, runs, warmup, workdir, files=()):
     """Runs one twinmill command `runs` times; prints median wall, CPU and peak memory, and
     the size of the files it wrote (paths relative to workdir)."""
-    for _ in range(warmup):
-        run_once(argv, os.path.join(workdir, "solo.stdout"))
-    rs = [run_once(argv, os.path.join(workdir, "solo.stdout")) for _ in range(runs)]
-    if any(r[3] != 0 for r in rs):
+    rs = repeated(argv, runs, warmup, os.path.join(workdir, "solo.stdout"))
+    if rs is None:
         print(f"{name}: a run failed (see above); no figures")
         return
     med = lambda k: statistics.median(r[k] for r in rs)
@@ -117,23 +129,22 @@ def solo(name, argv, runs, warmup, workdir, files=()):
 
 # The simultaneous 5-axis family: each scene under benches/data with its targets
 # (docs/benchmarks.md), as (comparison, goal) by figure; a figure without a target is left out.
-SIDE_CUT = {"wall s": ("<=", 5.0), "moves/s": (">=", 2000.0), "peak MiB": ("<=", 300.0), "peak/stock": ("<=", 1.5)}
+MEMORY = {"peak MiB": ("<=", 300.0), "peak/stock": ("<=", 1.5)}
+SIDE_CUT = {"wall s": ("<=", 5.0), "moves/s": (">=", 2000.0), **MEMORY}
 FIVE_AXIS = (
     ("trunnion-side-cut.toml", SIDE_CUT),
     ("trunnion-side-cut-ball.toml", SIDE_CUT),
-    ("trunnion-blade.toml", {"moves/s": (">=", 3000.0), "peak MiB": ("<=", 300.0), "peak/stock": ("<=", 1.5)}),
-    ("hexapod-side-cut.toml", {"moves/s": (">=", 1000.0), "peak MiB": ("<=", 300.0), "peak/stock": ("<=", 1.5)}),
+    ("trunnion-blade.toml", {"moves/s": (">=", 3000.0), **MEMORY}),
+    ("hexapod-side-cut.toml", {"moves/s": (">=", 1000.0), **MEMORY}),
 )
 
 
-def report_json(out, scene):
-    """The report.json `twinmill simulate` wrote under `out` for `scene` (named by its `name`)."""
+def scene_name(scene):
+    """The `name` of the scene file `scene` under benches/data (its output folder's stem)."""
     import tomllib  # Python 3.11's standard library; only this comparison needs it
 
     with open(os.path.join(REPO, "benches", "data", scene), "rb") as f:
-        name = tomllib.load(f)["name"]
-    with open(os.path.join(out, f"{name}-simulate", "report.json"), encoding="utf-8") as f:
-        return json.load(f)
+        return tomllib.load(f)["name"]
 
 
 def five_axis(tw, runs, warmup, workdir):
@@ -149,16 +160,15 @@ def five_axis(tw, runs, warmup, workdir):
     stdout = os.path.join(workdir, "five-axis.stdout")
     for scene, targets in FIVE_AXIS:
         argv = [tw, "simulate", os.path.join(REPO, "benches", "data", scene), "--out", out]
-        for _ in range(warmup):
-            run_once(argv, stdout)
-        rs = []
-        for _ in range(runs):
-            wall, cpu, peak, code = run_once(argv, stdout)
-            if code != 0:
-                break
-            rep = report_json(out, scene)
-            rs.append((wall, cpu, peak, rep["timings_s"]["sweep"], rep["sweep"]["moves"], rep["stock"]["memory_mib"]))
-        if len(rs) < runs:
+        report = os.path.join(out, f"{scene_name(scene)}-simulate", "report.json")
+
+        def figures_of_run():
+            with open(report, encoding="utf-8") as f:
+                rep = json.load(f)
+            return rep["timings_s"]["sweep"], rep["sweep"]["moves"], rep["stock"]["memory_mib"]
+
+        rs = repeated(argv, runs, warmup, stdout, figures_of_run)
+        if rs is None:
             print(f"  {scene}: a run failed (see above); no figures")
             continue
         med = lambda k: statistics.median(r[k] for r in rs)
