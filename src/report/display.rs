@@ -19,7 +19,9 @@
 //! still meet, closed), then once more joined, within the same bound, so that the seams
 //! collapse too; the two passes' errors add up. The simplifier's working memory is then that
 //! of a piece and the joined result, not of the whole mesh (whose ~80 MB for 660 k triangles
-//! set the simulate command's peak).
+//! set the simulate command's peak); every pass reads the one f32 copy of the positions
+//! (meshoptimizer's `_decoder` forms would copy them all on each call), and a piece's
+//! result is kept at its own size while the others are simplified.
 //!
 //! **Deviations** ([`deviations`]) are measured for each display triangle at its three
 //! corners, along the triangle's normal: from a point just inside the corner (1 % of the way
@@ -134,9 +136,9 @@ fn simplify_in(mesh: &TriMesh, max_triangles: usize, pieces_above: usize) -> Dis
     if out.len() / 3 > max_triangles {
         let diagonal = (b.max - b.min).norm() as f32;
         let mut err2 = 0.0f32;
-        out = meshopt::simplify_decoder(
+        out = meshopt::simplify(
             &out,
-            &positions,
+            &vertex_data(&positions),
             max_triangles * 3,
             diagonal,
             abs,
@@ -145,6 +147,7 @@ fn simplify_in(mesh: &TriMesh, max_triangles: usize, pieces_above: usize) -> Dis
         // Measured from the first pass's surface: the two moves add up.
         error_mm += Real::from(err2);
     }
+    drop(positions);
     // Compact: used vertices in index order.
     let mut map = vec![u32::MAX; mesh.vertices.len()];
     let mut used: Vec<u32> = out.clone();
@@ -170,6 +173,17 @@ fn simplify_in(mesh: &TriMesh, max_triangles: usize, pieces_above: usize) -> Dis
     }
 }
 
+/// `positions` as meshoptimizer reads them, borrowed: each call of its `_decoder` forms
+/// would copy every vertex's position (4 MB for a mesh of 330 k vertices), on every piece.
+fn vertex_data(positions: &[[f32; 3]]) -> meshopt::VertexDataAdapter<'_> {
+    meshopt::VertexDataAdapter::new(
+        meshopt::typed_to_bytes(positions),
+        std::mem::size_of::<[f32; 3]>(),
+        0,
+    )
+    .expect("whole [f32; 3] positions, position at offset 0")
+}
+
 /// The first pass of [`simplify`] (collapses within [`FIRST_PASS_ERROR_MM`]): its indices
 /// into `positions` (the mesh's vertices, f32 about a centre) and the error it reports (mm).
 /// A mesh of more than `pieces_above` triangles is cut into pieces of consecutive
@@ -184,9 +198,11 @@ fn first_pass(mesh: &TriMesh, positions: &[[f32; 3]], pieces_above: usize) -> (V
     // then that of the vertices they use (`Sparse`).
     let opts = abs | meshopt::SimplifyOptions::Sparse;
     let bound = FIRST_PASS_ERROR_MM as f32;
+    let data = vertex_data(positions);
     let whole = |indices: &[u32], opts| {
         let mut err = 0.0f32;
-        let out = meshopt::simplify_decoder(indices, positions, 0, bound, opts, Some(&mut err));
+        let mut out = meshopt::simplify(indices, &data, 0, bound, opts, Some(&mut err));
+        out.shrink_to_fit();
         (out, Real::from(err))
     };
     if mesh.triangles.len() <= pieces_above {
@@ -246,15 +262,18 @@ fn first_pass(mesh: &TriMesh, positions: &[[f32; 3]], pieces_above: usize) -> (V
                 .flat_map(|&t| mesh.triangles[t as usize])
                 .collect();
             let mut err = 0.0f32;
-            let out = meshopt::simplify_with_locks_decoder(
+            let mut out = meshopt::simplify_with_locks(
                 &indices,
-                positions,
+                &data,
                 &locked,
                 0,
                 bound,
                 opts,
                 Some(&mut err),
             );
+            // Kept until every piece is done: not at the input's length, which meshopt
+            // allocates and truncates to what is left (a small part of it).
+            out.shrink_to_fit();
             (out, err)
         })
         .collect();
@@ -262,7 +281,10 @@ fn first_pass(mesh: &TriMesh, positions: &[[f32; 3]], pieces_above: usize) -> (V
         .iter()
         .map(|(_, e)| Real::from(*e))
         .fold(0.0, Real::max);
-    let joined: Vec<u32> = simplified.into_iter().flat_map(|(out, _)| out).collect();
+    let mut joined: Vec<u32> = Vec::with_capacity(simplified.iter().map(|(o, _)| o.len()).sum());
+    for (out, _) in simplified {
+        joined.extend_from_slice(&out);
+    }
     let (out, err) = whole(&joined, opts);
     (out, err_pieces + err)
 }

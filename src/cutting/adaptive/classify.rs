@@ -140,13 +140,16 @@ impl Signs<'_> {
 }
 
 /// A node of a root block's octree, in 8 bytes: a planar or edge leaf's planes are kept
-/// beside the nodes ([`Tree::kinds`]), so a walk down the tree reads a few cache lines.
+/// beside the nodes ([`Tree::planes`]), so a walk down the tree reads a few cache lines.
 #[derive(Clone, Copy, Debug)]
 pub(super) enum Node {
     Empty,
     Fine,
-    /// A planar or edge leaf, its kind at this index of the tree's kinds.
-    Planes(u32),
+    /// A planar leaf, its plane at this index of the tree's planes.
+    Planar(u32),
+    /// An edge leaf, its two planes at this index of the tree's planes and the next
+    /// ([`Kind::Edge`], with its flag).
+    Edge(u32, bool),
     /// Children at these eight consecutive nodes (child c at offset (c & 1, c >> 1 & 1,
     /// c >> 2 & 1) halves).
     Split(u32),
@@ -157,8 +160,9 @@ pub(super) struct Tree {
     pub(super) root: usize,
     pub(super) origin: [isize; 3],
     pub(super) nodes: Vec<Node>,
-    /// The kinds of the planar and edge leaves ([`Node::Planes`]).
-    pub(super) kinds: Vec<Kind>,
+    /// The planes of the planar and edge leaves ([`Node::Planar`], [`Node::Edge`]): one
+    /// or two each, not a [`Kind`] each (which has room for two).
+    pub(super) planes: Vec<Plane>,
 }
 
 impl Tree {
@@ -167,7 +171,12 @@ impl Tree {
         match self.nodes[node] {
             Node::Empty => Some(Kind::Empty),
             Node::Fine => Some(Kind::Fine),
-            Node::Planes(k) => Some(self.kinds[k as usize]),
+            Node::Planar(k) => Some(Kind::Planar(self.planes[k as usize])),
+            Node::Edge(k, convex) => Some(Kind::Edge(
+                self.planes[k as usize],
+                self.planes[k as usize + 1],
+                convex,
+            )),
             Node::Split(_) => None,
         }
     }
@@ -442,8 +451,8 @@ pub(super) fn child_origin(o: [isize; 3], s: usize, c: usize) -> [isize; 3] {
     ]
 }
 
-/// A tree's nodes and its planar and edge leaves' kinds, as [`Grower`] grows them.
-pub(super) type TreeParts<'t> = (&'t mut Vec<Node>, &'t mut Vec<Kind>);
+/// A tree's nodes and its planar and edge leaves' planes, as [`Grower`] grows them.
+pub(super) type TreeParts<'t> = (&'t mut Vec<Node>, &'t mut Vec<Plane>);
 
 /// Grows a root block's tree: classifies blocks, splitting until every part is a leaf;
 /// keeps the largest plane residual of the leaves it made.
@@ -480,35 +489,40 @@ impl<'a, 'b> Grower<'a, 'b> {
     }
 
     /// Classifies the block at `nodes[at]` (origin `o`, size `s`), a planar or edge leaf's
-    /// kind appended to `kinds`.
+    /// planes appended to `planes`.
     pub(super) fn grow(&mut self, t: TreeParts, at: usize, o: [isize; 3], s: usize) {
         block_masks(&self.root, self.r0, o, s, &mut self.masks);
         let (kind, r) = classify(self.lat, &self.masks, (o, s), self.tol, &mut self.bufs);
-        let (nodes, kinds) = t;
+        let (nodes, planes) = t;
         match kind {
             Some(k) => {
+                let next = planes.len() as u32;
                 nodes[at] = match k {
                     Kind::Empty => Node::Empty,
                     Kind::Fine => Node::Fine,
-                    Kind::Planar(_) | Kind::Edge(..) => {
-                        kinds.push(k);
-                        Node::Planes((kinds.len() - 1) as u32)
+                    Kind::Planar(p) => {
+                        planes.push(p);
+                        Node::Planar(next)
+                    }
+                    Kind::Edge(p, q, convex) => {
+                        planes.extend([p, q]);
+                        Node::Edge(next, convex)
                     }
                 };
                 self.resid = self.resid.max(r);
             }
-            None => self.split((nodes, kinds), at, o, s),
+            None => self.split((nodes, planes), at, o, s),
         }
     }
 
     /// Makes `nodes[at]` a split node and grows its eight children.
     pub(super) fn split(&mut self, t: TreeParts, at: usize, o: [isize; 3], s: usize) {
-        let (nodes, kinds) = t;
+        let (nodes, planes) = t;
         let first = nodes.len();
         nodes.extend([Node::Empty; 8]);
         nodes[at] = Node::Split(first as u32);
         for c in 0..8 {
-            self.grow((nodes, kinds), first + c, child_origin(o, s, c), s / 2);
+            self.grow((nodes, planes), first + c, child_origin(o, s, c), s / 2);
         }
     }
 }

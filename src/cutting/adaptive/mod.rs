@@ -161,20 +161,20 @@ pub fn mesh_stock_adaptive(
                 return (None, 0.0);
             }
             let o = origin(r);
-            let (mut nodes, mut kinds) = (vec![Node::Empty], Vec::new());
+            let (mut nodes, mut planes) = (vec![Node::Empty], Vec::new());
             let mut g = Grower::new(&lat, tol, o);
-            g.grow((&mut nodes, &mut kinds), 0, o, ROOT);
+            g.grow((&mut nodes, &mut planes), 0, o, ROOT);
             let resid = g.resid;
             let empty = matches!(nodes[0], Node::Empty);
             // The tree is kept while every tree is meshed: no spare capacity.
             nodes.shrink_to_fit();
-            kinds.shrink_to_fit();
+            planes.shrink_to_fit();
             (
                 (!empty).then_some(Tree {
                     root: r,
                     origin: o,
                     nodes,
-                    kinds,
+                    planes,
                 }),
                 resid,
             )
@@ -247,7 +247,7 @@ pub fn mesh_stock_adaptive(
                 }
                 let mut g = Grower::new(lat, tol, t.origin);
                 for &(node, o, s) in nodes {
-                    g.split((&mut t.nodes, &mut t.kinds), node, o, s);
+                    g.split((&mut t.nodes, &mut t.planes), node, o, s);
                 }
                 g.resid
             })
@@ -290,7 +290,7 @@ pub fn mesh_stock_adaptive(
     }
     // The trees are no longer needed: freed before the outputs are joined (the peak).
     drop(forest);
-    let outs: Vec<Out> = outs.into_iter().flatten().collect();
+    let mut outs: Vec<Out> = outs.into_iter().flatten().collect();
     for o in &outs {
         report.planar_leaves += o.planar;
         report.edge_leaves += o.edge;
@@ -298,36 +298,56 @@ pub fn mesh_stock_adaptive(
         report.corner_points += o.corners;
         report.feature_vertices += o.features;
     }
-    // Number the vertices in key order (every tree's, one per key) and join the triangles
-    // in tree order, each tree's renumbered through its vertices' keys.
-    let mut verts: Vec<(Key, Point3)> =
-        Vec::with_capacity(outs.iter().map(|o| o.verts.len()).sum());
+    // Number the vertices in key order (every tree's, one per key): the keys alone sorted
+    // (not with their points), each tree's vertices found among them (its keys then
+    // freed), the points placed, and the triangles joined in tree order, each tree's
+    // renumbered.
+    let mut keys: Vec<Key> = Vec::with_capacity(outs.iter().map(|o| o.keys.len()).sum());
     for o in &outs {
-        verts.extend_from_slice(&o.verts);
+        keys.extend_from_slice(&o.keys);
     }
-    verts.par_sort_unstable_by_key(|v| v.0);
-    verts.dedup_by_key(|v| v.0);
-    if verts.len() >= u32::MAX as usize {
+    keys.par_sort_unstable();
+    keys.dedup();
+    if keys.len() >= u32::MAX as usize {
         return Err(MeshError::TooLarge {
             what: "vertices",
-            count: verts.len(),
+            count: keys.len(),
             format: "32-bit vertex indices",
         });
     }
-    let triangles: Vec<[u32; 3]> = outs
-        .into_par_iter()
+    let globals: Vec<Vec<u32>> = outs
+        .par_iter_mut()
         .map(|o| {
             // A tree's vertices are in key order: each is found from the last one found.
             let mut at = 0;
-            let global: Vec<u32> = o
-                .verts
+            std::mem::take(&mut o.keys)
                 .iter()
-                .map(|(k, _)| {
-                    at = gallop(&verts[at..], |v| v.0 < *k) + at;
+                .map(|k| {
+                    at = gallop(&keys[at..], |x| x < k) + at;
                     at as u32
                 })
-                .collect();
-            drop(o.verts);
+                .collect()
+        })
+        .collect();
+    let count = keys.len();
+    drop(keys);
+    // A key shared by trees is the same lattice point, found the same way in each: the
+    // same point.
+    let mut vertices = vec![Point3::origin(); count];
+    for (o, global) in outs.iter_mut().zip(&globals) {
+        for (p, &i) in o.points.iter().zip(global) {
+            debug_assert!(
+                vertices[i as usize] == Point3::origin() || vertices[i as usize] == *p,
+                "a key shared by two trees with two points"
+            );
+            vertices[i as usize] = *p;
+        }
+        o.points = Vec::new();
+    }
+    let triangles: Vec<[u32; 3]> = outs
+        .into_par_iter()
+        .zip(globals)
+        .map(|(o, global)| {
             o.faces
                 .iter()
                 .map(|f| f.map(|i| global[i as usize]))
@@ -337,7 +357,7 @@ pub fn mesh_stock_adaptive(
         .collect();
     Ok((
         TriMesh {
-            vertices: verts.into_iter().map(|v| v.1).collect(),
+            vertices,
             triangles,
         },
         report,

@@ -14,8 +14,13 @@ use super::*;
 pub(super) struct Out {
     /// The triangles by their corners' keys, while the tree is meshed.
     pub(super) tris: Vec<[Key; 3]>,
-    /// The tree's vertices, one per key, in key order (once the tree is meshed).
+    /// The vertices named by the tree's leaves, while the tree is meshed.
     pub(super) verts: Vec<(Key, Point3)>,
+    /// The tree's vertices, one per key, in key order (once the tree is meshed; `verts` is
+    /// then empty): their keys, and their points in the same order (apart, the pair's
+    /// alignment padding is not kept while every tree's output waits to be joined).
+    pub(super) keys: Vec<Key>,
+    pub(super) points: Vec<Point3>,
     /// The triangles as indices into `verts` (once the tree is meshed; `tris` is then
     /// empty): a quarter of their keys' size while every tree's output waits to be joined.
     pub(super) faces: Vec<[u32; 3]>,
@@ -411,8 +416,9 @@ impl Forest<'_> {
             .collect();
         // Kept until every tree is meshed: the vertices at their exact size, and the
         // triangles by index, not by key; the buffers go back for the next tree.
-        let kept = out.verts.to_vec();
-        *verts = std::mem::replace(&mut out.verts, kept);
+        out.keys = out.verts.iter().map(|v| v.0).collect();
+        out.points = out.verts.iter().map(|v| v.1).collect();
+        *verts = std::mem::take(&mut out.verts);
         *tris = std::mem::take(&mut out.tris);
         *slots = index.slots;
         out
