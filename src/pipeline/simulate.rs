@@ -65,7 +65,21 @@ const DEVIATION_IMAGE_PX: (u32, u32) = (1200, 900);
 /// (rapids through material, shank or holder in the stock, anything touching a fixture),
 /// meshes the result and, when the scene has a design model, maps the part's deviation
 /// from it: no scan, no identification.
+///
+/// Runs on a thread of rayon's pool (the caller's, when it is one), as the work it hands
+/// out does: glibc keeps a heap for each thread, so the buffers of every stage come from
+/// the heaps holding what the sweep and the mesher freed, not from the calling thread's
+/// own (the ball side cut's peak 98 MiB instead of 110 MiB; the same output).
 pub fn simulate(
+    scene: &Scene,
+    program: &Program,
+    progress: &dyn Progress,
+) -> Result<Simulation, PipelineError> {
+    rayon::scope(|_| simulate_here(scene, program, progress))
+}
+
+/// [`simulate`] on the calling thread.
+fn simulate_here(
     scene: &Scene,
     program: &Program,
     progress: &dyn Progress,
