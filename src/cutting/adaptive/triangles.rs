@@ -21,8 +21,9 @@ pub(super) struct Out {
     /// alignment padding is not kept while every tree's output waits to be joined).
     pub(super) keys: Vec<Key>,
     pub(super) points: Vec<Point3>,
-    /// The triangles as indices into `verts` (once the tree is meshed; `tris` is then
-    /// empty): a quarter of their keys' size while every tree's output waits to be joined.
+    /// The triangles as indices into the tree's vertices (`keys`, `points`; once the tree
+    /// is meshed, `tris` then empty): a quarter of their keys' size while every tree's
+    /// output waits to be joined.
     pub(super) faces: Vec<[u32; 3]>,
     /// Leaves whose triangulation failed: node, origin, size.
     pub(super) failed: Vec<(usize, [isize; 3], usize)>,
