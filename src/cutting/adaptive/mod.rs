@@ -46,7 +46,10 @@
 //! mesh (tested against the exact crossings), and every mesh vertex is an exact crossing, a
 //! tangent-line corner, or a fan centre within `plane_tol_mm` of its plane. A triangulation
 //! that would fold (a triangle facing against its plane's normal) or a loop that is not as
-//! expected makes the leaf split, in rounds, until none does; single cells never fail.
+//! expected makes the leaf split, in rounds, until none does; single cells never fail. A
+//! leaf's triangles depend on its own data and on the sizes of the leaves across its faces
+//! only, so a tree meshed again after a round keeps those of every leaf that touches no
+//! leaf that split, and meshes the rest: the same mesh as meshing every leaf again.
 //!
 //! **Determinism.** Vertices are named by lattice keys (the lattice edge of a crossing, the
 //! cell face of a corner, the leaf of a fan centre) and numbered in key order at the end;
@@ -74,7 +77,7 @@ use classify::{Grower, Kind, Node, Plane, Signs, Tree, child_origin, occupied_ro
 use classify::{plane_inside, plane_mask};
 use forest::{Chain, Forest, LeafRef};
 use lattice::{Key, Lat, Vtx, bit_range, corner_key, local_key, point};
-use triangles::Out;
+use triangles::{Out, Reuse};
 
 /// Root block edge in cells (a power of two; masks of `ROOT + 1` bits fit a word).
 pub const ROOT: usize = 32;
@@ -140,6 +143,17 @@ pub fn mesh_stock_adaptive(
     stock: &TriDexel,
     opts: &AdaptiveOptions,
 ) -> Result<(TriMesh, AdaptiveReport), MeshError> {
+    mesh_adaptive(stock, opts, true)
+}
+
+/// [`mesh_stock_adaptive`]; a tree meshed again after a split keeps the triangles of the
+/// leaves the split did not touch where `reuse` (the same mesh either way), else every
+/// leaf is meshed again.
+fn mesh_adaptive(
+    stock: &TriDexel,
+    opts: &AdaptiveOptions,
+    reuse: bool,
+) -> Result<(TriMesh, AdaptiveReport), MeshError> {
     let lat = Lat {
         f: Frame::of(stock),
     };
@@ -200,18 +214,26 @@ pub fn mesh_stock_adaptive(
         trees,
     };
     // Mesh every tree; after a round that split leaves, mesh again the trees that split and
-    // those sharing a root face with them (whose minimal faces may have changed).
+    // those sharing a root face with them (whose minimal faces may have changed): in each,
+    // the leaves touching a leaf that split, the others' triangles kept (`Reuse`).
     let mut outs: Vec<Option<Out>> = forest.trees.iter().map(|_| None).collect();
+    // Per tree, the boxes (origin, size) of the leaves whose split it must see.
+    let mut split: Vec<Vec<([isize; 3], usize)>> =
+        forest.trees.iter().map(|_| Vec::new()).collect();
+    let tols = (opts.chain_tol_mm, tol);
     loop {
         let f = &forest;
         let fresh: Vec<Option<Out>> = f
             .trees
             .par_iter()
             .enumerate()
-            .zip(outs.par_iter())
-            .map(|((ti, t), old)| {
-                old.is_none()
-                    .then(|| f.mesh_tree(ti, t, opts.chain_tol_mm, tol))
+            .zip(outs.par_iter().zip(split.par_iter()))
+            .map(|((ti, t), (old, split))| match old {
+                None => Some(f.mesh_tree(ti, t, tols, None)),
+                Some(old) if !split.is_empty() => {
+                    Some(f.mesh_tree(ti, t, tols, reuse.then_some(Reuse { old, split })))
+                }
+                Some(_) => None,
             })
             .collect();
         for (o, n) in outs.iter_mut().zip(fresh) {
@@ -219,6 +241,7 @@ pub fn mesh_stock_adaptive(
                 *o = n;
             }
         }
+        split.iter_mut().for_each(Vec::clear);
         let failed: Vec<Vec<(usize, [isize; 3], usize)>> = outs
             .iter()
             .map(|o| o.as_ref().map_or_else(Vec::new, |o| o.failed.clone()))
@@ -257,7 +280,7 @@ pub fn mesh_stock_adaptive(
             if nodes.is_empty() {
                 continue;
             }
-            outs[ti] = None;
+            split[ti].extend(nodes.iter().map(|&(_, o, s)| (o, s)));
             let r = forest.trees[ti].root;
             let rc = [r % rn[0], r / rn[0] % rn[1], r / (rn[0] * rn[1])];
             let o = forest.trees[ti].origin;
@@ -282,14 +305,19 @@ pub fn mesh_stock_adaptive(
                     nc[axis] = c as usize;
                     let nr = (nc[2] * rn[1] + nc[1]) * rn[0] + nc[0];
                     if let Some(nt) = forest.roots[nr] {
-                        outs[nt as usize] = None;
+                        split[nt as usize]
+                            .extend(nodes.iter().filter(|n| on_face(n)).map(|&(_, o, s)| (o, s)));
                     }
                 }
             }
         }
     }
-    // The trees are no longer needed: freed before the outputs are joined (the peak).
-    drop(forest);
+    // The trees and the leaves' records are no longer needed: freed before the outputs
+    // are joined (the peak).
+    drop((forest, split));
+    for o in outs.iter_mut().flatten() {
+        o.leaves = Vec::new();
+    }
     let mut outs: Vec<Out> = outs.into_iter().flatten().collect();
     for o in &outs {
         report.planar_leaves += o.planar;

@@ -208,6 +208,48 @@ fn the_mesh_is_identical_on_one_and_two_threads() {
     assert_eq!(ra, rb);
 }
 
+#[test]
+fn a_tree_meshed_again_keeps_the_leaves_no_split_touched_and_is_the_same() {
+    // After a round in which leaves split, a tree is meshed again keeping the triangles
+    // of the leaves no split touched: the mesh and its report must be those of meshing
+    // every leaf again. Random parts and a tilted cut (whose sloping faces make leaves
+    // fail and split), at least one of them meshed in more than one round.
+    let mut parts: Vec<TriDexel> = (0..12u64).map(|case| random_part(5, case, true)).collect();
+    let mut s = stock([12.0, 10.0, 6.0], 0.1);
+    let axis = Vector3::new(
+        0.0,
+        -(25.0f64.to_radians()).sin(),
+        25.0f64.to_radians().cos(),
+    );
+    cut_along(
+        &mut s,
+        ToolKind::Ball,
+        6.0,
+        [-2.0, 4.0, 4.0],
+        [14.0, 6.0, 3.0],
+        axis,
+    );
+    cut_along(
+        &mut s,
+        ToolKind::Flat,
+        4.0,
+        [3.0, -2.0, 5.0],
+        [9.0, 12.0, 4.0],
+        axis,
+    );
+    parts.push(s);
+    let mut rounds = 0;
+    for (case, s) in parts.iter().enumerate() {
+        let opts = AdaptiveOptions::default();
+        let (a, ra) = mesh_adaptive(s, &opts, true).expect("meshes");
+        let (b, rb) = mesh_adaptive(s, &opts, false).expect("meshes");
+        assert_eq!(a, b, "case {case}");
+        assert_eq!(ra, rb, "case {case}");
+        rounds += ra.split_rounds;
+    }
+    assert!(rounds > 0, "no part was meshed again");
+}
+
 /// Planes along a column (`A + B·t`): plain ones, a crossing landing on lattice points
 /// (exact and one ulp off), slopes too small for a finite crossing, and non-finite values.
 fn plane_cases() -> Vec<(Real, Real)> {

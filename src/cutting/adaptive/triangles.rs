@@ -1,6 +1,7 @@
 //! Leaves to triangles: each leaf's face polylines linked into closed loops, fanned in its
 //! plane(s) (an edge leaf's loop split where the edge leaves the block), fine cells as
-//! the dexel-resolution mesher meshes them; every leaf of a tree in node order.
+//! the dexel-resolution mesher meshes them; every leaf of a tree in node order (a tree meshed
+//! again after a split keeps the triangles of the leaves the split did not touch).
 //!
 //! **Invariant:** triangles only join vertices of the leaf's own loops and fan centres
 //! inside its block, so every edge on a block face is used once in each direction.
@@ -27,11 +28,57 @@ pub(super) struct Out {
     pub(super) faces: Vec<[u32; 3]>,
     /// Leaves whose triangulation failed: node, origin, size.
     pub(super) failed: Vec<(usize, [isize; 3], usize)>,
+    /// What each meshed leaf added, in node order (leaves that failed or hold no surface
+    /// left out), while leaves may still split: a tree meshed again keeps the triangles of
+    /// the leaves no split touched ([`Reuse`]). Emptied once no leaf fails.
+    pub(super) leaves: Vec<LeafOut>,
     pub(super) planar: usize,
     pub(super) edge: usize,
     pub(super) fine: usize,
     pub(super) corners: usize,
     pub(super) features: usize,
+}
+
+/// What one leaf added to its tree's output: its node, its triangles (the next `tris` of
+/// the tree's `faces`, in node order), its tangent-line corners and its feature points.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct LeafOut {
+    node: u32,
+    tris: u32,
+    corners: u32,
+    features: u32,
+}
+
+/// A tree meshed again after some of its leaves (or a neighbouring tree's leaves on their
+/// common root face) split: its output before, and the boxes (origin, size) of the leaves
+/// that split. A leaf's triangles depend on its own data and on the sizes of the leaves
+/// across its faces only (its minimal faces), so a leaf whose closed box touches none of
+/// those boxes triangulates as before: its triangles are taken from `old` instead, in
+/// their place in node order, and the tree's output is the same as meshing every leaf.
+pub(super) struct Reuse<'a> {
+    pub(super) old: &'a Out,
+    pub(super) split: &'a [([isize; 3], usize)],
+}
+
+impl Reuse<'_> {
+    /// Whether the leaf at `o` of size `s` touches a leaf that split (closed boxes).
+    fn touched(&self, o: [isize; 3], s: usize) -> bool {
+        self.split
+            .iter()
+            .any(|&(d, ds)| (0..3).all(|a| o[a] <= d[a] + ds as isize && d[a] <= o[a] + s as isize))
+    }
+
+    /// Per node, where its triangles start in `old.faces` and what it added (none: the
+    /// node was not a meshed leaf).
+    fn by_node(&self, nodes: usize) -> Vec<Option<(usize, LeafOut)>> {
+        let mut at = vec![None; nodes];
+        let mut start = 0;
+        for r in &self.old.leaves {
+            at[r.node as usize] = Some((start, *r));
+            start += r.tris as usize;
+        }
+        at
+    }
 }
 
 /// Fans a polygon in a plane with normal `nrm`: from its first vertex if that gives no
@@ -356,9 +403,17 @@ fn share_cell_face(a: Key, b: Key) -> bool {
 }
 
 impl Forest<'_> {
-    /// Meshes every leaf of tree `ti`, in node order.
-    pub(super) fn mesh_tree(&self, ti: usize, t: &Tree, tol: Real, plane_tol: Real) -> Out {
-        TREE_SCRATCH.with_borrow_mut(|scratch| self.mesh_tree_in(ti, t, (tol, plane_tol), scratch))
+    /// Meshes every leaf of tree `ti`, in node order; with `reuse`, the leaves no split
+    /// touched keep their triangles from the tree's output before (see [`Reuse`]).
+    pub(super) fn mesh_tree(
+        &self,
+        ti: usize,
+        t: &Tree,
+        (tol, plane_tol): (Real, Real),
+        reuse: Option<Reuse>,
+    ) -> Out {
+        TREE_SCRATCH
+            .with_borrow_mut(|scratch| self.mesh_tree_in(ti, t, (tol, plane_tol), reuse, scratch))
     }
 
     /// [`Self::mesh_tree`] with the working buffers `scratch`: the tree's triangles and
@@ -369,6 +424,7 @@ impl Forest<'_> {
         ti: usize,
         t: &Tree,
         (tol, plane_tol): (Real, Real),
+        reuse: Option<Reuse>,
         scratch: &mut TreeScratch,
     ) -> Out {
         let TreeScratch {
@@ -385,6 +441,7 @@ impl Forest<'_> {
         };
         out.tris.clear();
         out.verts.clear();
+        let before = reuse.as_ref().map(|r| r.by_node(t.nodes.len()));
         stack.clear();
         stack.push((0usize, t.origin, ROOT));
         while let Some((node, o, s)) = stack.pop() {
@@ -392,17 +449,58 @@ impl Forest<'_> {
                 for c in (0..8).rev() {
                     stack.push((first as usize + c, child_origin(o, s, c), s / 2));
                 }
-            } else if let Some(kind) = t.leaf(node) {
-                let leaf = LeafRef {
-                    tree: ti,
-                    node,
-                    o,
-                    s,
-                    kind,
-                };
-                self.mesh_leaf(&leaf, (tol, plane_tol), &mut out, loops);
+                continue;
+            }
+            let Some(kind) = t.leaf(node) else {
+                continue;
+            };
+            if matches!(kind, Kind::Empty) {
+                continue;
+            }
+            let kept = reuse
+                .as_ref()
+                .zip(before.as_ref())
+                .filter(|(r, _)| !r.touched(o, s))
+                .and_then(|(r, at)| at.get(node).copied().flatten().map(|k| (r.old, k)));
+            let (tris, corners, features, failed) =
+                (out.tris.len(), out.corners, out.features, out.failed.len());
+            match kept {
+                Some((old, (start, rec))) => {
+                    // The leaf's triangles and their corners as meshing it gives them.
+                    for f in &old.faces[start..start + rec.tris as usize] {
+                        out.tris.push(f.map(|i| old.keys[i as usize]));
+                        out.verts
+                            .extend(f.map(|i| (old.keys[i as usize], old.points[i as usize])));
+                    }
+                    out.corners += rec.corners as usize;
+                    out.features += rec.features as usize;
+                    match kind {
+                        Kind::Planar(_) => out.planar += 1,
+                        Kind::Edge(..) => out.edge += 1,
+                        _ => out.fine += 1,
+                    }
+                }
+                None => {
+                    let leaf = LeafRef {
+                        tree: ti,
+                        node,
+                        o,
+                        s,
+                        kind,
+                    };
+                    self.mesh_leaf(&leaf, (tol, plane_tol), &mut out, loops);
+                }
+            }
+            if out.failed.len() == failed {
+                out.leaves.push(LeafOut {
+                    node: node as u32,
+                    tris: (out.tris.len() - tris) as u32,
+                    corners: (out.corners - corners) as u32,
+                    features: (out.features - features) as u32,
+                });
             }
         }
+        out.leaves.shrink_to_fit();
         // Each vertex is named by every leaf that uses it: keep one per tree (equal keys
         // carry equal positions), so the trees' outputs stay near the mesh's size.
         out.verts.sort_unstable_by_key(|v| v.0);
