@@ -28,10 +28,17 @@ pub(super) struct Out {
     pub(super) faces: Vec<[u32; 3]>,
     /// Leaves whose triangulation failed: node, origin, size.
     pub(super) failed: Vec<(usize, [isize; 3], usize)>,
-    /// What each meshed leaf added, in node order (leaves that failed or hold no surface
-    /// left out), while leaves may still split: a tree meshed again keeps the triangles of
-    /// the leaves no split touched ([`Reuse`]). Emptied once no leaf fails.
+    /// What each leaf added, in node order (every leaf but the empty ones, which add
+    /// nothing, and those that failed), while leaves may still split: a tree meshed again
+    /// keeps the triangles of the leaves no split touched ([`Reuse`]). Emptied once no leaf
+    /// fails.
     pub(super) leaves: Vec<LeafOut>,
+    /// The tree's node count when it was meshed: the nodes below it that are leaves now
+    /// were those leaves then (a split leaf becomes a split node, its children added after).
+    pub(super) nodes: usize,
+    /// Whether `leaves` holds the record of every leaf that did not fail (a count too large
+    /// for its field leaves the tree to be meshed again in full).
+    pub(super) reusable: bool,
     pub(super) planar: usize,
     pub(super) edge: usize,
     pub(super) fine: usize,
@@ -39,14 +46,26 @@ pub(super) struct Out {
     pub(super) features: usize,
 }
 
-/// What one leaf added to its tree's output: its node, its triangles (the next `tris` of
-/// the tree's `faces`, in node order), its tangent-line corners and its feature points.
+/// What one leaf added to its tree's output: its triangles (the next `tris` of the tree's
+/// `faces`, in node order), its tangent-line corners and its feature points (4 bytes a
+/// leaf while every tree's output waits).
 #[derive(Clone, Copy, Debug)]
 pub(super) struct LeafOut {
-    node: u32,
-    tris: u32,
-    corners: u32,
-    features: u32,
+    tris: u16,
+    corners: u8,
+    features: u8,
+}
+
+impl LeafOut {
+    /// The record of a leaf that added `tris` triangles, `corners` corners and `features`
+    /// feature points; none where one does not fit its field.
+    fn of(tris: usize, corners: usize, features: usize) -> Option<Self> {
+        Some(Self {
+            tris: tris.try_into().ok()?,
+            corners: corners.try_into().ok()?,
+            features: features.try_into().ok()?,
+        })
+    }
 }
 
 /// A tree meshed again after some of its leaves (or a neighbouring tree's leaves on their
@@ -66,18 +85,6 @@ impl Reuse<'_> {
         self.split
             .iter()
             .any(|&(d, ds)| (0..3).all(|a| o[a] <= d[a] + ds as isize && d[a] <= o[a] + s as isize))
-    }
-
-    /// Per node, where its triangles start in `old.faces` and what it added (none: the
-    /// node was not a meshed leaf).
-    fn by_node(&self, nodes: usize) -> Vec<Option<(usize, LeafOut)>> {
-        let mut at = vec![None; nodes];
-        let mut start = 0;
-        for r in &self.old.leaves {
-            at[r.node as usize] = Some((start, *r));
-            start += r.tris as usize;
-        }
-        at
     }
 }
 
@@ -441,7 +448,12 @@ impl Forest<'_> {
         };
         out.tris.clear();
         out.verts.clear();
-        let before = reuse.as_ref().map(|r| r.by_node(t.nodes.len()));
+        // Old records are taken in node order: the leaves then that are leaves now come in
+        // the same order (a split only puts a subtree in a leaf's place).
+        let reuse = reuse.filter(|r| r.old.reusable);
+        let (mut record, mut start) = (0, 0);
+        out.reusable = true;
+        out.nodes = t.nodes.len();
         stack.clear();
         stack.push((0usize, t.origin, ROOT));
         while let Some((node, o, s)) = stack.pop() {
@@ -457,15 +469,18 @@ impl Forest<'_> {
             if matches!(kind, Kind::Empty) {
                 continue;
             }
-            let kept = reuse
-                .as_ref()
-                .zip(before.as_ref())
-                .filter(|(r, _)| !r.touched(o, s))
-                .and_then(|(r, at)| at.get(node).copied().flatten().map(|k| (r.old, k)));
+            // This leaf's record before, and where its triangles start: a leaf then.
+            let then = reuse.as_ref().filter(|r| node < r.old.nodes).map(|r| {
+                let rec = r.old.leaves[record];
+                let at = (r.old, start, rec, !r.touched(o, s));
+                record += 1;
+                start += rec.tris as usize;
+                at
+            });
             let (tris, corners, features, failed) =
                 (out.tris.len(), out.corners, out.features, out.failed.len());
-            match kept {
-                Some((old, (start, rec))) => {
+            match then {
+                Some((old, start, rec, true)) => {
                     // The leaf's triangles and their corners as meshing it gives them.
                     for f in &old.faces[start..start + rec.tris as usize] {
                         out.tris.push(f.map(|i| old.keys[i as usize]));
@@ -480,7 +495,7 @@ impl Forest<'_> {
                         _ => out.fine += 1,
                     }
                 }
-                None => {
+                _ => {
                     let leaf = LeafRef {
                         tree: ti,
                         node,
@@ -491,14 +506,22 @@ impl Forest<'_> {
                     self.mesh_leaf(&leaf, (tol, plane_tol), &mut out, loops);
                 }
             }
+            let rec = LeafOut::of(
+                out.tris.len() - tris,
+                out.corners - corners,
+                out.features - features,
+            );
+            // A leaf that failed is split before the tree is meshed again: no record.
             if out.failed.len() == failed {
-                out.leaves.push(LeafOut {
-                    node: node as u32,
-                    tris: (out.tris.len() - tris) as u32,
-                    corners: (out.corners - corners) as u32,
-                    features: (out.features - features) as u32,
-                });
+                match rec {
+                    Some(r) if out.reusable => out.leaves.push(r),
+                    Some(_) => {}
+                    None => out.reusable = false,
+                }
             }
+        }
+        if !out.reusable {
+            out.leaves = Vec::new();
         }
         out.leaves.shrink_to_fit();
         // Each vertex is named by every leaf that uses it: keep one per tree (equal keys
