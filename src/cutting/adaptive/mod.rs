@@ -222,25 +222,23 @@ fn mesh_adaptive(
         forest.trees.iter().map(|_| Vec::new()).collect();
     let tols = (opts.chain_tol_mm, tol);
     loop {
+        // Each tree's output replaced as soon as it is meshed again: the old one is freed
+        // then, not held until every tree of the round is done.
         let f = &forest;
-        let fresh: Vec<Option<Out>> = f
-            .trees
-            .par_iter()
+        outs.par_iter_mut()
             .enumerate()
-            .zip(outs.par_iter().zip(split.par_iter()))
-            .map(|((ti, t), (old, split))| match old {
-                None => Some(f.mesh_tree(ti, t, tols, None)),
-                Some(old) if !split.is_empty() => {
-                    Some(f.mesh_tree(ti, t, tols, reuse.then_some(Reuse { old, split })))
-                }
-                Some(_) => None,
-            })
-            .collect();
-        for (o, n) in outs.iter_mut().zip(fresh) {
-            if n.is_some() {
-                *o = n;
-            }
-        }
+            .zip(split.par_iter())
+            .for_each(|((ti, out), split)| {
+                let t = &f.trees[ti];
+                let new = match out {
+                    None => f.mesh_tree(ti, t, tols, None),
+                    Some(old) if !split.is_empty() => {
+                        f.mesh_tree(ti, t, tols, reuse.then_some(Reuse { old, split }))
+                    }
+                    Some(_) => return,
+                };
+                *out = Some(new);
+            });
         split.iter_mut().for_each(Vec::clear);
         let failed: Vec<Vec<(usize, [isize; 3], usize)>> = outs
             .iter()
