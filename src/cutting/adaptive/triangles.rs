@@ -46,6 +46,18 @@ pub(super) struct Out {
     pub(super) features: usize,
 }
 
+impl Out {
+    /// Counts a leaf of `kind` meshed without failing (planar, edge or fine).
+    fn count(&mut self, kind: &Kind) {
+        match kind {
+            Kind::Planar(_) => self.planar += 1,
+            Kind::Edge(..) => self.edge += 1,
+            Kind::Fine => self.fine += 1,
+            Kind::Empty => {}
+        }
+    }
+}
+
 /// What one leaf added to its tree's output: its triangles (the next `tris` of the tree's
 /// `faces`, in node order), its tangent-line corners and its feature points (4 bytes a
 /// leaf while every tree's output waits).
@@ -252,10 +264,7 @@ impl Forest<'_> {
                         out.tris.extend(tris);
                         out.verts.extend(verts);
                         out.corners += corners;
-                        match leaf.kind {
-                            Kind::Planar(_) => out.planar += 1,
-                            _ => out.edge += 1,
-                        }
+                        out.count(&leaf.kind);
                     }
                     None => out.failed.push((leaf.node, leaf.o, leaf.s)),
                 }
@@ -348,7 +357,7 @@ impl Forest<'_> {
             out.failed.push((leaf.node, leaf.o, leaf.s));
             return;
         }
-        out.fine += 1;
+        out.count(&leaf.kind);
         out.corners += corners;
         let lo = lat.pos(o);
         let hi = lat.pos([o[0] + 1, o[1] + 1, o[2] + 1]);
@@ -489,11 +498,7 @@ impl Forest<'_> {
                     }
                     out.corners += rec.corners as usize;
                     out.features += rec.features as usize;
-                    match kind {
-                        Kind::Planar(_) => out.planar += 1,
-                        Kind::Edge(..) => out.edge += 1,
-                        _ => out.fine += 1,
-                    }
+                    out.count(&kind);
                 }
                 _ => {
                     let leaf = LeafRef {
