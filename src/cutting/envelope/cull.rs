@@ -771,7 +771,9 @@ pub struct GroupHull {
     shape: Shape,
     r: Real,
     l: Real,
-    /// The reference pose: the middle sample of the group's middle move, and its
+    /// The reference pose, halfway through the group (the start of its middle move for an
+    /// even count of moves, the middle move's middle sample for an odd one: the cells'
+    /// tilts from it, which grow the hull most, are then the least), and its
     /// [`axis_dirs`].
     reference: Sample,
     dirs: [Vector3; 3],
@@ -786,7 +788,11 @@ impl GroupHull {
     /// The hull of the moves `group` (one tool; not empty).
     pub fn of(group: &[&RotaryEnvelope]) -> Self {
         let mid = group[group.len() / 2];
-        let reference = mid.samples[mid.samples.len() / 2];
+        let reference = if group.len() % 2 == 0 {
+            mid.samples[0]
+        } else {
+            mid.samples[mid.samples.len() / 2]
+        };
         let (r, l) = (mid.r, mid.l);
         let axis_mid = Vector3::new(0.0, 0.0, l / 2.0);
         let rho = (r * r + l * l / 4.0).sqrt();
