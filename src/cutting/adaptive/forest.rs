@@ -186,8 +186,7 @@ impl Forest<'_> {
     /// The polylines of the minimal face with lower lattice point `f0` (axis `n`) and size
     /// `q`, from the signs `inside` gives for its lattice points (which must be the
     /// lattice's own), simplified within `tol` when `q > 1`: their vertices appended to
-    /// `pool`, the polylines to `chains`. Returns the tangent-line corners added. (The
-    /// caller skips a face whose signs are known to be uniform, [`Signs::uniform`].)
+    /// `pool`, the polylines to `chains`. Returns the tangent-line corners added.
     pub(super) fn face_chains(
         &self,
         (n, f0, q): (usize, [isize; 3], usize),
@@ -196,6 +195,10 @@ impl Forest<'_> {
         pool: &mut Vec<Vtx>,
         chains: &mut Vec<Chain>,
     ) -> usize {
+        let lat = &self.lat;
+        if signs.uniform(lat, n, f0, q) {
+            return 0;
+        }
         FACE_SCRATCH.with_borrow_mut(|scratch| {
             self.face_chains_in((n, f0, q), signs, tol, (pool, chains), scratch)
         })

@@ -250,57 +250,6 @@ fn a_tree_meshed_again_keeps_the_leaves_no_split_touched_and_is_the_same() {
     assert!(rounds > 0, "no part was meshed again");
 }
 
-#[test]
-fn a_face_two_leaves_share_is_worked_out_once_and_the_mesh_is_the_same() {
-    // The second leaf of a tree to need a minimal face's polylines takes the first's: the
-    // mesh and its report must be those of working every face out again, on random parts
-    // and a tilted two-tool cut (planar, edge and fine leaves of many sizes), and faces
-    // must have been taken.
-    use super::triangles::{FACE_CACHE_HITS, FACE_CACHE_OFF};
-    use std::sync::atomic::Ordering::Relaxed;
-    let mut parts: Vec<TriDexel> = (0..8u64).map(|case| random_part(5, case, true)).collect();
-    let mut s = stock([12.0, 10.0, 6.0], 0.1);
-    let axis = Vector3::new(0.3, -0.4, 0.866).normalize();
-    cut_along(
-        &mut s,
-        ToolKind::Ball,
-        6.0,
-        [-2.0, 4.0, 4.0],
-        [14.0, 6.0, 3.0],
-        axis,
-    );
-    cut_along(
-        &mut s,
-        ToolKind::Flat,
-        4.0,
-        [3.0, -2.0, 5.0],
-        [9.0, 12.0, 4.0],
-        axis,
-    );
-    parts.push(s);
-    let opts = AdaptiveOptions::default();
-    let hits = FACE_CACHE_HITS.load(Relaxed);
-    let cached: Vec<_> = parts
-        .iter()
-        .map(|s| mesh_adaptive(s, &opts, true).expect("meshes"))
-        .collect();
-    assert!(
-        FACE_CACHE_HITS.load(Relaxed) > hits + 100,
-        "few faces taken"
-    );
-    // Other tests meshing meanwhile work their faces out again too: the same meshes.
-    FACE_CACHE_OFF.store(true, Relaxed);
-    let again: Vec<_> = parts
-        .iter()
-        .map(|s| mesh_adaptive(s, &opts, true).expect("meshes"))
-        .collect();
-    FACE_CACHE_OFF.store(false, Relaxed);
-    for (case, ((a, ra), (b, rb))) in cached.iter().zip(&again).enumerate() {
-        assert_eq!(a, b, "case {case}");
-        assert_eq!(ra, rb, "case {case}");
-    }
-}
-
 /// Planes along a column (`A + B·t`): plain ones, a crossing landing on lattice points
 /// (exact and one ulp off), slopes too small for a finite crossing, and non-finite values.
 fn plane_cases() -> Vec<(Real, Real)> {

@@ -1,8 +1,7 @@
 //! Leaves to triangles: each leaf's face polylines linked into closed loops, fanned in its
 //! plane(s) (an edge leaf's loop split where the edge leaves the block), fine cells as
 //! the dexel-resolution mesher meshes them; every leaf of a tree in node order (a tree meshed
-//! again after a split keeps the triangles of the leaves the split did not touch). A minimal
-//! face two leaves of a tree share has its polylines worked out once ([`FaceCache`]).
+//! again after a split keeps the triangles of the leaves the split did not touch).
 //!
 //! **Invariant:** triangles only join vertices of the leaf's own loops and fan centres
 //! inside its block, so every edge on a block face is used once in each direction.
@@ -147,96 +146,6 @@ pub(super) struct Loops {
     open: Vec<Chain>,
     used: Vec<bool>,
     faces: Vec<([isize; 3], usize)>,
-    /// The tree's minimal faces whose polylines are worked out ([`FaceCache`]).
-    cache: FaceCache,
-}
-
-/// The polylines of the minimal faces of one tree worked out so far (before the lower
-/// leaf's reversal), by face: a face shared by two leaves of the tree is worked out once.
-/// Every leaf reads the lattice's own signs (see [`Signs`]) with the tree's tolerance, so
-/// the second leaf's copy is what working the face out again gives, bit for bit.
-#[derive(Default)]
-struct FaceCache {
-    /// Face key ([`FaceCache::key`]) to its chains' range in `chains` and its corners.
-    by_face: std::collections::HashMap<u32, (u32, u32, u32), FaceHashing>,
-    pool: Vec<Vtx>,
-    chains: Vec<Chain>,
-    /// The tree's origin (faces are keyed within its block).
-    origin: [isize; 3],
-}
-
-impl FaceCache {
-    /// Emptied for the tree at `origin`.
-    fn start(&mut self, origin: [isize; 3]) {
-        self.by_face.clear();
-        self.pool.clear();
-        self.chains.clear();
-        self.origin = origin;
-    }
-
-    /// The face (axis `n`, lower point `f0`, size `q`) of a block of the tree as one word:
-    /// its point's offsets from the tree's origin (0 to [`ROOT`]) and its size's binary
-    /// logarithm (a power of two up to `ROOT`), 6 bits each, and the axis; `None` for a
-    /// face outside the tree's block (not kept).
-    fn key(&self, n: usize, f0: [isize; 3], q: usize) -> Option<u32> {
-        let mut key = (n as u32) << 24 | q.trailing_zeros() << 18;
-        for (a, (&f, &o)) in f0.iter().zip(&self.origin).enumerate() {
-            let d = f - o;
-            if !(0..=ROOT as isize).contains(&d) {
-                return None;
-            }
-            key |= (d as u32) << (6 * a);
-        }
-        (q.is_power_of_two() && q <= ROOT).then_some(key)
-    }
-}
-
-#[cfg(not(test))]
-fn face_cache_off() -> bool {
-    false
-}
-
-/// Set by a test to work every face out again (no [`FaceCache`]); the mesh is the same.
-#[cfg(test)]
-pub(super) static FACE_CACHE_OFF: std::sync::atomic::AtomicBool =
-    std::sync::atomic::AtomicBool::new(false);
-
-/// Faces taken from a [`FaceCache`], counted for the tests.
-#[cfg(test)]
-pub(super) static FACE_CACHE_HITS: std::sync::atomic::AtomicU64 =
-    std::sync::atomic::AtomicU64::new(0);
-
-#[cfg(test)]
-fn face_cache_off() -> bool {
-    FACE_CACHE_OFF.load(std::sync::atomic::Ordering::Relaxed)
-}
-
-/// The hashing of [`FaceCache`]'s words: one multiplication, its high bits folded down.
-#[derive(Clone, Copy, Default)]
-struct FaceHashing;
-
-impl std::hash::BuildHasher for FaceHashing {
-    type Hasher = FaceHasher;
-    fn build_hasher(&self) -> FaceHasher {
-        FaceHasher(0)
-    }
-}
-
-struct FaceHasher(u64);
-
-impl std::hash::Hasher for FaceHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u32(u32::from(b) ^ (self.0 as u32).rotate_left(8));
-        }
-    }
-    fn write_u32(&mut self, x: u32) {
-        let h = (u64::from(x) ^ self.0).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        self.0 = h ^ (h >> 32);
-    }
 }
 
 impl Loops {
@@ -283,7 +192,7 @@ impl Forest<'_> {
                 for k in 0..lp.faces.len() {
                     let (f0, q) = lp.faces[k];
                     let first = lp.chains.len();
-                    let c = self.face_chains_once((n, f0, q), signs, tol, lp);
+                    let c = self.face_chains((n, f0, q), signs, tol, &mut lp.pool, &mut lp.chains);
                     // A corner belongs to the face: count it once, from the leaf below.
                     if upper {
                         *corners += c;
@@ -331,56 +240,6 @@ impl Forest<'_> {
             lp.ranges.push(at..lp.v.len());
         }
         true
-    }
-
-    /// [`Forest::face_chains`] of the face `(n, f0, q)` into `lp.pool` and `lp.chains`,
-    /// taken from the tree's [`FaceCache`] where a leaf worked it out before.
-    fn face_chains_once(
-        &self,
-        (n, f0, q): (usize, [isize; 3], usize),
-        signs: &Signs,
-        tol: Real,
-        lp: &mut Loops,
-    ) -> usize {
-        if signs.uniform(&self.lat, n, f0, q) {
-            return 0;
-        }
-        let cache = &mut lp.cache;
-        let key = cache.key(n, f0, q).filter(|_| !face_cache_off());
-        let Some(key) = key else {
-            return self.face_chains((n, f0, q), signs, tol, &mut lp.pool, &mut lp.chains);
-        };
-        if let Some(&(from, to, corners)) = cache.by_face.get(&key) {
-            for c in &cache.chains[from as usize..to as usize] {
-                let start = lp.pool.len();
-                lp.pool.extend_from_slice(&cache.pool[c.start..c.end]);
-                lp.chains.push(Chain {
-                    start,
-                    end: lp.pool.len(),
-                    closed: c.closed,
-                });
-            }
-            #[cfg(test)]
-            FACE_CACHE_HITS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            return corners as usize;
-        }
-        let first = lp.chains.len();
-        let corners = self.face_chains((n, f0, q), signs, tol, &mut lp.pool, &mut lp.chains);
-        let from = cache.chains.len();
-        for c in &lp.chains[first..] {
-            let start = cache.pool.len();
-            cache.pool.extend_from_slice(&lp.pool[c.start..c.end]);
-            cache.chains.push(Chain {
-                start,
-                end: cache.pool.len(),
-                closed: c.closed,
-            });
-        }
-        let to = cache.chains.len();
-        cache
-            .by_face
-            .insert(key, (from as u32, to as u32, corners as u32));
-        corners
     }
 
     fn mesh_leaf(
@@ -598,7 +457,6 @@ impl Forest<'_> {
         };
         out.tris.clear();
         out.verts.clear();
-        loops.cache.start(t.origin);
         // Old records are taken in node order: the leaves then that are leaves now come in
         // the same order (a split only puts a subtree in a leaf's place).
         let reuse = reuse.filter(|r| r.old.reusable);
