@@ -788,7 +788,7 @@ impl GroupHull {
     /// The hull of the moves `group` (one tool; not empty).
     pub fn of(group: &[&RotaryEnvelope]) -> Self {
         let mid = group[group.len() / 2];
-        let reference = if group.len() % 2 == 0 {
+        let reference = if group.len().is_multiple_of(2) {
             mid.samples[0]
         } else {
             mid.samples[mid.samples.len() / 2]
